@@ -1,0 +1,125 @@
+//! Leuven friction on the main body (MODEL.md eqs. 6-9): a Stribeck curve S(v) for sliding and a
+//! Bouc-Wen presliding force Fh driven by the asperity deformation g.
+
+use crate::params::Params;
+
+/// Sign that is 0 at 0 (f64::signum gives +1 there).
+#[inline(always)]
+pub fn sign0(x: f64) -> f64 {
+    if x > 0.0 { 1.0 } else if x < 0.0 { -1.0 } else { 0.0 }
+}
+
+/// Leuven friction constants, precomputed once per run.
+#[derive(Clone, Copy, Debug)]
+pub struct Leuven {
+    fc: f64,
+    fs_minus_fc: f64,
+    inv_vs: f64,
+    delta: f64,
+    n: f64,
+    a: f64,
+    b: f64,
+    c: f64,
+    sigma1: f64,
+    sigma2: f64,
+    /// Direction asymmetry: Fc, Fs scaled by (1 + eps sgn v) (0 for the paper's model).
+    eps: f64,
+    delta_is_two: bool,
+    n_is_one: bool,
+}
+
+impl Leuven {
+    /// `normal_force` is passed explicitly so that effects (an incline) can change it.
+    pub fn new(p: &Params, normal_force: f64, eps: f64) -> Self {
+        Leuven {
+            fc: p.mu_k * normal_force,
+            fs_minus_fc: (p.mu_s - p.mu_k) * normal_force,
+            inv_vs: 1.0 / p.stribeck_velocity,
+            delta: p.stribeck_exponent,
+            n: p.fric_n,
+            a: p.fric_alpha,
+            b: p.fric_beta,
+            c: p.fric_gamma,
+            sigma1: p.sigma1,
+            sigma2: p.sigma2,
+            eps,
+            delta_is_two: p.stribeck_exponent == 2.0,
+            n_is_one: p.fric_n == 1.0,
+        }
+    }
+
+    /// Stribeck curve S(v) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta) [N], times (1 + eps sgn v).
+    #[inline(always)]
+    pub fn stribeck(&self, v: f64) -> f64 {
+        let x = v.abs() * self.inv_vs;
+        // (|v|/vs)^2 as a product: powf is the most expensive call in the step otherwise.
+        let e = if self.delta_is_two { x * x } else { x.powf(self.delta) };
+        let s = self.fc + self.fs_minus_fc * (-e).exp();
+        if self.eps == 0.0 { s } else { s * (1.0 + self.eps * sign0(v)) }
+    }
+
+    /// (dg/dt [m/s], dFh/dt [N/s]) at main-body velocity `v` [m/s] and presliding force `fh` [N].
+    #[inline(always)]
+    pub fn rates(&self, v: f64, fh: f64) -> (f64, f64) {
+        let r = (fh / self.stribeck(v)).abs();
+        let rn = if self.n_is_one { r } else { r.powf(self.n) };
+        // eq. 6 written with |v| so that v = 0 needs no 0/0
+        let gdot = v - v.abs() * sign0(fh) * rn;
+        let fhdot = self.a * gdot - self.b * gdot.abs() * fh - self.c * gdot * fh.abs();
+        (gdot, fhdot)
+    }
+
+    /// Friction force Ff = Fh + sigma1 dg/dt + sigma2 v [N], acting against the main body.
+    #[inline(always)]
+    pub fn force(&self, v: f64, fh: f64, gdot: f64) -> f64 {
+        fh + self.sigma1 * gdot + self.sigma2 * v
+    }
+
+    /// Rough stiffness |d(dFh/dt)/dFh| during sliding at speed |v| [1/s], for step-size hints.
+    pub fn sliding_stiffness(&self, v: f64) -> f64 {
+        let s = self.stribeck(v).max(1e-300);
+        v.abs() * (self.a * self.n / s + self.b + self.c.abs())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stribeck_curve_runs_from_static_to_coulomb() {
+        let p = Params::paper();
+        let f = Leuven::new(&p, p.normal_force, 0.0);
+        assert!((f.stribeck(0.0) - 0.6 * p.normal_force).abs() < 1e-12);
+        assert!((f.stribeck(1.0) - 0.5 * p.normal_force).abs() < 1e-12);
+        let at_vs = 0.5 * p.normal_force + 0.1 * p.normal_force * (-1.0f64).exp();
+        assert!((f.stribeck(-1e-3) - at_vs).abs() < 1e-12);
+    }
+
+    #[test]
+    fn presliding_is_elastic_at_zero_force() {
+        let p = Params::paper();
+        let f = Leuven::new(&p, p.normal_force, 0.0);
+        let (gdot, fhdot) = f.rates(1e-6, 0.0);
+        assert_eq!(gdot, 1e-6);
+        assert_eq!(fhdot, p.fric_alpha * 1e-6);
+        assert_eq!(f.rates(0.0, 1.3), (0.0, 0.0));
+    }
+
+    #[test]
+    fn sliding_force_saturates_at_stribeck_level() {
+        // At Fh = S(v) with the same sign as v, the asperities stop deforming.
+        let p = Params::paper();
+        let f = Leuven::new(&p, p.normal_force, 0.0);
+        let v = 2e-3;
+        let (gdot, _) = f.rates(v, f.stribeck(v));
+        assert!(gdot.abs() < 1e-15);
+    }
+
+    #[test]
+    fn asymmetry_scales_levels_by_direction() {
+        let p = Params::paper();
+        let f = Leuven::new(&p, p.normal_force, 0.1);
+        assert!((f.stribeck(1.0) / f.stribeck(-1.0) - 1.1 / 0.9).abs() < 1e-12);
+    }
+}

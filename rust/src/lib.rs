@@ -1,0 +1,20 @@
+//! idm-rs core: dynamics of a piezoelectric impact drive mechanism (IDM).
+//!
+//! One physical idea per module; the numerics are plain Rust, testable with `cargo test`.
+//! The Python bindings (`python` feature) are a thin layer in `bindings`.
+
+pub mod effects;
+pub mod friction;
+pub mod mechanics;
+pub mod model;
+pub mod params;
+pub mod piezo;
+pub mod rk4;
+pub mod simulate;
+pub mod waveform;
+
+#[cfg(test)]
+mod paper_case_tests;
+
+#[cfg(feature = "python")]
+mod bindings;

@@ -1,0 +1,203 @@
+//! Structural mechanics of the IDM: the lumped 2-DOF model (LPS, eq. 19) and the n-element FEM
+//! bar (DPS, eqs. 16-17) with consistent mass and Rayleigh damping. Node 0 is the main body,
+//! node n the weight. Built once per run with nalgebra; the integrator then only needs the
+//! precomputed products M^-1 K, M^-1 C and the two columns of M^-1 that the forces load.
+
+use crate::params::Params;
+use nalgebra::DMatrix;
+
+/// Which structural model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Structure {
+    /// Lumped parameter system: two masses, spring kp, damper beta_c kp; massless PE.
+    Lps,
+    /// Distributed parameter system: the PE as `n` two-node bar elements.
+    Dps(usize),
+}
+
+/// Assembled matrices and the dense products the right-hand side uses (row-major).
+#[derive(Clone, Debug)]
+pub struct Mechanics {
+    /// number of nodes (degrees of freedom)
+    pub dof: usize,
+    pub mass: DMatrix<f64>,
+    pub damping: DMatrix<f64>,
+    pub stiffness: DMatrix<f64>,
+    /// the PE's own mass matrix Mp (zero for the LPS)
+    pub pe_mass_matrix: DMatrix<f64>,
+    minv_k: Vec<f64>,
+    minv_c: Vec<f64>,
+    minv_main: Vec<f64>,
+    minv_weight: Vec<f64>,
+}
+
+/// Element mass and stiffness of a two-node bar: rho A le / 6 [[2,1],[1,2]], E A / le [[1,-1],[-1,1]].
+fn assemble_bar(p: &Params, n_elements: usize) -> (DMatrix<f64>, DMatrix<f64>) {
+    let dof = n_elements + 1;
+    let le = p.pe_length / n_elements as f64;
+    let me = p.pe_density * p.pe_area * le / 6.0;
+    let ke = p.pe_youngs * p.pe_area / le;
+    let mut mp = DMatrix::zeros(dof, dof);
+    let mut kp = DMatrix::zeros(dof, dof);
+    for e in 0..n_elements {
+        let (i, j) = (e, e + 1);
+        mp[(i, i)] += 2.0 * me;
+        mp[(j, j)] += 2.0 * me;
+        mp[(i, j)] += me;
+        mp[(j, i)] += me;
+        kp[(i, i)] += ke;
+        kp[(j, j)] += ke;
+        kp[(i, j)] -= ke;
+        kp[(j, i)] -= ke;
+    }
+    (mp, kp)
+}
+
+impl Mechanics {
+    pub fn new(p: &Params, structure: Structure) -> Result<Self, String> {
+        match structure {
+            Structure::Lps => {
+                // eq. 19: cp = beta_c kp, no PE mass, no mass-proportional damping
+                let kp = p.kp();
+                let k = DMatrix::from_row_slice(2, 2, &[kp, -kp, -kp, kp]);
+                let c = &k * p.rayleigh_beta;
+                let m = DMatrix::from_row_slice(2, 2, &[p.m1, 0.0, 0.0, p.m2]);
+                Self::from_matrices(m, c, k, DMatrix::zeros(2, 2))
+            }
+            Structure::Dps(n) => {
+                if n == 0 {
+                    return Err("parameter 'n_elements' must be at least 1".into());
+                }
+                let (mp, kp) = assemble_bar(p, n);
+                let mut m = mp.clone();
+                m[(0, 0)] += p.m1;
+                m[(n, n)] += p.m2;
+                let c = &mp * p.rayleigh_alpha + &kp * p.rayleigh_beta;
+                Self::from_matrices(m, c, kp, mp)
+            }
+        }
+    }
+
+    fn from_matrices(
+        mass: DMatrix<f64>,
+        damping: DMatrix<f64>,
+        stiffness: DMatrix<f64>,
+        pe_mass_matrix: DMatrix<f64>,
+    ) -> Result<Self, String> {
+        let dof = mass.nrows();
+        let minv = mass
+            .clone()
+            .try_inverse()
+            .ok_or_else(|| "mass matrix is singular".to_string())?;
+        let row_major = |a: &DMatrix<f64>| a.transpose().as_slice().to_vec();
+        Ok(Mechanics {
+            dof,
+            minv_k: row_major(&(&minv * &stiffness)),
+            minv_c: row_major(&(&minv * &damping)),
+            minv_main: minv.column(0).iter().copied().collect(),
+            minv_weight: minv.column(dof - 1).iter().copied().collect(),
+            mass,
+            damping,
+            stiffness,
+            pe_mass_matrix,
+        })
+    }
+
+    /// acc = M^-1 (f_main e_0 + f_weight e_n - K q - C v) [m/s^2].
+    #[inline(always)]
+    pub fn accelerations(&self, q: &[f64], v: &[f64], f_main: f64, f_weight: f64, acc: &mut [f64]) {
+        let n = self.dof;
+        for i in 0..n {
+            let rk = &self.minv_k[i * n..(i + 1) * n];
+            let rc = &self.minv_c[i * n..(i + 1) * n];
+            let mut a = self.minv_main[i] * f_main + self.minv_weight[i] * f_weight;
+            for j in 0..n {
+                a -= rk[j] * q[j] + rc[j] * v[j];
+            }
+            acc[i] = a;
+        }
+    }
+
+    /// Highest natural frequency of the undamped structure [rad/s] (generalised eigenproblem
+    /// K x = w^2 M x, solved through the Cholesky factor of M).
+    pub fn highest_frequency(&self) -> f64 {
+        let chol = match self.mass.clone().cholesky() {
+            Some(c) => c,
+            None => return f64::INFINITY,
+        };
+        let linv = chol.l().try_inverse().unwrap_or_else(|| DMatrix::zeros(self.dof, self.dof));
+        let a = &linv * &self.stiffness * linv.transpose();
+        let sym = (&a + a.transpose()) * 0.5;
+        let w2 = sym.symmetric_eigenvalues().iter().copied().fold(0.0f64, f64::max);
+        w2.max(0.0).sqrt()
+    }
+
+    /// Quadratic forms for the energy budget: (1/2 v'Mv, 1/2 q'Kq, v'Cv).
+    pub fn kinetic(&self, v: &[f64]) -> f64 {
+        0.5 * quad(&self.mass, v)
+    }
+
+    pub fn strain(&self, q: &[f64]) -> f64 {
+        0.5 * quad(&self.stiffness, q)
+    }
+
+    pub fn dissipation(&self, v: &[f64]) -> f64 {
+        quad(&self.damping, v)
+    }
+
+    /// Column sums of Mp: 1'Mp v is the PE's momentum [kg m/s].
+    pub fn pe_mass_column_sums(&self) -> Vec<f64> {
+        (0..self.dof).map(|j| self.pe_mass_matrix.column(j).sum()).collect()
+    }
+
+    /// 1'M v [kg m/s].
+    pub fn momentum(&self, v: &[f64]) -> f64 {
+        (0..self.dof).map(|j| self.mass.column(j).sum() * v[j]).sum()
+    }
+}
+
+fn quad(a: &DMatrix<f64>, x: &[f64]) -> f64 {
+    let n = x.len();
+    let mut s = 0.0;
+    for i in 0..n {
+        for j in 0..n {
+            s += x[i] * a[(i, j)] * x[j];
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dps_total_mass_is_device_mass() {
+        let p = Params::paper();
+        let m = Mechanics::new(&p, Structure::Dps(4)).unwrap();
+        let total: f64 = m.mass.iter().sum();
+        assert!((total - (p.m1 + p.m2 + p.pe_mass())).abs() < 1e-15);
+        // rigid-body motion stores no strain
+        assert!(m.strain(&[1.0; 5]).abs() < 1e-6);
+    }
+
+    #[test]
+    fn lps_mode_matches_analytic_two_mass_frequency() {
+        let p = Params::paper();
+        let m = Mechanics::new(&p, Structure::Lps).unwrap();
+        let w = (p.kp() * (1.0 / p.m1 + 1.0 / p.m2)).sqrt();
+        assert!((m.highest_frequency() / w - 1.0).abs() < 1e-12);
+        assert!((w / 1.3e4 - 1.0).abs() < 0.03); // MODEL.md: 1.3e4 rad/s
+    }
+
+    #[test]
+    fn dps_one_massless_element_is_the_lps() {
+        let mut p = Params::paper();
+        p.pe_density = 0.0;
+        let a = Mechanics::new(&p, Structure::Lps).unwrap();
+        let b = Mechanics::new(&p, Structure::Dps(1)).unwrap();
+        assert_eq!(a.minv_k, b.minv_k);
+        assert_eq!(a.minv_c, b.minv_c);
+        assert_eq!(a.minv_main, b.minv_main);
+    }
+}

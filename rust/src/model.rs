@@ -1,0 +1,192 @@
+//! The IDM as one first-order system: structure + piezo force + friction + optional effects.
+//! Owns the state layout and the right-hand side; the integrator and the driver are elsewhere.
+
+use crate::effects::{first_order_rate, ground_spring_force, weight_drag, Effects};
+use crate::friction::Leuven;
+use crate::mechanics::{Mechanics, Structure};
+use crate::params::Params;
+use crate::piezo::{piezo_force, PiezoHysteresis};
+
+/// Number of energy/impulse accounting states (see [`Layout::accounting`]).
+pub const N_ACCOUNTING: usize = 7;
+
+/// Where each quantity lives in the flat state vector.
+#[derive(Clone, Copy, Debug)]
+pub struct Layout {
+    /// nodes (node 0 main body, node dof-1 weight)
+    pub dof: usize,
+    /// positions q at 0..dof, velocities at dof..2 dof
+    pub g: usize,
+    pub fh: usize,
+    pub h: usize,
+    /// PE voltage behind the amplifier lag
+    pub vpe: Option<usize>,
+    /// creep extension xc
+    pub xc: Option<usize>,
+    /// sensor reading behind its lag
+    pub xs: Option<usize>,
+    /// start of [W_input, W_friction, W_damping, W_external, I_friction, I_rayleigh, I_external]:
+    /// works [J] and impulses [N s] integrated with the state, for energy and momentum budgets
+    pub accounting: Option<usize>,
+    pub dim: usize,
+}
+
+impl Layout {
+    fn new(dof: usize, e: &Effects, accounting: bool) -> Self {
+        let mut next = 2 * dof + 3;
+        let mut take = |on: bool, len: usize| {
+            on.then(|| {
+                next += len;
+                next - len
+            })
+        };
+        let vpe = take(e.tau_amp > 0.0, 1);
+        let xc = take(e.tau_creep > 0.0, 1);
+        let xs = take(e.tau_sensor > 0.0, 1);
+        let accounting = take(accounting, N_ACCOUNTING);
+        Layout { dof, g: 2 * dof, fh: 2 * dof + 1, h: 2 * dof + 2, vpe, xc, xs, accounting, dim: next }
+    }
+}
+
+/// Everything the right-hand side needs, precomputed once.
+#[derive(Clone, Debug)]
+pub struct Model {
+    pub params: Params,
+    pub effects: Effects,
+    pub structure: Structure,
+    pub mech: Mechanics,
+    pub friction: Leuven,
+    pub layout: Layout,
+    hysteresis: Option<PiezoHysteresis>,
+    kp: f64,
+    d33: f64,
+    /// constant external force on the main body (incline) [N]
+    f_incline: f64,
+    inv_tau_amp: f64,
+    inv_tau_creep: f64,
+    inv_tau_sensor: f64,
+    pe_mass_sums: Vec<f64>,
+}
+
+impl Model {
+    pub fn new(
+        params: Params,
+        effects: Effects,
+        structure: Structure,
+        piezo_hysteresis: bool,
+        accounting: bool,
+    ) -> Result<Self, String> {
+        params.validate()?;
+        effects.validate()?;
+        let mech = Mechanics::new(&params, structure)?;
+        let layout = Layout::new(mech.dof, &effects, accounting);
+        let inv = |tau: f64| if tau > 0.0 { 1.0 / tau } else { 0.0 };
+        // The PE mass rests on the guide in both structures (MODEL.md's normal force).
+        let total_mass = params.m1 + params.m2 + params.pe_mass();
+        Ok(Model {
+            friction: Leuven::new(&params, params.normal_force * effects.normal_scale(), effects.eps),
+            hysteresis: piezo_hysteresis.then(|| {
+                PiezoHysteresis::new(params.hyst_alpha, params.hyst_beta, params.hyst_gamma, params.d33)
+            }),
+            kp: params.kp(),
+            d33: params.d33,
+            f_incline: effects.incline_force(total_mass),
+            inv_tau_amp: inv(effects.tau_amp),
+            inv_tau_creep: inv(effects.tau_creep),
+            inv_tau_sensor: inv(effects.tau_sensor),
+            pe_mass_sums: mech.pe_mass_column_sums(),
+            params,
+            effects,
+            structure,
+            mech,
+            layout,
+        })
+    }
+
+    /// Bound on |Fh| [N] (MODEL.md invariant), with the effective normal force and asymmetry.
+    pub fn presliding_bound(&self) -> f64 {
+        let p = &self.params;
+        let fs = p.mu_s.max(p.mu_k) * p.normal_force * self.effects.normal_scale() * (1.0 + self.effects.eps.abs());
+        fs.min(p.fric_alpha / (p.fric_beta + p.fric_gamma))
+    }
+
+    /// PE voltage and its rate [V, V/s] given the commanded ones (the amplifier may lag).
+    #[inline(always)]
+    fn pe_voltage(&self, v_cmd: f64, dv_cmd: f64, y: &[f64]) -> (f64, f64) {
+        match self.layout.vpe {
+            Some(i) => (y[i], first_order_rate(v_cmd, y[i], self.inv_tau_amp)),
+            None => (v_cmd, dv_cmd),
+        }
+    }
+
+    /// Piezo force Fp [N] in state `y` at commanded voltage `v_cmd`.
+    #[inline(always)]
+    pub fn piezo_force(&self, v_cmd: f64, y: &[f64]) -> f64 {
+        let (v, _) = self.pe_voltage(v_cmd, 0.0, y);
+        let xc = self.layout.xc.map_or(0.0, |i| y[i]);
+        piezo_force(self.kp, self.d33, v, xc, y[self.layout.h])
+    }
+
+    /// Friction force Ff [N] on the main body in state `y`.
+    #[inline(always)]
+    pub fn friction_force(&self, y: &[f64]) -> f64 {
+        let v1 = y[self.layout.dof];
+        let fh = y[self.layout.fh];
+        let (gdot, _) = self.friction.rates(v1, fh);
+        self.friction.force(v1, fh, gdot)
+    }
+
+    /// What the sensor reads [m] at time `t` [s] in state `y`.
+    #[inline(always)]
+    pub fn reading(&self, t: f64, y: &[f64]) -> f64 {
+        let x = self.layout.xs.map_or(y[0], |i| y[i]);
+        x + self.effects.drift_rate * t
+    }
+
+    /// dy/dt at commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s].
+    #[inline(always)]
+    pub fn rhs(&self, v_cmd: f64, dv_cmd: f64, y: &[f64], dy: &mut [f64]) {
+        let l = &self.layout;
+        let n = l.dof;
+        let (q, v) = (&y[..n], &y[n..2 * n]);
+        let (v_pe, dv_pe) = self.pe_voltage(v_cmd, dv_cmd, y);
+        if let Some(i) = l.vpe {
+            dy[i] = dv_pe;
+        }
+        let h = y[l.h];
+        dy[l.h] = self.hysteresis.map_or(0.0, |hy| hy.rate(dv_pe, h));
+        let xc = match l.xc {
+            Some(i) => {
+                dy[i] = first_order_rate(self.effects.kappa * self.d33 * v_pe, y[i], self.inv_tau_creep);
+                y[i]
+            }
+            None => 0.0,
+        };
+        let fp = piezo_force(self.kp, self.d33, v_pe, xc, h);
+
+        let (v1, fh) = (v[0], y[l.fh]);
+        let (gdot, fhdot) = self.friction.rates(v1, fh);
+        let ff = self.friction.force(v1, fh, gdot);
+        dy[l.g] = gdot;
+        dy[l.fh] = fhdot;
+
+        let f_ext_main = self.f_incline + ground_spring_force(self.effects.k_ground, q[0]);
+        let f_ext_weight = weight_drag(self.effects.c_weight, v[n - 1]);
+        dy[..n].copy_from_slice(v);
+        self.mech.accelerations(q, v, fp - ff + f_ext_main, -fp + f_ext_weight, &mut dy[n..2 * n]);
+
+        if let Some(i) = l.xs {
+            dy[i] = first_order_rate(q[0], y[i], self.inv_tau_sensor);
+        }
+        if let Some(a) = l.accounting {
+            dy[a] = fp * (v[0] - v[n - 1]);
+            dy[a + 1] = ff * v[0];
+            dy[a + 2] = self.mech.dissipation(v);
+            dy[a + 3] = f_ext_main * v[0] + f_ext_weight * v[n - 1];
+            dy[a + 4] = ff;
+            dy[a + 5] = self.params.rayleigh_alpha
+                * self.pe_mass_sums.iter().zip(v).map(|(m, vi)| m * vi).sum::<f64>();
+            dy[a + 6] = f_ext_main + f_ext_weight;
+        }
+    }
+}
