@@ -1,0 +1,31 @@
+"""idm-rs: dynamics of piezoelectric impact drive mechanisms (stick-slip inertial actuators).
+
+A Rust core (fixed-step RK4 over the nodal state, Leuven friction, Bouc-Wen hysteresis) under a
+typed Python API. Quick start::
+
+    import idm_rs
+    p = idm_rs.Params()                                   # the paper's Table 1
+    w = idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=9.5e-3)
+    r = idm_rs.simulate(p, w, t_end=10e-3, dt=1e-8, model="dps", n_elements=4)
+    r.final_position                                      # x1(10 ms) [m]
+"""
+
+from ._core import __version__
+from .effects import Effects
+from .params import Params
+from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate
+from .waveforms import Sampled, Sawtooth, Triangle, Waveform
+
+__all__ = [
+    "__version__",
+    "DivergenceError",
+    "Effects",
+    "EnergyBudget",
+    "Params",
+    "Sampled",
+    "Sawtooth",
+    "SimulationResult",
+    "Triangle",
+    "Waveform",
+    "simulate",
+]

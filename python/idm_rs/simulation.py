@@ -1,0 +1,232 @@
+"""One simulation: ``simulate()`` and its result object."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal, Optional
+
+import numpy as np
+from numpy.typing import NDArray
+
+from . import _core
+from .effects import Effects
+from .params import PARAM_INFO, Params
+from .waveforms import Waveform
+
+if TYPE_CHECKING:
+    import xarray
+
+Model = Literal["lps", "dps"]
+DivergenceError = _core.DivergenceError
+
+
+@dataclass(frozen=True)
+class EnergyBudget:
+    """Energy and momentum accounting integrated with the state (all per saved time).
+
+    Energies in J: ``kinetic`` ½vᵀMv, ``strain`` ½qᵀKq, ``input_work`` ∫Fp(v1 − v_weight)dt,
+    ``friction_work`` ∫Ff v1 dt, ``damping_work`` ∫vᵀCv dt, ``external_work`` (effects' forces).
+    Impulses in N·s: ``momentum`` 1ᵀMv [kg m/s], ``friction_impulse`` ∫Ff dt,
+    ``rayleigh_impulse`` αc∫1ᵀMp v dt, ``external_impulse``.
+    """
+
+    kinetic: NDArray[np.float64]
+    strain: NDArray[np.float64]
+    input_work: NDArray[np.float64]
+    friction_work: NDArray[np.float64]
+    damping_work: NDArray[np.float64]
+    external_work: NDArray[np.float64]
+    momentum: NDArray[np.float64]
+    friction_impulse: NDArray[np.float64]
+    rayleigh_impulse: NDArray[np.float64]
+    external_impulse: NDArray[np.float64]
+
+    @property
+    def residual(self) -> NDArray[np.float64]:
+        """Stored energy minus net work in [J]; zero up to the integrator's error."""
+        return self.kinetic + self.strain - (
+            self.input_work - self.friction_work - self.damping_work + self.external_work
+        )
+
+    @property
+    def relative_residual(self) -> float:
+        """max |residual| over the largest energy flow of the run [-]."""
+        scale = max(
+            float(np.max(np.abs(a)))
+            for a in (self.input_work, self.friction_work, self.damping_work, self.kinetic + self.strain)
+        )
+        return float(np.max(np.abs(self.residual)) / scale) if scale > 0 else 0.0
+
+    @property
+    def momentum_residual(self) -> NDArray[np.float64]:
+        """1ᵀMv + ∫Ff dt + αc∫1ᵀMp v dt − ∫F_ext dt [N s]; zero up to the integrator's error."""
+        return self.momentum + self.friction_impulse + self.rayleigh_impulse - self.external_impulse
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """A saved trajectory. Arrays have one entry per saved time (``save_every`` steps apart,
+    plus t = 0 and t_end); ``nodes`` and ``velocities`` have one column per node (node 0 is the
+    main body at z = l, the last the weight at z = 0)."""
+
+    t: NDArray[np.float64]  #: time [s]
+    nodes: NDArray[np.float64]  #: nodal displacements [m], shape (time, node)
+    velocities: NDArray[np.float64]  #: nodal velocities [m/s]
+    friction: NDArray[np.float64]  #: friction force Ff on the main body [N]
+    fh: NDArray[np.float64]  #: presliding (hysteresis) friction force Fh [N]
+    g: NDArray[np.float64]  #: asperity deformation g [m]
+    h: NDArray[np.float64]  #: piezo hysteresis state h [m]
+    voltage: NDArray[np.float64]  #: commanded voltage [V]
+    piezo_force: NDArray[np.float64]  #: piezo force Fp [N]
+    reading: NDArray[np.float64]  #: what the sensor reads [m] (x1 unless a sensor effect is on)
+    final_position: float  #: x1(t_end) [m]
+    params: Params
+    waveform: Waveform
+    model: str
+    n_elements: int
+    dt: float
+    piezo_hysteresis: bool
+    effects: Effects
+    energy: Optional[EnergyBudget] = None
+    final_state: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0), repr=False)
+
+    @property
+    def main_body(self) -> NDArray[np.float64]:
+        """x1, main body displacement [m]."""
+        return self.nodes[:, 0]
+
+    @property
+    def weight(self) -> NDArray[np.float64]:
+        """x2, weight displacement [m]."""
+        return self.nodes[:, -1]
+
+    @property
+    def main_body_velocity(self) -> NDArray[np.float64]:
+        """v1 [m/s]."""
+        return self.velocities[:, 0]
+
+    def to_xarray(self) -> "xarray.Dataset":
+        """The trajectory as an xarray Dataset with units, and every setting in ``attrs``."""
+        import xarray as xr
+
+        from . import __version__
+
+        def var(data: NDArray[np.float64], units: str, long_name: str, dims: tuple[str, ...] = ("time",)):
+            return xr.Variable(dims, data, {"units": units, "long_name": long_name})
+
+        ds = xr.Dataset(
+            {
+                "main_body": var(self.main_body, "m", "main body displacement x1"),
+                "weight": var(self.weight, "m", "weight displacement x2"),
+                "nodes": var(self.nodes, "m", "nodal displacements", ("time", "node")),
+                "velocities": var(self.velocities, "m/s", "nodal velocities", ("time", "node")),
+                "friction": var(self.friction, "N", "friction force Ff"),
+                "fh": var(self.fh, "N", "presliding friction force Fh"),
+                "g": var(self.g, "m", "asperity deformation g"),
+                "h": var(self.h, "m", "piezo hysteresis h"),
+                "voltage": var(self.voltage, "V", "commanded voltage"),
+                "piezo_force": var(self.piezo_force, "N", "piezo force Fp"),
+                "reading": var(self.reading, "m", "sensor reading"),
+            },
+            coords={
+                "time": ("time", self.t, {"units": "s", "long_name": "time"}),
+                "node": ("node", np.arange(self.nodes.shape[1]), {"long_name": "node (0 = main body)"}),
+            },
+        )
+        ds.attrs.update(
+            {
+                "idm_rs_version": __version__,
+                "model": self.model,
+                "n_elements": self.n_elements,
+                "dt_s": self.dt,
+                "method": "rk4",
+                "piezo_hysteresis": int(self.piezo_hysteresis),
+                "waveform": repr(self.waveform),
+                "final_position_m": self.final_position,
+            }
+        )
+        for name, value in self.params.to_dict().items():
+            ds.attrs[f"param_{name}"] = value
+            ds.attrs[f"param_{name}_units"] = PARAM_INFO[name][1]
+        for name, value in self.effects.active().items():
+            ds.attrs[f"effect_{name}"] = value
+        return ds
+
+
+def simulate(
+    params: Params,
+    waveform: Waveform,
+    t_end: float,
+    dt: float = 1e-8,
+    model: Model = "dps",
+    n_elements: int = 4,
+    save_every: int = 100,
+    *,
+    piezo_hysteresis: bool = True,
+    effects: Optional[Effects] = None,
+    energy: bool = False,
+) -> SimulationResult:
+    """Simulate the IDM from rest over [0, ``t_end``] s with fixed-step RK4 of step ``dt`` [s].
+
+    ``model`` is ``"lps"`` (two lumped masses) or ``"dps"`` (the PE as ``n_elements`` FEM bar
+    elements). The waveform's breakpoints must fall on step boundaries and ``dt`` must divide
+    ``t_end``; otherwise a ValueError says which breakpoint and suggests a ``dt``. A step too
+    large for the structure is refused up front; one too large for the friction state during
+    sliding raises :class:`DivergenceError` with the time and a smaller step to try.
+    ``energy=True`` integrates the energy and momentum budgets alongside (``result.energy``).
+    The GIL is released while the Rust core runs.
+    """
+    if not isinstance(params, Params):
+        raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
+    effects = effects or Effects()
+    bt, bv = waveform.breakpoints()
+    out = _core.simulate(
+        params._given(),
+        effects.active(),
+        np.asarray(bt, dtype=float).tolist(),
+        np.asarray(bv, dtype=float).tolist(),
+        float(t_end),
+        float(dt),
+        str(model),
+        int(n_elements),
+        int(save_every),
+        bool(piezo_hysteresis),
+        bool(energy),
+    )
+    budget = None
+    if energy:
+        acc = out["accounting"]
+        budget = EnergyBudget(
+            kinetic=out["kinetic"],
+            strain=out["strain"],
+            input_work=acc[:, 0],
+            friction_work=acc[:, 1],
+            damping_work=acc[:, 2],
+            external_work=acc[:, 3],
+            momentum=out["momentum"],
+            friction_impulse=acc[:, 4],
+            rayleigh_impulse=acc[:, 5],
+            external_impulse=acc[:, 6],
+        )
+    return SimulationResult(
+        t=out["t"],
+        nodes=out["nodes"],
+        velocities=out["velocities"],
+        friction=out["friction"],
+        fh=out["fh"],
+        g=out["g"],
+        h=out["h"],
+        voltage=out["voltage"],
+        piezo_force=out["piezo_force"],
+        reading=out["reading"],
+        final_position=float(out["final_state"][0]),
+        params=params,
+        waveform=waveform,
+        model=str(model),
+        n_elements=int(n_elements) if model == "dps" else 1,
+        dt=float(dt),
+        piezo_hysteresis=bool(piezo_hysteresis),
+        effects=effects,
+        energy=budget,
+        final_state=out["final_state"],
+    )

@@ -1,0 +1,146 @@
+"""Input voltage waveforms. All are piecewise linear; each gives its breakpoints (t [s], V [V])
+to the Rust core, which steps exactly onto them."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal, Union
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+
+def _check(name: str, value: float, *, positive: bool = False, non_negative: bool = False) -> float:
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"parameter '{name}' must be finite, got {value}")
+    if positive and value <= 0:
+        raise ValueError(f"parameter '{name}' must be positive, got {value}")
+    if non_negative and value < 0:
+        raise ValueError(f"parameter '{name}' must be non-negative, got {value}")
+    return value
+
+
+@dataclass(frozen=True)
+class Triangle:
+    """Single triangular wave: 0 V until ``delay`` [s], linear to ``amplitude`` [V] at
+    delay + ``rise`` [s], linear back to 0 V at delay + rise + ``fall`` [s], then 0 V.
+    The paper case is ``Triangle(80.0, 0.5e-3, 9.5e-3)``."""
+
+    amplitude: float = 80.0
+    rise: float = 0.5e-3
+    fall: float = 9.5e-3
+    delay: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check("amplitude", self.amplitude)
+        _check("rise", self.rise, positive=True)
+        _check("fall", self.fall, positive=True)
+        _check("delay", self.delay, non_negative=True)
+
+    def breakpoints(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        t = [0.0] + ([self.delay] if self.delay > 0 else [])
+        t += [self.delay + self.rise, self.delay + self.rise + self.fall]
+        v = [0.0] * (len(t) - 2) + [self.amplitude, 0.0]
+        return np.asarray(t), np.asarray(v, dtype=float)
+
+    @property
+    def duration(self) -> float:
+        """End of the wave [s]."""
+        return self.delay + self.rise + self.fall
+
+
+@dataclass(frozen=True)
+class Sawtooth:
+    """A train of ``cycles`` sawtooth periods of 1/``frequency`` [Hz] after ``delay`` [s].
+
+    ``direction="forward"``: rise 0 → ``amplitude`` [V] in ``rise`` [s], then a linear fall to 0
+    over the rest of the period (fast extension, slow contraction: the body steps forward).
+    ``"backward"``: rise over (period − rise), fall in ``rise``. 0 V before and after."""
+
+    amplitude: float = 80.0
+    frequency: float = 100.0
+    cycles: int = 3
+    rise: float = 0.5e-3
+    direction: Literal["forward", "backward"] = "forward"
+    delay: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check("amplitude", self.amplitude)
+        _check("frequency", self.frequency, positive=True)
+        _check("rise", self.rise, positive=True)
+        _check("delay", self.delay, non_negative=True)
+        if int(self.cycles) != self.cycles or self.cycles < 1:
+            raise ValueError(f"parameter 'cycles' must be a positive integer, got {self.cycles}")
+        object.__setattr__(self, "cycles", int(self.cycles))
+        if self.direction not in ("forward", "backward"):
+            raise ValueError(f"parameter 'direction' must be 'forward' or 'backward', got {self.direction!r}")
+        if self.rise >= 1.0 / self.frequency:
+            raise ValueError(
+                f"parameter 'rise' ({self.rise} s) must be shorter than the period ({1 / self.frequency} s)"
+            )
+
+    @property
+    def period(self) -> float:
+        """1/frequency [s]."""
+        return 1.0 / self.frequency
+
+    @property
+    def duration(self) -> float:
+        """End of the last cycle [s]."""
+        return self.delay + self.cycles * self.period
+
+    def breakpoints(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        peak = self.rise if self.direction == "forward" else self.period - self.rise
+        t = [0.0] + ([self.delay] if self.delay > 0 else [])
+        v = [0.0] * len(t)
+        for k in range(self.cycles):
+            t += [self.delay + k * self.period + peak, self.delay + (k + 1) * self.period]
+            v += [self.amplitude, 0.0]
+        return np.asarray(t), np.asarray(v, dtype=float)
+
+
+@dataclass(frozen=True, eq=False)
+class Sampled:
+    """Any sampled waveform, piecewise linear through (``t`` [s], ``voltage`` [V]); the first
+    value holds before ``t[0]`` and the last after ``t[-1]``. Times must increase strictly; the
+    step ``dt`` of a simulation must divide every sample time that falls inside the run."""
+
+    t: NDArray[np.float64] = field(repr=False)
+    voltage: NDArray[np.float64] = field(repr=False)
+
+    def __init__(self, t: ArrayLike, voltage: ArrayLike) -> None:
+        tt = np.ascontiguousarray(t, dtype=float).ravel()
+        vv = np.ascontiguousarray(voltage, dtype=float).ravel()
+        if tt.shape != vv.shape:
+            raise ValueError(f"Sampled: {tt.size} times but {vv.size} voltages")
+        if tt.size == 0:
+            raise ValueError("Sampled: needs at least one sample")
+        if not (np.all(np.isfinite(tt)) and np.all(np.isfinite(vv))):
+            bad = int(np.flatnonzero(~(np.isfinite(tt) & np.isfinite(vv)))[0])
+            raise ValueError(f"Sampled: sample {bad} is not finite")
+        if np.any(np.diff(tt) <= 0):
+            bad = int(np.flatnonzero(np.diff(tt) <= 0)[0])
+            raise ValueError(f"Sampled: times must increase strictly (t[{bad}] >= t[{bad + 1}])")
+        object.__setattr__(self, "t", tt)
+        object.__setattr__(self, "voltage", vv)
+
+    def breakpoints(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        return self.t, self.voltage
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1])
+
+    def __repr__(self) -> str:
+        return f"Sampled({self.t.size} samples, t = {self.t[0]:g}..{self.t[-1]:g} s)"
+
+
+Waveform = Union[Triangle, Sawtooth, Sampled]
+
+
+def voltage_at(waveform: Waveform, t: ArrayLike) -> NDArray[np.float64]:
+    """V(t) [V] of any waveform, evaluated with numpy (for plots and checks)."""
+    bt, bv = waveform.breakpoints()
+    return np.interp(np.asarray(t, dtype=float), bt, bv)
