@@ -51,28 +51,36 @@ impl Leuven {
     /// Stribeck curve S(v) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta) [N], times (1 + eps sgn v).
     #[inline(always)]
     pub fn stribeck(&self, v: f64) -> f64 {
-        let x = v.abs() * self.inv_vs;
-        // (|v|/vs)^2 as a product: powf is the most expensive call in the step otherwise.
-        let e = if self.delta_is_two { x * x } else { x.powf(self.delta) };
-        let s = self.fc + self.fs_minus_fc * (-e).exp();
+        let s = if self.fs_minus_fc == 0.0 {
+            self.fc // no Stribeck peak (mu_s = mu_k): skip the exp
+        } else {
+            let x = v.abs() * self.inv_vs;
+            // (|v|/vs)^2 as a product: powf would be the most expensive call in the step
+            let e = if self.delta_is_two { x * x } else { x.powf(self.delta) };
+            self.fc + self.fs_minus_fc * (-e).exp()
+        };
         if self.eps == 0.0 { s } else { s * (1.0 + self.eps * sign0(v)) }
     }
 
     /// (dg/dt [m/s], dFh/dt [N/s]) at main-body velocity `v` [m/s] and presliding force `fh` [N].
     #[inline(always)]
     pub fn rates(&self, v: f64, fh: f64) -> (f64, f64) {
-        let r = (fh / self.stribeck(v)).abs();
-        let rn = if self.n_is_one { r } else { r.powf(self.n) };
-        // eq. 6 written with |v| so that v = 0 needs no 0/0
-        let gdot = v - v.abs() * sign0(fh) * rn;
+        let ratio = fh / self.stribeck(v);
+        // eq. 6 written with |v| so that v = 0 needs no 0/0; for n = 1, sgn(Fh)|Fh/S| = Fh/S
+        let gdot = if self.n_is_one {
+            v - v.abs() * ratio
+        } else {
+            v - v.abs() * sign0(fh) * ratio.abs().powf(self.n)
+        };
         let fhdot = self.a * gdot - self.b * gdot.abs() * fh - self.c * gdot * fh.abs();
         (gdot, fhdot)
     }
 
-    /// Friction force Ff = Fh + sigma1 dg/dt + sigma2 v [N], acting against the main body.
+    /// Friction force Ff = Fh + sigma2 v + sigma1 dg/dt [N], acting against the main body.
+    /// dg/dt is known last (it waits on the Stribeck exp and a division), so it is added last.
     #[inline(always)]
     pub fn force(&self, v: f64, fh: f64, gdot: f64) -> f64 {
-        fh + self.sigma1 * gdot + self.sigma2 * v
+        (fh + self.sigma2 * v) + self.sigma1 * gdot
     }
 
     /// Rough stiffness |d(dFh/dt)/dFh| during sliding at speed |v| [1/s], for step-size hints.

@@ -3,6 +3,8 @@
 //! One physical idea per module; the numerics are plain Rust, testable with `cargo test`.
 //! The Python bindings (`python` feature) are a thin layer in `bindings`.
 
+pub mod batch;
+pub mod dopri5;
 pub mod effects;
 pub mod friction;
 pub mod mechanics;

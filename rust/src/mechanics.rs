@@ -106,15 +106,47 @@ impl Mechanics {
     /// acc = M^-1 (f_main e_0 + f_weight e_n - K q - C v) [m/s^2].
     #[inline(always)]
     pub fn accelerations(&self, q: &[f64], v: &[f64], f_main: f64, f_weight: f64, acc: &mut [f64]) {
+        // Fixed sizes for the common cases let the compiler unroll and drop bounds checks.
+        match self.dof {
+            2 => self.accelerations_fixed::<2>(q, v, f_main, f_weight, acc),
+            3 => self.accelerations_fixed::<3>(q, v, f_main, f_weight, acc),
+            4 => self.accelerations_fixed::<4>(q, v, f_main, f_weight, acc),
+            5 => self.accelerations_fixed::<5>(q, v, f_main, f_weight, acc),
+            6 => self.accelerations_fixed::<6>(q, v, f_main, f_weight, acc),
+            _ => self.accelerations_dyn(q, v, f_main, f_weight, acc),
+        }
+    }
+
+    #[inline(always)]
+    fn accelerations_fixed<const N: usize>(&self, q: &[f64], v: &[f64], f_main: f64, f_weight: f64, acc: &mut [f64]) {
+        let q: &[f64; N] = q.try_into().unwrap();
+        let v: &[f64; N] = v.try_into().unwrap();
+        let acc: &mut [f64; N] = acc.try_into().unwrap();
+        let mk: &[f64] = &self.minv_k[..N * N];
+        let mc: &[f64] = &self.minv_c[..N * N];
+        let m0: &[f64; N] = self.minv_main[..N].try_into().unwrap();
+        let ml: &[f64; N] = self.minv_weight[..N].try_into().unwrap();
+        // The structural part first, the forces last: f_main ends the step's critical
+        // dependency chain (it waits on the friction), so nothing should queue behind it.
+        for i in 0..N {
+            let mut a = 0.0;
+            for j in 0..N {
+                a -= mk[i * N + j] * q[j] + mc[i * N + j] * v[j];
+            }
+            acc[i] = a + ml[i] * f_weight + m0[i] * f_main;
+        }
+    }
+
+    fn accelerations_dyn(&self, q: &[f64], v: &[f64], f_main: f64, f_weight: f64, acc: &mut [f64]) {
         let n = self.dof;
         for i in 0..n {
             let rk = &self.minv_k[i * n..(i + 1) * n];
             let rc = &self.minv_c[i * n..(i + 1) * n];
-            let mut a = self.minv_main[i] * f_main + self.minv_weight[i] * f_weight;
+            let mut a = 0.0;
             for j in 0..n {
                 a -= rk[j] * q[j] + rc[j] * v[j];
             }
-            acc[i] = a;
+            acc[i] = a + self.minv_weight[i] * f_weight + self.minv_main[i] * f_main;
         }
     }
 

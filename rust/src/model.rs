@@ -119,6 +119,31 @@ impl Model {
         }
     }
 
+    /// Characteristic magnitude of each state component, for adaptive error norms: positions
+    /// and h by the free stroke d33 V_max, velocities by stroke x the LPS frequency, g by Fs/a,
+    /// Fh by Fs; accounting states are left out (inf).
+    pub fn state_scales(&self, v_max: f64) -> Vec<f64> {
+        let p = &self.params;
+        let l = &self.layout;
+        let stroke = (p.d33 * v_max.abs()).max(1e-9);
+        let omega = (p.kp() * (1.0 / p.m1 + 1.0 / p.m2)).sqrt();
+        let fs = p.mu_s.max(p.mu_k) * p.normal_force;
+        let mut s = vec![f64::INFINITY; l.dim];
+        for i in 0..l.dof {
+            s[i] = stroke;
+            s[l.dof + i] = stroke * omega;
+        }
+        s[l.g] = fs / p.fric_alpha;
+        s[l.fh] = fs;
+        s[l.h] = stroke;
+        for (idx, scale) in [(l.vpe, v_max.abs().max(1.0)), (l.xc, stroke), (l.xs, stroke)] {
+            if let Some(i) = idx {
+                s[i] = scale;
+            }
+        }
+        s
+    }
+
     /// Piezo force Fp [N] in state `y` at commanded voltage `v_cmd`.
     #[inline(always)]
     pub fn piezo_force(&self, v_cmd: f64, y: &[f64]) -> f64 {
@@ -143,50 +168,77 @@ impl Model {
         x + self.effects.drift_rate * t
     }
 
+    /// True when the state is just nodes, g, Fh and h (no lagged effects, no accounting): the
+    /// driver then runs a fixed-size, register-resident path.
+    pub fn is_plain(&self) -> bool {
+        self.layout.dim == 2 * self.layout.dof + 3
+    }
+
     /// dy/dt at commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s].
     #[inline(always)]
     pub fn rhs(&self, v_cmd: f64, dv_cmd: f64, y: &[f64], dy: &mut [f64]) {
+        self.rhs_impl::<0, true>(v_cmd, dv_cmd, y, dy);
+    }
+
+    /// The right-hand side. `N` > 0 fixes the node count at compile time; `EXTRAS = false`
+    /// promises a plain state (see [`Model::is_plain`]). Both only let the compiler keep the
+    /// state in registers; the physics is the same code. Returns (Ff [N], dg/dt [m/s]) at `y`,
+    /// which the sweep metrics reuse instead of evaluating the friction again.
+    #[inline(always)]
+    pub fn rhs_impl<const N: usize, const EXTRAS: bool>(
+        &self,
+        v_cmd: f64,
+        dv_cmd: f64,
+        y: &[f64],
+        dy: &mut [f64],
+    ) -> (f64, f64) {
         let l = &self.layout;
-        let n = l.dof;
+        let n = if N > 0 { N } else { l.dof };
+        let (ig, ifh, ih) = (2 * n, 2 * n + 1, 2 * n + 2);
         let (q, v) = (&y[..n], &y[n..2 * n]);
-        let (v_pe, dv_pe) = self.pe_voltage(v_cmd, dv_cmd, y);
-        if let Some(i) = l.vpe {
-            dy[i] = dv_pe;
-        }
-        let h = y[l.h];
-        dy[l.h] = self.hysteresis.map_or(0.0, |hy| hy.rate(dv_pe, h));
-        let xc = match l.xc {
-            Some(i) => {
-                dy[i] = first_order_rate(self.effects.kappa * self.d33 * v_pe, y[i], self.inv_tau_creep);
-                y[i]
+        let (v_pe, dv_pe) = if EXTRAS { self.pe_voltage(v_cmd, dv_cmd, y) } else { (v_cmd, dv_cmd) };
+        let h = y[ih];
+        dy[ih] = self.hysteresis.map_or(0.0, |hy| hy.rate(dv_pe, h));
+        let mut xc = 0.0;
+        if EXTRAS {
+            if let Some(i) = l.vpe {
+                dy[i] = dv_pe;
             }
-            None => 0.0,
-        };
+            if let Some(i) = l.xc {
+                dy[i] = first_order_rate(self.effects.kappa * self.d33 * v_pe, y[i], self.inv_tau_creep);
+                xc = y[i];
+            }
+        }
         let fp = piezo_force(self.kp, self.d33, v_pe, xc, h);
 
-        let (v1, fh) = (v[0], y[l.fh]);
+        let (v1, fh) = (v[0], y[ifh]);
         let (gdot, fhdot) = self.friction.rates(v1, fh);
         let ff = self.friction.force(v1, fh, gdot);
-        dy[l.g] = gdot;
-        dy[l.fh] = fhdot;
+        dy[ig] = gdot;
+        dy[ifh] = fhdot;
 
         let f_ext_main = self.f_incline + ground_spring_force(self.effects.k_ground, q[0]);
         let f_ext_weight = weight_drag(self.effects.c_weight, v[n - 1]);
-        dy[..n].copy_from_slice(v);
-        self.mech.accelerations(q, v, fp - ff + f_ext_main, -fp + f_ext_weight, &mut dy[n..2 * n]);
+        for i in 0..n {
+            dy[i] = v[i];
+        }
+        self.mech.accelerations(q, v, (fp + f_ext_main) - ff, f_ext_weight - fp, &mut dy[n..2 * n]);
 
-        if let Some(i) = l.xs {
-            dy[i] = first_order_rate(q[0], y[i], self.inv_tau_sensor);
+        if EXTRAS {
+            if let Some(i) = l.xs {
+                dy[i] = first_order_rate(q[0], y[i], self.inv_tau_sensor);
+            }
+            if let Some(a) = l.accounting {
+                dy[a] = fp * (v[0] - v[n - 1]);
+                dy[a + 1] = ff * v[0];
+                dy[a + 2] = self.mech.dissipation(v);
+                dy[a + 3] = f_ext_main * v[0] + f_ext_weight * v[n - 1];
+                dy[a + 4] = ff;
+                dy[a + 5] = self.params.rayleigh_alpha
+                    * self.pe_mass_sums.iter().zip(v).map(|(m, vi)| m * vi).sum::<f64>();
+                dy[a + 6] = f_ext_main + f_ext_weight;
+            }
         }
-        if let Some(a) = l.accounting {
-            dy[a] = fp * (v[0] - v[n - 1]);
-            dy[a + 1] = ff * v[0];
-            dy[a + 2] = self.mech.dissipation(v);
-            dy[a + 3] = f_ext_main * v[0] + f_ext_weight * v[n - 1];
-            dy[a + 4] = ff;
-            dy[a + 5] = self.params.rayleigh_alpha
-                * self.pe_mass_sums.iter().zip(v).map(|(m, vi)| m * vi).sum::<f64>();
-            dy[a + 6] = f_ext_main + f_ext_weight;
-        }
+        (ff, gdot)
     }
 }

@@ -2,7 +2,7 @@
 //! divergence every step, and hands each state to an observer (saving, metrics).
 
 use crate::model::Model;
-use crate::rk4::Rk4;
+use crate::rk4::{Rhs, Rk4};
 use crate::waveform::PiecewiseLinear;
 
 /// RK4's stability limit on the imaginary axis is 2 sqrt 2; keep a margin.
@@ -58,6 +58,26 @@ pub fn rest_state(model: &Model) -> Vec<f64> {
     vec![0.0; model.layout.dim]
 }
 
+/// The model under a linear input over one step, per lane: V = v0 + slope c dt. Keeps
+/// (Ff, dg/dt) of each lane's first stage, i.e. at the state at the start of the step.
+pub(crate) struct ModelRhs<'a, const N: usize, const EXTRAS: bool, const L: usize = 1> {
+    pub model: &'a Model,
+    pub v0: [f64; L],
+    pub slope: [f64; L],
+    pub dt: f64,
+    pub ff_gdot: [(f64, f64); L],
+}
+
+impl<const N: usize, const EXTRAS: bool, const L: usize> Rhs for ModelRhs<'_, N, EXTRAS, L> {
+    #[inline(always)]
+    fn eval(&mut self, lane: usize, c: f64, y: &[f64], dy: &mut [f64]) {
+        let out = self.model.rhs_impl::<N, EXTRAS>(self.v0[lane] + self.slope[lane] * c * self.dt, self.slope[lane], y, dy);
+        if c == 0.0 {
+            self.ff_gdot[lane] = out;
+        }
+    }
+}
+
 /// Integrate `steps` steps of `dt` from `y` (at t = 0). After every step the observer gets
 /// (step index k >= 1, t, state, commanded voltage). Stops with `Diverged` as soon as the
 /// state is non-finite or |Fh| leaves its bound.
@@ -67,9 +87,49 @@ pub fn integrate<O: FnMut(usize, f64, &[f64], f64)>(
     dt: f64,
     steps: usize,
     y: &mut [f64],
-    mut observe: O,
+    observe: O,
 ) -> Result<(), SimError> {
-    let mut rk = Rk4::new(y.len());
+    // Plain states of the common sizes run on stack arrays (see rk4.rs); same arithmetic.
+    macro_rules! fixed {
+        ($n:literal, $d:literal) => {{
+            let mut a = [0.0; $d];
+            a.copy_from_slice(y);
+            let r = integrate_with::<_, _, $n, false>(model, wave, dt, steps, &mut a, observe);
+            y.copy_from_slice(&a);
+            r
+        }};
+    }
+    match (model.is_plain(), model.layout.dof) {
+        (true, 2) => fixed!(2, 7),
+        (true, 3) => fixed!(3, 9),
+        (true, 4) => fixed!(4, 11),
+        (true, 5) => fixed!(5, 13),
+        (true, 6) => fixed!(6, 15),
+        _ => {
+            let mut v = y.to_vec();
+            let r = integrate_with::<_, _, 0, true>(model, wave, dt, steps, &mut v, observe);
+            y.copy_from_slice(&v);
+            r
+        }
+    }
+}
+
+#[inline(always)]
+fn integrate_with<S, O, const N: usize, const EXTRAS: bool>(
+    model: &Model,
+    wave: &PiecewiseLinear,
+    dt: f64,
+    steps: usize,
+    y: &mut S,
+    mut observe: O,
+) -> Result<(), SimError>
+where
+    S: AsRef<[f64]> + AsMut<[f64]> + Clone,
+    O: FnMut(usize, f64, &[f64], f64),
+{
+    let mut zero = y.clone();
+    zero.as_mut().fill(0.0);
+    let mut rk = Rk4::new(zero);
     let l = model.layout;
     // a hair above the bound: RK4 may overshoot it by its truncation error
     let bound = model.presliding_bound() * (1.0 + 1e-6) + 1e-12;
@@ -88,16 +148,17 @@ pub fn integrate<O: FnMut(usize, f64, &[f64], f64)>(
             let s = (bv[seg + 1] - bv[seg]) / (bt[seg + 1] - bt[seg]);
             (bv[seg] + s * (t0 - bt[seg]), s)
         };
-        let mut f = |c: f64, s: &[f64], ds: &mut [f64]| model.rhs(v0 + slope * c * dt, slope, s, ds);
+        let mut f = ModelRhs::<N, EXTRAS> { model, v0: [v0], slope: [slope], dt, ff_gdot: [(0.0, 0.0)] };
         rk.step(&mut f, dt, y);
         let t1 = (k + 1) as f64 * dt;
-        let fh = y[l.fh];
-        if !(fh.abs() <= bound) || !y[l.dof].is_finite() || !y[0].is_finite() {
-            return Err(diverged(model, dt, t1, y));
+        let ys = y.as_ref();
+        let fh = ys[l.fh];
+        if !(fh.abs() <= bound) || !ys[l.dof].is_finite() || !ys[0].is_finite() {
+            return Err(diverged(model, dt, t1, ys));
         }
-        observe(k + 1, t1, y, v0 + slope * dt);
+        observe(k + 1, t1, ys, v0 + slope * dt);
     }
-    if let Some(i) = y.iter().position(|x| !x.is_finite()) {
+    if let Some(i) = y.as_ref().iter().position(|x| !x.is_finite()) {
         return Err(SimError::Diverged {
             t: steps as f64 * dt,
             message: format!("state component {i} is not finite at the end of the run"),
@@ -193,9 +254,12 @@ pub fn simulate(
     let mut y = rest_state(model);
     let mut out = Trajectory { dof: model.layout.dof, ..Default::default() };
     out.record(model, 0.0, &y, wave.value(0.0));
+    let mut until_save = save_every;
     integrate(model, wave, dt, steps, &mut y, |k, t, s, v| {
-        if k % save_every == 0 || k == steps {
+        until_save -= 1; // a countdown, not k % save_every: no division in the step loop
+        if until_save == 0 || k == steps {
             out.record(model, t, s, v);
+            until_save = save_every;
         }
     })?;
     out.final_state = y;
