@@ -14,6 +14,7 @@ from ._core import __version__
 from .effects import Effects
 from .params import Params
 from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate
+from .sweep import METRICS, sweep
 from .waveforms import Sampled, Sawtooth, Triangle, Waveform
 
 __all__ = [
@@ -27,5 +28,7 @@ __all__ = [
     "SimulationResult",
     "Triangle",
     "Waveform",
+    "METRICS",
     "simulate",
+    "sweep",
 ]

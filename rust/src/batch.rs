@@ -1,0 +1,541 @@
+//! The batch engine behind sweeps: many independent points (parameters, effects, waveform),
+//! each reduced to a few metrics inside the loop — no trajectory is stored, so memory is
+//! O(points x metrics). Points run in parallel with rayon; with RK4, groups of `LANES` points
+//! advance stage by stage together (see rk4.rs) so one core works on several independent
+//! dependency chains at once. Every point's arithmetic is exactly that of `simulate` for the
+//! same settings, so results do not depend on thread count, chunking or lane grouping.
+
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use rayon::prelude::*;
+
+use crate::dopri5::{self, Dopri5Options};
+use crate::effects::Effects;
+use crate::mechanics::Structure;
+use crate::model::Model;
+use crate::params::Params;
+use crate::rk4::{Rhs, Rk4};
+use crate::simulate::{plan_steps, rest_state, ModelRhs, SimError};
+use crate::waveform::PiecewiseLinear;
+
+/// Points advanced together per core with RK4.
+pub const LANES: usize = 4;
+/// The main body counts as sliding when |v1| exceeds this share of the Stribeck velocity:
+/// presliding (elastic asperity) motion is orders of magnitude slower.
+pub const SLIP_VELOCITY_FACTOR: f64 = 0.1;
+/// How often (in steps) a running point looks at the cancel flag.
+const CANCEL_CHECK_STEPS: usize = 1 << 14;
+
+/// Integration method for a batch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Method {
+    /// Fixed-step classical RK4 with step `BatchConfig::dt` (the reference).
+    Rk4,
+    /// Adaptive Dormand-Prince 5(4); `BatchConfig::dt` is the first trial step.
+    Dopri5 { rtol: f64, atol: f64 },
+}
+
+/// What is common to every point of a batch.
+#[derive(Clone, Copy, Debug)]
+pub struct BatchConfig {
+    pub structure: Structure,
+    pub piezo_hysteresis: bool,
+    pub t_end: f64,
+    pub dt: f64,
+    pub method: Method,
+    /// RK4: on divergence, retry with dt/2, dt/4, ... this many times before flagging the point
+    pub retries: u32,
+}
+
+/// One point: its parameters, effects, input and the number of drive cycles (0 if not a train).
+#[derive(Clone, Debug)]
+pub struct PointSpec {
+    pub params: Params,
+    pub effects: Effects,
+    pub wave: PiecewiseLinear,
+    pub cycles: usize,
+}
+
+/// Outcome of a point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Status {
+    /// not run (the batch was cancelled first)
+    NotRun = 0,
+    Ok = 1,
+    /// diverged at the requested dt, finished at a smaller one (see `dt_used`)
+    Retried = 2,
+    /// diverged at every step tried (`diverged_at` holds the time)
+    Diverged = 3,
+    /// the point's parameters are invalid
+    Invalid = 4,
+}
+
+/// Metrics of one point. NaN where not available.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointMetrics {
+    /// x1(t_end) [m]
+    pub final_position: f64,
+    /// x1(t_end) / cycles for trains [m]
+    pub step_per_cycle: f64,
+    /// max |v1| [m/s]
+    pub peak_velocity: f64,
+    /// max |Ff| [N]
+    pub peak_friction: f64,
+    /// share of time the main body slides, |v1| > SLIP_VELOCITY_FACTOR x stribeck_velocity [-]
+    pub slip_fraction: f64,
+    pub status: Status,
+    /// time of the (last) divergence [s]
+    pub diverged_at: f64,
+    /// step used (RK4) or smallest accepted step (dopri5) [s]
+    pub dt_used: f64,
+    /// steps taken (accepted, for dopri5)
+    pub steps: u64,
+}
+
+impl PointMetrics {
+    pub fn not_run() -> Self {
+        PointMetrics {
+            final_position: f64::NAN,
+            step_per_cycle: f64::NAN,
+            peak_velocity: f64::NAN,
+            peak_friction: f64::NAN,
+            slip_fraction: f64::NAN,
+            status: Status::NotRun,
+            diverged_at: f64::NAN,
+            dt_used: f64::NAN,
+            steps: 0,
+        }
+    }
+}
+
+/// Running maxima and slip time of one point.
+#[derive(Clone, Copy, Debug, Default)]
+struct Accumulator {
+    slip_velocity: f64,
+    peak_v: f64,
+    peak_f: f64,
+    slip_time: f64,
+}
+
+impl Accumulator {
+    fn new(model: &Model) -> Self {
+        Accumulator { slip_velocity: SLIP_VELOCITY_FACTOR * model.params.stribeck_velocity, ..Default::default() }
+    }
+
+    /// Account for the state (v1, Ff) held over a time `span`.
+    #[inline(always)]
+    fn observe(&mut self, v1: f64, ff: f64, span: f64) {
+        self.peak_v = self.peak_v.max(v1.abs());
+        self.peak_f = self.peak_f.max(ff.abs());
+        if v1.abs() > self.slip_velocity {
+            self.slip_time += span;
+        }
+    }
+
+    fn finish(self, model: &Model, y: &[f64], t_end: f64, cycles: usize, status: Status, dt_used: f64, steps: u64) -> PointMetrics {
+        let v1 = y[model.layout.dof];
+        let ff = model.friction_force(y);
+        let mut acc = self;
+        acc.observe(v1, ff, 0.0); // the final state counts for the peaks only
+        PointMetrics {
+            final_position: y[0],
+            step_per_cycle: if cycles > 0 { y[0] / cycles as f64 } else { f64::NAN },
+            peak_velocity: acc.peak_v,
+            peak_friction: acc.peak_f,
+            slip_fraction: acc.slip_time / t_end,
+            status,
+            diverged_at: f64::NAN,
+            dt_used,
+            steps,
+        }
+    }
+}
+
+fn build_model(cfg: &BatchConfig, spec: &PointSpec) -> Result<Model, String> {
+    Model::new(spec.params, spec.effects, cfg.structure, cfg.piezo_hysteresis, false)
+}
+
+/// Input over step k of lane: (V at step start, slope), advancing the lane's segment cursor.
+#[inline(always)]
+fn step_input(wave: &PiecewiseLinear, seg: &mut usize, k: usize, dt: f64) -> (f64, f64) {
+    let (bt, bv) = (wave.times(), wave.values());
+    let t0 = k as f64 * dt;
+    let t_mid = t0 + 0.5 * dt;
+    while *seg + 1 < bt.len() && bt[*seg + 1] <= t_mid {
+        *seg += 1;
+    }
+    if t_mid < bt[0] || *seg + 1 >= bt.len() {
+        (bv[*seg], 0.0)
+    } else {
+        let s = (bv[*seg + 1] - bv[*seg]) / (bt[*seg + 1] - bt[*seg]);
+        (bv[*seg] + s * (t0 - bt[*seg]), s)
+    }
+}
+
+/// RK4 on up to L points at once (same dof, same step count). `None` in `out` marks a lane
+/// that diverged (with its time) — the caller retries it alone.
+fn rk4_lanes<S, const N: usize, const EXTRAS: bool, const L: usize>(
+    models: &[Model],
+    specs: &[&PointSpec],
+    dt: f64,
+    steps: usize,
+    zero: S,
+    cancel: &AtomicBool,
+) -> Vec<Result<PointMetrics, f64>>
+where
+    S: AsRef<[f64]> + AsMut<[f64]> + Clone,
+{
+    let m = models.len();
+    let mut active = [false; L];
+    active[..m].fill(true);
+    let mut ys: [S; L] = std::array::from_fn(|_| zero.clone());
+    let mut rk: Rk4<S, L> = Rk4::new(zero.clone());
+    let mut acc: [Accumulator; L] = std::array::from_fn(|i| Accumulator::new(&models[i.min(m - 1)]));
+    let mut seg = [0usize; L];
+    let mut failed = [f64::NAN; L];
+    let bounds: Vec<f64> = models.iter().map(|md| md.presliding_bound() * (1.0 + 1e-6) + 1e-12).collect();
+    let (ifh, iv) = (models[0].layout.fh, models[0].layout.dof);
+    let mut rhs: [ModelRhs<N, EXTRAS, 1>; L] = std::array::from_fn(|i| ModelRhs {
+        model: &models[i.min(m - 1)],
+        v0: [0.0],
+        slope: [0.0],
+        dt,
+        ff_gdot: [(0.0, 0.0)],
+    });
+    for k in 0..steps {
+        if k % CANCEL_CHECK_STEPS == 0 && cancel.load(Ordering::Relaxed) {
+            return Vec::new();
+        }
+        let mut v_start = [0.0; L];
+        for i in 0..m {
+            let (v0, s) = step_input(&specs[i].wave, &mut seg[i], k, dt);
+            rhs[i].v0 = [v0];
+            rhs[i].slope = [s];
+            v_start[i] = ys[i].as_ref()[iv];
+        }
+        let mut f = |lane: usize, c: f64, y: &[f64], dy: &mut [f64]| rhs[lane].eval(0, c, y, dy);
+        rk.step_lanes(&mut f, dt, &mut ys, &active);
+        for i in 0..m {
+            if active[i] {
+                // (Ff, dg/dt) from the first stage belong to the state at the step's start
+                let (ff, _) = rhs[i].ff_gdot[0];
+                acc[i].observe(v_start[i], ff, dt);
+                let y = ys[i].as_ref();
+                if !(y[ifh].abs() <= bounds[i]) || !y[iv].is_finite() || !y[0].is_finite() {
+                    active[i] = false;
+                    failed[i] = (k + 1) as f64 * dt;
+                }
+            }
+        }
+    }
+    (0..m)
+        .map(|i| {
+            if failed[i].is_nan() && ys[i].as_ref().iter().all(|x| x.is_finite()) {
+                Ok(acc[i].finish(&models[i], ys[i].as_ref(), steps as f64 * dt, specs[i].cycles, Status::Ok, dt, steps as u64))
+            } else {
+                Err(if failed[i].is_nan() { steps as f64 * dt } else { failed[i] })
+            }
+        })
+        .collect()
+}
+
+/// RK4 over a group of points with the same model layout, dispatched to a fixed-size state.
+fn rk4_group(cfg: &BatchConfig, models: &[Model], specs: &[&PointSpec], steps: usize, cancel: &AtomicBool) -> Vec<Result<PointMetrics, f64>> {
+    let dt = cfg.dt;
+    macro_rules! fixed {
+        ($n:literal, $d:literal) => {
+            rk4_lanes::<[f64; $d], $n, false, LANES>(models, specs, dt, steps, [0.0; $d], cancel)
+        };
+    }
+    let plain = models.iter().all(|m| m.is_plain());
+    match (plain, models[0].layout.dof) {
+        (true, 2) => fixed!(2, 7),
+        (true, 3) => fixed!(3, 9),
+        (true, 4) => fixed!(4, 11),
+        (true, 5) => fixed!(5, 13),
+        (true, 6) => fixed!(6, 15),
+        _ => models
+            .iter()
+            .zip(specs)
+            .flat_map(|(m, s)| {
+                rk4_lanes::<Vec<f64>, 0, true, 1>(std::slice::from_ref(m), &[*s], dt, steps, rest_state(m), cancel)
+            })
+            .collect(),
+    }
+}
+
+/// Adaptive Dormand-Prince run of one point.
+fn dopri5_point(cfg: &BatchConfig, model: &Model, spec: &PointSpec, rtol: f64, atol: f64, cancel: &AtomicBool) -> Option<PointMetrics> {
+    let wave = &spec.wave;
+    let (bt, bv) = (wave.times(), wave.values());
+    let v_max = bv.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let opts = Dopri5Options {
+        rtol,
+        atol,
+        scale: model.state_scales(v_max),
+        h_init: cfg.dt,
+        h_min: 1e-14,
+        h_max: cfg.t_end / 10.0,
+    };
+    let input = |seg: usize, t: f64| -> (f64, f64) {
+        if seg + 1 >= bt.len() || t < bt[0] {
+            (bv[seg.min(bt.len() - 1)], 0.0)
+        } else {
+            let s = (bv[seg + 1] - bv[seg]) / (bt[seg + 1] - bt[seg]);
+            (bv[seg] + s * (t - bt[seg]), s)
+        }
+    };
+    let mut y = rest_state(model);
+    let mut acc = Accumulator::new(model);
+    let (mut t_prev, mut h_min_used, mut evals) = (0.0, f64::INFINITY, 0usize);
+    let (mut v_prev, mut ff_prev) = (0.0, 0.0);
+    let mut cancelled = false;
+    let result = dopri5::integrate(
+        |seg, t, s: &[f64], ds: &mut [f64]| {
+            let (v, slope) = input(seg, t);
+            model.rhs(v, slope, s, ds);
+        },
+        0.0,
+        cfg.t_end,
+        bt,
+        &mut y,
+        &opts,
+        |t, s| {
+            // the state at the start of each accepted step is held over it
+            acc.observe(v_prev, ff_prev, t - t_prev);
+            h_min_used = h_min_used.min(t - t_prev);
+            t_prev = t;
+            v_prev = s[model.layout.dof];
+            ff_prev = model.friction_force(s);
+            evals += 1;
+            if evals % 4096 == 0 && cancel.load(Ordering::Relaxed) {
+                cancelled = true;
+                return false;
+            }
+            true
+        },
+    );
+    if cancelled {
+        return None;
+    }
+    Some(match result {
+        Ok(stats) if y.iter().all(|x| x.is_finite()) => acc.finish(model, &y, cfg.t_end, spec.cycles, Status::Ok, h_min_used, stats.accepted),
+        Ok(_) => diverged_metrics(cfg.t_end, cfg.dt),
+        Err((t, _)) => diverged_metrics(t, cfg.dt),
+    })
+}
+
+fn diverged_metrics(t: f64, dt: f64) -> PointMetrics {
+    PointMetrics { status: Status::Diverged, diverged_at: t, dt_used: dt, ..PointMetrics::not_run() }
+}
+
+/// RK4 retry of one diverged point at dt/2, dt/4, ...
+fn rk4_retry(cfg: &BatchConfig, model: &Model, spec: &PointSpec, first_failure: f64, cancel: &AtomicBool) -> Option<PointMetrics> {
+    let mut failed_at = first_failure;
+    let mut dt = cfg.dt;
+    for _ in 0..cfg.retries {
+        dt /= 2.0;
+        let steps = match plan_steps(model, &spec.wave, cfg.t_end, dt) {
+            Ok(s) => s,
+            Err(_) => break,
+        };
+        let c = BatchConfig { dt, ..*cfg };
+        let r = rk4_group(&c, std::slice::from_ref(model), &[spec], steps, cancel);
+        match r.first() {
+            None => return None, // cancelled
+            Some(Ok(m)) => return Some(PointMetrics { status: Status::Retried, ..*m }),
+            Some(Err(t)) => failed_at = *t,
+        }
+    }
+    Some(PointMetrics { dt_used: dt, ..diverged_metrics(failed_at, dt) })
+}
+
+/// Run one chunk of points (any size); `None` entries were cancelled before finishing.
+fn run_chunk(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: &AtomicUsize) -> Vec<Option<PointMetrics>> {
+    let mut out: Vec<Option<PointMetrics>> = vec![None; specs.len()];
+    // invalid points are answered at once; valid ones are grouped by layout for the lanes
+    let mut valid: Vec<(usize, Model)> = Vec::with_capacity(specs.len());
+    for (i, s) in specs.iter().enumerate() {
+        match build_model(cfg, s).and_then(|m| {
+            if cfg.method == Method::Rk4 {
+                plan_steps(&m, &s.wave, cfg.t_end, cfg.dt).map_err(|e| e.to_string())?;
+            }
+            Ok(m)
+        }) {
+            Ok(m) => valid.push((i, m)),
+            Err(_) => {
+                out[i] = Some(PointMetrics { status: Status::Invalid, ..PointMetrics::not_run() });
+                done.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+    match cfg.method {
+        Method::Rk4 => {
+            let steps = (cfg.t_end / cfg.dt).round() as usize;
+            let mut start = 0;
+            while start < valid.len() {
+                if cancel.load(Ordering::Relaxed) {
+                    break;
+                }
+                // a lane group shares one state layout
+                let dim = valid[start].1.layout.dim;
+                let mut end = start + 1;
+                while end < valid.len() && end - start < LANES && valid[end].1.layout.dim == dim {
+                    end += 1;
+                }
+                let group = &valid[start..end];
+                let models: Vec<Model> = group.iter().map(|(_, m)| m.clone()).collect();
+                let gspecs: Vec<&PointSpec> = group.iter().map(|(i, _)| &specs[*i]).collect();
+                let results = rk4_group(cfg, &models, &gspecs, steps, cancel);
+                if results.is_empty() {
+                    break; // cancelled
+                }
+                for ((i, m), r) in group.iter().zip(results) {
+                    let metrics = match r {
+                        Ok(x) => Some(x),
+                        Err(t) => rk4_retry(cfg, m, &specs[*i], t, cancel),
+                    };
+                    if metrics.is_some() {
+                        done.fetch_add(1, Ordering::Relaxed);
+                    }
+                    out[*i] = metrics;
+                }
+                start = end;
+            }
+        }
+        Method::Dopri5 { rtol, atol } => {
+            for (i, m) in &valid {
+                if cancel.load(Ordering::Relaxed) {
+                    break;
+                }
+                out[*i] = dopri5_point(cfg, m, &specs[*i], rtol, atol, cancel);
+                if out[*i].is_some() {
+                    done.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Points per rayon task: big enough to amortise scheduling, small enough to balance load and
+/// to stop promptly on cancel.
+pub const CHUNK: usize = 4 * LANES;
+
+/// Run every point on the current rayon pool. Unfinished points (after `cancel`) come back as
+/// `Status::NotRun` with NaN metrics; `done` counts finished points as they finish.
+pub fn run_batch(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: &AtomicUsize) -> Result<Vec<PointMetrics>, SimError> {
+    if !(cfg.dt.is_finite() && cfg.dt > 0.0) {
+        return Err(SimError::Input(format!("parameter 'dt' must be positive and finite, got {}", cfg.dt)));
+    }
+    if let Method::Dopri5 { rtol, atol } = cfg.method {
+        if !(rtol > 0.0 && atol > 0.0 && rtol.is_finite() && atol.is_finite()) {
+            return Err(SimError::Input(format!("'rtol' and 'atol' must be positive, got {rtol}, {atol}")));
+        }
+    }
+    Ok(specs
+        .par_chunks(CHUNK)
+        .flat_map_iter(|chunk| run_chunk(cfg, chunk, cancel, done))
+        .map(|m| m.unwrap_or_else(PointMetrics::not_run))
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::simulate;
+
+    fn cfg(method: Method, structure: Structure) -> BatchConfig {
+        BatchConfig { structure, piezo_hysteresis: true, t_end: 2e-3, dt: 2e-8, method, retries: 2 }
+    }
+
+    fn specs(n: usize) -> Vec<PointSpec> {
+        (0..n)
+            .map(|i| {
+                let mut p = Params::paper();
+                p.m2 = 0.15 + 0.05 * i as f64;
+                p.normal_force = p.default_normal_force();
+                PointSpec {
+                    params: p,
+                    effects: Effects::default(),
+                    wave: PiecewiseLinear::sawtooth(40.0 + 10.0 * i as f64, 1000.0, 2, 0.2e-3, true, 0.0).unwrap(),
+                    cycles: 2,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn rk4_batch_equals_simulate_bitwise() {
+        for structure in [Structure::Lps, Structure::Dps(4)] {
+            let c = cfg(Method::Rk4, structure);
+            let sp = specs(7);
+            let (cancel, done) = (AtomicBool::new(false), AtomicUsize::new(0));
+            let r = run_batch(&c, &sp, &cancel, &done).unwrap();
+            assert_eq!(done.load(Ordering::Relaxed), 7);
+            for (s, m) in sp.iter().zip(&r) {
+                let model = Model::new(s.params, s.effects, structure, true, false).unwrap();
+                let t = simulate(&model, &s.wave, c.t_end, c.dt, 1).unwrap();
+                assert_eq!(m.status, Status::Ok);
+                assert_eq!(m.final_position, t.final_state[0]);
+                let pv = t.velocities.chunks(model.layout.dof).map(|v| v[0].abs()).fold(0.0, f64::max);
+                let pf = t.friction.iter().fold(0.0f64, |a, f| a.max(f.abs()));
+                assert_eq!(m.peak_velocity, pv);
+                assert_eq!(m.peak_friction, pf);
+                assert!(m.slip_fraction > 0.0 && m.slip_fraction < 1.0);
+            }
+        }
+    }
+
+    #[test]
+    fn results_do_not_depend_on_thread_count() {
+        let c = cfg(Method::Rk4, Structure::Lps);
+        let sp = specs(9);
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap())
+        };
+        let bits = |r: Vec<PointMetrics>| -> Vec<[u64; 7]> {
+            r.iter()
+                .map(|m| [m.final_position, m.step_per_cycle, m.peak_velocity, m.peak_friction, m.slip_fraction, m.diverged_at, m.dt_used].map(f64::to_bits))
+                .collect()
+        };
+        assert_eq!(bits(run(1)), bits(run(2)));
+    }
+
+    #[test]
+    fn dopri5_agrees_with_rk4_to_a_nanometre() {
+        let sp = specs(3);
+        let (cancel, done) = (AtomicBool::new(false), AtomicUsize::new(0));
+        let a = run_batch(&cfg(Method::Rk4, Structure::Lps), &sp, &cancel, &done).unwrap();
+        let b = run_batch(&cfg(Method::Dopri5 { rtol: 1e-7, atol: 1e-7 }, Structure::Lps), &sp, &cancel, &done).unwrap();
+        for (x, y) in a.iter().zip(&b) {
+            assert_eq!(y.status, Status::Ok);
+            assert!((x.final_position - y.final_position).abs() < 1e-9, "{} {}", x.final_position, y.final_position);
+            assert!(y.steps < 100_000 / 2, "adaptive took {} steps", y.steps);
+        }
+    }
+
+    #[test]
+    fn diverging_point_is_retried_and_does_not_poison_others() {
+        let mut c = cfg(Method::Rk4, Structure::Lps);
+        c.dt = 4e-7;
+        c.t_end = 2e-3;
+        let sp = specs(3);
+        let r = run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        assert!(r.iter().any(|m| m.status == Status::Retried), "{r:?}");
+        assert!(r.iter().all(|m| m.final_position.is_finite()));
+        c.retries = 0;
+        let r = run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        assert!(r.iter().any(|m| m.status == Status::Diverged && m.diverged_at > 0.0 && m.final_position.is_nan()));
+    }
+
+    #[test]
+    fn cancelled_batch_returns_not_run_points() {
+        let c = cfg(Method::Rk4, Structure::Lps);
+        let cancel = AtomicBool::new(true);
+        let r = run_batch(&c, &specs(5), &cancel, &AtomicUsize::new(0)).unwrap();
+        assert!(r.iter().all(|m| m.status == Status::NotRun && m.final_position.is_nan()));
+    }
+}

@@ -60,7 +60,7 @@ pub fn rest_state(model: &Model) -> Vec<f64> {
 
 /// The model under a linear input over one step, per lane: V = v0 + slope c dt. Keeps
 /// (Ff, dg/dt) of each lane's first stage, i.e. at the state at the start of the step.
-pub(crate) struct ModelRhs<'a, const N: usize, const EXTRAS: bool, const L: usize = 1> {
+pub struct ModelRhs<'a, const N: usize, const EXTRAS: bool, const L: usize = 1> {
     pub model: &'a Model,
     pub v0: [f64; L],
     pub slope: [f64; L],

@@ -1,0 +1,412 @@
+"""Parameter sweeps: the outer product of a grid of values, each point reduced to metrics inside
+the Rust batch engine (no trajectories stored), returned as a labelled ``xarray.Dataset``.
+
+Points are sent to Rust in blocks, so memory is O(points x metrics) plus one block. Locally the
+blocks run on a rayon pool with the GIL released while a tqdm bar follows progress; Ctrl-C stops
+within about a second and returns what finished. With ``client=`` (a ``dask.distributed.Client``)
+each block is a Dask task on the cluster instead.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+import warnings
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, Any, Literal, Mapping, Optional, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import _core
+from .effects import Effects
+from .params import PARAM_INFO, Params
+from .waveforms import Sampled, Sawtooth, Triangle, Waveform
+
+if TYPE_CHECKING:
+    import xarray
+
+#: metric name -> (units, long name)
+METRICS: dict[str, tuple[str, str]] = {
+    "final_position": ("m", "main body displacement x1 at t_end"),
+    "step_per_cycle": ("m", "mean main body step per drive cycle, x1(t_end)/cycles"),
+    "peak_velocity": ("m/s", "largest |v1|"),
+    "peak_friction": ("N", "largest |Ff|"),
+    "slip_fraction": ("1", "share of time the main body slides (|v1| > 0.1 stribeck_velocity)"),
+}
+
+#: derived axes: name -> (units, long name)
+DERIVED_AXES: dict[str, tuple[str, str]] = {
+    "mass_ratio": ("1", "weight-to-main-body mass ratio m2/m1 (m1 fixed)"),
+    "pe_mass_ratio": ("1", "PE-to-main-body mass ratio mPE/m1 (through pe_density)"),
+    "stiffness": ("N/m", "PE stiffness kp = Ep Ap / l (through pe_youngs)"),
+    "voltage": ("V", "drive amplitude"),
+}
+
+WAVE_FIELDS: dict[str, tuple[str, str]] = {
+    "amplitude": ("V", "drive amplitude"),
+    "rise": ("s", "rise (edge) time"),
+    "fall": ("s", "fall time (triangle)"),
+    "frequency": ("Hz", "drive frequency (sawtooth)"),
+    "cycles": ("1", "number of drive cycles (sawtooth)"),
+    "delay": ("s", "delay before the wave"),
+}
+
+STATUS_MEANINGS = "not_run ok ok_at_smaller_dt diverged invalid"
+
+#: smallest number of points per Dask task (the scheduler's overhead is ~1 ms per task)
+DASK_MIN_BLOCK = 10_000
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """Everything needed to run any block of the grid (picklable for Dask)."""
+
+    params: Params
+    waveform: Waveform
+    effects: Effects
+    names: tuple[str, ...]
+    values: tuple[NDArray[np.float64], ...]
+    t_end: float
+    dt: float
+    model: str
+    n_elements: int
+    piezo_hysteresis: bool
+    method: str
+    rtol: float
+    atol: float
+    retries: int
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(len(v) for v in self.values)
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape, dtype=np.int64))
+
+    def arrays(self, start: int, stop: int) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Parameter, effect and waveform matrices of flat points [start, stop)."""
+        n = stop - start
+        idx = np.unravel_index(np.arange(start, stop), self.shape)
+        pnames = _core.param_names()
+        base = self.params.to_dict(resolved=False)
+        pm = np.empty((n, len(pnames)))
+        for j, name in enumerate(pnames):
+            pm[:, j] = base.get(name, math.nan)  # NaN normal_force: derived per point
+        enames = _core.effect_names()
+        em = np.tile([getattr(self.effects, e) for e in enames], (n, 1)).astype(float)
+        wm = np.tile(_wave_row(self.waveform), (n, 1))
+        wcol = {c: j for j, c in enumerate(_core.wave_columns())}
+        for axis, (name, vals) in enumerate(zip(self.names, self.values)):
+            v = vals[idx[axis]]
+            if name in pnames:
+                pm[:, pnames.index(name)] = v
+            elif name in enames:
+                em[:, enames.index(name)] = v
+            elif name in ("voltage", "amplitude"):
+                wm[:, wcol["amplitude"]] = v
+            elif name in WAVE_FIELDS:
+                wm[:, wcol[name]] = v
+        # derived axes, applied after the plain ones so they see the swept m1, Ap, l
+        col = {name: j for j, name in enumerate(pnames)}
+        for axis, (name, vals) in enumerate(zip(self.names, self.values)):
+            v = vals[idx[axis]]
+            if name == "mass_ratio":
+                pm[:, col["m2"]] = v * pm[:, col["m1"]]
+            elif name == "pe_mass_ratio":
+                pm[:, col["pe_density"]] = v * pm[:, col["m1"]] / (pm[:, col["pe_area"]] * pm[:, col["pe_length"]])
+            elif name == "stiffness":
+                pm[:, col["pe_youngs"]] = v * pm[:, col["pe_length"]] / pm[:, col["pe_area"]]
+        return pm, em, wm
+
+
+def _wave_row(w: Waveform) -> list[float]:
+    cols = _core.wave_columns()
+    row = dict.fromkeys(cols, 0.0)
+    if isinstance(w, Triangle):
+        row.update(kind=0, amplitude=w.amplitude, rise=w.rise, fall=w.fall, delay=w.delay)
+    elif isinstance(w, Sawtooth):
+        row.update(kind=1, amplitude=w.amplitude, rise=w.rise, frequency=w.frequency, cycles=w.cycles,
+                   forward=1.0 if w.direction == "forward" else 0.0, delay=w.delay)
+    else:
+        row.update(kind=2, amplitude=1.0)
+    return [float(row[c]) for c in cols]
+
+
+def _axis_info(name: str) -> tuple[str, str]:
+    if name in PARAM_INFO:
+        sym, units, meaning = PARAM_INFO[name]
+        return units, f"{meaning} ({sym})"
+    if name in DERIVED_AXES:
+        return DERIVED_AXES[name]
+    if name in WAVE_FIELDS:
+        return WAVE_FIELDS[name]
+    effect_units = {"theta_rad": "rad", "k_ground": "N/m", "tau_amp": "s", "kappa": "1", "tau_creep": "s",
+                    "c_weight": "N s/m", "eps": "1", "tau_sensor": "s", "drift_rate": "m/s"}
+    return effect_units[name], f"effect parameter {name}"
+
+
+def _check_grid(grid: Mapping[str, ArrayLike], waveform: Waveform) -> tuple[tuple[str, ...], tuple[NDArray[np.float64], ...]]:
+    if not grid:
+        raise ValueError("grid is empty: give at least one axis, e.g. {'mass_ratio': np.linspace(0.25, 2, 8)}")
+    known = set(PARAM_INFO) | set(DERIVED_AXES) | set(WAVE_FIELDS) | {f.name for f in fields(Effects)}
+    names, values = [], []
+    for name, vals in grid.items():
+        if name not in known:
+            raise ValueError(f"unknown sweep axis '{name}'; known: {sorted(known)}")
+        v = np.asarray(vals, dtype=float).ravel()
+        if v.size == 0:
+            raise ValueError(f"sweep axis '{name}' is empty")
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"sweep axis '{name}' has non-finite values")
+        if name in WAVE_FIELDS or name == "voltage":
+            kind = {Triangle: ("amplitude", "rise", "fall", "delay"),
+                    Sawtooth: ("amplitude", "rise", "frequency", "cycles", "delay"),
+                    Sampled: ("amplitude",)}[type(waveform)]
+            if (name if name != "voltage" else "amplitude") not in kind:
+                raise ValueError(f"sweep axis '{name}' does not apply to a {type(waveform).__name__} waveform")
+        names.append(name)
+        values.append(v)
+    if "mass_ratio" in names and "m2" in names:
+        raise ValueError("sweep axes 'mass_ratio' and 'm2' both set m2; keep one")
+    if "stiffness" in names and "pe_youngs" in names:
+        raise ValueError("sweep axes 'stiffness' and 'pe_youngs' both set pe_youngs; keep one")
+    if "pe_mass_ratio" in names and "pe_density" in names:
+        raise ValueError("sweep axes 'pe_mass_ratio' and 'pe_density' both set pe_density; keep one")
+    if "voltage" in names and "amplitude" in names:
+        raise ValueError("sweep axes 'voltage' and 'amplitude' are the same; keep one")
+    return tuple(names), tuple(values)
+
+
+def _start(plan: _Plan, start: int, stop: int, threads: int) -> Any:
+    pm, em, wm = plan.arrays(start, stop)
+    st = sv = None
+    if isinstance(plan.waveform, Sampled):
+        st, sv = plan.waveform.t.tolist(), plan.waveform.voltage.tolist()
+    return _core.start_batch(pm, em, wm, st, sv, plan.model, plan.n_elements, plan.piezo_hysteresis,
+                             plan.t_end, plan.dt, plan.method, plan.rtol, plan.atol, plan.retries, threads)
+
+
+def run_block(plan: _Plan, start: int, stop: int, threads: int = 1) -> dict[str, NDArray[Any]]:
+    """Run flat points [start, stop) of a plan to completion; the unit of work of a Dask task.
+    ``threads`` caps the rayon threads so that Dask workers do not oversubscribe their cores."""
+    run = _start(plan, start, stop, threads)
+    run.wait(1e9)
+    return dict(run.result())
+
+
+_OUTPUTS: dict[str, Any] = {
+    **{m: np.float64 for m in METRICS},
+    "status": np.uint8,
+    "diverged_at": np.float64,
+    "dt_used": np.float64,
+    "steps": np.uint64,
+}
+
+
+def sweep(
+    params: Params,
+    waveform: Waveform,
+    grid: Mapping[str, ArrayLike],
+    *,
+    t_end: float,
+    dt: float,
+    model: Literal["lps", "dps"] = "dps",
+    n_elements: int = 4,
+    metrics: Sequence[str] = tuple(METRICS),
+    method: Literal["rk4", "dopri5"] = "rk4",
+    rtol: float = 1e-7,
+    atol: float = 1e-7,
+    retries: int = 2,
+    piezo_hysteresis: bool = True,
+    effects: Optional[Effects] = None,
+    progress: bool = True,
+    client: Any = None,
+    threads: Optional[int] = None,
+    block_size: int = 65_536,
+) -> "xarray.Dataset":
+    """Sweep the outer product of ``grid`` and return the metrics as an ``xarray.Dataset``.
+
+    ``grid`` maps axis names to 1-D arrays, one dimension per name in the given order. A name is
+    any :class:`Params` field, any waveform field (``amplitude``, ``frequency``, ``rise``,
+    ``fall``, ``cycles``, ``delay``), any :class:`Effects` field, or a derived axis:
+    ``mass_ratio`` (m2/m1, m1 fixed), ``pe_mass_ratio`` (mPE/m1 through ``pe_density``),
+    ``stiffness`` (kp [N/m] through ``pe_youngs``), ``voltage`` (the amplitude [V]).
+    The normal force is recomputed per point as (m1+m2+mPE)·g unless ``params.normal_force`` is
+    set or swept.
+
+    ``method="rk4"``: fixed step ``dt`` [s], the reference; each point equals ``simulate()``
+    bit for bit. A point that diverges is retried at dt/2, dt/4 (``retries`` times) and then
+    flagged (``status`` 3 with ``diverged_at``), never returned as a silent NaN.
+    ``method="dopri5"``: adaptive Dormand-Prince 5(4) with ``rtol``/``atol`` (``atol`` in units of
+    each state's natural scale: the free stroke d33·V for positions, Fs for friction), ``dt`` the
+    first trial step.
+
+    Metrics (computed in the Rust loop): ``final_position`` [m], ``step_per_cycle`` [m] (sawtooth
+    trains), ``peak_velocity`` [m/s], ``peak_friction`` [N], ``slip_fraction`` [-]; always with
+    ``status``, ``diverged_at`` [s], ``dt_used`` [s], ``steps``.
+
+    Ctrl-C stops within about a second and returns the finished points (others NaN,
+    ``attrs["complete"] == 0``). ``client`` (a ``dask.distributed.Client``) runs blocks of at
+    least 10⁴ points as Dask tasks, each capped at the worker's thread count.
+    """
+    import xarray as xr
+
+    from . import __version__
+
+    if not isinstance(params, Params):
+        raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
+    unknown = [m for m in metrics if m not in METRICS]
+    if unknown:
+        raise ValueError(f"unknown metric(s) {unknown}; known: {list(METRICS)}")
+    if model not in ("lps", "dps"):
+        raise ValueError(f"parameter 'model' must be 'lps' or 'dps', got {model!r}")
+    if method not in ("rk4", "dopri5"):
+        raise ValueError(f"parameter 'method' must be 'rk4' or 'dopri5', got {method!r}")
+    names, values = _check_grid(grid, waveform)
+    effects = effects or Effects()
+    plan = _Plan(params, waveform, effects, names, values, float(t_end), float(dt), model, int(n_elements),
+                 bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries))
+    # refuse bad settings before any work: run the first point's checks on a one-point block
+    _validate_first(plan)
+
+    n = plan.size
+    out = {k: np.full(n, np.nan if t is np.float64 else 0, dtype=t) for k, t in _OUTPUTS.items()}
+    threads = int(threads or os.cpu_count() or 1)
+    t0 = time.perf_counter()
+    complete = True
+    bar = _progress_bar(n, progress)
+    try:
+        if client is not None:
+            complete = _run_dask(plan, out, client, max(block_size, DASK_MIN_BLOCK), bar)
+        else:
+            complete = _run_local(plan, out, threads, block_size, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - t0
+
+    shape = plan.shape
+    coords = {}
+    for name, vals in zip(names, values):
+        units, long_name = _axis_info(name)
+        coords[name] = (name, vals, {"units": units, "long_name": long_name})
+    data_vars = {}
+    for m in metrics:
+        units, long_name = METRICS[m]
+        data_vars[m] = (names, out[m].reshape(shape), {"units": units, "long_name": long_name})
+    data_vars["status"] = (names, out["status"].reshape(shape), {
+        "long_name": "point status", "flag_values": np.arange(5, dtype=np.uint8), "flag_meanings": STATUS_MEANINGS})
+    data_vars["diverged_at"] = (names, out["diverged_at"].reshape(shape), {"units": "s", "long_name": "time of divergence"})
+    data_vars["dt_used"] = (names, out["dt_used"].reshape(shape), {
+        "units": "s", "long_name": "step used (rk4) or smallest accepted step (dopri5)"})
+    data_vars["steps"] = (names, out["steps"].reshape(shape), {"long_name": "integration steps taken"})
+    ds = xr.Dataset(data_vars, coords=coords)
+    ds.attrs.update({
+        "idm_rs_version": __version__,
+        "model": model,
+        "n_elements": int(n_elements) if model == "dps" else 1,
+        "method": method,
+        "dt_s": float(dt),
+        "t_end_s": float(t_end),
+        "rtol": float(rtol) if method == "dopri5" else math.nan,
+        "atol": float(atol) if method == "dopri5" else math.nan,
+        "retries": int(retries),
+        "piezo_hysteresis": int(piezo_hysteresis),
+        "waveform": repr(waveform),
+        "normal_force_rule": "as set" if params.normal_force is not None else "(m1+m2+mPE)*9.81 per point",
+        "complete": int(complete),
+        "points": n,
+        "points_finished": int(np.count_nonzero(out["status"])),
+        "wall_time_s": wall,
+        "executor": "dask" if client is not None else f"local rayon, {threads} threads",
+    })
+    for name, value in params.to_dict(resolved=False).items():
+        ds.attrs[f"param_{name}"] = value
+    for name, value in effects.active().items():
+        ds.attrs[f"effect_{name}"] = value
+    return ds
+
+
+def _validate_first(plan: _Plan) -> None:
+    """Fail fast, with the core's message, on what every point shares (step, duration, model)."""
+    pm, em, wm = plan.arrays(0, 1)
+    p = {k: float(v) for k, v in zip(_core.param_names(), pm[0]) if not (k == "normal_force" and math.isnan(v))}
+    eff = {k: float(v) for k, v in zip(_core.effect_names(), em[0]) if v != 0.0}
+    bt, bv = _point_waveform(plan.waveform, wm[0]).breakpoints()
+    _core.check_plan(p, eff, bt.tolist(), bv.tolist(), plan.t_end, plan.dt, plan.model, plan.n_elements, plan.method)
+
+
+def _point_waveform(w: Waveform, row: NDArray[np.float64]) -> Waveform:
+    c = dict(zip(_core.wave_columns(), row))
+    if isinstance(w, Triangle):
+        return Triangle(c["amplitude"], c["rise"], c["fall"], c["delay"])
+    if isinstance(w, Sawtooth):
+        return Sawtooth(c["amplitude"], c["frequency"], int(c["cycles"]), c["rise"], w.direction, c["delay"])
+    return Sampled(w.t, w.voltage * c["amplitude"])
+
+
+def _progress_bar(total: int, show: bool) -> Any:
+    if not show:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, unit="pt", desc="idm-rs sweep", smoothing=0.1)
+
+
+def _run_local(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_size: int, bar: Any) -> bool:
+    n = plan.size
+    for start in range(0, n, block_size):
+        stop = min(n, start + block_size)
+        run = _start(plan, start, stop, threads)
+        seen = 0
+        try:
+            while not run.wait(0.1):
+                if bar is not None:
+                    p = run.progress()
+                    bar.update(p - seen)
+                    seen = p
+        except KeyboardInterrupt:
+            run.cancel()
+            res = run.result()
+            _store(out, res, start, stop)
+            warnings.warn(f"sweep interrupted: {int(np.count_nonzero(out['status']))} of {n} points finished; "
+                          "the rest are NaN (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
+            return False
+        res = run.result()
+        if bar is not None:
+            bar.update(run.progress() - seen)
+        _store(out, res, start, stop)
+    return True
+
+
+def _store(out: dict[str, NDArray[Any]], res: Mapping[str, NDArray[Any]], start: int, stop: int) -> None:
+    for k in out:
+        out[k][start:stop] = res[k]
+
+
+def _run_dask(plan: _Plan, out: dict[str, NDArray[Any]], client: Any, block: int, bar: Any) -> bool:
+    from dask.distributed import as_completed
+
+    n = plan.size
+    # one task per block; each worker thread runs one block with one rayon thread
+    futures = {}
+    for start in range(0, n, block):
+        stop = min(n, start + block)
+        fut = client.submit(run_block, plan, start, stop, 1, pure=False)
+        futures[fut] = (start, stop)
+    try:
+        for fut in as_completed(futures):
+            start, stop = futures[fut]
+            _store(out, fut.result(), start, stop)
+            if bar is not None:
+                bar.update(stop - start)
+    except KeyboardInterrupt:
+        for fut in futures:
+            fut.cancel()
+        warnings.warn("sweep interrupted: finished blocks kept (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
+        return False
+    return True
