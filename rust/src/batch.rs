@@ -45,6 +45,9 @@ pub struct BatchConfig {
     pub method: Method,
     /// RK4: on divergence, retry with dt/2, dt/4, ... this many times before flagging the point
     pub retries: u32,
+    /// RK4: record the sensor reading at t = 0 and every `record_every` steps (0: none). The
+    /// only per-time output of a batch; fits compare it with recordings.
+    pub record_every: usize,
 }
 
 /// One point: its parameters, effects, input and the number of drive cycles (0 if not a train).
@@ -54,6 +57,21 @@ pub struct PointSpec {
     pub effects: Effects,
     pub wave: PiecewiseLinear,
     pub cycles: usize,
+    /// this point's duration [s] if it differs from the batch's `t_end`
+    pub t_end: Option<f64>,
+}
+
+impl PointSpec {
+    fn t_end(&self, cfg: &BatchConfig) -> f64 {
+        self.t_end.unwrap_or(cfg.t_end)
+    }
+}
+
+/// What a point gives back: its metrics and, if asked for, its recorded reading.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointOutput {
+    pub metrics: PointMetrics,
+    pub trace: Vec<f64>,
 }
 
 /// Outcome of a point.
@@ -173,16 +191,17 @@ fn step_input(wave: &PiecewiseLinear, seg: &mut usize, k: usize, dt: f64) -> (f6
     }
 }
 
-/// RK4 on up to L points at once (same dof, same step count). `None` in `out` marks a lane
-/// that diverged (with its time) — the caller retries it alone.
+/// RK4 on up to L points at once (same state layout; each its own step count). An `Err` marks
+/// a lane that diverged (with its time) — the caller retries it alone. Empty if cancelled.
 fn rk4_lanes<S, const N: usize, const EXTRAS: bool, const L: usize>(
     models: &[Model],
     specs: &[&PointSpec],
     dt: f64,
-    steps: usize,
+    steps: &[usize],
+    record_every: usize,
     zero: S,
     cancel: &AtomicBool,
-) -> Vec<Result<PointMetrics, f64>>
+) -> Vec<Result<PointOutput, f64>>
 where
     S: AsRef<[f64]> + AsMut<[f64]> + Clone,
 {
@@ -194,6 +213,16 @@ where
     let mut acc: [Accumulator; L] = std::array::from_fn(|i| Accumulator::new(&models[i.min(m - 1)]));
     let mut seg = [0usize; L];
     let mut failed = [f64::NAN; L];
+    let mut traces: Vec<Vec<f64>> = (0..m)
+        .map(|i| {
+            if record_every == 0 {
+                return Vec::new();
+            }
+            let mut v = Vec::with_capacity(steps[i] / record_every + 1);
+            v.push(models[i].reading(0.0, ys[i].as_ref()));
+            v
+        })
+        .collect();
     let bounds: Vec<f64> = models.iter().map(|md| md.presliding_bound() * (1.0 + 1e-6) + 1e-12).collect();
     let (ifh, iv) = (models[0].layout.fh, models[0].layout.dof);
     let mut rhs: [ModelRhs<N, EXTRAS, 1>; L] = std::array::from_fn(|i| ModelRhs {
@@ -203,12 +232,15 @@ where
         dt,
         ff_gdot: [(0.0, 0.0)],
     });
-    for k in 0..steps {
+    let max_steps = steps.iter().copied().max().unwrap_or(0);
+    let mut until_record = record_every;
+    for k in 0..max_steps {
         if k % CANCEL_CHECK_STEPS == 0 && cancel.load(Ordering::Relaxed) {
             return Vec::new();
         }
         let mut v_start = [0.0; L];
         for i in 0..m {
+            active[i] &= k < steps[i];
             let (v0, s) = step_input(&specs[i].wave, &mut seg[i], k, dt);
             rhs[i].v0 = [v0];
             rhs[i].slope = [s];
@@ -216,6 +248,8 @@ where
         }
         let mut f = |lane: usize, c: f64, y: &[f64], dy: &mut [f64]| rhs[lane].eval(0, c, y, dy);
         rk.step_lanes(&mut f, dt, &mut ys, &active);
+        let t1 = (k + 1) as f64 * dt;
+        until_record = until_record.wrapping_sub(1);
         for i in 0..m {
             if active[i] {
                 // (Ff, dg/dt) from the first stage belong to the state at the step's start
@@ -224,28 +258,41 @@ where
                 let y = ys[i].as_ref();
                 if !(y[ifh].abs() <= bounds[i]) || !y[iv].is_finite() || !y[0].is_finite() {
                     active[i] = false;
-                    failed[i] = (k + 1) as f64 * dt;
+                    failed[i] = t1;
+                } else if until_record == 0 {
+                    traces[i].push(models[i].reading(t1, y));
                 }
             }
+        }
+        if until_record == 0 {
+            until_record = record_every;
         }
     }
     (0..m)
         .map(|i| {
             if failed[i].is_nan() && ys[i].as_ref().iter().all(|x| x.is_finite()) {
-                Ok(acc[i].finish(&models[i], ys[i].as_ref(), steps as f64 * dt, specs[i].cycles, Status::Ok, dt, steps as u64))
+                let t_end = steps[i] as f64 * dt;
+                let metrics = acc[i].finish(&models[i], ys[i].as_ref(), t_end, specs[i].cycles, Status::Ok, dt, steps[i] as u64);
+                Ok(PointOutput { metrics, trace: std::mem::take(&mut traces[i]) })
             } else {
-                Err(if failed[i].is_nan() { steps as f64 * dt } else { failed[i] })
+                Err(if failed[i].is_nan() { steps[i] as f64 * dt } else { failed[i] })
             }
         })
         .collect()
 }
 
 /// RK4 over a group of points with the same model layout, dispatched to a fixed-size state.
-fn rk4_group(cfg: &BatchConfig, models: &[Model], specs: &[&PointSpec], steps: usize, cancel: &AtomicBool) -> Vec<Result<PointMetrics, f64>> {
-    let dt = cfg.dt;
+fn rk4_group(
+    dt: f64,
+    record_every: usize,
+    models: &[Model],
+    specs: &[&PointSpec],
+    steps: &[usize],
+    cancel: &AtomicBool,
+) -> Vec<Result<PointOutput, f64>> {
     macro_rules! fixed {
         ($n:literal, $d:literal) => {
-            rk4_lanes::<[f64; $d], $n, false, LANES>(models, specs, dt, steps, [0.0; $d], cancel)
+            rk4_lanes::<[f64; $d], $n, false, LANES>(models, specs, dt, steps, record_every, [0.0; $d], cancel)
         };
     }
     let plain = models.iter().all(|m| m.is_plain());
@@ -255,13 +302,19 @@ fn rk4_group(cfg: &BatchConfig, models: &[Model], specs: &[&PointSpec], steps: u
         (true, 4) => fixed!(4, 11),
         (true, 5) => fixed!(5, 13),
         (true, 6) => fixed!(6, 15),
-        _ => models
-            .iter()
-            .zip(specs)
-            .flat_map(|(m, s)| {
-                rk4_lanes::<Vec<f64>, 0, true, 1>(std::slice::from_ref(m), &[*s], dt, steps, rest_state(m), cancel)
-            })
-            .collect(),
+        _ => {
+            let mut out = Vec::with_capacity(models.len());
+            for (i, (m, s)) in models.iter().zip(specs).enumerate() {
+                let r = rk4_lanes::<Vec<f64>, 0, true, 1>(
+                    std::slice::from_ref(m), &[*s], dt, &steps[i..=i], record_every, rest_state(m), cancel,
+                );
+                if r.is_empty() {
+                    return Vec::new(); // cancelled
+                }
+                out.extend(r);
+            }
+            out
+        }
     }
 }
 
@@ -276,7 +329,7 @@ fn dopri5_point(cfg: &BatchConfig, model: &Model, spec: &PointSpec, rtol: f64, a
         scale: model.state_scales(v_max),
         h_init: cfg.dt,
         h_min: 1e-14,
-        h_max: cfg.t_end / 10.0,
+        h_max: spec.t_end(cfg) / 10.0,
     };
     let input = |seg: usize, t: f64| -> (f64, f64) {
         if seg + 1 >= bt.len() || t < bt[0] {
@@ -297,7 +350,7 @@ fn dopri5_point(cfg: &BatchConfig, model: &Model, spec: &PointSpec, rtol: f64, a
             model.rhs(v, slope, s, ds);
         },
         0.0,
-        cfg.t_end,
+        spec.t_end(cfg),
         bt,
         &mut y,
         &opts,
@@ -320,8 +373,10 @@ fn dopri5_point(cfg: &BatchConfig, model: &Model, spec: &PointSpec, rtol: f64, a
         return None;
     }
     Some(match result {
-        Ok(stats) if y.iter().all(|x| x.is_finite()) => acc.finish(model, &y, cfg.t_end, spec.cycles, Status::Ok, h_min_used, stats.accepted),
-        Ok(_) => diverged_metrics(cfg.t_end, cfg.dt),
+        Ok(stats) if y.iter().all(|x| x.is_finite()) => {
+            acc.finish(model, &y, spec.t_end(cfg), spec.cycles, Status::Ok, h_min_used, stats.accepted)
+        }
+        Ok(_) => diverged_metrics(spec.t_end(cfg), cfg.dt),
         Err((t, _)) => diverged_metrics(t, cfg.dt),
     })
 }
@@ -330,49 +385,52 @@ fn diverged_metrics(t: f64, dt: f64) -> PointMetrics {
     PointMetrics { status: Status::Diverged, diverged_at: t, dt_used: dt, ..PointMetrics::not_run() }
 }
 
-/// RK4 retry of one diverged point at dt/2, dt/4, ...
-fn rk4_retry(cfg: &BatchConfig, model: &Model, spec: &PointSpec, first_failure: f64, cancel: &AtomicBool) -> Option<PointMetrics> {
+/// RK4 retry of one diverged point at dt/2, dt/4, ... (recording at the same times).
+fn rk4_retry(cfg: &BatchConfig, model: &Model, spec: &PointSpec, first_failure: f64, cancel: &AtomicBool) -> Option<PointOutput> {
     let mut failed_at = first_failure;
-    let mut dt = cfg.dt;
+    let (mut dt, mut record_every) = (cfg.dt, cfg.record_every);
     for _ in 0..cfg.retries {
         dt /= 2.0;
-        let steps = match plan_steps(model, &spec.wave, cfg.t_end, dt) {
+        record_every *= 2;
+        let steps = match plan_steps(model, &spec.wave, spec.t_end(cfg), dt) {
             Ok(s) => s,
             Err(_) => break,
         };
-        let c = BatchConfig { dt, ..*cfg };
-        let r = rk4_group(&c, std::slice::from_ref(model), &[spec], steps, cancel);
-        match r.first() {
+        match rk4_group(dt, record_every, std::slice::from_ref(model), &[spec], &[steps], cancel).pop() {
             None => return None, // cancelled
-            Some(Ok(m)) => return Some(PointMetrics { status: Status::Retried, ..*m }),
-            Some(Err(t)) => failed_at = *t,
+            Some(Ok(o)) => {
+                return Some(PointOutput { metrics: PointMetrics { status: Status::Retried, ..o.metrics }, trace: o.trace })
+            }
+            Some(Err(t)) => failed_at = t,
         }
     }
-    Some(PointMetrics { dt_used: dt, ..diverged_metrics(failed_at, dt) })
+    Some(PointOutput { metrics: PointMetrics { dt_used: dt, ..diverged_metrics(failed_at, dt) }, trace: Vec::new() })
 }
 
 /// Run one chunk of points (any size); `None` entries were cancelled before finishing.
-fn run_chunk(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: &AtomicUsize) -> Vec<Option<PointMetrics>> {
-    let mut out: Vec<Option<PointMetrics>> = vec![None; specs.len()];
+fn run_chunk(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: &AtomicUsize) -> Vec<Option<PointOutput>> {
+    let mut out: Vec<Option<PointOutput>> = vec![None; specs.len()];
     // invalid points are answered at once; valid ones are grouped by layout for the lanes
-    let mut valid: Vec<(usize, Model)> = Vec::with_capacity(specs.len());
+    let mut valid: Vec<(usize, Model, usize)> = Vec::with_capacity(specs.len());
     for (i, s) in specs.iter().enumerate() {
-        match build_model(cfg, s).and_then(|m| {
-            if cfg.method == Method::Rk4 {
-                plan_steps(&m, &s.wave, cfg.t_end, cfg.dt).map_err(|e| e.to_string())?;
-            }
-            Ok(m)
-        }) {
-            Ok(m) => valid.push((i, m)),
+        let checked = build_model(cfg, s).and_then(|m| {
+            let steps = match cfg.method {
+                Method::Rk4 => plan_steps(&m, &s.wave, s.t_end(cfg), cfg.dt).map_err(|e| e.to_string())?,
+                Method::Dopri5 { .. } => 0,
+            };
+            Ok((m, steps))
+        });
+        match checked {
+            Ok((m, steps)) => valid.push((i, m, steps)),
             Err(_) => {
-                out[i] = Some(PointMetrics { status: Status::Invalid, ..PointMetrics::not_run() });
+                let metrics = PointMetrics { status: Status::Invalid, ..PointMetrics::not_run() };
+                out[i] = Some(PointOutput { metrics, trace: Vec::new() });
                 done.fetch_add(1, Ordering::Relaxed);
             }
         }
     }
     match cfg.method {
         Method::Rk4 => {
-            let steps = (cfg.t_end / cfg.dt).round() as usize;
             let mut start = 0;
             while start < valid.len() {
                 if cancel.load(Ordering::Relaxed) {
@@ -385,31 +443,33 @@ fn run_chunk(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: 
                     end += 1;
                 }
                 let group = &valid[start..end];
-                let models: Vec<Model> = group.iter().map(|(_, m)| m.clone()).collect();
-                let gspecs: Vec<&PointSpec> = group.iter().map(|(i, _)| &specs[*i]).collect();
-                let results = rk4_group(cfg, &models, &gspecs, steps, cancel);
+                let models: Vec<Model> = group.iter().map(|(_, m, _)| m.clone()).collect();
+                let gspecs: Vec<&PointSpec> = group.iter().map(|(i, _, _)| &specs[*i]).collect();
+                let steps: Vec<usize> = group.iter().map(|(_, _, s)| *s).collect();
+                let results = rk4_group(cfg.dt, cfg.record_every, &models, &gspecs, &steps, cancel);
                 if results.is_empty() {
                     break; // cancelled
                 }
-                for ((i, m), r) in group.iter().zip(results) {
-                    let metrics = match r {
+                for ((i, m, _), r) in group.iter().zip(results) {
+                    let res = match r {
                         Ok(x) => Some(x),
                         Err(t) => rk4_retry(cfg, m, &specs[*i], t, cancel),
                     };
-                    if metrics.is_some() {
+                    if res.is_some() {
                         done.fetch_add(1, Ordering::Relaxed);
                     }
-                    out[*i] = metrics;
+                    out[*i] = res;
                 }
                 start = end;
             }
         }
         Method::Dopri5 { rtol, atol } => {
-            for (i, m) in &valid {
+            for (i, m, _) in &valid {
                 if cancel.load(Ordering::Relaxed) {
                     break;
                 }
-                out[*i] = dopri5_point(cfg, m, &specs[*i], rtol, atol, cancel);
+                out[*i] = dopri5_point(cfg, m, &specs[*i], rtol, atol, cancel)
+                    .map(|metrics| PointOutput { metrics, trace: Vec::new() });
                 if out[*i].is_some() {
                     done.fetch_add(1, Ordering::Relaxed);
                 }
@@ -425,7 +485,7 @@ pub const CHUNK: usize = 4 * LANES;
 
 /// Run every point on the current rayon pool. Unfinished points (after `cancel`) come back as
 /// `Status::NotRun` with NaN metrics; `done` counts finished points as they finish.
-pub fn run_batch(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: &AtomicUsize) -> Result<Vec<PointMetrics>, SimError> {
+pub fn run_batch(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: &AtomicUsize) -> Result<Vec<PointOutput>, SimError> {
     if !(cfg.dt.is_finite() && cfg.dt > 0.0) {
         return Err(SimError::Input(format!("parameter 'dt' must be positive and finite, got {}", cfg.dt)));
     }
@@ -433,11 +493,14 @@ pub fn run_batch(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, do
         if !(rtol > 0.0 && atol > 0.0 && rtol.is_finite() && atol.is_finite()) {
             return Err(SimError::Input(format!("'rtol' and 'atol' must be positive, got {rtol}, {atol}")));
         }
+        if cfg.record_every > 0 {
+            return Err(SimError::Input("recording readings needs method 'rk4'".into()));
+        }
     }
     Ok(specs
         .par_chunks(CHUNK)
         .flat_map_iter(|chunk| run_chunk(cfg, chunk, cancel, done))
-        .map(|m| m.unwrap_or_else(PointMetrics::not_run))
+        .map(|m| m.unwrap_or_else(|| PointOutput { metrics: PointMetrics::not_run(), trace: Vec::new() }))
         .collect())
 }
 
@@ -447,7 +510,7 @@ mod tests {
     use crate::simulate::simulate;
 
     fn cfg(method: Method, structure: Structure) -> BatchConfig {
-        BatchConfig { structure, piezo_hysteresis: true, t_end: 2e-3, dt: 2e-8, method, retries: 2 }
+        BatchConfig { structure, piezo_hysteresis: true, t_end: 2e-3, dt: 2e-8, method, retries: 2, record_every: 0 }
     }
 
     fn specs(n: usize) -> Vec<PointSpec> {
@@ -461,6 +524,7 @@ mod tests {
                     effects: Effects::default(),
                     wave: PiecewiseLinear::sawtooth(40.0 + 10.0 * i as f64, 1000.0, 2, 0.2e-3, true, 0.0).unwrap(),
                     cycles: 2,
+                    t_end: None,
                 }
             })
             .collect()
@@ -472,7 +536,7 @@ mod tests {
             let c = cfg(Method::Rk4, structure);
             let sp = specs(7);
             let (cancel, done) = (AtomicBool::new(false), AtomicUsize::new(0));
-            let r = run_batch(&c, &sp, &cancel, &done).unwrap();
+            let r: Vec<PointMetrics> = run_batch(&c, &sp, &cancel, &done).unwrap().into_iter().map(|o| o.metrics).collect();
             assert_eq!(done.load(Ordering::Relaxed), 7);
             for (s, m) in sp.iter().zip(&r) {
                 let model = Model::new(s.params, s.effects, structure, true, false).unwrap();
@@ -495,6 +559,9 @@ mod tests {
         let run = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap())
+                .into_iter()
+                .map(|o| o.metrics)
+                .collect::<Vec<_>>()
         };
         let bits = |r: Vec<PointMetrics>| -> Vec<[u64; 7]> {
             r.iter()
@@ -510,7 +577,7 @@ mod tests {
         let (cancel, done) = (AtomicBool::new(false), AtomicUsize::new(0));
         let a = run_batch(&cfg(Method::Rk4, Structure::Lps), &sp, &cancel, &done).unwrap();
         let b = run_batch(&cfg(Method::Dopri5 { rtol: 1e-7, atol: 1e-7 }, Structure::Lps), &sp, &cancel, &done).unwrap();
-        for (x, y) in a.iter().zip(&b) {
+        for (x, y) in a.iter().map(|o| o.metrics).zip(b.iter().map(|o| o.metrics)) {
             assert_eq!(y.status, Status::Ok);
             assert!((x.final_position - y.final_position).abs() < 1e-9, "{} {}", x.final_position, y.final_position);
             assert!(y.steps < 100_000 / 2, "adaptive took {} steps", y.steps);
@@ -523,11 +590,14 @@ mod tests {
         c.dt = 4e-7;
         c.t_end = 2e-3;
         let sp = specs(3);
-        let r = run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        let metrics = |c: &BatchConfig| -> Vec<PointMetrics> {
+            run_batch(c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap().into_iter().map(|o| o.metrics).collect()
+        };
+        let r = metrics(&c);
         assert!(r.iter().any(|m| m.status == Status::Retried), "{r:?}");
         assert!(r.iter().all(|m| m.final_position.is_finite()));
         c.retries = 0;
-        let r = run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        let r = metrics(&c);
         assert!(r.iter().any(|m| m.status == Status::Diverged && m.diverged_at > 0.0 && m.final_position.is_nan()));
     }
 
@@ -536,6 +606,23 @@ mod tests {
         let c = cfg(Method::Rk4, Structure::Lps);
         let cancel = AtomicBool::new(true);
         let r = run_batch(&c, &specs(5), &cancel, &AtomicUsize::new(0)).unwrap();
-        assert!(r.iter().all(|m| m.status == Status::NotRun && m.final_position.is_nan()));
+        assert!(r.iter().all(|o| o.metrics.status == Status::NotRun && o.metrics.final_position.is_nan()));
+    }
+
+    #[test]
+    fn recorded_traces_equal_simulate_readings_for_mixed_durations() {
+        let mut c = cfg(Method::Rk4, Structure::Dps(4));
+        c.record_every = 50;
+        let mut sp = specs(5);
+        sp[1].t_end = Some(1e-3);
+        sp[3].t_end = Some(1.5e-3);
+        sp[4].effects.tau_sensor = 2e-5; // an extra state: takes the general path
+        let r = run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        for (s, o) in sp.iter().zip(&r) {
+            let model = Model::new(s.params, s.effects, Structure::Dps(4), true, false).unwrap();
+            let t = simulate(&model, &s.wave, s.t_end.unwrap_or(c.t_end), c.dt, 50).unwrap();
+            assert_eq!(o.trace, t.reading);
+            assert_eq!(o.metrics.final_position, t.final_state[0]);
+        }
     }
 }

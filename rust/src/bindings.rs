@@ -13,7 +13,7 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::batch::{run_batch, BatchConfig, Method, PointMetrics, PointSpec};
+use crate::batch::{run_batch, BatchConfig, Method, PointMetrics, PointOutput, PointSpec};
 use crate::effects::{Effects, EFFECT_NAMES};
 use crate::mechanics::Structure;
 use crate::model::{Model, N_ACCOUNTING};
@@ -169,7 +169,7 @@ fn point_wave(row: &[f64], sampled: &Option<(Vec<f64>, Vec<f64>)>) -> Result<(Pi
     }
 }
 
-type BatchOutcome = Result<Vec<PointMetrics>, String>;
+type BatchOutcome = Result<Vec<PointOutput>, String>;
 
 /// A batch running on a background thread (with its own rayon pool), so that Python can show
 /// progress and cancel it on Ctrl-C while the GIL is free.
@@ -219,8 +219,16 @@ impl BatchRun {
         let outcome = py
             .detach(|| handle.join())
             .map_err(|_| PyRuntimeError::new_err("internal error in idm-rs batch worker (please report)"))?;
-        let metrics = outcome.map_err(value_error)?;
+        let outputs = outcome.map_err(value_error)?;
         let d = PyDict::new(py);
+        if outputs.iter().any(|o| !o.trace.is_empty()) {
+            let traces = pyo3::types::PyList::empty(py);
+            for o in &outputs {
+                traces.append(PyArray1::from_slice(py, &o.trace))?;
+            }
+            d.set_item("traces", traces)?;
+        }
+        let metrics: Vec<PointMetrics> = outputs.into_iter().map(|o| o.metrics).collect();
         let col = |f: fn(&PointMetrics) -> f64| metrics.iter().map(f).collect::<Vec<f64>>();
         d.set_item("final_position", col(|m| m.final_position).into_pyarray(py))?;
         d.set_item("step_per_cycle", col(|m| m.step_per_cycle).into_pyarray(py))?;
@@ -238,7 +246,7 @@ impl BatchRun {
 /// Start a batch. `params`: (P, 23) in `param_names()` order, NaN normal_force = derived;
 /// `effects`: (P, 9) in `effect_names()` order; `waves`: (P, 8) in `WAVE_COLUMNS` order.
 #[pyfunction]
-#[pyo3(signature = (params, effects, waves, sampled_t, sampled_v, model, n_elements, piezo_hysteresis, t_end, dt, method, rtol, atol, retries, threads))]
+#[pyo3(signature = (params, effects, waves, sampled_t, sampled_v, model, n_elements, piezo_hysteresis, t_end, dt, method, rtol, atol, retries, threads, t_ends=None, record_every=0))]
 #[allow(clippy::too_many_arguments)]
 fn start_batch(
     params: PyReadonlyArray2<'_, f64>,
@@ -256,6 +264,8 @@ fn start_batch(
     atol: f64,
     retries: u32,
     threads: usize,
+    t_ends: Option<Vec<f64>>,
+    record_every: usize,
 ) -> PyResult<BatchRun> {
     let n = params.shape()[0];
     let shape_ok = |a: &[usize], cols: usize| a == [n, cols];
@@ -270,7 +280,10 @@ fn start_batch(
         "dopri5" => Method::Dopri5 { rtol, atol },
         other => return Err(value_error(format!("parameter 'method' must be 'rk4' or 'dopri5', got '{other}'"))),
     };
-    let cfg = BatchConfig { structure: parse_structure(model, n_elements)?, piezo_hysteresis, t_end, dt, method, retries };
+    if t_ends.as_ref().is_some_and(|t| t.len() != n) {
+        return Err(value_error(format!("'t_ends' must have one duration per point ({n})")));
+    }
+    let cfg = BatchConfig { structure: parse_structure(model, n_elements)?, piezo_hysteresis, t_end, dt, method, retries, record_every };
     let sampled = match (sampled_t, sampled_v) {
         (Some(t), Some(v)) => Some((t, v)),
         _ => None,
@@ -299,7 +312,10 @@ fn start_batch(
                 .and_then(|p| Ok((p, Effects::from_pairs(&epairs)?)))
                 .and_then(|(p, e)| Ok((p, e, point_wave(&wm[i * nw..(i + 1) * nw], &sampled)?)));
             match spec {
-                Ok((params, effects, (wave, cycles))) => specs.push(PointSpec { params, effects, wave, cycles }),
+                Ok((params, effects, (wave, cycles))) => {
+                    let t_end = t_ends.as_ref().map(|t| t[i]);
+                    specs.push(PointSpec { params, effects, wave, cycles, t_end })
+                }
                 Err(msg) => return Err(format!("point {i}: {msg}")),
             }
         }
