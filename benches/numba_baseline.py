@@ -1,5 +1,6 @@
 """A careful numba implementation of the IDM model, the baseline that idm-rs's step cost is
-measured against (``bench_step_cost.py``).
+measured against (``bench_step_cost.py``), and, run over many points with ``prange``
+(:func:`sweep_x1`), the baseline of the sweep benchmark (``bench_sweep.py``).
 
 It is written the way an experienced numba user would write it from ``MODEL.md``, sharing no
 code with idm-rs: fixed-step classical RK4 over a flat state vector, all buffers
@@ -25,7 +26,7 @@ from __future__ import annotations
 from typing import Mapping
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 # Indices into the packed constant vector handed to the kernel. A flat float64 array keeps
 # the njit signatures short and lets one compiled kernel serve every parameter set.
@@ -131,6 +132,45 @@ def rk4_kernel(nn, minv_k, minv_c, minv_main, minv_weight, prm, delta_is_two, n_
         for i in range(dim):
             y[i] += sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
     return y[0]
+
+
+@njit(parallel=True, cache=True, fastmath=False, error_model="numpy")
+def rk4_sweep_kernel(nn, minv_k, minv_c, minv_main, minv_weight, prm, delta_is_two, n_is_one,
+                     bt, bv, dt, steps, out):
+    """``rk4_kernel`` over many points in parallel (``prange``, one point per iteration, the
+    points shared out among numba's threads): row ``i`` of every 2-D argument is point ``i``'s
+    (``minv_k``/``minv_c`` (P, N*N), ``minv_main``/``minv_weight`` (P, N), ``prm`` (P, N_CONST),
+    ``bt``/``bv`` (P, nb)); ``delta_is_two``/``n_is_one`` are (P,) booleans. Writes x1(t_end) [m]
+    of point ``i`` to ``out[i]``; a point that diverges ends as inf or NaN (no detection, no retry)."""
+    for i in prange(out.shape[0]):
+        y = np.zeros(2 * nn + 3)
+        out[i] = rk4_kernel(nn, minv_k[i], minv_c[i], minv_main[i], minv_weight[i], prm[i],
+                            delta_is_two[i], n_is_one[i], bt[i], bv[i], dt, steps, y)
+
+
+def prepare_many(points, model: str, n_elements: int = 4):
+    """``prepare`` for a list of parameter dicts, stacked for :func:`rk4_sweep_kernel`
+    (all points must have the same number of nodes)."""
+    prepared = [prepare(p, model, n_elements) for p in points]
+    nn = prepared[0][0]
+    stack = lambda k: np.ascontiguousarray(np.stack([q[k] for q in prepared]))  # noqa: E731
+    flags = lambda k: np.array([q[k] for q in prepared], dtype=np.bool_)  # noqa: E731
+    return nn, stack(1), stack(2), stack(3), stack(4), stack(5), flags(6), flags(7)
+
+
+def sweep_x1(points, breakpoints, model: str = "lps", n_elements: int = 4, t_end: float = 10e-3,
+             dt: float = 5e-8) -> np.ndarray:
+    """x1(t_end) [m] of every point (parameter dicts with ``normal_force`` filled in, and per-point
+    breakpoint arrays ``(bt, bv)``, all of one length) from rest, fixed-step RK4 of ``dt`` [s],
+    in parallel over numba's threads (``numba.set_num_threads``). Diverged points come back as
+    inf or NaN."""
+    steps = int(round(t_end / dt))
+    args = prepare_many(points, model, n_elements)
+    bt = np.ascontiguousarray(np.stack([np.asarray(b[0], float) for b in breakpoints]))
+    bv = np.ascontiguousarray(np.stack([np.asarray(b[1], float) for b in breakpoints]))
+    out = np.empty(len(points))
+    rk4_sweep_kernel(*args, bt, bv, dt, steps, out)
+    return out
 
 
 def structure(p: Mapping[str, float], model: str, n_elements: int = 4):

@@ -119,3 +119,100 @@ def test_python_m_entry_point():
     assert run.stderr.startswith("error: ") and "m1" in run.stderr and "Traceback" not in run.stderr
     run = subprocess.run([sys.executable, "-m", "idm_rs", "--version"], capture_output=True, text=True)
     assert run.returncode == 0 and idm_rs.__version__ in run.stdout
+
+
+# --- idm-rs sweep ---------------------------------------------------------------------------------
+
+
+def test_sweep_writes_netcdf_heat_map_and_summary(tmp_path, capsys):
+    xr = pytest.importorskip("xarray")
+    nc, png = tmp_path / "sweep.nc", tmp_path / "heat.png"
+    argv = [
+        "sweep", "--model", "lps", "--dt", "5e-8", "--t-end", "1e-3", "--grid", "mass_ratio=0.25:2:3",
+        "--grid", "voltage=40,120", "--param", "mu_k=0.45", "--threads", "2", "--out", str(nc),
+        "--plot", str(png), "--metric", "peak_velocity", "--no-progress",
+    ]
+    assert main(argv) == 0
+    ref = idm_rs.sweep(
+        idm_rs.Params(mu_k=0.45), idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3),
+        {"mass_ratio": np.linspace(0.25, 2, 3), "voltage": [40.0, 120.0]},
+        t_end=1e-3, dt=5e-8, model="lps", progress=False,
+    )
+    with xr.open_dataset(nc) as ds:
+        assert tuple(ds.final_position.dims) == ("mass_ratio", "voltage")
+        np.testing.assert_array_equal(ds["mass_ratio"].values, [0.25, 1.125, 2.0])
+        assert ds["voltage"].attrs["units"] == "V"
+        for name in ("final_position", "peak_velocity", "status", "steps"):
+            np.testing.assert_array_equal(ds[name].values, ref[name].values)
+        assert ds.attrs["param_mu_k"] == 0.45 and ds.attrs["model"] == "lps"
+    assert png.read_bytes().startswith(PNG_MAGIC)
+    text = capsys.readouterr().out
+    assert "mass_ratio (3) x voltage (2) = 6 points" in text
+    assert "points/s" in text and "status: ok 6, diverged 0" in text
+
+
+def test_sweep_line_plot_marks_diverged_points(tmp_path, capsys):
+    png = tmp_path / "line.png"
+    argv = [
+        "sweep", "--model", "lps", "--dt", "4e-7", "--t-end", "2e-3", "--retries", "0",
+        "--grid", "mass_ratio=0.25,0.5,1,1.5", "--amplitude", "120", "--plot", str(png), "--no-progress",
+    ]
+    assert main(argv) == 0
+    assert png.read_bytes().startswith(PNG_MAGIC)
+    text = capsys.readouterr().out
+    assert "ok 1, diverged 3" in text
+
+
+def test_sweep_netcdf3_fallback_keeps_values(tmp_path):
+    xr = pytest.importorskip("xarray")
+    from idm_rs.cli import write_sweep_netcdf
+
+    ds = idm_rs.sweep(idm_rs.Params(), idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3), {"voltage": [40.0, 80.0]},
+                      t_end=1e-3, dt=5e-8, model="lps", progress=False)
+    path = tmp_path / "s3.nc"
+    assert write_sweep_netcdf(ds, path, engine="scipy") == "scipy"
+    with xr.open_dataset(path, engine="scipy") as back:
+        np.testing.assert_array_equal(back["steps"].values, ds["steps"].values)
+        np.testing.assert_array_equal(back["status"].values, ds["status"].values)
+        np.testing.assert_array_equal(back["final_position"].values, ds["final_position"].values)
+
+
+def test_parse_grid():
+    from idm_rs.cli import parse_grid
+
+    g = parse_grid(["mass_ratio=0.25:2:8", "voltage=40,80, 120", "m1=0.3"])
+    assert list(g) == ["mass_ratio", "voltage", "m1"]
+    np.testing.assert_array_equal(g["mass_ratio"], np.linspace(0.25, 2, 8))
+    np.testing.assert_array_equal(g["voltage"], [40.0, 80.0, 120.0])
+    np.testing.assert_array_equal(g["m1"], [0.3])
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["sweep", "--grid", "mass_ratio=1:2"], "A:B:N"),
+        (["sweep", "--grid", "mass_ratio=1:2:0"], "N must be"),
+        (["sweep", "--grid", "mass_ratio=a,b"], "mass_ratio"),
+        (["sweep", "--grid", "mass_ratio"], "NAME="),
+        (["sweep", "--grid", "voltage=40", "--grid", "voltage=80"], "twice"),
+        (["sweep", "--grid", "nosuch=1", "--t-end", "1e-4"], "nosuch"),
+        (["sweep", "--grid", "m1=0.3", "--grid", "m2=0.3", "--grid", "mu_k=0.5", "--plot", "x.png"], "1 or 2 axes"),
+        (["sweep", "--grid", "m1=0.3", "--out", "x.csv"], ".csv"),
+        (["sweep", "--grid", "m1=0.3", "--dt", "3e-8", "--t-end", "1e-4"], "does not divide"),
+    ],
+)
+def test_sweep_errors_are_one_line(argv, needle, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and needle in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("key, value", [("7a", 0.05), ("7b", 1.5), ("7c", 0.75), ("7d", 100.0)])
+def test_fig7_summary_runs_through_sweep_and_equals_simulate(key, value):
+    import dataclasses
+
+    sweep = dataclasses.replace({s.key: s for s in paper.fig7_sweeps()}[key], dense=(value,))
+    (point,) = paper.run_dense(sweep, 5e-8)
+    result, dt = paper.run_case(sweep.build(value), 5e-8)
+    assert point.status == 1 and point.dt == dt == 5e-8
+    assert point.final_position == result.final_position

@@ -1,5 +1,6 @@
-"""The ``idm-rs`` command line: ``idm-rs reproduce`` (the paper's Figs. 6 and 7) and
-``idm-rs simulate`` (one case). ``python -m idm_rs`` is the same command.
+"""The ``idm-rs`` command line: ``idm-rs reproduce`` (the paper's Figs. 6 and 7),
+``idm-rs simulate`` (one case) and ``idm-rs sweep`` (a grid of cases through the batch engine,
+saved as netCDF with a heat map). ``python -m idm_rs`` is the same command.
 
 Errors in the input (a bad parameter, a step that does not fit the waveform, a run that
 diverges) print one ``error: ...`` line to stderr and exit with status 2.
@@ -11,14 +12,18 @@ import argparse
 import sys
 import time
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import TYPE_CHECKING, Optional, Sequence
 
 import numpy as np
 
 from . import __version__
 from .params import Params
 from .simulation import DivergenceError, SimulationResult, simulate
+from .sweep import METRICS
 from .waveforms import Sawtooth, Triangle, Waveform
+
+if TYPE_CHECKING:
+    import xarray
 
 EXIT_ERROR = 2
 CSV_COLUMNS = ("t", "voltage", "x1", "x2", "friction", "fh")
@@ -73,7 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--dt", type=_positive_float, default=None, metavar="DT",
                     help="RK4 step of the paper case [s] (default 1e-8; 2e-8 with --quick)")
     rp.add_argument("--quick", action="store_true",
-                    help="fewer Fig. 7 curves, no dense summary, dt 2e-8 s (for tests)")
+                    help="fewer Fig. 7 curves, 9-point dopri5 final-position summaries, dt 2e-8 s (for tests)")
+    rp.add_argument("--threads", type=_positive_int, default=None, metavar="N",
+                    help="threads of the Fig. 7 summary sweeps (default: all cores)")
     rp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     sp = sub.add_parser(
@@ -89,6 +96,64 @@ def build_parser() -> argparse.ArgumentParser:
                     help="simulated time [s] (default: the end of the waveform)")
     sp.add_argument("--save-every", type=_positive_int, default=100, metavar="K",
                     help="save every K-th step (default: 100)")
+    _add_case_arguments(sp)
+    sp.add_argument("--out", default=None, metavar="FILE",
+                    help="save the trajectory: FILE.csv (columns " + ", ".join(CSV_COLUMNS) + "; SI units) "
+                         "or FILE.nc (netCDF, every variable)")
+    sp.add_argument("--plot", default=None, metavar="FILE.png", help="plot voltage, x1, x2 and friction")
+
+    sw = sub.add_parser(
+        "sweep",
+        help="sweep a grid of parameter values, save the metrics (netCDF) and a heat map",
+        description=(
+            "Run the outer product of the --grid axes through the parallel batch engine (no trajectories "
+            "are stored: each point is reduced to final_position, step_per_cycle, peak_velocity, "
+            "peak_friction, slip_fraction and a status), print a summary, and save the labelled results "
+            "(--out FILE.nc) and a heat map of one metric (--plot FILE.png). The normal force follows "
+            "the swept masses, (m1+m2+mPE) g per point, unless set with --param normal_force=VALUE."
+        ),
+        epilog=(
+            "Axis names: any Table 1 parameter (m1, mu_k, ...), any waveform field (amplitude, rise, fall, "
+            "frequency, cycles, delay), any effect parameter, or a derived axis: mass_ratio (m2/m1, m1 fixed), "
+            "pe_mass_ratio (mPE/m1 through the PE density), stiffness (kp [N/m] through Ep), voltage "
+            "(the amplitude [V]). Example: idm-rs sweep --model lps --dt 5e-8 --grid mass_ratio=0.25:2:200 "
+            "--grid voltage=40:120:200 --out sweep.nc --plot heat.png"
+        ),
+    )
+    sw.add_argument("--grid", action="append", default=[], required=True, metavar="NAME=SPEC",
+                    help="a sweep axis: NAME=A:B:N (numpy.linspace(A, B, N)), NAME=V1,V2,... or NAME=V; "
+                         "repeat for more axes (dimensions in the given order)")
+    sw.add_argument("--model", choices=("lps", "dps"), default="dps", help="lumped or FEM model (default: dps)")
+    sw.add_argument("--n-elements", type=_positive_int, default=4, metavar="N",
+                    help="FEM elements of the DPS (default: 4)")
+    sw.add_argument("--method", choices=("rk4", "dopri5"), default="rk4",
+                    help="fixed-step RK4 (the reference) or adaptive Dormand-Prince 5(4) (default: rk4)")
+    sw.add_argument("--dt", type=_positive_float, default=1e-8, metavar="DT",
+                    help="RK4 step, or dopri5's first trial step [s] (default: 1e-8)")
+    sw.add_argument("--rtol", type=_positive_float, default=1e-7, help="dopri5 relative tolerance (default: 1e-7)")
+    sw.add_argument("--atol", type=_positive_float, default=1e-7,
+                    help="dopri5 absolute tolerance, in units of each state's scale (default: 1e-7)")
+    sw.add_argument("--retries", type=int, default=2, metavar="K",
+                    help="rk4: retry a diverging point at dt/2, ..., dt/2^K before flagging it (default: 2)")
+    sw.add_argument("--t-end", type=_positive_float, default=None, metavar="T",
+                    help="simulated time [s] (default: the end of the waveform)")
+    _add_case_arguments(sw)
+    sw.add_argument("--threads", type=_positive_int, default=None, metavar="N",
+                    help="worker threads (default: all cores)")
+    sw.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="run on a Dask cluster at ADDRESS (e.g. tcp://host:8786, from `dask scheduler`) "
+                         "instead of the local thread pool")
+    sw.add_argument("--out", default=None, metavar="FILE.nc", help="save the results as netCDF")
+    sw.add_argument("--plot", default=None, metavar="FILE.png",
+                    help="heat map (2 axes) or line plot (1 axis) of --metric; diverged points hatched grey")
+    sw.add_argument("--metric", choices=(*METRICS, "dt_used", "steps"), default="final_position",
+                    help="what --plot shows (default: final_position)")
+    sw.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return parser
+
+
+def _add_case_arguments(sp: argparse.ArgumentParser) -> None:
+    """The waveform, parameter and hysteresis options shared by ``simulate`` and ``sweep``."""
     sp.add_argument("--waveform", choices=("triangle", "sawtooth"), default="triangle",
                     help="input voltage (default: triangle, the paper's single wave)")
     sp.add_argument("--amplitude", type=float, default=80.0, metavar="V", help="peak voltage [V] (default: 80)")
@@ -105,11 +170,6 @@ def build_parser() -> argparse.ArgumentParser:
                     help="override a parameter of Table 1 (SI units), e.g. --param m2=0.4 mu_k=0.45; "
                          "normal_force=auto restores (m1+m2+mPE) g")
     sp.add_argument("--no-hysteresis", action="store_true", help="turn off the piezo (Bouc-Wen) hysteresis")
-    sp.add_argument("--out", default=None, metavar="FILE",
-                    help="save the trajectory: FILE.csv (columns " + ", ".join(CSV_COLUMNS) + "; SI units) "
-                         "or FILE.nc (netCDF, every variable)")
-    sp.add_argument("--plot", default=None, metavar="FILE.png", help="plot voltage, x1, x2 and friction")
-    return parser
 
 
 # --- helpers -------------------------------------------------------------------------------------
@@ -224,6 +284,197 @@ def paper_case_csv(lps: SimulationResult, dps: SimulationResult, path: Path, eve
     np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
 
 
+# --- sweep helpers -------------------------------------------------------------------------------
+
+
+def parse_grid_axis(item: str) -> tuple[str, np.ndarray]:
+    """``"voltage=40:120:5"`` → ``("voltage", numpy.linspace(40, 120, 5))``; ``"mu_k=0.4,0.5"`` →
+    ``("mu_k", [0.4, 0.5])``; ``"m1=0.3"`` → ``("m1", [0.3])``."""
+    name, sep, spec = item.partition("=")
+    name, spec = name.strip(), spec.strip()
+    if not sep or not name or not spec:
+        raise CliError(f"--grid expects NAME=A:B:N or NAME=V1,V2,..., got {item!r}")
+    bad = CliError(f"--grid {name}: cannot read {spec!r} as A:B:N or a list of numbers")
+    if ":" in spec:
+        parts = [t.strip() for t in spec.split(":")]
+        if len(parts) != 3:
+            raise CliError(f"--grid {name}: expected A:B:N (numpy.linspace(A, B, N)), got {spec!r}")
+        try:
+            a, b = float(parts[0]), float(parts[1])
+        except ValueError:
+            raise bad from None
+        if not parts[2].isdigit() or int(parts[2]) < 1:
+            raise CliError(f"--grid {name}: N must be a positive integer, got {parts[2]!r}")
+        values = np.linspace(a, b, int(parts[2]))
+    else:
+        try:
+            values = np.array([float(v) for v in spec.split(",") if v.strip()])
+        except ValueError:
+            raise bad from None
+    if values.size == 0:
+        raise CliError(f"--grid {name}: no values")
+    if not np.all(np.isfinite(values)):
+        raise CliError(f"--grid {name}: values must be finite, got {spec!r}")
+    return name, values
+
+
+def parse_grid(items: Sequence[str]) -> dict[str, np.ndarray]:
+    """Several ``--grid`` items → an ordered ``{name: values}`` (a name may appear once)."""
+    grid: dict[str, np.ndarray] = {}
+    for item in items:
+        name, values = parse_grid_axis(item)
+        if name in grid:
+            raise CliError(f"--grid {name} is given twice")
+        grid[name] = values
+    return grid
+
+
+def write_sweep_netcdf(ds: "xarray.Dataset", path: Path, engine: Optional[str] = None) -> str:
+    """Save a sweep Dataset as netCDF, with the netCDF4 engine when it is installed, else scipy's
+    netCDF3 writer (which has no unsigned or 64-bit integers: ``steps`` is then stored as float64,
+    exact below 2**53, and ``status`` as int8). Returns the engine used."""
+    if engine is None:
+        try:
+            import netCDF4  # noqa: F401
+
+            engine = "netcdf4"
+        except ImportError:
+            engine = "scipy"
+    if engine == "scipy":
+        ds = ds.copy()
+        for name in list(ds.variables):
+            var = ds[name]
+            if var.dtype.kind == "u" or var.dtype == np.int64:
+                target = np.int8 if var.dtype.itemsize == 1 else np.float64
+                ds[name] = var.astype(target)
+                ds[name].attrs = dict(var.attrs)
+            for key, value in list(ds[name].attrs.items()):
+                if isinstance(value, np.ndarray) and (value.dtype.kind == "u" or value.dtype == np.int64):
+                    ds[name].attrs[key] = value.astype(np.int8 if value.dtype.itemsize == 1 else np.float64)
+        for key, value in list(ds.attrs.items()):
+            if isinstance(value, (bool, np.bool_)):
+                ds.attrs[key] = int(value)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ds.to_netcdf(path, engine=engine)
+    return engine
+
+
+def _cell_edges(c: np.ndarray) -> np.ndarray:
+    """Edges of the cells centred on the (sorted or not) coordinates ``c``."""
+    c = np.asarray(c, dtype=float)
+    if c.size == 1:
+        half = 0.05 * abs(c[0]) or 0.5
+        return np.array([c[0] - half, c[0] + half])
+    mid = 0.5 * (c[1:] + c[:-1])
+    return np.concatenate([[c[0] - (mid[0] - c[0])], mid, [c[-1] + (c[-1] - mid[-1])]])
+
+
+def _display_scale(units: str) -> tuple[float, str]:
+    """Plot lengths in µm and velocities in mm/s; everything else in its own units."""
+    return {"m": (1e6, "µm"), "m/s": (1e3, "mm/s")}.get(units, (1.0, units))
+
+
+def _axis_label(da: "xarray.DataArray", name: str) -> str:
+    units = da.attrs.get("units", "")
+    return f"{name} [{units}]" if units and units != "1" else name
+
+
+def plot_sweep(ds: "xarray.Dataset", metric: str, path: Path) -> None:
+    """A heat map of ``metric`` over a 2-axis sweep (pcolormesh, colour bar with units) or a line
+    plot over a 1-axis sweep. Points that diverged (status 3) are hatched grey, points not run
+    (an interrupted sweep) plain grey."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PatchCollection
+    from matplotlib.patches import Patch, Rectangle
+
+    da = ds[metric]
+    dims = list(da.dims)
+    if len(dims) not in (1, 2):
+        raise CliError(f"--plot draws sweeps of 1 or 2 axes; this one has {len(dims)} ({', '.join(dims)})")
+    scale, units = _display_scale(da.attrs.get("units", ""))
+    values = da.values.astype(float) * scale
+    status = ds["status"].values
+    diverged = status == 3
+    not_run = status == 0
+    label = f"{metric} [{units}]" if units and units != "1" else metric
+    long_name = da.attrs.get("long_name", metric)
+    hatch = dict(facecolor="0.75", edgecolor="0.35", hatch="///", lw=0.0)
+
+    fig, ax = plt.subplots(figsize=(8, 6) if len(dims) == 2 else (8, 4.5), layout="constrained")
+    if len(dims) == 2:
+        ydim, xdim = dims
+        x, y = ds[xdim].values, ds[ydim].values
+        xe, ye = _cell_edges(x), _cell_edges(y)
+        cmap = plt.get_cmap("viridis").with_extremes(bad="0.75")
+        mesh = ax.pcolormesh(xe, ye, np.ma.masked_invalid(values), cmap=cmap, shading="flat")
+        cb = fig.colorbar(mesh, ax=ax)
+        cb.set_label(f"{long_name} [{units}]" if units and units != "1" else long_name)
+        rects = [Rectangle((xe[j], ye[i]), xe[j + 1] - xe[j], ye[i + 1] - ye[i]) for i, j in zip(*np.nonzero(diverged))]
+        if rects:
+            ax.add_collection(PatchCollection(rects, **hatch))
+        ax.set_xlabel(_axis_label(ds[xdim], xdim))
+        ax.set_ylabel(_axis_label(ds[ydim], ydim))
+    else:
+        (xdim,) = dims
+        x = ds[xdim].values
+        xe = _cell_edges(x)
+        ax.plot(x, values, ".-", color="C0", lw=1.2, ms=4)
+        for j in np.flatnonzero(diverged):
+            ax.axvspan(xe[j], xe[j + 1], **hatch)
+        for j in np.flatnonzero(not_run):
+            ax.axvspan(xe[j], xe[j + 1], color="0.85", lw=0)
+        ax.set_xlabel(_axis_label(ds[xdim], xdim))
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    handles = []
+    if diverged.any():
+        handles.append(Patch(**hatch, label=f"diverged ({int(diverged.sum())})"))
+    if not_run.any():
+        handles.append(Patch(facecolor="0.75" if len(dims) == 2 else "0.85", label=f"not run ({int(not_run.sum())})"))
+    if handles:
+        ax.legend(handles=handles, loc="best", fontsize=8.5)
+    a = ds.attrs
+    model = "LPS" if a.get("model") == "lps" else f"DPS (n = {a.get('n_elements')})"
+    step = f"dt = {a.get('dt_s'):g} s" if a.get("method") == "rk4" else f"rtol = {a.get('rtol'):g}"
+    ax.set_title(f"{long_name}\n{model}, {a.get('method')} ({step}), t_end = {a.get('t_end_s'):g} s, "
+                 f"{a.get('waveform')}", fontsize=9.5)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+STATUS_NAMES = ("not run", "ok", "ok at a smaller dt", "diverged", "invalid")
+
+
+def sweep_summary(ds: "xarray.Dataset", metric: str) -> str:
+    """A few lines: the grid, the wall time and rate, the statuses and the metric's range."""
+    a = ds.attrs
+    axes = " x ".join(f"{d} ({ds.sizes[d]})" for d in ds["status"].dims) or "?"
+    n = int(a["points"])
+    wall = float(a["wall_time_s"])
+    model = "LPS" if a["model"] == "lps" else f"DPS (n = {a['n_elements']})"
+    step = f"dt = {a['dt_s']:g} s" if a["method"] == "rk4" else f"rtol = {a['rtol']:g}, atol = {a['atol']:g}"
+    counts = np.bincount(ds["status"].values.ravel().astype(np.int64), minlength=len(STATUS_NAMES))
+    statuses = ", ".join(f"{name} {int(c)}" for name, c in zip(STATUS_NAMES, counts) if c or name in ("ok", "diverged"))
+    lines = [
+        f"sweep of {axes} = {n} points: {model}, {a['method']} ({step}), t_end = {a['t_end_s']:g} s, {a['executor']}",
+        f"wall time {wall:.2f} s, {n / max(wall, 1e-12):.1f} points/s",
+        f"status: {statuses}",
+    ]
+    if metric in ds:
+        v = ds[metric].values.astype(float)
+        finite = v[np.isfinite(v)]
+        units = ds[metric].attrs.get("units", "")
+        if finite.size:
+            lines.append(f"{metric}: min {finite.min():.6g}, max {finite.max():.6g} [{units}]")
+    if not a.get("complete", 1):
+        lines.append(f"interrupted: {int(a['points_finished'])} of {n} points finished; the rest are NaN")
+    return "\n".join(lines)
+
+
 # --- commands ------------------------------------------------------------------------------------
 
 
@@ -254,6 +505,53 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sweep(a: argparse.Namespace) -> int:
+    import warnings
+
+    from .sweep import sweep
+
+    grid = parse_grid(a.grid)
+    if a.plot and len(grid) not in (1, 2):
+        raise CliError(f"--plot draws sweeps of 1 or 2 axes; --grid gives {len(grid)} ({', '.join(grid)})")
+    if a.out and Path(a.out).suffix.lower() != ".nc":
+        raise CliError(f"--out: unknown file type {Path(a.out).suffix!r} (use .nc)")
+    if a.plot and Path(a.plot).suffix.lower() != ".png":
+        raise CliError(f"--plot: unknown file type {Path(a.plot).suffix!r} (use .png)")
+    if a.retries < 0:
+        raise CliError(f"--retries must be 0 or more, got {a.retries}")
+    params = params_from_overrides(a.param)
+    waveform = waveform_from_args(a)
+    t_end = _snap(a.t_end if a.t_end is not None else waveform.duration, a.dt)
+    client = None
+    if a.scheduler:
+        from dask.distributed import Client
+
+        client = Client(a.scheduler)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RuntimeWarning)
+            ds = sweep(
+                params, waveform, grid, t_end=t_end, dt=a.dt, model=a.model, n_elements=a.n_elements,
+                method=a.method, rtol=a.rtol, atol=a.atol, retries=a.retries,
+                piezo_hysteresis=not a.no_hysteresis, progress=not a.no_progress, client=client,
+                threads=a.threads,
+            )
+    finally:
+        if client is not None:
+            client.close()
+    for w in caught:
+        if not (issubclass(w.category, RuntimeWarning) and "interrupted" in str(w.message)):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    print(sweep_summary(ds, a.metric))
+    if a.out:
+        engine = write_sweep_netcdf(ds, Path(a.out))
+        print(f"wrote {a.out} (netCDF, {engine} engine)")
+    if a.plot:
+        plot_sweep(ds, a.metric, Path(a.plot))
+        print(f"wrote {a.plot}")
+    return 0 if ds.attrs["complete"] else 130
+
+
 def cmd_reproduce(a: argparse.Namespace) -> int:
     from tqdm.auto import tqdm
 
@@ -274,7 +572,8 @@ def cmd_reproduce(a: argparse.Namespace) -> int:
         bar.update(2)
         csv_every = max(1, round(1e-6 / (dt * save_every)))  # the CSV at about 1 µs
         paper_case_csv(case.lps, case.dps, out / "paper_case.csv", every=csv_every)
-        report = write_figures(case, out, quick=a.quick, fig7_dt=2e-8 if a.quick else None, bar=bar)
+        report = write_figures(case, out, quick=a.quick, fig7_dt=2e-8 if a.quick else None, bar=bar,
+                               threads=a.threads)
     elapsed = time.perf_counter() - t0
     print(paper.comparison_table(case.lps, case.dps))
     print()
@@ -298,7 +597,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         parser.print_help()
         return EXIT_ERROR
     try:
-        return cmd_reproduce(a) if a.command == "reproduce" else cmd_simulate(a)
+        command = {"reproduce": cmd_reproduce, "simulate": cmd_simulate, "sweep": cmd_sweep}[a.command]
+        return command(a)
     except (ValueError, DivergenceError, OSError) as exc:
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_ERROR

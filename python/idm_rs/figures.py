@@ -186,10 +186,13 @@ def fig6d(
 
 
 def fig7(
-    sweep: Sweep, runs: Sequence[SweepRun], path: PathLike, dense: Sequence[FinalPoint] = ()
+    sweep: Sweep, runs: Sequence[SweepRun], path: PathLike, dense: Sequence[FinalPoint] = (),
+    dense_label: Optional[str] = None,
 ) -> Path:
     """One Fig. 7 panel: x1/l vs time for each swept value (left), and x1(10 ms) vs the swept
-    value (right: the curves' values as coloured markers, ``dense`` points as a thin line)."""
+    value (right: the curves' values as coloured markers, ``dense`` points, from one
+    ``idm_rs.sweep``, as a thin line labelled ``dense_label``; diverged points are left out and
+    marked with a grey x on the axis)."""
     fig, (ax, axs) = plt.subplots(
         1, 2, figsize=(12, 5), width_ratios=[2.2, 1], layout="constrained"
     )
@@ -215,7 +218,10 @@ def fig7(
     if len(dense):
         dv = np.array([p.value for p in dense])
         dx = np.array([p.final_position * 1e6 for p in dense])
-        axs.plot(dv, dx, ".-", color="0.35", lw=0.9, ms=3.5, label=f"{len(dense)} values")
+        axs.plot(dv, dx, ".-", color="0.35", lw=0.9, ms=3.5, label=dense_label or f"{len(dense)} values")
+        bad = ~np.isfinite(dx)
+        if bad.any():
+            axs.plot(dv[bad], np.zeros(int(bad.sum())), "x", color="0.5", ms=6, label=f"diverged ({int(bad.sum())})")
     else:
         axs.plot([r.value for r in runs], [r.result.final_position * 1e6 for r in runs], "-", color="0.35", lw=0.9)
     for i, run in enumerate(runs):
@@ -247,6 +253,7 @@ class FiguresReport:
     paths: dict[str, Path] = field(default_factory=dict)  #: figure name → PNG
     fig7_dt: float = 0.0  #: the step used for Fig. 7 (before any halving) [s]
     fig7_dt_check: float = 0.0  #: |x1(2e-8) − x1(1e-8)| on the check case [m] (nan: unchecked)
+    dense_method: str = "rk4"  #: the method of the final-position summary sweeps
     sweeps: dict[str, list[SweepRun]] = field(default_factory=dict)
     dense: dict[str, list[FinalPoint]] = field(default_factory=dict)
 
@@ -258,8 +265,17 @@ class FiguresReport:
             else " (not checked against 1e-8 s)"
         )
         lines = [f"Fig. 7: dt = {self.fig7_dt:g} s{check}"]
+        npts = sum(len(d) for d in self.dense.values())
+        if npts:
+            how = (f"RK4, dt = {self.fig7_dt:g} s" if self.dense_method == "rk4"
+                   else f"{self.dense_method}, adaptive")
+            lines.append(f"  final-position summaries: {npts} points through idm_rs.sweep ({how})")
         for key, runs in self.sweeps.items():
-            halved = [f"{r.value:g}: dt {r.dt:g}" for r in [*runs, *self.dense.get(key, [])] if r.dt != self.fig7_dt]
+            dense = self.dense.get(key, []) if self.dense_method == "rk4" else []  # dopri5's dt is its own
+            halved = [f"{r.value:g}: dt {r.dt:g}" for r in [*runs, *dense] if r.dt != self.fig7_dt]
+            diverged = [f"{p.value:g}" for p in self.dense.get(key, []) if p.status == 3]
+            if diverged:
+                halved.append("diverged at every step tried: " + ", ".join(diverged))
             finals = ", ".join(f"{r.value:g} -> {r.result.final_position * 1e6:+.3f}" for r in runs)
             lines.append(f"  {key} x1(10 ms) [um]: {finals}" + (f"  (halved dt: {'; '.join(halved)})" if halved else ""))
         return "\n".join(lines)
@@ -278,13 +294,18 @@ def write_figures(
     fig7_dt: Optional[float] = None,
     bar: Any = None,
     progress: bool = True,
+    dense_method: Optional[str] = None,
+    threads: Optional[int] = None,
 ) -> FiguresReport:
     """Write fig6a.png … fig7d.png into ``out_dir`` from the paper case and the Fig. 7 sweeps.
 
     ``fig7_dt``: the Fig. 7 step; by default 2e-8 s if it agrees with 1e-8 s to 1e-11 m on the
     stiffest case, m2/m1 = 0.25 (checked here), else 1e-8 s; with ``quick`` 2e-8 s unchecked. A curve that
-    diverges is rerun with half the step. ``bar``: a tqdm bar to advance by one per simulation
-    and per figure (else one is made, shown if ``progress``)."""
+    diverges is rerun with half the step. The final-position summaries (right panels) run as one
+    :func:`idm_rs.sweep` per panel on ``threads`` threads (default all cores), with
+    ``dense_method`` (default ``"rk4"`` at ``fig7_dt``, bit for bit ``simulate()``; ``"dopri5"``
+    with ``quick``). ``bar``: a tqdm bar to advance by one per simulation and per figure (else one
+    is made, shown if ``progress``)."""
     from tqdm.auto import tqdm
 
     out = Path(out_dir)
@@ -293,7 +314,7 @@ def write_figures(
     own_bar = bar is None
     if own_bar:
         bar = tqdm(total=2 + fig7_run_count(quick) + 8, desc="figures", unit="run", disable=not progress)
-    rep = FiguresReport()
+    rep = FiguresReport(dense_method=dense_method or ("dopri5" if quick else "rk4"))
     try:
         if fig7_dt is None:
             if quick:
@@ -313,10 +334,13 @@ def write_figures(
         for name, sweep in zip(FIG7_NAMES, sweeps):
             bar.set_postfix_str(name)
             runs = run_sweep(sweep, fig7_dt, on_done=lambda: bar.update(1))
-            dense = run_dense(sweep, fig7_dt, on_done=lambda: bar.update(1))
+            dense = run_dense(sweep, fig7_dt, on_done=lambda: bar.update(1), method=rep.dense_method,
+                              threads=threads)
             rep.sweeps[sweep.key] = runs
             rep.dense[sweep.key] = dense
-            rep.paths[name] = fig7(sweep, runs, out / f"{name}.png", dense)
+            how = f"RK4 {fig7_dt:g} s" if rep.dense_method == "rk4" else rep.dense_method
+            label = f"{len(dense)} values (idm_rs.sweep, {how})"
+            rep.paths[name] = fig7(sweep, runs, out / f"{name}.png", dense, dense_label=label)
             bar.update(1)
     finally:
         if own_bar:

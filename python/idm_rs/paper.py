@@ -6,7 +6,8 @@ The paper drives the IDM with a single triangular wave, 0 → 80 V in 0.5 ms and
 force) and gives reference values for them; :func:`comparison_table` sets ours beside both.
 
 Fig. 7 sweeps one parameter at a time around the paper case; :func:`fig7_sweeps` describes the
-four sweeps and :func:`run_sweep` runs one.
+four sweeps, :func:`run_sweep` runs one's time histories (``simulate``) and :func:`run_dense` its
+final-position summary over a dense grid (one ``idm_rs.sweep`` through the parallel batch engine).
 """
 
 from __future__ import annotations
@@ -137,14 +138,17 @@ class Sweep:
     fmt: str = "{:g}"  #: legend format of a value
     note: str = ""  #: the model, and what else changes along the sweep
     dense: tuple[float, ...] = ()  #: a finer grid for the final-position summary
+    axis: str = ""  #: the ``idm_rs.sweep`` grid axis that ``build`` varies
+    axis_scale: float = 1.0  #: the axis value of a swept value ``v`` is ``v * axis_scale``
 
 
 class FinalPoint(NamedTuple):
     """x1(t_end) of one value of a sweep's dense grid."""
 
     value: float
-    final_position: float  #: [m]
-    dt: float  #: the step used [s]
+    final_position: float  #: [m] (NaN if the point diverged at every step tried)
+    dt: float  #: the step used [s] (rk4), or the smallest accepted step (dopri5)
+    status: int = 1  #: the sweep's status: 1 ok, 2 ok at a smaller step, 3 diverged
 
 
 @dataclass(frozen=True)
@@ -160,7 +164,8 @@ def fig7_sweeps(quick: bool = False) -> list[Sweep]:
     """The four sweeps of Fig. 7 (a: PE-to-main-body mass ratio, with the n = 1 FEM special case
     of eq. 18; b: weight-to-main-body mass ratio; c: PE stiffness; d: voltage; b–d with the DPS of
     four elements). Each has a dense grid for the final-position summary; ``quick`` keeps two or
-    three values per sweep and no dense grid."""
+    three values per sweep and a coarser summary grid (``QUICK_DENSE`` values, plus the curves'
+    values)."""
     p = paper_params()
     pe_volume = p.pe_area * p.pe_length
 
@@ -181,25 +186,25 @@ def fig7_sweeps(quick: bool = False) -> list[Sweep]:
             "7a", "PE-to-main-body mass ratio", "m_PE / m1 [-]",
             (0.01, 0.05, 0.1, 0.2), p.pe_mass / p.m1, mass_pe,
             note="DPS, n = 1 (eq. 18); ρp varied, normal force (m1 + m2 + mPE)·g follows",
-            dense=_grid(0.01, 0.2, 20),
+            dense=_grid(0.01, 0.2, 20), axis="pe_mass_ratio",
         ),
         Sweep(
             "7b", "weight-to-main-body mass ratio", "m2 / m1 [-]",
             (0.25, 0.5, 0.75, 1.0, 1.5, 2.0), p.m2 / p.m1, mass_weight,
             note="DPS, n = 4; m2 varied, normal force (m1 + m2 + mPE)·g follows",
-            dense=_grid(0.25, 2.0, 36),
+            dense=_grid(0.25, 2.0, 36), axis="mass_ratio",
         ),
         Sweep(
             "7c", "PE stiffness", "k_p / k_p0 [-]",
             (0.5, 0.75, 1.0, 1.5, 2.0), 1.0, stiffness,
             fmt="{:g} k_p0", note="DPS, n = 4; Ep varied, k_p0 = 2.77e7 N/m",
-            dense=_grid(0.5, 2.0, 31),
+            dense=_grid(0.5, 2.0, 31), axis="pe_youngs", axis_scale=p.pe_youngs,
         ),
         Sweep(
             "7d", "applied voltage", "peak voltage [V]",
             (40.0, 60.0, 80.0, 100.0, 120.0), PAPER_AMPLITUDE, voltage, fmt="{:g} V",
             note="DPS, n = 4; triangle, rise 0.5 ms, fall 9.5 ms",
-            dense=_grid(40.0, 120.0, 17),
+            dense=_grid(40.0, 120.0, 17), axis="voltage",
         ),
     ]
     if quick:
@@ -210,9 +215,17 @@ def fig7_sweeps(quick: bool = False) -> list[Sweep]:
             "7d": (40.0, 80.0, 120.0),
         }
         sweeps = [
-            dataclasses.replace(s, values=keep[s.key], dense=()) for s in sweeps
+            dataclasses.replace(
+                s, values=keep[s.key],
+                dense=tuple(sorted({*_grid(s.dense[0], s.dense[-1], QUICK_DENSE), *keep[s.key]})),
+            )
+            for s in sweeps
         ]
     return sweeps
+
+
+#: values of each summary grid in quick mode
+QUICK_DENSE = 9
 
 
 def _grid(lo: float, hi: float, n: int) -> tuple[float, ...]:
@@ -258,14 +271,41 @@ def run_sweep(
 
 
 def run_dense(
-    sweep: Sweep, dt: float, on_done: Optional[Callable[[], None]] = None
+    sweep: Sweep,
+    dt: float,
+    on_done: Optional[Callable[[], None]] = None,
+    *,
+    method: str = "rk4",
+    rtol: float = 1e-7,
+    atol: float = 1e-7,
+    max_halvings: int = 4,
+    threads: Optional[int] = None,
 ) -> list[FinalPoint]:
-    """x1(10 ms) over ``sweep.dense`` (only the end point is kept)."""
-    points = []
-    for v in sweep.dense:
-        r, used = run_case(sweep.build(v), dt, interval=PAPER_T_END / 10)
-        points.append(FinalPoint(v, r.final_position, used))
-        if on_done is not None:
+    """x1(10 ms) over ``sweep.dense``, as one :func:`idm_rs.sweep` along ``sweep.axis`` (the batch
+    engine on all cores; no trajectory is kept). With ``method="rk4"`` each point is bit for bit
+    ``simulate()`` of ``sweep.build(value)`` at step ``dt``; a point that diverges is retried at
+    dt/2, ... (``max_halvings`` times) and, if it still diverges, returned with a NaN position and
+    status 3. ``method="dopri5"`` is the adaptive Dormand-Prince 5(4) with ``rtol``/``atol``.
+    ``on_done()`` is called once per point when the sweep is done."""
+    from .sweep import sweep as batch_sweep
+
+    if not sweep.dense:
+        return []
+    if not sweep.axis:
+        raise ValueError(f"sweep {sweep.key} has no batch axis")
+    base = sweep.build(sweep.reference)  # the swept field is overridden point by point
+    values = np.asarray(sweep.dense, dtype=float)
+    ds = batch_sweep(
+        base.params, base.waveform, {sweep.axis: values * sweep.axis_scale}, t_end=PAPER_T_END, dt=dt,
+        model=base.model, n_elements=base.n_elements, metrics=("final_position",), method=method,
+        rtol=rtol, atol=atol, retries=max_halvings, progress=False, threads=threads,
+    )
+    points = [
+        FinalPoint(float(v), float(x), float(used), int(st))
+        for v, x, used, st in zip(values, ds["final_position"].values, ds["dt_used"].values, ds["status"].values)
+    ]
+    if on_done is not None:
+        for _ in points:
             on_done()
     return points
 

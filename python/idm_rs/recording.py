@@ -1,0 +1,583 @@
+"""Reader for IDM lab recordings in the ``idm-recording/1`` format (``recordings/FORMAT.md``).
+
+A *case* is a directory holding ``meta.json`` and one CSV file (``t,voltage,x``) per experiment::
+
+    rec = idm_rs.recording.load_case("recordings/dev/dev01")
+    rec.nominal.params                  # idm_rs.Params of meta.json (normal_force as given)
+    for e in rec.experiments:
+        e.t, e.voltage, e.x             # numpy arrays [s], [V], [m]
+        e.waveform                      # the idm_rs.Sawtooth that meta.json describes
+
+Malformed input is refused with a :class:`RecordingError` (a ``ValueError``) whose message starts
+with the file and, where there is one, the line (counting the header as line 1) and the column:
+missing or extra columns, non-numeric or non-finite values, non-uniform time, a time axis not
+starting at 0, ``x`` not in metres, and every way ``meta.json`` can disagree with a file (sample
+rate, duration, amplitude, waveform shape, resolution, a file name that says otherwise).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Iterator, Mapping, Optional, Sequence, Union
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .params import Params
+from .waveforms import Sawtooth, voltage_at
+
+__all__ = [
+    "FORMAT_ID",
+    "HEADER",
+    "Experiment",
+    "Nominal",
+    "Recording",
+    "RecordingError",
+    "load_case",
+]
+
+FORMAT_ID = "idm-recording/1"
+#: the exact column names of every CSV file, in order
+HEADER: tuple[str, ...] = ("t", "voltage", "x")
+META = "meta.json"
+
+#: |t_k - k/sample_rate| tolerance, as a fraction of the step (times are written exactly)
+TIME_TOLERANCE = 1e-2
+#: largest |x| [m] accepted as a displacement in metres (the format's scale is µm)
+MAX_ABS_X_M = 1e-3
+#: the voltage peak may differ from amplitude_V by at most this fraction (or 1 V) ...
+PEAK_TOLERANCE = 0.2
+#: ... and every sample from the sawtooth of meta.json by at most this fraction of amplitude_V
+WAVEFORM_TOLERANCE = 1e-2
+#: x / resolution_m may differ from an integer by at most this much (10 significant digits)
+QUANTUM_TOLERANCE = 0.05
+
+PathLike = Union[str, Path]
+
+_NAME_PATTERN = re.compile(
+    r"^exp\d+_(?P<direction>forward|backward)_(?P<amp>[0-9.]+)V_(?P<freq>[0-9.]+)Hz\.csv$"
+)
+
+
+class RecordingError(ValueError):
+    """A recording that does not follow ``idm-recording/1``.
+
+    ``file`` is the offending file, ``line`` its 1-based line (the CSV header is line 1) and
+    ``column`` the CSV column name or the ``meta.json`` key path, when they apply. The message
+    starts with all three, e.g. ``exp1.csv, line 57, column 3 ('x'): not a number: 'abc'``.
+    """
+
+    def __init__(
+        self,
+        file: PathLike,
+        message: str,
+        *,
+        line: Optional[int] = None,
+        column: Optional[str] = None,
+    ) -> None:
+        self.file = Path(file)
+        self.line = line
+        self.column = column
+        self.reason = message
+        where = str(self.file)
+        if line is not None:
+            where += f", line {line}"
+        if column is not None:
+            if column in HEADER:
+                where += f", column {HEADER.index(column) + 1} ('{column}')"
+            else:
+                where += f", key '{column}'"
+        super().__init__(f"{where}: {message}")
+
+
+# --------------------------------------------------------------------------------------------
+# data classes
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Experiment:
+    """One CSV file of a case: the drive described in ``meta.json`` and the samples.
+
+    ``t`` [s] (from 0, uniform step), ``voltage`` [V] (commanded), ``x`` [m] (measured main-body
+    displacement, with an unknown constant offset, noise and quantisation)."""
+
+    file: str  #: file name as listed in meta.json
+    path: Path  #: full path of the CSV file
+    amplitude_V: float
+    frequency_Hz: float
+    direction: str  #: "forward" or "backward"
+    cycles: int
+    rest_s: float  #: 0 V before the first cycle [s]
+    edge_s: float  #: duration of the fast edge [s]
+    t: NDArray[np.float64] = field(repr=False)
+    voltage: NDArray[np.float64] = field(repr=False)
+    x: NDArray[np.float64] = field(repr=False)
+
+    @property
+    def waveform(self) -> Sawtooth:
+        """The drive as an ``idm_rs.Sawtooth`` (delay = rest_s, rise = edge_s)."""
+        return Sawtooth(
+            amplitude=self.amplitude_V,
+            frequency=self.frequency_Hz,
+            cycles=self.cycles,
+            rise=self.edge_s,
+            direction=self.direction,  # type: ignore[arg-type]
+            delay=self.rest_s,
+        )
+
+    @property
+    def duration(self) -> float:
+        """End of the last cycle = time of the last sample [s]."""
+        return self.rest_s + self.cycles / self.frequency_Hz
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def name(self) -> str:
+        """The file name without ``.csv``."""
+        return Path(self.file).stem
+
+    @property
+    def rest_mask(self) -> NDArray[np.bool_]:
+        """Samples before the first cycle starts (t < rest_s): the device is at rest there."""
+        step = self.t[1] - self.t[0] if self.t.size > 1 else 0.0
+        return self.t < self.rest_s - 0.5 * step
+
+    def __len__(self) -> int:
+        return self.n_samples
+
+
+@dataclass(frozen=True)
+class Nominal:
+    """The model a case is compared with: structure and believed parameter values.
+
+    ``n_elements`` is the number of PE elements for ``"dps"`` and 1 for ``"lps"`` (as in
+    :class:`idm_rs.SimulationResult`)."""
+
+    model: str  #: "lps" or "dps"
+    n_elements: int
+    piezo_hysteresis: bool
+    params: Params
+
+    def simulate_kwargs(self) -> dict[str, Any]:
+        """``model``, ``n_elements`` and ``piezo_hysteresis`` for :func:`idm_rs.simulate`."""
+        return {"model": self.model, "n_elements": self.n_elements, "piezo_hysteresis": self.piezo_hysteresis}
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """A loaded case: the nominal model, the experiments and the sensor properties."""
+
+    path: Path  #: the case directory
+    name: str  #: the directory name
+    nominal: Nominal
+    experiments: list[Experiment]
+    sample_rate_Hz: float
+    resolution_m: float
+    meta: dict = field(repr=False, default_factory=dict)  #: meta.json as read
+
+    @classmethod
+    def load(cls, path: PathLike) -> "Recording":
+        """Read and validate a case directory (raises :class:`RecordingError`)."""
+        return load_case(path)
+
+    @property
+    def sample_step(self) -> float:
+        """1 / sample_rate_Hz [s]."""
+        return 1.0 / self.sample_rate_Hz
+
+    @property
+    def n_samples(self) -> int:
+        """Samples over all experiments."""
+        return sum(e.n_samples for e in self.experiments)
+
+    def __len__(self) -> int:
+        return len(self.experiments)
+
+    def __iter__(self) -> Iterator[Experiment]:
+        return iter(self.experiments)
+
+    def __getitem__(self, key: Union[int, str]) -> Experiment:
+        """An experiment by index, file name or file stem."""
+        if isinstance(key, str):
+            for e in self.experiments:
+                if key in (e.file, e.name):
+                    return e
+            raise KeyError(f"no experiment {key!r} in {self.path}; files: {[e.file for e in self.experiments]}")
+        return self.experiments[key]
+
+
+# --------------------------------------------------------------------------------------------
+# meta.json
+# --------------------------------------------------------------------------------------------
+def _require(obj: Any, keys: Sequence[str], meta: Path, where: str) -> None:
+    if not isinstance(obj, dict):
+        raise RecordingError(meta, f"must be a JSON object, got {type(obj).__name__}", column=where or None)
+    missing = [k for k in keys if k not in obj]
+    if missing:
+        prefix = f"{where}." if where else ""
+        raise RecordingError(
+            meta,
+            f"missing key{'s' if len(missing) > 1 else ''} "
+            + ", ".join(f"'{prefix}{k}'" for k in missing),
+        )
+
+
+def _number(obj: Mapping[str, Any], key: str, meta: Path, where: str, *, positive: bool = False,
+            non_negative: bool = False) -> float:
+    v = obj[key]
+    path = f"{where}.{key}"
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise RecordingError(meta, f"must be a number, got {v!r}", column=path)
+    v = float(v)
+    if not math.isfinite(v):
+        raise RecordingError(meta, f"must be finite, got {v}", column=path)
+    if positive and v <= 0:
+        raise RecordingError(meta, f"must be positive, got {v}", column=path)
+    if non_negative and v < 0:
+        raise RecordingError(meta, f"must be non-negative, got {v}", column=path)
+    return v
+
+
+def _read_meta(case: Path) -> dict:
+    meta = case / META
+    if not case.is_dir():
+        raise RecordingError(case, "not a directory (a case is a directory with meta.json and CSV files)")
+    if not meta.is_file():
+        raise RecordingError(meta, f"missing: a case directory must hold {META}")
+    text = meta.read_text(encoding="utf-8")
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise RecordingError(meta, f"invalid JSON (column {exc.colno}): {exc.msg}", line=exc.lineno) from None
+    if not isinstance(data, dict):
+        raise RecordingError(meta, f"must hold a JSON object, got {type(data).__name__}")
+    if "format" not in data:
+        raise RecordingError(meta, f"missing key 'format' (expected \"{FORMAT_ID}\")")
+    if data["format"] != FORMAT_ID:
+        raise RecordingError(meta, f"unsupported format {data['format']!r}; this reader reads \"{FORMAT_ID}\"",
+                             column="format")
+    _require(data, ["nominal", "experiments", "sensor"], meta, "")
+    return data
+
+
+def _parse_nominal(nom: Any, meta: Path) -> Nominal:
+    _require(nom, ["model", "piezo_hysteresis", "params"], meta, "nominal")
+    model = nom["model"]
+    if model not in ("lps", "dps"):
+        raise RecordingError(meta, f"must be \"lps\" or \"dps\", got {model!r}", column="nominal.model")
+    if model == "dps":
+        if "n_elements" not in nom:
+            raise RecordingError(meta, "missing key 'nominal.n_elements' (required for model \"dps\")")
+        n = nom["n_elements"]
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise RecordingError(meta, f"must be a positive integer, got {n!r}", column="nominal.n_elements")
+    else:
+        n = 1
+    hyst = nom["piezo_hysteresis"]
+    if not isinstance(hyst, bool):
+        raise RecordingError(meta, f"must be true or false, got {hyst!r}", column="nominal.piezo_hysteresis")
+    raw = nom["params"]
+    if not isinstance(raw, dict):
+        raise RecordingError(meta, f"must be a JSON object, got {type(raw).__name__}", column="nominal.params")
+    known = [f.name for f in fields(Params)]
+    unknown = sorted(set(raw) - set(known))
+    if unknown:
+        raise RecordingError(
+            meta,
+            f"unknown parameter name{'s' if len(unknown) > 1 else ''} {', '.join(repr(u) for u in unknown)}; "
+            f"known: {', '.join(known)}",
+            column="nominal.params",
+        )
+    missing = [k for k in known if k not in raw]
+    if missing:
+        raise RecordingError(
+            meta, f"missing parameter{'s' if len(missing) > 1 else ''} {', '.join(repr(m) for m in missing)}",
+            column="nominal.params",
+        )
+    values = {k: _number(raw, k, meta, "nominal.params") for k in known}
+    try:
+        params = Params(**values)
+    except (TypeError, ValueError) as exc:
+        raise RecordingError(meta, str(exc), column="nominal.params") from None
+    return Nominal(model=model, n_elements=int(n), piezo_hysteresis=hyst, params=params)
+
+
+_EXPERIMENT_KEYS = ("file", "waveform", "amplitude_V", "frequency_Hz", "direction", "cycles", "rest_s", "edge_s")
+
+
+def _parse_experiment_meta(e: Any, i: int, meta: Path) -> dict[str, Any]:
+    where = f"experiments[{i}]"
+    _require(e, _EXPERIMENT_KEYS, meta, where)
+    name = e["file"]
+    if not isinstance(name, str) or not name or Path(name).name != name or name in (".", ".."):
+        raise RecordingError(meta, f"must be a plain file name in the case directory, got {name!r}",
+                             column=f"{where}.file")
+    if e["waveform"] != "sawtooth":
+        raise RecordingError(meta, f"unsupported waveform {e['waveform']!r} (only \"sawtooth\")",
+                             column=f"{where}.waveform")
+    if e["direction"] not in ("forward", "backward"):
+        raise RecordingError(meta, f"must be \"forward\" or \"backward\", got {e['direction']!r}",
+                             column=f"{where}.direction")
+    cycles = e["cycles"]
+    if isinstance(cycles, bool) or not isinstance(cycles, (int, float)) or cycles != int(cycles) or cycles < 1:
+        raise RecordingError(meta, f"must be a positive integer, got {cycles!r}", column=f"{where}.cycles")
+    out = {
+        "file": name,
+        "amplitude_V": _number(e, "amplitude_V", meta, where),
+        "frequency_Hz": _number(e, "frequency_Hz", meta, where, positive=True),
+        "direction": e["direction"],
+        "cycles": int(cycles),
+        "rest_s": _number(e, "rest_s", meta, where, non_negative=True),
+        "edge_s": _number(e, "edge_s", meta, where, positive=True),
+    }
+    if out["edge_s"] >= 1.0 / out["frequency_Hz"]:
+        raise RecordingError(
+            meta, f"edge_s = {out['edge_s']} s must be shorter than the period 1/frequency_Hz = "
+            f"{1.0 / out['frequency_Hz']} s", column=f"{where}.edge_s",
+        )
+    m = _NAME_PATTERN.match(name)
+    if m is not None:  # a name in the usual pattern must agree with its meta entry
+        said = {"direction": m["direction"], "amplitude_V": float(m["amp"]), "frequency_Hz": float(m["freq"])}
+        for key, value in said.items():
+            if (value != out[key]) if key == "direction" else not math.isclose(value, out[key], rel_tol=1e-9):
+                raise RecordingError(
+                    meta, f"disagrees with the file name {name!r}: meta.json says {key} = {e[key]!r}, "
+                    f"the name says {value!r}", column=f"{where}.{key}",
+                )
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# CSV files
+# --------------------------------------------------------------------------------------------
+def _check_header(line: str, csv: Path) -> None:
+    clean = line.rstrip("\r\n").lstrip("\ufeff")  # a byte-order mark and CRLF are tolerated
+    expected = ",".join(HEADER)
+    if clean == expected:
+        return
+    got = [c.strip() for c in clean.split(",")]
+    if tuple(got) == HEADER:
+        raise RecordingError(csv, f"header must be exactly '{expected}' (no spaces), got {line.rstrip()!r}", line=1)
+    if all(_is_float(c) for c in got if c):
+        raise RecordingError(csv, f"no header: the first line must be '{expected}', got {line.rstrip()!r}", line=1)
+    missing = [c for c in HEADER if c not in got]
+    extra = [c for c in got if c not in HEADER]
+    parts = []
+    if missing:
+        parts.append(f"missing column{'s' if len(missing) > 1 else ''} " + ", ".join(f"'{c}'" for c in missing))
+    if extra:
+        parts.append(
+            f"extra column{'s' if len(extra) > 1 else ''} "
+            + ", ".join(f"'{c}' (column {got.index(c) + 1})" for c in extra)
+        )
+    if not parts:
+        parts.append(f"columns in the wrong order or repeated ({', '.join(got)})")
+    raise RecordingError(csv, f"header must be exactly '{expected}': {'; '.join(parts)}", line=1)
+
+
+def _is_float(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def _locate_parse_error(lines: list[str], csv: Path) -> RecordingError:
+    """The first line/column that np.loadtxt could not read (slow path, only on failure)."""
+    for k, line in enumerate(lines[1:], start=2):
+        cells = line.rstrip("\r").split(",")
+        if line.strip() == "":
+            return RecordingError(csv, "empty line", line=k)
+        if len(cells) != len(HEADER):
+            return RecordingError(
+                csv, f"{len(cells)} value{'s' if len(cells) != 1 else ''}, expected {len(HEADER)} "
+                f"({','.join(HEADER)}): {line.rstrip()!r}", line=k,
+            )
+        for name, cell in zip(HEADER, cells):
+            if not _is_float(cell):
+                return RecordingError(csv, f"not a number: {cell!r}", line=k, column=name)
+    return RecordingError(csv, "could not be read as numbers")
+
+
+def _read_csv(csv: Path) -> NDArray[np.float64]:
+    try:
+        text = csv.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise RecordingError(csv, f"not a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
+    lines = text.split("\n")
+    while lines and lines[-1].strip() == "":  # trailing newline(s)
+        lines.pop()
+    if not lines:
+        raise RecordingError(csv, f"empty file (expected the header '{','.join(HEADER)}' and samples)")
+    _check_header(lines[0], csv)
+    if len(lines) < 3:
+        raise RecordingError(csv, f"{len(lines) - 1} sample(s); a recording needs at least 2")
+    try:
+        data = np.loadtxt(lines[1:], delimiter=",", comments=None, dtype=float, ndmin=2)
+    except ValueError:
+        raise _locate_parse_error(lines, csv) from None
+    if data.shape != (len(lines) - 1, len(HEADER)):  # e.g. a blank line skipped by loadtxt
+        raise _locate_parse_error(lines, csv)
+    finite = np.isfinite(data)
+    if not finite.all():
+        row, col = np.argwhere(~finite)[0]
+        raw = lines[row + 1].rstrip("\r").split(",")[col]
+        raise RecordingError(csv, f"value is not finite: {raw!r}", line=int(row) + 2, column=HEADER[col])
+    return data
+
+
+def _check_experiment(
+    data: NDArray[np.float64], csv: Path, meta: Path, where: str, e: dict[str, Any],
+    sample_rate: float, resolution: float,
+) -> None:
+    t, v, x = data[:, 0], data[:, 1], data[:, 2]
+    n = t.size
+    step = 1.0 / sample_rate
+    tol = TIME_TOLERANCE * step
+    if abs(t[0]) > tol:
+        raise RecordingError(csv, f"time must start at 0, got t = {float(t[0])!r} s", line=2, column="t")
+    d = np.diff(t)
+    if np.any(d <= 0):
+        k = int(np.flatnonzero(d <= 0)[0])
+        raise RecordingError(
+            csv, f"time does not increase: t = {float(t[k + 1])!r} s after t = {float(t[k])!r} s", line=k + 3, column="t"
+        )
+    file_step = float(np.median(d))
+    if abs(file_step - step) > tol:
+        hint = ""
+        for unit, factor in (("ms", 1e3), ("µs", 1e6)):
+            if abs(file_step / factor - step) <= tol:
+                hint = f" (or t is in {unit}, not s)"
+        raise RecordingError(
+            csv, f"time step is {file_step:.6g} s ({1 / file_step:.6g} Hz) but {meta.name} gives "
+            f"sensor.sample_rate_Hz = {sample_rate:g} (step {step:.6g} s): {meta.name} disagrees with the "
+            f"file{hint}", line=3, column="t",
+        )
+    bad = np.abs(d - step) > tol
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise RecordingError(
+            csv, f"non-uniform time step: t jumps from {float(t[k])!r} s to {float(t[k + 1])!r} s "
+            f"(step {d[k]:.6g} s, expected {step:.6g} s = 1/sensor.sample_rate_Hz)", line=k + 3, column="t",
+        )
+    drift = np.abs(t - np.arange(n) * step) > tol
+    if drift.any():
+        k = int(np.flatnonzero(drift)[0])
+        raise RecordingError(
+            csv, f"non-uniform time: t = {float(t[k])!r} s but sample {k} should be at {k * step:.10g} s "
+            f"(step {step:.6g} s = 1/sensor.sample_rate_Hz)", line=k + 2, column="t",
+        )
+    duration = e["rest_s"] + e["cycles"] / e["frequency_Hz"]
+    if abs(t[-1] - duration) > 0.5 * step:
+        raise RecordingError(
+            csv, f"last sample at t = {float(t[-1])!r} s, but {meta.name} ({where}) describes rest_s + cycles / "
+            f"frequency_Hz = {e['rest_s']:g} + {e['cycles']} / {e['frequency_Hz']:g} = {duration:.10g} s: "
+            f"{meta.name} disagrees with the file", line=n + 1, column="t",
+        )
+    big = np.abs(x) > MAX_ABS_X_M
+    if big.any():
+        k = int(np.flatnonzero(big)[0])
+        raise RecordingError(
+            csv, f"x = {float(x[k]):.10g} looks like it is not in metres (|x| > {MAX_ABS_X_M:g} m; displacements of "
+            f"an IDM recording are µm-scale: was it written in µm or nm?)", line=k + 2, column="x",
+        )
+    amp = e["amplitude_V"]
+    peak_k = int(np.argmax(np.abs(v)))
+    peak = float(v[peak_k])
+    if abs(peak - amp) > max(PEAK_TOLERANCE * abs(amp), 1.0):
+        raise RecordingError(
+            csv, f"voltage peaks at {peak:g} V but {meta.name} gives amplitude_V = {amp:g} ({where}): "
+            f"{meta.name} disagrees with the file (or the voltage is not in V)", line=peak_k + 2, column="voltage",
+        )
+    wave = Sawtooth(amp, e["frequency_Hz"], e["cycles"], e["edge_s"], e["direction"], e["rest_s"])
+    expected = voltage_at(wave, np.arange(n) * step)
+    off = np.abs(v - expected) > max(WAVEFORM_TOLERANCE * abs(amp), 1e-6)
+    if off.any():
+        k = int(np.flatnonzero(off)[0])
+        hint = ""
+        other = "backward" if e["direction"] == "forward" else "forward"
+        alt = voltage_at(Sawtooth(amp, e["frequency_Hz"], e["cycles"], e["edge_s"], other, e["rest_s"]),
+                         np.arange(n) * step)
+        if np.all(np.abs(v - alt) <= max(WAVEFORM_TOLERANCE * abs(amp), 1e-6)):
+            hint = f"; the file holds a {other} sawtooth"
+        raise RecordingError(
+            csv, f"voltage {v[k]:.10g} V differs from the sawtooth {meta.name} describes ({where}: "
+            f"{e['direction']}, {amp:g} V, {e['frequency_Hz']:g} Hz, {e['cycles']} cycles, rest {e['rest_s']:g} s, "
+            f"edge {e['edge_s']:g} s), which is {expected[k]:.10g} V at t = {float(t[k])!r} s{hint}: "
+            f"{meta.name} disagrees with the file", line=k + 2, column="voltage",
+        )
+    if resolution > 0:
+        q = x / resolution
+        # 10 significant digits: |x| up to 1e-3 m at 1e-10 m steps still rounds to < 1e-2 of a step
+        bad_q = np.abs(q - np.round(q)) > QUANTUM_TOLERANCE
+        if bad_q.any():
+            k = int(np.flatnonzero(bad_q)[0])
+            raise RecordingError(
+                csv, f"x = {float(x[k])!r} m is not a multiple of sensor.resolution_m = {resolution:g} m: "
+                f"{meta.name} disagrees with the file", line=k + 2, column="x",
+            )
+
+
+# --------------------------------------------------------------------------------------------
+# the case
+# --------------------------------------------------------------------------------------------
+def load_case(path: PathLike) -> Recording:
+    """Read and validate the case directory ``path`` (``meta.json`` + CSV files).
+
+    Returns a :class:`Recording`; raises :class:`RecordingError` naming the file, line and column
+    of the first problem found."""
+    case = Path(path)
+    meta_path = case / META
+    data = _read_meta(case)
+    nominal = _parse_nominal(data["nominal"], meta_path)
+
+    sensor = data["sensor"]
+    _require(sensor, ["sample_rate_Hz", "resolution_m"], meta_path, "sensor")
+    sample_rate = _number(sensor, "sample_rate_Hz", meta_path, "sensor", positive=True)
+    resolution = _number(sensor, "resolution_m", meta_path, "sensor", non_negative=True)
+
+    exps_meta = data["experiments"]
+    if not isinstance(exps_meta, list) or not exps_meta:
+        raise RecordingError(meta_path, "must be a non-empty list of experiments", column="experiments")
+    parsed = [_parse_experiment_meta(e, i, meta_path) for i, e in enumerate(exps_meta)]
+    seen: dict[str, int] = {}
+    for i, e in enumerate(parsed):
+        if e["file"] in seen:
+            raise RecordingError(
+                meta_path, f"file {e['file']!r} is listed twice (experiments[{seen[e['file']]}] and [{i}])",
+                column=f"experiments[{i}].file",
+            )
+        seen[e["file"]] = i
+
+    experiments = []
+    for i, e in enumerate(parsed):
+        csv = case / e["file"]
+        if not csv.is_file():
+            raise RecordingError(csv, f"missing: listed in {META} (experiments[{i}].file) but not in {case}")
+        table = _read_csv(csv)
+        _check_experiment(table, csv, meta_path, f"experiments[{i}]", e, sample_rate, resolution)
+        experiments.append(
+            Experiment(
+                path=csv,
+                t=np.ascontiguousarray(table[:, 0]),
+                voltage=np.ascontiguousarray(table[:, 1]),
+                x=np.ascontiguousarray(table[:, 2]),
+                **e,
+            )
+        )
+    return Recording(
+        path=case,
+        name=case.resolve().name,
+        nominal=nominal,
+        experiments=experiments,
+        sample_rate_Hz=sample_rate,
+        resolution_m=resolution,
+        meta=data,
+    )

@@ -1,0 +1,195 @@
+"""Synthetic recordings: simulate a "true" device and write it as an ``idm-recording/1`` case.
+
+The case holds what a lab would record: the commanded sawtooth, and the sensor reading of the
+true device (true parameters, structure and effects) with a per-file offset, white Gaussian
+noise and quantisation. ``meta.json`` holds the *nominal* model, which may differ from the truth:
+that is how test cases with known answers (mis-set parameters, missing physics) are made::
+
+    p = idm_rs.Params(normal_force=6.90624)
+    case = make_case(tmp / "case", nominal_params=p, effects=idm_rs.Effects(k_ground=5e3))
+    rec = idm_rs.recording.load_case(case)
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import fields
+from pathlib import Path
+from typing import Any, Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from .effects import Effects
+from .params import Params
+from .recording import FORMAT_ID, HEADER, META
+from .simulation import simulate
+from .waveforms import Sawtooth, voltage_at
+
+__all__ = ["DEFAULT_EXPERIMENTS", "make_case"]
+
+#: a small, fast default: two 2-cycle bursts at 200 Hz, one each way (12 ms of motion each)
+DEFAULT_EXPERIMENTS: tuple[dict[str, Any], ...] = (
+    {"amplitude_V": 80, "frequency_Hz": 200, "direction": "forward", "cycles": 2},
+    {"amplitude_V": 60, "frequency_Hz": 200, "direction": "backward", "cycles": 2},
+)
+#: offsets are drawn uniformly in ±this [m] unless given
+OFFSET_RANGE_M = 2e-6
+
+
+def _fmt_number(v: float) -> Union[int, float]:
+    """Integers as JSON integers (80, not 80.0), as in FORMAT.md."""
+    return int(v) if float(v).is_integer() and abs(v) < 2**53 else float(v)
+
+
+def experiment_file_name(index: int, direction: str, amplitude_V: float, frequency_Hz: float) -> str:
+    """``exp{index}_{direction}_{A}V_{f}Hz.csv`` (index from 1)."""
+    return f"exp{index}_{direction}_{_fmt_number(amplitude_V):g}V_{_fmt_number(frequency_Hz):g}Hz.csv"
+
+
+def make_case(
+    directory: Union[str, Path],
+    *,
+    nominal_params: Params,
+    true_params: Optional[Params] = None,
+    model: str = "lps",
+    n_elements: int = 4,
+    piezo_hysteresis: bool = False,
+    true_model: Optional[str] = None,
+    true_n_elements: Optional[int] = None,
+    true_piezo_hysteresis: Optional[bool] = None,
+    effects: Optional[Effects] = None,
+    experiments: Optional[Sequence[Mapping[str, Any]]] = None,
+    noise_rms: float = 1.5e-9,
+    resolution: Optional[float] = 2.5e-10,
+    offsets: Optional[Sequence[float]] = None,
+    seed: int = 0,
+    dt: float = 1e-8,
+    rest_s: float = 0.002,
+    edge_s: float = 0.0005,
+    sample_rate_Hz: float = 1e5,
+) -> Path:
+    """Simulate the true device and write a case directory; returns ``Path(directory)``.
+
+    ``nominal_params`` / ``model`` / ``n_elements`` / ``piezo_hysteresis`` go to ``meta.json``
+    (``normal_force`` written explicitly, resolved from the masses when ``None``). The device
+    simulated is ``true_params`` / ``true_model`` / ``true_n_elements`` /
+    ``true_piezo_hysteresis`` (each defaulting to the nominal one) with ``effects``.
+
+    ``experiments``: dicts with ``amplitude_V``, ``frequency_Hz``, ``direction``, ``cycles`` and
+    optionally ``rest_s``, ``edge_s`` and ``file`` (default :data:`DEFAULT_EXPERIMENTS`).
+    Each file's ``x`` is the simulated ``reading`` (sampled at ``sample_rate_Hz``, integrated at
+    step ``dt``) + an offset (``offsets[i]``, or uniform in ±2 µm) + white Gaussian noise of RMS
+    ``noise_rms`` [m], rounded to multiples of ``resolution`` [m] (``None`` or 0: no rounding).
+    Everything random comes from ``numpy.random.default_rng(seed)``.
+    """
+    if not isinstance(nominal_params, Params):
+        raise TypeError(f"nominal_params must be idm_rs.Params, got {type(nominal_params).__name__}")
+    if model not in ("lps", "dps"):
+        raise ValueError(f"model must be 'lps' or 'dps', got {model!r}")
+    true_params = nominal_params if true_params is None else true_params
+    true_model = model if true_model is None else true_model
+    true_n_elements = n_elements if true_n_elements is None else true_n_elements
+    true_piezo_hysteresis = piezo_hysteresis if true_piezo_hysteresis is None else true_piezo_hysteresis
+    exps = [dict(e) for e in (DEFAULT_EXPERIMENTS if experiments is None else experiments)]
+    if not exps:
+        raise ValueError("experiments must not be empty")
+    if not (noise_rms >= 0 and math.isfinite(noise_rms)):
+        raise ValueError(f"noise_rms must be finite and non-negative, got {noise_rms}")
+    resolution = float(resolution or 0.0)
+    if resolution < 0 or not math.isfinite(resolution):
+        raise ValueError(f"resolution must be finite and non-negative, got {resolution}")
+    ratio = 1.0 / (sample_rate_Hz * dt)
+    save_every = int(round(ratio))
+    if save_every < 1 or abs(ratio - save_every) > 1e-6 * ratio:
+        raise ValueError(
+            f"dt = {dt:g} s must divide the sample step 1/sample_rate_Hz = {1 / sample_rate_Hz:g} s"
+        )
+
+    rng = np.random.default_rng(seed)
+    if offsets is None:
+        offs = rng.uniform(-OFFSET_RANGE_M, OFFSET_RANGE_M, size=len(exps))
+    else:
+        offs = np.asarray(offsets, dtype=float)
+        if offs.shape != (len(exps),):
+            raise ValueError(f"offsets: {offs.size} values for {len(exps)} experiments")
+
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    meta_exps = []
+    for i, e in enumerate(exps):
+        unknown = set(e) - {"amplitude_V", "frequency_Hz", "direction", "cycles", "rest_s", "edge_s", "file"}
+        if unknown:
+            raise ValueError(f"experiments[{i}]: unknown key(s) {sorted(unknown)}")
+        rest = float(e.get("rest_s", rest_s))
+        edge = float(e.get("edge_s", edge_s))
+        wave = Sawtooth(
+            amplitude=float(e["amplitude_V"]),
+            frequency=float(e["frequency_Hz"]),
+            cycles=int(e["cycles"]),
+            rise=edge,
+            direction=e["direction"],
+            delay=rest,
+        )
+        n = int(round(wave.duration * sample_rate_Hz)) + 1
+        t = np.arange(n) / sample_rate_Hz
+        if abs(t[-1] - wave.duration) > 1e-9 / sample_rate_Hz:
+            raise ValueError(
+                f"experiments[{i}]: the duration rest_s + cycles/frequency_Hz = {wave.duration:g} s is not a "
+                f"multiple of the sample step {1 / sample_rate_Hz:g} s"
+            )
+        sim = simulate(
+            true_params,
+            wave,
+            t_end=t[-1],
+            dt=dt,
+            model=true_model,  # type: ignore[arg-type]
+            n_elements=true_n_elements,
+            save_every=save_every,
+            piezo_hysteresis=true_piezo_hysteresis,
+            effects=effects,
+        )
+        if sim.t.shape != t.shape or np.max(np.abs(sim.t - t)) > 1e-3 / sample_rate_Hz:
+            raise RuntimeError(f"experiments[{i}]: simulation saved {sim.t.size} times, expected {n}")
+        x = sim.reading + offs[i]
+        if noise_rms > 0:
+            x = x + rng.normal(0.0, noise_rms, size=n)
+        if resolution > 0:
+            x = np.round(x / resolution) * resolution
+        v = voltage_at(wave, t)
+        name = e.get("file") or experiment_file_name(i + 1, wave.direction, wave.amplitude, wave.frequency)
+        np.savetxt(
+            out / name,
+            np.column_stack([t, v, x]),
+            fmt="%.10g",
+            delimiter=",",
+            header=",".join(HEADER),
+            comments="",
+        )
+        meta_exps.append(
+            {
+                "file": name,
+                "waveform": "sawtooth",
+                "amplitude_V": _fmt_number(wave.amplitude),
+                "frequency_Hz": _fmt_number(wave.frequency),
+                "direction": wave.direction,
+                "cycles": wave.cycles,
+                "rest_s": rest,
+                "edge_s": edge,
+            }
+        )
+
+    nominal: dict[str, Any] = {"model": model}
+    if model == "dps":
+        nominal["n_elements"] = int(n_elements)
+    nominal["piezo_hysteresis"] = bool(piezo_hysteresis)
+    resolved = nominal_params.to_dict(resolved=True)
+    nominal["params"] = {f.name: resolved[f.name] for f in fields(Params)}  # FORMAT.md's order
+    meta = {
+        "format": FORMAT_ID,
+        "nominal": nominal,
+        "experiments": meta_exps,
+        "sensor": {"sample_rate_Hz": float(sample_rate_Hz), "resolution_m": resolution},
+    }
+    (out / META).write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
+    return out
