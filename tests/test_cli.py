@@ -216,3 +216,21 @@ def test_fig7_summary_runs_through_sweep_and_equals_simulate(key, value):
     result, dt = paper.run_case(sweep.build(value), 5e-8)
     assert point.status == 1 and point.dt == dt == 5e-8
     assert point.final_position == result.final_position
+
+
+def test_sweep_on_a_dask_scheduler(capsys):
+    distributed = pytest.importorskip("dask.distributed")
+    import warnings
+
+    argv = ["sweep", "--model", "lps", "--dt", "5e-8", "--t-end", "1e-3", "--grid", "voltage=40,80", "--no-progress"]
+    assert main(argv) == 0
+    local = capsys.readouterr().out
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the cluster's start-up/shut-down chatter is not under test
+        with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                      dashboard_address=None) as cluster:
+            assert main([*argv, "--scheduler", cluster.scheduler_address]) == 0
+    remote = capsys.readouterr().out
+    assert ", dask" in remote.splitlines()[0]
+    assert [ln for ln in remote.splitlines() if ln.startswith("final_position")] == \
+           [ln for ln in local.splitlines() if ln.startswith("final_position")]

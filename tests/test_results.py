@@ -83,13 +83,6 @@ def test_to_xarray_has_units_on_every_variable(result):
     np.testing.assert_array_equal(ds["main_body"].values, result.main_body)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "BUG (python/idm_rs/simulation.py to_xarray): the 'node' coordinate has only a "
-        "long_name, no 'units' attribute (a dimensionless index would carry units '1')."
-    ),
-)
 def test_to_xarray_has_units_on_every_coordinate(result):
     ds = result.to_xarray()
     for name, coord in ds.coords.items():

@@ -87,15 +87,6 @@ def test_zero_save_every_is_named():
         idm_rs.simulate(idm_rs.Params(), SHORT_WAVE, 1e-3, save_every=0)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=OverflowError,
-    reason=(
-        "BUG (python/idm_rs/simulation.py + bindings): a negative n_elements or save_every "
-        "reaches PyO3's usize conversion and raises OverflowError('can't convert negative int "
-        "to unsigned'), which names no parameter."
-    ),
-)
 @pytest.mark.parametrize("kw,name", [({"n_elements": -1}, "n_elements"), ({"save_every": -1}, "save_every")])
 def test_negative_counts_are_named(kw, name):
     with pytest.raises(ValueError, match=f"'{name}'"):

@@ -16,19 +16,26 @@ from .params import Params
 from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate
 from .sweep import METRICS, sweep
 from .waveforms import Sampled, Sawtooth, Triangle, Waveform
+from .recording import Recording, RecordingError, load_case
+from .diagnosis import Diagnosis, diagnose
 
 __all__ = [
     "__version__",
+    "Diagnosis",
     "DivergenceError",
     "Effects",
     "EnergyBudget",
     "Params",
+    "Recording",
+    "RecordingError",
     "Sampled",
     "Sawtooth",
     "SimulationResult",
     "Triangle",
     "Waveform",
     "METRICS",
+    "diagnose",
+    "load_case",
     "simulate",
     "sweep",
 ]

@@ -1,6 +1,7 @@
 """The ``idm-rs`` command line: ``idm-rs reproduce`` (the paper's Figs. 6 and 7),
-``idm-rs simulate`` (one case) and ``idm-rs sweep`` (a grid of cases through the batch engine,
-saved as netCDF with a heat map). ``python -m idm_rs`` is the same command.
+``idm-rs simulate`` (one case), ``idm-rs sweep`` (a grid of cases through the batch engine,
+saved as netCDF with a heat map) and ``idm-rs diagnose`` (a recorded case against its nominal
+model: report, JSON and plots). ``python -m idm_rs`` is the same command.
 
 Errors in the input (a bad parameter, a step that does not fit the waveform, a run that
 diverges) print one ``error: ...`` line to stderr and exit with status 2.
@@ -149,7 +150,29 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--metric", choices=(*METRICS, "dt_used", "steps"), default="final_position",
                     help="what --plot shows (default: final_position)")
     sw.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_diagnose_parser(sub)
     return parser
+
+
+def _add_diagnose_parser(sub: "argparse._SubParsersAction") -> None:
+    dp = sub.add_parser(
+        "diagnose",
+        help="diagnose a recorded case: locate the mismatch, name the missing physics, refit",
+        description=(
+            "Compare the recordings of CASE_DIR (format idm-recording/1: meta.json and one CSV per "
+            "experiment) with their nominal model: calibrate the plausibly-off parameters, locate the "
+            "residual, try every catalogue effect, and print the verdict (a catalogue id, 'none' or "
+            "'unexplained') with the evidence."
+        ),
+    )
+    dp.add_argument("case_dir", metavar="CASE_DIR", help="the case directory")
+    dp.add_argument("--json", default=None, metavar="OUT",
+                    help="write the diagnosis as JSON (verdict, ranking, RMS figures [m], locations, ...)")
+    dp.add_argument("--plots", default=None, metavar="DIR",
+                    help="write the figures (fits per experiment, residual phases, ranking, RMS story) into DIR")
+    dp.add_argument("--no-progress", action="store_true", help="no progress bar")
+    dp.add_argument("--threads", type=_positive_int, default=None, metavar="N",
+                    help="threads of the batch simulations (default: all cores)")
 
 
 def _add_case_arguments(sp: argparse.ArgumentParser) -> None:
@@ -584,6 +607,26 @@ def cmd_reproduce(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_diagnose(a: argparse.Namespace) -> int:
+    import json
+
+    from .diagnosis import diagnose
+    from .diagnosis.report import json_safe
+
+    d = diagnose(a.case_dir, progress=not a.no_progress, threads=a.threads)
+    print(d.report())
+    if a.json:
+        out = Path(a.json)
+        if out.parent != Path(""):
+            out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(json_safe(d.to_dict()), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        print(f"wrote {out}")
+    if a.plots:
+        paths = d.plot(a.plots)
+        print(f"wrote {len(paths)} figures in {a.plots}: " + ", ".join(p.name for p in paths))
+    return 0
+
+
 def _one_line(exc: BaseException) -> str:
     msg = exc.args[0] if exc.args and isinstance(exc.args[0], str) else str(exc)
     return " ".join(str(msg).split())
@@ -597,7 +640,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         parser.print_help()
         return EXIT_ERROR
     try:
-        command = {"reproduce": cmd_reproduce, "simulate": cmd_simulate, "sweep": cmd_sweep}[a.command]
+        command = {"reproduce": cmd_reproduce, "simulate": cmd_simulate, "sweep": cmd_sweep,
+                   "diagnose": cmd_diagnose}[a.command]
         return command(a)
     except (ValueError, DivergenceError, OSError) as exc:
         print(f"error: {_one_line(exc)}", file=sys.stderr)

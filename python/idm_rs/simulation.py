@@ -130,7 +130,7 @@ class SimulationResult:
             },
             coords={
                 "time": ("time", self.t, {"units": "s", "long_name": "time"}),
-                "node": ("node", np.arange(self.nodes.shape[1]), {"long_name": "node (0 = main body)"}),
+                "node": ("node", np.arange(self.nodes.shape[1]), {"units": "1", "long_name": "node (0 = main body)"}),
             },
         )
         ds.attrs.update(
@@ -179,6 +179,9 @@ def simulate(
     if not isinstance(params, Params):
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
     effects = effects or Effects()
+    for name, value in (("n_elements", n_elements), ("save_every", save_every)):
+        if isinstance(value, bool) or int(value) != value or value < 1:
+            raise ValueError(f"parameter '{name}' must be a positive integer, got {value!r}")
     bt, bv = waveform.breakpoints()
     out = _core.simulate(
         params._given(),

@@ -89,8 +89,12 @@ class _Plan:
 
     def arrays(self, start: int, stop: int) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Parameter, effect and waveform matrices of flat points [start, stop)."""
-        n = stop - start
-        idx = np.unravel_index(np.arange(start, stop), self.shape)
+        return self.arrays_at(np.arange(start, stop))
+
+    def arrays_at(self, flat: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Parameter, effect and waveform matrices of the flat points `flat`."""
+        n = flat.size
+        idx = np.unravel_index(flat, self.shape)
         pnames = _core.param_names()
         base = self.params.to_dict(resolved=False)
         pm = np.empty((n, len(pnames)))
@@ -270,8 +274,7 @@ def sweep(
     effects = effects or Effects()
     plan = _Plan(params, waveform, effects, names, values, float(t_end), float(dt), model, int(n_elements),
                  bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries))
-    # refuse bad settings before any work: run the first point's checks on a one-point block
-    _validate_first(plan)
+    _validate_axes(plan)
 
     n = plan.size
     out = {k: np.full(n, np.nan if t is np.float64 else 0, dtype=t) for k, t in _OUTPUTS.items()}
@@ -331,13 +334,25 @@ def sweep(
     return ds
 
 
-def _validate_first(plan: _Plan) -> None:
-    """Fail fast, with the core's message, on what every point shares (step, duration, model)."""
-    pm, em, wm = plan.arrays(0, 1)
-    p = {k: float(v) for k, v in zip(_core.param_names(), pm[0]) if not (k == "normal_force" and math.isnan(v))}
-    eff = {k: float(v) for k, v in zip(_core.effect_names(), em[0]) if v != 0.0}
-    bt, bv = _point_waveform(plan.waveform, wm[0]).breakpoints()
-    _core.check_plan(p, eff, bt.tolist(), bv.tolist(), plan.t_end, plan.dt, plan.model, plan.n_elements, plan.method)
+def _validate_axes(plan: _Plan) -> None:
+    """Fail fast, with the core's message, on a setting every point shares (step, duration,
+    model) or an axis value that is invalid on its own: the points where one axis takes each of
+    its values and the others their first are checked before any work. (A point invalid only
+    in combination is flagged with status 4 instead.)"""
+    cross = {0}
+    for a, n in enumerate(plan.shape):
+        for i in range(n):
+            m = [0] * len(plan.shape)
+            m[a] = i
+            cross.add(int(np.ravel_multi_index(m, plan.shape)))
+    flat = np.array(sorted(cross))
+    pm, em, wm = plan.arrays_at(flat)
+    for k in range(flat.size):
+        p = {n: float(v) for n, v in zip(_core.param_names(), pm[k]) if not (n == "normal_force" and math.isnan(v))}
+        eff = {n: float(v) for n, v in zip(_core.effect_names(), em[k]) if v != 0.0}
+        bt, bv = _point_waveform(plan.waveform, wm[k]).breakpoints()
+        _core.check_plan(p, eff, bt.tolist(), bv.tolist(), plan.t_end, plan.dt, plan.model, plan.n_elements,
+                         plan.method)
 
 
 def _point_waveform(w: Waveform, row: NDArray[np.float64]) -> Waveform:
@@ -359,27 +374,34 @@ def _progress_bar(total: int, show: bool) -> Any:
 
 def _run_local(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_size: int, bar: Any) -> bool:
     n = plan.size
-    for start in range(0, n, block_size):
-        stop = min(n, start + block_size)
-        run = _start(plan, start, stop, threads)
-        seen = 0
-        try:
+    run = None
+    start = stop = 0
+    try:
+        for start in range(0, n, block_size):
+            stop = min(n, start + block_size)
+            run = _start(plan, start, stop, threads)
+            seen = 0
             while not run.wait(0.1):
                 if bar is not None:
                     p = run.progress()
                     bar.update(p - seen)
                     seen = p
-        except KeyboardInterrupt:
-            run.cancel()
             res = run.result()
+            run = None
+            if bar is not None:
+                bar.update(stop - start - seen)
             _store(out, res, start, stop)
-            warnings.warn(f"sweep interrupted: {int(np.count_nonzero(out['status']))} of {n} points finished; "
-                          "the rest are NaN (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
-            return False
-        res = run.result()
-        if bar is not None:
-            bar.update(run.progress() - seen)
-        _store(out, res, start, stop)
+    except KeyboardInterrupt:
+        # Ctrl-C anywhere: stop the workers, keep every finished point
+        if run is not None:
+            run.cancel()
+            try:
+                _store(out, run.result(), start, stop)
+            except RuntimeError:
+                pass  # the block's result was already taken
+        warnings.warn(f"sweep interrupted: {int(np.count_nonzero(out['status']))} of {n} points finished; "
+                      "the rest are NaN (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
+        return False
     return True
 
 

@@ -318,39 +318,65 @@ fn rk4_group(
     }
 }
 
-/// Adaptive Dormand-Prince run of one point.
+/// Adaptive Dormand-Prince run of one point, dispatched to a fixed-size state when plain.
 fn dopri5_point(cfg: &BatchConfig, model: &Model, spec: &PointSpec, rtol: f64, atol: f64, cancel: &AtomicBool) -> Option<PointMetrics> {
+    macro_rules! fixed {
+        ($n:literal, $d:literal) => {
+            dopri5_run::<[f64; $d], $n, false>(cfg, model, spec, rtol, atol, [0.0; $d], cancel)
+        };
+    }
+    match (model.is_plain(), model.layout.dof) {
+        (true, 2) => fixed!(2, 7),
+        (true, 3) => fixed!(3, 9),
+        (true, 4) => fixed!(4, 11),
+        (true, 5) => fixed!(5, 13),
+        (true, 6) => fixed!(6, 15),
+        _ => dopri5_run::<Vec<f64>, 0, true>(cfg, model, spec, rtol, atol, rest_state(model), cancel),
+    }
+}
+
+fn dopri5_run<S, const N: usize, const EXTRAS: bool>(
+    cfg: &BatchConfig,
+    model: &Model,
+    spec: &PointSpec,
+    rtol: f64,
+    atol: f64,
+    zero: S,
+    cancel: &AtomicBool,
+) -> Option<PointMetrics>
+where
+    S: AsRef<[f64]> + AsMut<[f64]> + Clone,
+{
     let wave = &spec.wave;
     let (bt, bv) = (wave.times(), wave.values());
     let v_max = bv.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let t_end = spec.t_end(cfg);
     let opts = Dopri5Options {
         rtol,
         atol,
         scale: model.state_scales(v_max),
         h_init: cfg.dt,
         h_min: 1e-14,
-        h_max: spec.t_end(cfg) / 10.0,
+        h_max: t_end / 10.0,
     };
-    let input = |seg: usize, t: f64| -> (f64, f64) {
-        if seg + 1 >= bt.len() || t < bt[0] {
-            (bv[seg.min(bt.len() - 1)], 0.0)
-        } else {
-            let s = (bv[seg + 1] - bv[seg]) / (bt[seg + 1] - bt[seg]);
-            (bv[seg] + s * (t - bt[seg]), s)
-        }
-    };
-    let mut y = rest_state(model);
+    let mut y = zero;
     let mut acc = Accumulator::new(model);
     let (mut t_prev, mut h_min_used, mut evals) = (0.0, f64::INFINITY, 0usize);
     let (mut v_prev, mut ff_prev) = (0.0, 0.0);
     let mut cancelled = false;
     let result = dopri5::integrate(
-        |seg, t, s: &[f64], ds: &mut [f64]| {
-            let (v, slope) = input(seg, t);
-            model.rhs(v, slope, s, ds);
+        |seg: usize, t: f64, s: &[f64], ds: &mut [f64]| {
+            // V(t) on the segment that starts at breakpoint `seg` (constant after the last)
+            let (v, slope) = if seg + 1 >= bt.len() || t < bt[0] {
+                (bv[seg.min(bt.len() - 1)], 0.0)
+            } else {
+                let sl = (bv[seg + 1] - bv[seg]) / (bt[seg + 1] - bt[seg]);
+                (bv[seg] + sl * (t - bt[seg]), sl)
+            };
+            model.rhs_impl::<N, EXTRAS>(v, slope, s, ds);
         },
         0.0,
-        spec.t_end(cfg),
+        t_end,
         bt,
         &mut y,
         &opts,
@@ -372,11 +398,12 @@ fn dopri5_point(cfg: &BatchConfig, model: &Model, spec: &PointSpec, rtol: f64, a
     if cancelled {
         return None;
     }
+    let y = y.as_ref();
     Some(match result {
         Ok(stats) if y.iter().all(|x| x.is_finite()) => {
-            acc.finish(model, &y, spec.t_end(cfg), spec.cycles, Status::Ok, h_min_used, stats.accepted)
+            acc.finish(model, y, t_end, spec.cycles, Status::Ok, h_min_used, stats.accepted)
         }
-        Ok(_) => diverged_metrics(spec.t_end(cfg), cfg.dt),
+        Ok(_) => diverged_metrics(t_end, cfg.dt),
         Err((t, _)) => diverged_metrics(t, cfg.dt),
     })
 }

@@ -13,7 +13,7 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::batch::{run_batch, BatchConfig, Method, PointMetrics, PointOutput, PointSpec};
+use crate::batch::{run_batch, BatchConfig, Method, PointMetrics, PointOutput, PointSpec, Status};
 use crate::effects::{Effects, EFFECT_NAMES};
 use crate::mechanics::Structure;
 use crate::model::{Model, N_ACCOUNTING};
@@ -300,7 +300,10 @@ fn start_batch(
     let (c2, d2) = (cancel.clone(), done.clone());
     let handle = std::thread::spawn(move || -> BatchOutcome {
         let (np, ne, nw) = (PARAM_NAMES.len(), EFFECT_NAMES.len(), WAVE_COLUMNS.len());
+        // a point whose values are invalid (a negative mass from a sweep axis, say) is flagged
+        // Status::Invalid; it does not stop the others
         let mut specs = Vec::with_capacity(n);
+        let mut slot: Vec<Option<usize>> = Vec::with_capacity(n);
         for i in 0..n {
             let prow = &pm[i * np..(i + 1) * np];
             let pairs: Vec<(&str, f64)> = PARAM_NAMES.iter().copied().zip(prow.iter().copied())
@@ -314,16 +317,22 @@ fn start_batch(
             match spec {
                 Ok((params, effects, (wave, cycles))) => {
                     let t_end = t_ends.as_ref().map(|t| t[i]);
-                    specs.push(PointSpec { params, effects, wave, cycles, t_end })
+                    slot.push(Some(specs.len()));
+                    specs.push(PointSpec { params, effects, wave, cycles, t_end });
                 }
-                Err(msg) => return Err(format!("point {i}: {msg}")),
+                Err(_) => {
+                    slot.push(None);
+                    d2.fetch_add(1, Ordering::Relaxed);
+                }
             }
         }
         let run = || catch_unwind(AssertUnwindSafe(|| pool.install(|| run_batch(&cfg, &specs, &c2, &d2))));
-        match run() {
-            Ok(r) => r.map_err(|e| e.to_string()),
-            Err(_) => Err("internal error in idm-rs batch (please report)".into()),
-        }
+        let mut results = match run() {
+            Ok(r) => r.map_err(|e| e.to_string())?,
+            Err(_) => return Err("internal error in idm-rs batch (please report)".into()),
+        };
+        let invalid = PointOutput { metrics: PointMetrics { status: Status::Invalid, ..PointMetrics::not_run() }, trace: Vec::new() };
+        Ok(slot.into_iter().map(|s| s.map_or_else(|| invalid.clone(), |k| std::mem::replace(&mut results[k], invalid.clone()))).collect())
     });
     Ok(BatchRun { cancel, done, total: n, handle: Mutex::new(Some(handle)) })
 }

@@ -61,24 +61,34 @@ class CaseSimulator:
             self._wave_rows.append([float(row[c]) for c in cols])
         self.evaluations = 0  # simulated experiment runs, for reports
 
-    def predict(self, specs: Sequence[ModelSpec]) -> list[list[NDArray[np.float64]]]:
-        """Readings [m] per spec, per experiment (NaN-filled where the run diverged)."""
+    def horizon(self, j: int, cycles: Optional[int]) -> tuple[float, int]:
+        """(duration [s], samples) of experiment j cut after `cycles` drive cycles (None: all)."""
+        e = self.recording.experiments[j]
+        if cycles is None or cycles >= e.cycles:
+            return e.duration, e.n_samples
+        t_end = e.rest_s + cycles / e.frequency_Hz
+        return t_end, int(round(t_end * self.recording.sample_rate_Hz)) + 1
+
+    def predict(self, specs: Sequence[ModelSpec], cycles: Optional[int] = None) -> list[list[NDArray[np.float64]]]:
+        """Readings [m] per spec, per experiment (NaN-filled where the run diverged), over the
+        first `cycles` drive cycles of each experiment (None: all of it)."""
         out: list[list[NDArray[np.float64]]] = [[] for _ in specs]
         by_structure: dict[Structure, list[int]] = {}
         for i, s in enumerate(specs):
             by_structure.setdefault(s.structure, []).append(i)
-        exps = self.recording.experiments
+        n_exp = len(self.recording.experiments)
+        horizons = [self.horizon(j, cycles) for j in range(n_exp)]
         pnames, enames = _core.param_names(), _core.effect_names()
         for structure, idx in by_structure.items():
             rows_p, rows_e, rows_w, t_ends = [], [], [], []
             for i in idx:
                 prow = [math.nan if specs[i].params.get(n) is None else float(specs[i].params[n]) for n in pnames]
                 erow = [float(specs[i].effects.get(n, 0.0)) for n in enames]
-                for j, e in enumerate(exps):
+                for j in range(n_exp):
                     rows_p.append(prow)
                     rows_e.append(erow)
                     rows_w.append(self._wave_rows[j])
-                    t_ends.append(e.duration)
+                    t_ends.append(horizons[j][0])
             run = _core.start_batch(
                 np.asarray(rows_p), np.asarray(rows_e), np.asarray(rows_w), None, None,
                 structure.model, structure.n_elements, structure.piezo_hysteresis,
@@ -89,10 +99,10 @@ class CaseSimulator:
             traces = res.get("traces", [np.zeros(0)] * len(t_ends))
             k = 0
             for i in idx:
-                for e in exps:
+                for j in range(n_exp):
                     tr = np.asarray(traces[k])
-                    if tr.size != e.n_samples:  # diverged or invalid point
-                        tr = np.full(e.n_samples, np.nan)
+                    if tr.size != horizons[j][1]:  # diverged or invalid point
+                        tr = np.full(horizons[j][1], np.nan)
                     out[i].append(tr)
                     k += 1
         return out

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from ..recording import Recording, load_case
 from .case_model import FIT_DT, CaseSimulator, ModelSpec, Structure
 from .catalogue import CALIBRATED, CALIBRATION_RANGE, CALIBRATION_SCALE, CATALOGUE, Effect
-from .fitting import FitResult, FreeParam, Objective, apply, fit, set_param
+from .fitting import FitResult, FreeParam, Objective, apply, fit, fit_progressive, set_param
 from .locate import Location, locate, merge_windows
 from .noise import NoiseEstimate, estimate_noise
 
@@ -191,7 +191,7 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
 
     # 1. calibrate the plausibly-off nominal parameters
     cal_free = _calibration_params(p0)
-    cal = fit(obj, spec0, cal_free, progress=tick)
+    cal = fit_progressive(obj, spec0, cal_free, progress=tick)
     k_cal = len(cal_free) + n_off
     bic_cal = cal.chi2 + k_cal * ln_n
     wz_cal = whiteness_z(cal.residuals)
@@ -228,7 +228,7 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
         if i < refit_top:
             base = ModelSpec(eff.structure(structure0), dict(cal.spec.params), dict(cal.spec.effects))
             free = cal_at + [ep.free(v) for ep, v in zip(eff.params, s["start"])]
-            r = fit(obj, base, free, progress=tick)
+            r = fit_progressive(obj, base, free, progress=tick)
             eff_names = [ep.name for ep in eff.params]
             cand = Candidate(
                 eff.id, eff.description, _report_params(eff, r), {n_: r.std[n_] for n_ in eff_names},
@@ -243,7 +243,8 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
                              chi2 + k * ln_n, bic_cal - (chi2 + k * ln_n), sigma * math.sqrt(chi2 / n), math.nan,
                              math.nan, True)
         ranking.append(cand)
-    ranking.sort(key=lambda c: -c.delta_bic)
+    # refitted candidates first (their numbers are real fits), then the screened-only estimates
+    ranking.sort(key=lambda c: (c.screened_only, -c.delta_bic))
     # held-out prediction for the leading refitted candidates
     for c in [c for c in ranking if not c.screened_only][:2]:
         c.heldout_rms = heldout_rms(c._base, c._free)  # type: ignore[attr-defined]
@@ -328,8 +329,7 @@ def _screen(obj: Objective, cal: FitResult, cal_at: list[FreeParam], effects: Se
         # Gauss-Newton from the start point: chi2 after the linearised optimum
         du, *_ = np.linalg.lstsq(A, -rs, rcond=None)
         chi2_lin = float(np.sum((rs + A @ du) ** 2))
-        est = [f.value(float(d)) for f, d in zip(entry["free"], du[Jn.shape[1]:])]
-        est = [min(max(v, f.lower), f.upper) for v, f in zip(est, entry["free"])]
+        est = [f.value(float(np.clip(d, *f.u_bounds()))) for f, d in zip(entry["free"], du[Jn.shape[1]:])]
         out.append({"effect": entry["effect"], "start": entry["start"], "delta_chi2": chi2_cal - chi2_lin,
                     "estimate": est, "mu_k": cal.values["mu_k"]})
     return out

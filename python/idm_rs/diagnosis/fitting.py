@@ -86,22 +86,31 @@ def apply(base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64]) ->
 
 
 class Objective:
-    """Residuals in noise units for a recording, offsets profiled per experiment."""
+    """Residuals in noise units for a recording, offsets profiled per experiment, over the
+    experiments listed and the first `cycles` drive cycles of each (None: everything)."""
 
     def __init__(self, recording: Recording, simulator: CaseSimulator, sigma: float,
-                 experiments: Optional[Sequence[int]] = None) -> None:
+                 experiments: Optional[Sequence[int]] = None, cycles: Optional[int] = None) -> None:
         self.recording = recording
         self.sim = simulator
         self.sigma = sigma
+        self.cycles = cycles
         self.experiments = list(range(len(recording.experiments))) if experiments is None else list(experiments)
-        self.n = sum(recording.experiments[j].n_samples for j in self.experiments)
+        self.samples = {j: simulator.horizon(j, cycles)[1] for j in self.experiments}
+        self.n = sum(self.samples.values())
         self._bad = 1e3  # residual (noise units) given to samples of a diverged run
+
+    def with_cycles(self, cycles: Optional[int]) -> "Objective":
+        return Objective(self.recording, self.sim, self.sigma, self.experiments, cycles)
+
+    def predict(self, specs: Sequence[ModelSpec]) -> list[list[NDArray[np.float64]]]:
+        return self.sim.predict(specs, self.cycles)
 
     def profiled(self, preds: Sequence[NDArray[np.float64]]) -> tuple[list[NDArray[np.float64]], list[float]]:
         """Residuals [m] with the best offset removed, and those offsets [m]."""
         res, offs = [], []
         for j in self.experiments:
-            d = self.recording.experiments[j].x - preds[j]
+            d = self.recording.experiments[j].x[: self.samples[j]] - preds[j]
             if not np.all(np.isfinite(d)):
                 res.append(np.full(d.size, self._bad * self.sigma))
                 offs.append(math.nan)
@@ -116,7 +125,7 @@ class Objective:
         return np.concatenate(res) / self.sigma
 
     def chi2(self, spec: ModelSpec) -> float:
-        v = self.vector(self.sim.predict([spec])[0])
+        v = self.vector(self.predict([spec])[0])
         return float(v @ v)
 
 
@@ -130,7 +139,7 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
         key = u.tobytes()
         if key not in cache:
             cache.clear()
-            cache[key] = objective.vector(sim.predict([apply(base, free, u)])[0])
+            cache[key] = objective.vector(objective.predict([apply(base, free, u)])[0])
         if progress:
             progress()
         return cache[key]
@@ -147,19 +156,19 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
             uj[j] += h
             specs.append(apply(base, free, uj))
             steps.append(h)
-        preds = sim.predict(specs)
+        preds = objective.predict(specs)
         cols = [(objective.vector(p) - r0) / h for p, h in zip(preds, steps)]
         return np.stack(cols, axis=1)
 
     if not free:
         r = fun(np.zeros(0))
-        res, offs = objective.profiled(sim.predict([base])[0])
+        res, offs = objective.profiled(objective.predict([base])[0])
         return FitResult({}, {}, float(r @ r), objective.n, res, offs, base, 1, True, "nothing to fit")
     u0 = np.clip(np.zeros(len(free)), lo, hi)
     sol = least_squares(fun, u0, jac=jac, bounds=(lo, hi), method="trf", x_scale=1.0, max_nfev=max_nfev,
                         xtol=1e-6, ftol=1e-8, gtol=1e-8)
     spec = apply(base, free, sol.x)
-    preds = sim.predict([spec])[0]
+    preds = objective.predict([spec])[0]
     res, offs = objective.profiled(preds)
     chi2 = float(sum(np.sum(r * r) for r in res)) / objective.sigma**2
     # parameter uncertainty from the Jacobian at the optimum, scaled by the residual variance
@@ -177,3 +186,23 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
         su = math.sqrt(max(cov_u[j, j], 0.0))
         std[f.name] = abs(v * f.scale * su) if f.log else abs(f.scale * su)
     return FitResult(values, std, chi2, objective.n, res, offs, spec, int(sol.nfev), bool(sol.success), str(sol.message))
+
+
+#: drive cycles fitted at each stage of a progressive fit (None: all). Stick-slip makes the
+#: misfit a rugged function of the parameters over many cycles (a slip event more or less
+#: shifts everything after it), but a smooth one over the first cycle; each stage starts in
+#: the basin the shorter one found.
+HORIZONS: tuple[Optional[int], ...] = (1, 2, None)
+
+
+def fit_progressive(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *,
+                    horizons: Sequence[Optional[int]] = HORIZONS, max_nfev: int = 40,
+                    progress: Optional[Callable[[], None]] = None) -> FitResult:
+    """`fit` over growing horizons, each stage started from the previous optimum."""
+    current = list(free)
+    result: Optional[FitResult] = None
+    for k in horizons:
+        result = fit(objective.with_cycles(k), base, current, max_nfev=max_nfev, progress=progress)
+        current = [f.at(result.values[f.name]) for f in current]
+    assert result is not None
+    return result

@@ -1,0 +1,15 @@
+"""Diagnosis of a recorded case against its nominal model: calibrate the plausibly-off
+parameters, locate the residual (experiment, motion phase, time window), try every catalogue
+effect, rank them by BIC and held-out prediction, and give a verdict (a catalogue id, "none" or
+"unexplained") with a text report (:mod:`.report`) and figures (:mod:`.plots`)::
+
+    d = idm_rs.diagnose("recordings/dev/dev05")
+    d.verdict, d.ranking[0].params
+    print(d.report())
+    d.plot("plots/")
+"""
+
+from .catalogue import CATALOGUE
+from .diagnose import Candidate, Diagnosis, diagnose
+
+__all__ = ["CATALOGUE", "Candidate", "Diagnosis", "diagnose"]

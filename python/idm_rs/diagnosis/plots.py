@@ -1,0 +1,256 @@
+"""Figures of a diagnosis (matplotlib, Agg): the fit per experiment with its residual and the
+systematic windows shaded, where the residual lives (experiment x phase), the candidate ranking,
+and the RMS story against the noise floor."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import TYPE_CHECKING, Optional
+
+import numpy as np
+
+from .locate import PHASES
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from .diagnose import Candidate, Diagnosis
+
+DPI = 120
+C_DATA = "0.45"
+C_NOMINAL = "tab:red"
+C_CALIBRATED = "tab:orange"
+C_REFIT = "tab:blue"
+C_WINDOW = "tab:red"
+PHASE_COLOURS = {"rest": "0.6", "rapid edge / slip": "tab:purple", "slow edge / stick": "tab:green"}
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
+
+
+def refit_candidate(d: "Diagnosis") -> Optional["Candidate"]:
+    """The candidate the plots show as the refitted model: the verdict's, when it names an effect."""
+    return next((c for c in d.ranking if c.effect == d.verdict and c.spec is not None), None)
+
+
+def _aligned(x: np.ndarray, pred: np.ndarray) -> tuple[np.ndarray, float]:
+    """(prediction shifted by its best offset, that offset) [m]."""
+    off = float(np.nanmean(x - pred)) if np.any(np.isfinite(pred)) else math.nan
+    return pred + off, off
+
+
+def _save(fig: "Figure", path: Path) -> Path:
+    fig.savefig(path, dpi=DPI)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return path
+
+
+def plot_fits(d: "Diagnosis", directory: Path) -> list[Path]:
+    """``fit_<experiment>.png``: voltage; data vs nominal vs refitted model; residuals of the
+    calibrated nominal and of the refitted model with the systematic windows shaded."""
+    import matplotlib.pyplot as plt
+
+    if d.simulator is None or d.nominal_spec is None or d.calibrated_spec is None:
+        return []
+    cand = refit_candidate(d)
+    specs = [d.nominal_spec, d.calibrated_spec] + ([cand.spec] if cand is not None else [])
+    preds = d.simulator.predict(specs)
+    refit_label = f"with {cand.effect} (refit)" if cand is not None else "calibrated nominal"
+    sigma_nm = d.noise.sigma * 1e9
+    paths = []
+    for j, e in enumerate(d.recording.experiments):
+        t_ms = e.t * 1e3
+        x = e.x
+        p_nom, p_cal = preds[0][j], preds[1][j]
+        p_ref = preds[2][j] if cand is not None else p_cal
+        ref_aligned, off_ref = _aligned(x, p_ref)
+        if not math.isfinite(off_ref):
+            off_ref = float(np.mean(x))
+        nom_aligned, _ = _aligned(x, p_nom)
+        cal_aligned, _ = _aligned(x, p_cal)
+        r_cal = (x - cal_aligned) * 1e9
+        r_ref = (x - ref_aligned) * 1e9
+
+        fig, (ax_v, ax_x, ax_r) = plt.subplots(3, 1, figsize=(10, 7.5), sharex=True,
+                                               gridspec_kw={"height_ratios": [1, 3, 2]}, constrained_layout=True)
+        ax_v.plot(t_ms, e.voltage, color="0.3", lw=1)
+        ax_v.set_ylabel("voltage [V]")
+        ax_v.set_title(f"{d.case} / {e.name}: {e.direction}, {e.amplitude_V:g} V, {e.frequency_Hz:g} Hz, "
+                       f"{e.cycles} cycles — verdict: {d.verdict}")
+        scale, unit = (1e6, "µm") if np.ptp(x) > 2e-6 else (1e9, "nm")
+        ax_x.plot(t_ms, (x - off_ref) * scale, color=C_DATA, lw=3.0, alpha=0.45, label="data (offset removed)")
+        ax_x.plot(t_ms, (nom_aligned - off_ref) * scale, color=C_NOMINAL, lw=1.2, ls="--", label="nominal (meta.json)")
+        if cand is not None:
+            ax_x.plot(t_ms, (cal_aligned - off_ref) * scale, color=C_CALIBRATED, lw=1.0, ls=":",
+                      label="calibrated nominal")
+        ax_x.plot(t_ms, (ref_aligned - off_ref) * scale, color=C_REFIT, lw=1.2, label=refit_label)
+        ax_x.set_ylabel(f"main body x1 [{unit}]")
+        ax_x.legend(loc="best", fontsize=8)
+        ax_x.grid(alpha=0.3)
+
+        for w in d.windows:
+            if w.experiment == e.name:
+                for ax in (ax_x, ax_r):
+                    ax.axvspan(w.t_start * 1e3, w.t_end * 1e3, color=C_WINDOW, alpha=0.12, lw=0)
+        ax_r.axhspan(-sigma_nm, sigma_nm, color="0.8", alpha=0.6, lw=0, label=f"±1σ noise ({sigma_nm:.2f} nm)")
+        ax_r.plot(t_ms, r_cal, color=C_CALIBRATED, lw=0.7,
+                  label=f"calibrated nominal (RMS {np.sqrt(np.nanmean(r_cal ** 2)):.2f} nm)")
+        if cand is not None:
+            ax_r.plot(t_ms, r_ref, color=C_REFIT, lw=0.7,
+                      label=f"{refit_label} (RMS {np.sqrt(np.nanmean(r_ref ** 2)):.2f} nm)")
+        if any(w.experiment == e.name for w in d.windows):
+            ax_r.axvspan(np.nan, np.nan, color=C_WINDOW, alpha=0.12, lw=0, label="systematic windows (calibrated)")
+        ax_r.axhline(0, color="0.3", lw=0.5)
+        ax_r.set_ylabel("residual (data − model) [nm]")
+        ax_r.set_xlabel("time [ms]")
+        ax_r.legend(loc="upper left", fontsize=8, ncol=2)
+        ax_r.grid(alpha=0.3)
+        paths.append(_save(fig, directory / f"fit_{_safe(e.name)}.png"))
+    return paths
+
+
+def plot_residual_phases(d: "Diagnosis", directory: Path) -> Path:
+    """``residual_phases.png``: share of the excess residual energy of the calibrated model by
+    experiment and motion phase, RMS / noise written on each bar, systematic cells outlined."""
+    import matplotlib.pyplot as plt
+
+    names = [e.name for e in d.recording.experiments]
+    cells = {(l.experiment, l.phase): l for l in d.locations if l.phase in PHASES}
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.9 * len(names) + 2), 4.5), constrained_layout=True)
+    width = 0.8 / len(PHASES)
+    x = np.arange(len(names))
+    for k, phase in enumerate(PHASES):
+        shares, ratios, sys_ = [], [], []
+        for n in names:
+            l = cells.get((n, phase))
+            shares.append(100 * l.excess_share if l else 0.0)
+            ratios.append(l.rms_over_noise if l else math.nan)
+            sys_.append(bool(l and l.systematic))
+        pos = x + (k - (len(PHASES) - 1) / 2) * width
+        bars = ax.bar(pos, shares, width, color=PHASE_COLOURS.get(phase), label=phase,
+                      edgecolor=["black" if s else "none" for s in sys_], linewidth=1.2)
+        for b, r in zip(bars, ratios):
+            if math.isfinite(r):
+                ax.annotate(f"{r:.1f}×", (b.get_x() + b.get_width() / 2, b.get_height()), ha="center", va="bottom",
+                            fontsize=7, xytext=(0, 2), textcoords="offset points")
+    ax.set_xticks(x, names, rotation=15, ha="right", fontsize=8)
+    ax.set_ylabel("share of excess residual energy [%]")
+    ax.set_title(f"{d.case}: where the calibrated model's residual lives\n"
+                 f"(label: RMS / noise; black outline: systematic; noise {d.noise.sigma * 1e9:.2f} nm)")
+    ax.legend(fontsize=8)
+    ax.grid(axis="y", alpha=0.3)
+    ax.set_ylim(0, max(5.0, ax.get_ylim()[1] * 1.1))
+    return _save(fig, directory / "residual_phases.png")
+
+
+def plot_ranking(d: "Diagnosis", directory: Path) -> Path:
+    """``ranking.png``: ΔBIC of every candidate (symlog), RMS after / noise and held-out RMS
+    written beside each bar, the verdict highlighted, screened-only bars hatched."""
+    import matplotlib.pyplot as plt
+
+    from .diagnose import BIC_THRESHOLD
+
+    cands = list(d.ranking)
+    sigma = d.noise.sigma
+    fig, ax = plt.subplots(figsize=(10, 0.45 * len(cands) + 1.8), constrained_layout=True)
+    y = np.arange(len(cands))[::-1]
+    vals = np.array([c.delta_bic for c in cands], dtype=float)
+    colours = [C_REFIT if c.effect == d.verdict else ("0.75" if c.screened_only else "0.5") for c in cands]
+    bars = ax.barh(y, np.nan_to_num(vals), color=colours, hatch=None)
+    for b, c in zip(bars, cands):
+        if c.screened_only:
+            b.set_hatch("//")
+            b.set_edgecolor("0.4")
+    ax.set_xscale("symlog", linthresh=max(BIC_THRESHOLD, 1.0))
+    ax.axvline(BIC_THRESHOLD, color="tab:green", ls="--", lw=1, label=f"ΔBIC threshold ({BIC_THRESHOLD:g})")
+    ax.axvline(0, color="0.2", lw=0.8)
+    ax.set_yticks(y, [c.effect + (" (screened)" if c.screened_only else "") for c in cands], fontsize=9)
+    lo, hi = ax.get_xlim()
+    ax.set_xlim(lo, hi * 10 if hi > 0 else hi)
+    for yi, c in zip(y, cands):
+        text = f"RMS {c.rms_after / sigma:.2f}× noise" if math.isfinite(c.rms_after) else "RMS –"
+        if math.isfinite(c.heldout_rms):
+            text += f", held-out {c.heldout_rms * 1e9:.2f} nm"
+        xpos = max(c.delta_bic, 0.0) if math.isfinite(c.delta_bic) else 0.0
+        ax.annotate(text, (xpos, yi), xytext=(4, 0), textcoords="offset points", va="center", fontsize=8)
+    ax.set_xlabel("ΔBIC against the calibrated nominal model (symlog; > 0: better)")
+    ax.set_title(f"{d.case}: candidate effects — verdict: {d.verdict}")
+    ax.legend(loc="lower right", fontsize=8)
+    ax.grid(axis="x", alpha=0.3)
+    return _save(fig, directory / "ranking.png")
+
+
+def plot_rms_story(d: "Diagnosis", directory: Path) -> Path:
+    """``rms_story.png``: residual RMS of the nominal, calibrated and refitted models against the
+    noise floor (band: the noise estimate's ±1σ uncertainty)."""
+    import matplotlib.pyplot as plt
+
+    from .diagnose import NOISE_RATIO_OK
+
+    sigma = d.noise.sigma
+    cand = refit_candidate(d)
+    labels = ["nominal\n(meta.json)", "calibrated\nnominal"]
+    values = [d.rms_before, d.rms_calibrated]
+    colours = [C_NOMINAL, C_CALIBRATED]
+    hatches = [None, None]
+    if cand is not None:
+        labels.append(f"with\n{cand.effect}")
+        values.append(cand.rms_after)
+        colours.append(C_REFIT)
+        hatches.append(None)
+    else:
+        # no effect accepted: show the best refitted candidate, marked as not accepted
+        tried = next((c for c in d.ranking if not c.screened_only and math.isfinite(c.rms_after)), None)
+        if tried is not None:
+            labels.append(f"best candidate\n{tried.effect}\n(not accepted)")
+            values.append(tried.rms_after)
+            colours.append("0.75")
+            hatches.append("//")
+    vals_nm = np.array(values) * 1e9
+    fig, ax = plt.subplots(figsize=(6.5, 4.5), constrained_layout=True)
+    bars = ax.bar(range(len(values)), vals_nm, color=colours, width=0.6)
+    for b, h in zip(bars, hatches):
+        if h:
+            b.set_hatch(h)
+            b.set_edgecolor("0.4")
+    log = bool(np.nanmax(vals_nm) / (sigma * 1e9) > 20)
+    if log:
+        ax.set_yscale("log")
+    rel = d.noise.relative_uncertainty
+    ax.axhspan(sigma * 1e9 * (1 - rel), sigma * 1e9 * (1 + rel), color="0.6", alpha=0.5, lw=0)
+    ax.axhline(sigma * 1e9, color="0.2", lw=1, label=f"noise floor {sigma * 1e9:.2f} nm")
+    ax.axhline(NOISE_RATIO_OK * sigma * 1e9, color="tab:green", ls="--", lw=1,
+               label=f"{NOISE_RATIO_OK:g} × noise (explained)")
+    for b, v in zip(bars, vals_nm):
+        ax.annotate(f"{v:.2f} nm\n{v / (sigma * 1e9):.2f}× noise", (b.get_x() + b.get_width() / 2, v),
+                    ha="center", va="bottom", fontsize=8, xytext=(0, 2), textcoords="offset points")
+    ax.set_xticks(range(len(values)), labels)
+    ax.set_ylabel("residual RMS [nm]")
+    top = ax.get_ylim()[1]
+    if log:
+        ax.set_ylim(0.5 * sigma * 1e9, top * 3)
+    else:
+        ax.set_ylim(0, top * 1.2)
+    ax.set_title(f"{d.case}: residual RMS — verdict: {d.verdict}")
+    ax.legend(fontsize=8, loc="upper right")
+    ax.grid(axis="y", alpha=0.3)
+    return _save(fig, directory / "rms_story.png")
+
+
+def plot_diagnosis(d: "Diagnosis", directory: Path) -> list[Path]:
+    """Write every figure of the diagnosis into `directory` (created); returns their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = plot_fits(d, directory)
+    paths.append(plot_residual_phases(d, directory))
+    paths.append(plot_ranking(d, directory))
+    paths.append(plot_rms_story(d, directory))
+    return paths

@@ -1,0 +1,247 @@
+"""The diagnosis as readable text, in the spirit of PySINDy's printed models and SciML's
+"missing physics" story: the verdict, how the residual RMS falls (nominal -> calibrated -> with
+the effect) against the noise floor, the calibrated parameters, where the residual lives, the
+candidate ranking with its evidence, and the refitted model in one line. Units everywhere."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Optional, Sequence
+
+from ..params import PARAM_INFO
+from .catalogue import CALIBRATION_RANGE, CATALOGUE
+
+if TYPE_CHECKING:
+    from .diagnose import Candidate, Diagnosis
+
+#: experiment x phase locations listed in the report
+TOP_LOCATIONS = 6
+#: systematic time windows listed in the report
+TOP_WINDOWS = 4
+
+#: the term each effect adds to the nominal equations (FORMAT.md's catalogue)
+EFFECT_TERMS: dict[str, str] = {
+    "pe_mass": "PE as a 4-element bar with mass and Rayleigh damping (DPS)",
+    "piezo_hysteresis": "Fp = kp (d33 V - h), h' = hyst_alpha d33 V' - hyst_beta |V'| h - hyst_gamma V' |h|",
+    "stribeck": "s(v) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta), Fs = mu_s Fn > Fc",
+    "incline": "m1 x1'' += -(m1 + m2 + mPE) g sin(theta_rad), Fn *= cos(theta_rad)",
+    "spring_to_ground": "m1 x1'' += -k_ground x1",
+    "amplifier_lowpass": "Vpe' = (Vcmd - Vpe) / tau_amp",
+    "piezo_creep": "xc' = (kappa d33 V - xc) / tau_creep, Fp = kp (d33 V + xc)",
+    "weight_friction": "m2 x2'' += -c_weight x2'",
+    "friction_asymmetry": "Fc, Fs *= (1 + eps sgn x1')",
+    "sensor_lowpass": "x' = (x1 - x) / tau_sensor (the reading)",
+    "thermal_drift": "x = x1 + drift_rate t (the reading)",
+}
+
+_UNITS: dict[str, str] = {ep.name: ep.unit for e in CATALOGUE for ep in e.params}
+_BOUNDS: dict[str, tuple[float, float]] = {ep.name: (ep.lower, ep.upper) for e in CATALOGUE for ep in e.params}
+_UNITS.update({"mu_s": "1", "mu_k": "1"})
+
+
+def _unit(name: str) -> str:
+    u = _UNITS.get(name) or (PARAM_INFO[name][1] if name in PARAM_INFO else "")
+    return "" if u in ("1", "") else u
+
+
+def _finite(x: Optional[float]) -> bool:
+    return x is not None and isinstance(x, (int, float)) and math.isfinite(x)
+
+
+def pm(value: float, std: Optional[float] = None, unit: str = "") -> str:
+    """``value ± std unit`` with the uncertainty's significant digits (two) and a shared power of
+    ten: ``1.62e-3 ± 0.02e-3``, ``0.5338 ± 0.0002``; without a usable std, 4 significant digits."""
+    u = f" {unit}" if unit else ""
+    if not _finite(value):
+        return f"{value}{u}"
+    v = float(value)
+    if not _finite(std) or std <= 0:
+        return f"{_g(v)}{u}"
+    s = float(std)
+    mag = max(abs(v), s)
+    e = int(math.floor(math.log10(mag))) if mag > 0 else 0
+    s_digit = int(math.floor(math.log10(s)))
+    if -3 <= e <= 3:
+        dec = min(max(1 - s_digit, 0), 10)
+        return f"{v:.{dec}f} ± {s:.{dec}f}{u}"
+    dec = min(max(e - s_digit + 1, 0), 6)
+    scale = 10.0**e
+    return f"{v / scale:.{dec}f}e{e} ± {s / scale:.{dec}f}e{e}{u}"
+
+
+def _g(x: float) -> str:
+    """4 significant digits, exponents written short (1.24e-7)."""
+    text = f"{x:.4g}"
+    if "e" in text:
+        m, e = text.split("e")
+        text = f"{m}e{int(e)}"
+    return text
+
+
+def _nm(x: float) -> str:
+    return f"{x * 1e9:.2f} nm" if _finite(x) else "–"
+
+
+def _ratio(x: float, sigma: float) -> str:
+    return f"{x / sigma:.2f} ×" if _finite(x) and sigma > 0 else "–"
+
+
+def candidate_params(c: "Candidate") -> list[tuple[str, float, Optional[float]]]:
+    """(name, value, std) of a candidate's effect parameters, in catalogue names."""
+    out = []
+    for name, v in c.params.items():
+        s = c.std.get(name)
+        if s is None and c.effect == "stribeck" and name == "mu_s" and "mu_s_excess" in c.std:
+            s = c.params.get("mu_k", 0.0) * c.std["mu_s_excess"]  # mu_s = mu_k (1 + excess)
+        out.append((name, float(v), None if s is None else float(s)))
+    return out
+
+
+def at_bound(value: float, lower: float, upper: float) -> bool:
+    """Whether a fitted value sits on a bound of its fit (its ±σ then means little)."""
+    tol = 1e-6 * max(abs(lower), abs(upper), 1e-300)
+    return _finite(value) and (abs(value - lower) <= tol or abs(value - upper) <= tol)
+
+
+def _bound_note(name: str, value: float) -> str:
+    b = _BOUNDS.get(name)
+    return " [at bound]" if b is not None and at_bound(value, *b) else ""
+
+
+def format_params(c: "Candidate") -> str:
+    items = candidate_params(c)
+    if not items:
+        return "(structure only)" if c.effect == "pe_mass" else "–"
+    return ", ".join(f"{n} = {pm(v, s, _unit(n))}{_bound_note(n, v)}" for n, v, s in items)
+
+
+def refit_model_line(d: "Diagnosis") -> str:
+    """The refitted model in one line: the nominal structure, calibrated, plus the verdict's effect."""
+    nom = d.recording.nominal
+    base = f"{nom.model.upper()}" + (f" (n = {nom.n_elements})" if nom.model == "dps" else "")
+    base += ", piezo hysteresis" if nom.piezo_hysteresis else ""
+    eq = "m1 x1'' = Fpe(V, x1 - x2, x1' - x2') - Ff(x1', g, Fh)"
+    cand = next((c for c in d.ranking if c.effect == d.verdict), None)
+    if cand is None:
+        tail = "nothing added" if d.verdict == "none" else "missing term not in the catalogue (unexplained)"
+        return f"{eq}   [{base}, calibrated; {tail}]"
+    return f"{eq} + {cand.effect}({format_params(cand)})   [{base}, calibrated; {EFFECT_TERMS.get(cand.effect, '')}]"
+
+
+def _table(headers: Sequence[str], rows: Sequence[Sequence[str]], align: str) -> list[str]:
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(headers)]
+
+    def line(cells: Sequence[str]) -> str:
+        return "  " + "  ".join(c.ljust(w) if a == "l" else c.rjust(w) for c, w, a in zip(cells, widths, align)).rstrip()
+
+    return [line(headers), "  " + "  ".join("-" * w for w in widths)] + [line(r) for r in rows]
+
+
+def text_report(d: "Diagnosis") -> str:
+    sigma = d.noise.sigma
+    rec = d.recording
+    lines: list[str] = []
+    title = f"Diagnosis of case {d.case!r}"
+    lines += [title, "=" * len(title)]
+    lines.append(f"{len(rec.experiments)} experiments, {rec.n_samples} samples at {rec.sample_rate_Hz / 1e3:g} kHz; "
+                 f"nominal {rec.nominal.model.upper()}"
+                 + (f" (n = {rec.nominal.n_elements})" if rec.nominal.model == "dps" else "")
+                 + f"; {d.simulations} simulated runs in {d.seconds:.1f} s")
+    lines.append("")
+    lines.append(f"VERDICT: {d.verdict.upper()}")
+    lines.append(f"  {d.reason}")
+
+    # --- the RMS story
+    best = next((c for c in d.ranking if c.effect == d.verdict), None)
+    lines += ["", "Residual RMS (a sensor offset fitted per file)"]
+    rows = [
+        ["noise floor (from the data)", _nm(sigma), "1.00 ×",
+         f"rest {_nm(d.noise.rest_sigma)}, 2nd differences {_nm(d.noise.difference_sigma)}, "
+         f"±{100 * d.noise.relative_uncertainty:.1f} %"],
+        ["nominal model (meta.json)", _nm(d.rms_before), _ratio(d.rms_before, sigma), ""],
+        ["calibrated nominal", _nm(d.rms_calibrated), _ratio(d.rms_calibrated, sigma),
+         f"whiteness z = {d.whiteness_z_calibrated:.1f}"],
+    ]
+    if best is not None:
+        rows.append([f"with {best.effect}", _nm(best.rms_after), _ratio(best.rms_after, sigma),
+                     f"whiteness z = {best.whiteness_z:.1f}" if _finite(best.whiteness_z) else ""])
+    rows.append([f"held-out {d.heldout_experiment}: calibrated", _nm(d.heldout_rms_calibrated),
+                 _ratio(d.heldout_rms_calibrated, sigma), "fitted on the other experiments"])
+    if best is not None and _finite(best.heldout_rms):
+        rows.append([f"held-out {d.heldout_experiment}: with {best.effect}", _nm(best.heldout_rms),
+                     _ratio(best.heldout_rms, sigma), ""])
+    lines += _table(["model", "RMS", "/ noise", "note"], rows, "lrrl")
+
+    # --- calibrated nominal parameters
+    p_meta = rec.nominal.params.to_dict(resolved=False)
+    lines += ["", "Calibrated nominal parameters (±1σ from the Jacobian), against meta.json"]
+    rows = []
+    for name, v in d.calibrated.items():
+        m = p_meta.get(name)
+        unit = _unit(name)
+        change = f"{100 * (v / m - 1):+.2f} %" if _finite(m) and m else "–"
+        bound = _finite(m) and at_bound(v, CALIBRATION_RANGE[0] * m, CALIBRATION_RANGE[1] * m)
+        rows.append([name, _g(m) + (f" {unit}" if unit else "") if _finite(m) else "–",
+                     pm(v, d.calibrated_std.get(name), unit), change + (" [at bound]" if bound else "")])
+    lines += _table(["parameter", "meta.json", "calibrated", "change"], rows, "lrrr")
+
+    # --- where the residual lives
+    lines += ["", "Where the residual lives (calibrated model; share of the residual energy above the noise)"]
+    locs = [l for l in d.locations if l.phase != "window"]
+    if locs:
+        rows = []
+        for l in locs[:TOP_LOCATIONS]:
+            rows.append([l.experiment, l.phase, f"{1e3 * l.t_start:.2f}–{1e3 * l.t_end:.2f}",
+                         f"{100 * l.excess_share:.1f} %", f"{l.rms_over_noise:.2f}",
+                         f"yes (z = {l.z:.0f})" if l.systematic else "no"])
+        lines += _table(["experiment", "phase", "span [ms]", "share", "RMS/noise", "systematic"], rows, "llrrrl")
+        n_sys = sum(l.systematic for l in locs)
+        lines.append(f"  {n_sys} of {len(locs)} experiment × phase cells hold a systematic residual")
+    if d.windows:
+        total = sum(w.t_end - w.t_start for w in d.windows)
+        top = sorted(d.windows, key=lambda w: -w.excess_share)[:TOP_WINDOWS]
+        lines.append(f"  systematic time windows: {len(d.windows)} spans, {1e3 * total:.1f} ms in all; largest: "
+                     + "; ".join(f"{w.experiment} {1e3 * w.t_start:.1f}–{1e3 * w.t_end:.1f} ms "
+                                 f"({100 * w.excess_share:.0f} %, {w.rms_over_noise:.1f} × noise)" for w in top))
+    else:
+        lines.append("  no systematic time window")
+
+    # --- candidate ranking
+    lines += ["", "Candidate effects (each refitted with the calibrated subset and the offsets; "
+                  "ΔBIC > 0: better than the calibrated nominal)"]
+    rows = []
+    for i, c in enumerate(d.ranking, 1):
+        mark = "*" if c.effect == d.verdict else " "
+        rows.append([f"{mark}{i}", c.effect, format_params(c), _nm(c.rms_after), _ratio(c.rms_after, sigma),
+                     f"{c.delta_bic:.1f}", _nm(c.heldout_rms) if _finite(c.heldout_rms) else "–",
+                     "screened" if c.screened_only else "refit"])
+    lines += _table(["#", "effect", "fitted parameters (±1σ)", "RMS after", "/ noise", "ΔBIC", "held-out RMS",
+                     "fit"], rows, "rllrrrrl")
+    lines.append("  screened: linearised estimate about the calibrated model, not refitted "
+                 "(values are estimates, no uncertainty)")
+
+    lines += ["", "Refit model:", "  " + refit_model_line(d)]
+    return "\n".join(lines) + "\n"
+
+
+def json_safe(obj: object) -> object:
+    """`obj` made strictly JSON-serialisable: numpy scalars and arrays to Python numbers and lists,
+    NaN and ±inf to None, tuples to lists, dataclass-free mappings with string keys."""
+    import numpy as np
+
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return [json_safe(v) for v in obj.tolist()]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    if obj is None or isinstance(obj, str):
+        return obj
+    return str(obj)

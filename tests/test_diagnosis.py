@@ -1,0 +1,146 @@
+"""The diagnosis end to end on small cases that idm-rs generates itself (so these run in a user's
+clone, without ../shared/recordings): a device with a clear ground spring must be diagnosed as
+`spring_to_ground` with the right stiffness, a device whose only difference from the nominal
+model is a mis-set friction coefficient as `none`; then the report, the JSON and the plots."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+import idm_rs
+from idm_rs.synthetic import make_case
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+#: nominal model of the synthetic cases: Table 1 with the normal force written out
+NOMINAL = idm_rs.Params(normal_force=(0.4 + 0.3) * 9.81)
+#: three short bursts at 200 Hz (2 cycles, 12 ms each), both directions
+EXPERIMENTS = (
+    {"amplitude_V": 80, "frequency_Hz": 200, "direction": "forward", "cycles": 2},
+    {"amplitude_V": 60, "frequency_Hz": 200, "direction": "backward", "cycles": 2},
+    {"amplitude_V": 100, "frequency_Hz": 200, "direction": "forward", "cycles": 2},
+)
+NOISE = 1.5e-9
+K_GROUND = 2e4  # [N/m]: ~ 20 x noise in the reading before any refit
+JSON_KEYS = ("verdict", "ranking", "rms_before", "rms_calibrated", "rms_after", "noise_rms", "locations")
+RANKING_KEYS = ("effect", "params", "rms_after", "bic", "heldout_rms")
+
+
+@pytest.fixture(scope="module")
+def spring_case(tmp_path_factory) -> Path:
+    return make_case(tmp_path_factory.mktemp("spring") / "spring_case", nominal_params=NOMINAL,
+                     effects=idm_rs.Effects(k_ground=K_GROUND), experiments=EXPERIMENTS, noise_rms=NOISE, seed=1,
+                     dt=2e-8)
+
+
+@pytest.fixture(scope="module")
+def spring_diagnosis(spring_case) -> idm_rs.Diagnosis:
+    return idm_rs.diagnose(spring_case, progress=False)
+
+
+def test_a_ground_spring_is_named_and_fitted(spring_diagnosis):
+    d = spring_diagnosis
+    assert d.verdict == "spring_to_ground", d.report()
+    cand = next(c for c in d.ranking if c.effect == "spring_to_ground")
+    assert cand.params["k_ground"] == pytest.approx(K_GROUND, rel=0.25)
+    assert d.rms_after <= 1.2 * d.noise.sigma
+    # the noise estimate is the one the data was made with
+    assert d.noise.sigma == pytest.approx(NOISE, rel=0.15)
+    # the missing spring showed before: calibration alone leaves a systematic residual
+    assert d.rms_calibrated > 1.2 * d.noise.sigma
+    assert any(l.systematic for l in d.locations)
+
+
+def test_a_misset_friction_coefficient_is_not_missing_physics(tmp_path):
+    case = make_case(tmp_path / "none_case", nominal_params=NOMINAL, true_params=NOMINAL.replace(mu_k=0.5 * 1.05),
+                     experiments=EXPERIMENTS, noise_rms=NOISE, seed=2, dt=2e-8)
+    d = idm_rs.diagnose(case, progress=False)
+    assert d.verdict == "none", d.report()
+    # calibration finds the mis-set coefficient and leaves noise
+    assert d.calibrated["mu_k"] == pytest.approx(0.525, rel=0.01)
+    assert d.rms_before > 3 * d.noise.sigma
+    assert d.rms_calibrated <= 1.2 * d.noise.sigma
+
+
+def test_report_tells_the_story(spring_diagnosis):
+    d = spring_diagnosis
+    text = d.report()
+    assert f"VERDICT: {d.verdict.upper()}" in text
+    for part in ("noise floor", "nominal model", "calibrated nominal", "Calibrated nominal parameters",
+                 "Where the residual lives", "Candidate effects", "Refit model:", " nm", "N/m"):
+        assert part in text, part
+    for c in d.ranking:
+        assert c.effect in text
+
+
+def test_cli_diagnose_writes_report_json_and_plots(spring_case, spring_diagnosis, tmp_path, capsys, monkeypatch):
+    """The command line around the diagnosis (the diagnosis itself is the one above, not re-run)."""
+    import idm_rs.diagnosis
+    from idm_rs.cli import main
+
+    calls = []
+
+    def cached(case, **kw):
+        calls.append((Path(case), kw))
+        return spring_diagnosis
+
+    monkeypatch.setattr(idm_rs.diagnosis, "diagnose", cached)
+    out_json, plots = tmp_path / "out" / "d.json", tmp_path / "plots"
+    rc = main(["diagnose", str(spring_case), "--json", str(out_json), "--plots", str(plots), "--no-progress",
+               "--threads", "1"])
+    assert rc == 0
+    assert calls == [(spring_case, {"progress": False, "threads": 1})]
+    text = capsys.readouterr().out
+    assert "VERDICT:" in text and str(out_json) in text
+
+    data = json.loads(out_json.read_text())  # strict JSON: no NaN
+    for key in JSON_KEYS:
+        assert key in data, key
+    assert data["verdict"] == spring_diagnosis.verdict
+    assert len(data["ranking"]) == len(spring_diagnosis.ranking) > 0
+    for entry in data["ranking"]:
+        for key in RANKING_KEYS:
+            assert key in entry, key
+        assert isinstance(entry["params"], dict)
+        assert entry["heldout_rms"] is None or math.isfinite(entry["heldout_rms"])
+    assert data["noise_rms"] == pytest.approx(spring_diagnosis.noise.sigma)
+    assert data["locations"] and {"experiment", "phase", "excess_share", "systematic"} <= set(data["locations"][0])
+
+    names = {p.name for p in plots.iterdir()}
+    exps = [e.name for e in spring_diagnosis.recording.experiments]
+    assert {f"fit_{n}.png" for n in exps} | {"residual_phases.png", "ranking.png", "rms_story.png"} <= names
+    for p in plots.iterdir():
+        data = p.read_bytes()
+        assert data.startswith(PNG_MAGIC) and len(data) > 10_000, p.name
+
+
+def test_cli_diagnose_refuses_a_malformed_case(tmp_path, capsys):
+    from idm_rs.cli import main
+
+    case = tmp_path / "bad"
+    case.mkdir()
+    (case / "meta.json").write_text("{not json")
+    assert main(["diagnose", str(case), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and "meta.json" in err[0]
+    assert main(["diagnose", str(tmp_path / "absent"), "--no-progress"]) == 2
+
+
+@pytest.mark.slow
+def test_cli_diagnose_end_to_end(tmp_path):
+    """`python -m idm_rs diagnose` as a user runs it, on a fresh small case."""
+    import subprocess
+    import sys
+
+    case = make_case(tmp_path / "case", nominal_params=NOMINAL, effects=idm_rs.Effects(k_ground=K_GROUND),
+                     experiments=EXPERIMENTS, noise_rms=NOISE, seed=3, dt=2e-8)
+    out = tmp_path / "d.json"
+    proc = subprocess.run([sys.executable, "-m", "idm_rs", "diagnose", str(case), "--json", str(out), "--plots",
+                           str(tmp_path / "plots"), "--no-progress"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(out.read_text())
+    assert data["verdict"] == "spring_to_ground"
+    assert (tmp_path / "plots" / "ranking.png").exists()
