@@ -11,6 +11,7 @@ from typing import Any, Callable, Optional, Sequence, Union
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import lsq_linear
 
 from ..recording import Recording, load_case
 from .case_model import FIT_DT, CaseSimulator, ModelSpec, Structure
@@ -228,7 +229,7 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
         if i < refit_top:
             base = ModelSpec(eff.structure(structure0), dict(cal.spec.params), dict(cal.spec.effects))
             free = cal_at + [ep.free(v) for ep, v in zip(eff.params, s["start"])]
-            r = fit_progressive(obj, base, free, progress=tick)
+            r = fit_progressive(obj, base, free, max_nfev=(12, 10, 10), progress=tick)
             eff_names = [ep.name for ep in eff.params]
             cand = Candidate(
                 eff.id, eff.description, _report_params(eff, r), {n_: r.std[n_] for n_ in eff_names},
@@ -326,8 +327,11 @@ def _screen(obj: Objective, cal: FitResult, cal_at: list[FreeParam], effects: Se
         rs = entry["r_start"]
         Je = [(obj.vector(preds2[idx + j]) - rs) / s for j, s in enumerate(steps)]
         A = np.concatenate([Jn, np.stack(Je, axis=1)], axis=1) if Je else Jn
-        # Gauss-Newton from the start point: chi2 after the linearised optimum
-        du, *_ = np.linalg.lstsq(A, -rs, rcond=None)
+        # bounded Gauss-Newton step from the start point: chi2 at the linearised optimum
+        bounds = [f.u_bounds() for f in cal_at] + [f.u_bounds() for f in entry["free"]]
+        lo = np.array([b[0] for b in bounds])
+        hi = np.array([b[1] for b in bounds])
+        du = lsq_linear(A, -rs, bounds=(np.minimum(lo, -1e-12), np.maximum(hi, 1e-12))).x
         chi2_lin = float(np.sum((rs + A @ du) ** 2))
         est = [f.value(float(np.clip(d, *f.u_bounds()))) for f, d in zip(entry["free"], du[Jn.shape[1]:])]
         out.append({"effect": entry["effect"], "start": entry["start"], "delta_chi2": chi2_cal - chi2_lin,

@@ -196,13 +196,14 @@ HORIZONS: tuple[Optional[int], ...] = (1, 2, None)
 
 
 def fit_progressive(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *,
-                    horizons: Sequence[Optional[int]] = HORIZONS, max_nfev: int = 40,
+                    horizons: Sequence[Optional[int]] = HORIZONS, max_nfev: Sequence[int] = (20, 12, 12),
                     progress: Optional[Callable[[], None]] = None) -> FitResult:
-    """`fit` over growing horizons, each stage started from the previous optimum."""
+    """`fit` over growing horizons, each stage started from the previous optimum (`max_nfev`
+    per stage: the later stages start close to their optimum)."""
     current = list(free)
     result: Optional[FitResult] = None
-    for k in horizons:
-        result = fit(objective.with_cycles(k), base, current, max_nfev=max_nfev, progress=progress)
+    for k, nfev in zip(horizons, max_nfev):
+        result = fit(objective.with_cycles(k), base, current, max_nfev=nfev, progress=progress)
         current = [f.at(result.values[f.name]) for f in current]
     assert result is not None
     return result
