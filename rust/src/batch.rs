@@ -318,94 +318,120 @@ fn rk4_group(
     }
 }
 
-/// Adaptive Dormand-Prince run of one point, dispatched to a fixed-size state when plain.
-fn dopri5_point(cfg: &BatchConfig, model: &Model, spec: &PointSpec, rtol: f64, atol: f64, cancel: &AtomicBool) -> Option<PointMetrics> {
+/// Adaptive Dormand-Prince runs of up to LANES points with one state layout, interleaved
+/// stage by stage (see dopri5.rs), dispatched to a fixed-size state when plain. Empty if
+/// cancelled.
+fn dopri5_group(cfg: &BatchConfig, models: &[Model], specs: &[&PointSpec], rtol: f64, atol: f64, cancel: &AtomicBool) -> Vec<PointMetrics> {
     macro_rules! fixed {
         ($n:literal, $d:literal) => {
-            dopri5_run::<[f64; $d], $n, false>(cfg, model, spec, rtol, atol, [0.0; $d], cancel)
+            dopri5_lanes::<[f64; $d], $n, false, LANES>(cfg, models, specs, rtol, atol, [0.0; $d], cancel)
         };
     }
-    match (model.is_plain(), model.layout.dof) {
+    let plain = models.iter().all(|m| m.is_plain());
+    match (plain, models[0].layout.dof) {
         (true, 2) => fixed!(2, 7),
         (true, 3) => fixed!(3, 9),
         (true, 4) => fixed!(4, 11),
         (true, 5) => fixed!(5, 13),
         (true, 6) => fixed!(6, 15),
-        _ => dopri5_run::<Vec<f64>, 0, true>(cfg, model, spec, rtol, atol, rest_state(model), cancel),
+        _ => {
+            let mut out = Vec::with_capacity(models.len());
+            for (m, s) in models.iter().zip(specs) {
+                let r = dopri5_lanes::<Vec<f64>, 0, true, 1>(cfg, std::slice::from_ref(m), &[*s], rtol, atol, rest_state(m), cancel);
+                if r.is_empty() {
+                    return Vec::new();
+                }
+                out.extend(r);
+            }
+            out
+        }
     }
 }
 
-fn dopri5_run<S, const N: usize, const EXTRAS: bool>(
+fn dopri5_lanes<S, const N: usize, const EXTRAS: bool, const L: usize>(
     cfg: &BatchConfig,
-    model: &Model,
-    spec: &PointSpec,
+    models: &[Model],
+    specs: &[&PointSpec],
     rtol: f64,
     atol: f64,
     zero: S,
     cancel: &AtomicBool,
-) -> Option<PointMetrics>
+) -> Vec<PointMetrics>
 where
     S: AsRef<[f64]> + AsMut<[f64]> + Clone,
 {
-    let wave = &spec.wave;
-    let (bt, bv) = (wave.times(), wave.values());
-    let v_max = bv.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    let t_end = spec.t_end(cfg);
-    let opts = Dopri5Options {
-        rtol,
-        atol,
-        scale: model.state_scales(v_max),
-        h_init: cfg.dt,
-        h_min: 1e-14,
-        h_max: t_end / 10.0,
-    };
-    let mut y = zero;
-    let mut acc = Accumulator::new(model);
-    let (mut t_prev, mut h_min_used, mut evals) = (0.0, f64::INFINITY, 0usize);
-    let (mut v_prev, mut ff_prev) = (0.0, 0.0);
+    let m = models.len();
+    // unused lanes repeat the last point with a zero duration: they finish at once
+    let lane = |i: usize| i.min(m - 1);
+    let t_end: [f64; L] = std::array::from_fn(|i| if i < m { specs[i].t_end(cfg) } else { 0.0 });
+    let opts: Vec<Dopri5Options> = (0..L)
+        .map(|i| {
+            let (md, sp) = (&models[lane(i)], specs[lane(i)]);
+            let v_max = sp.wave.values().iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            Dopri5Options {
+                rtol,
+                atol,
+                scale: md.state_scales(v_max),
+                h_init: cfg.dt,
+                h_min: 1e-14,
+                h_max: (t_end[i] / 10.0).max(cfg.dt),
+            }
+        })
+        .collect();
+    let mut ys: [S; L] = std::array::from_fn(|_| zero.clone());
+    let mut acc: [Accumulator; L] = std::array::from_fn(|i| Accumulator::new(&models[lane(i)]));
+    let mut t_prev = [0.0; L];
+    let mut h_min_used = [f64::INFINITY; L];
+    let mut v_prev = [0.0; L];
+    let mut ff_prev = [0.0; L];
+    let mut accepted = 0usize;
     let mut cancelled = false;
-    let result = dopri5::integrate(
-        |seg: usize, t: f64, s: &[f64], ds: &mut [f64]| {
+    let results = dopri5::integrate_lanes(
+        |i: usize, seg: usize, t: f64, s: &[f64], ds: &mut [f64]| {
             // V(t) on the segment that starts at breakpoint `seg` (constant after the last)
+            let (bt, bv) = (specs[lane(i)].wave.times(), specs[lane(i)].wave.values());
             let (v, slope) = if seg + 1 >= bt.len() || t < bt[0] {
                 (bv[seg.min(bt.len() - 1)], 0.0)
             } else {
                 let sl = (bv[seg + 1] - bv[seg]) / (bt[seg + 1] - bt[seg]);
                 (bv[seg] + sl * (t - bt[seg]), sl)
             };
-            model.rhs_impl::<N, EXTRAS>(v, slope, s, ds);
+            models[lane(i)].rhs_impl::<N, EXTRAS>(v, slope, s, ds);
         },
-        0.0,
+        [0.0; L],
         t_end,
-        bt,
-        &mut y,
-        &opts,
-        |t, s| {
+        std::array::from_fn(|i| specs[lane(i)].wave.times()),
+        &mut ys,
+        std::array::from_fn(|i| &opts[i]),
+        |i, t, s| {
             // the state at the start of each accepted step is held over it
-            acc.observe(v_prev, ff_prev, t - t_prev);
-            h_min_used = h_min_used.min(t - t_prev);
-            t_prev = t;
-            v_prev = s[model.layout.dof];
-            ff_prev = model.friction_force(s);
-            evals += 1;
-            if evals % 4096 == 0 && cancel.load(Ordering::Relaxed) {
+            acc[i].observe(v_prev[i], ff_prev[i], t - t_prev[i]);
+            h_min_used[i] = h_min_used[i].min(t - t_prev[i]);
+            t_prev[i] = t;
+            v_prev[i] = s[models[lane(i)].layout.dof];
+            ff_prev[i] = models[lane(i)].friction_force(s);
+            accepted += 1;
+            if accepted % 4096 == 0 && cancel.load(Ordering::Relaxed) {
                 cancelled = true;
-                return false;
             }
-            true
+            !cancelled
         },
     );
     if cancelled {
-        return None;
+        return Vec::new();
     }
-    let y = y.as_ref();
-    Some(match result {
-        Ok(stats) if y.iter().all(|x| x.is_finite()) => {
-            acc.finish(model, y, t_end, spec.cycles, Status::Ok, h_min_used, stats.accepted)
-        }
-        Ok(_) => diverged_metrics(t_end, cfg.dt),
-        Err((t, _)) => diverged_metrics(t, cfg.dt),
-    })
+    (0..m)
+        .map(|i| {
+            let y = ys[i].as_ref();
+            match &results[i] {
+                Ok(stats) if y.iter().all(|x| x.is_finite()) => {
+                    acc[i].finish(&models[i], y, t_end[i], specs[i].cycles, Status::Ok, h_min_used[i], stats.accepted)
+                }
+                Ok(_) => diverged_metrics(t_end[i], cfg.dt),
+                Err((t, _)) => diverged_metrics(*t, cfg.dt),
+            }
+        })
+        .collect()
 }
 
 fn diverged_metrics(t: f64, dt: f64) -> PointMetrics {
@@ -432,6 +458,16 @@ fn rk4_retry(cfg: &BatchConfig, model: &Model, spec: &PointSpec, first_failure: 
         }
     }
     Some(PointOutput { metrics: PointMetrics { dt_used: dt, ..diverged_metrics(failed_at, dt) }, trace: Vec::new() })
+}
+
+/// End of the lane group starting at `start`: up to LANES points sharing one state layout.
+fn lane_group_end(valid: &[(usize, Model, usize)], start: usize) -> usize {
+    let dim = valid[start].1.layout.dim;
+    let mut end = start + 1;
+    while end < valid.len() && end - start < LANES && valid[end].1.layout.dim == dim {
+        end += 1;
+    }
+    end
 }
 
 /// Run one chunk of points (any size); `None` entries were cancelled before finishing.
@@ -463,12 +499,7 @@ fn run_chunk(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: 
                 if cancel.load(Ordering::Relaxed) {
                     break;
                 }
-                // a lane group shares one state layout
-                let dim = valid[start].1.layout.dim;
-                let mut end = start + 1;
-                while end < valid.len() && end - start < LANES && valid[end].1.layout.dim == dim {
-                    end += 1;
-                }
+                let end = lane_group_end(&valid, start);
                 let group = &valid[start..end];
                 let models: Vec<Model> = group.iter().map(|(_, m, _)| m.clone()).collect();
                 let gspecs: Vec<&PointSpec> = group.iter().map(|(i, _, _)| &specs[*i]).collect();
@@ -491,24 +522,34 @@ fn run_chunk(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: 
             }
         }
         Method::Dopri5 { rtol, atol } => {
-            for (i, m, _) in &valid {
+            let mut start = 0;
+            while start < valid.len() {
                 if cancel.load(Ordering::Relaxed) {
                     break;
                 }
-                out[*i] = dopri5_point(cfg, m, &specs[*i], rtol, atol, cancel)
-                    .map(|metrics| PointOutput { metrics, trace: Vec::new() });
-                if out[*i].is_some() {
-                    done.fetch_add(1, Ordering::Relaxed);
+                let end = lane_group_end(&valid, start);
+                let group = &valid[start..end];
+                let models: Vec<Model> = group.iter().map(|(_, m, _)| m.clone()).collect();
+                let gspecs: Vec<&PointSpec> = group.iter().map(|(i, _, _)| &specs[*i]).collect();
+                let results = dopri5_group(cfg, &models, &gspecs, rtol, atol, cancel);
+                if results.is_empty() {
+                    break; // cancelled
                 }
+                for ((i, _, _), metrics) in group.iter().zip(results) {
+                    done.fetch_add(1, Ordering::Relaxed);
+                    out[*i] = Some(PointOutput { metrics, trace: Vec::new() });
+                }
+                start = end;
             }
         }
     }
     out
 }
 
-/// Points per rayon task: big enough to amortise scheduling, small enough to balance load and
-/// to stop promptly on cancel.
-pub const CHUNK: usize = 4 * LANES;
+/// Points per rayon task: one lane group. A task is milliseconds of work or more, so
+/// scheduling costs nothing, and small tasks balance the threads when a batch has few points
+/// (a fit's Jacobian) or points of very different cost.
+pub const CHUNK: usize = LANES;
 
 /// Run every point on the current rayon pool. Unfinished points (after `cancel`) come back as
 /// `Status::NotRun` with NaN metrics; `done` counts finished points as they finish.

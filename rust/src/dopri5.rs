@@ -60,70 +60,155 @@ where
     F: FnMut(usize, f64, &[f64], &mut [f64]),
     O: FnMut(f64, &[f64]) -> bool,
 {
-    let n = y.as_ref().len();
-    let mut zero = y.clone();
+    let ys: &mut [S; 1] = std::slice::from_mut(y).try_into().unwrap();
+    let [r] = integrate_lanes(
+        |_, seg, t, s: &[f64], ds: &mut [f64]| f(seg, t, s, ds),
+        [t0],
+        [t1],
+        [stops],
+        ys,
+        [opts],
+        |_, t, s: &[f64]| observe(t, s),
+    );
+    r
+}
+
+/// Where one lane stands.
+#[derive(Clone, Copy, PartialEq)]
+enum LaneState {
+    /// needs a fresh first stage (start, or a new input segment)
+    Fresh,
+    Running,
+    Done,
+}
+
+/// `L` independent adaptive integrations advanced attempt by attempt, stage by stage, so one
+/// core works on several dependency chains at once (a single one is latency-bound, see rk4.rs).
+/// Each lane keeps its own step size, segments and end time; its arithmetic is exactly that of
+/// a one-lane run. `f(lane, segment, t, y, dy)`; `observe(lane, t, y)`.
+pub fn integrate_lanes<S, F, O, const L: usize>(
+    mut f: F,
+    t0: [f64; L],
+    t1: [f64; L],
+    stops: [&[f64]; L],
+    ys: &mut [S; L],
+    opts: [&Dopri5Options; L],
+    mut observe: O,
+) -> [Result<Dopri5Stats, (f64, String)>; L]
+where
+    S: AsRef<[f64]> + AsMut<[f64]> + Clone,
+    F: FnMut(usize, usize, f64, &[f64], &mut [f64]),
+    O: FnMut(usize, f64, &[f64]) -> bool,
+{
+    let mut zero = ys[0].clone();
     zero.as_mut().fill(0.0);
-    let mut k: [S; 7] = std::array::from_fn(|_| zero.clone());
-    let mut tmp = zero.clone();
-    let mut y_new = zero;
-    let mut stats = Dopri5Stats::default();
-    let mut h = opts.h_init.min(opts.h_max);
-    let in_norm = opts.scale.iter().filter(|s| s.is_finite()).count().max(1) as f64;
-    // segment boundaries: every stop inside (t0, t1), then t1
-    let mut ends: Vec<f64> = stops.iter().copied().filter(|&s| s > t0 && s < t1).collect();
-    ends.push(t1);
+    let mut k: [[S; 7]; L] = std::array::from_fn(|_| std::array::from_fn(|_| zero.clone()));
+    let mut tmp: [S; L] = std::array::from_fn(|_| zero.clone());
+    let mut y_new: [S; L] = std::array::from_fn(|_| zero.clone());
+    let mut out: [Result<Dopri5Stats, (f64, String)>; L] = std::array::from_fn(|_| Ok(Dopri5Stats::default()));
+    let mut stats = [Dopri5Stats::default(); L];
+    let mut state = [LaneState::Fresh; L];
     let mut t = t0;
-    let mut seg = stops.iter().filter(|&&s| s <= t0).count().saturating_sub(1);
-    for &end in &ends {
-        f(seg, t, y.as_ref(), k[0].as_mut()); // fresh first stage: the input's slope changed
-        stats.evaluations += 1;
-        while t < end {
-            let last = end - (t + h) < 1e-3 * h;
-            let step = if last { end - t } else { h };
-            for (s, a) in [(1usize, &A2[..]), (2, &A3[..]), (3, &A4[..]), (4, &A5[..]), (5, &A6[..])] {
-                combine(tmp.as_mut(), y.as_ref(), step, a, &k);
-                f(seg, t + C[s] * step, tmp.as_ref(), k[s].as_mut());
+    let mut h: [f64; L] = std::array::from_fn(|i| opts[i].h_init.min(opts[i].h_max));
+    let mut step = [0.0; L];
+    let mut last = [false; L];
+    // segment boundaries of each lane: every stop inside (t0, t1), then t1
+    let ends: Vec<Vec<f64>> = (0..L)
+        .map(|i| {
+            let mut e: Vec<f64> = stops[i].iter().copied().filter(|&s| s > t0[i] && s < t1[i]).collect();
+            e.push(t1[i]);
+            e
+        })
+        .collect();
+    let mut end_idx = [0usize; L];
+    let mut seg: [usize; L] = std::array::from_fn(|i| stops[i].iter().filter(|&&s| s <= t0[i]).count().saturating_sub(1));
+    let in_norm: [f64; L] = std::array::from_fn(|i| opts[i].scale.iter().filter(|s| s.is_finite()).count().max(1) as f64);
+    loop {
+        // start segments, or finish lanes that reached their end
+        let mut any = false;
+        for i in 0..L {
+            if state[i] != LaneState::Done && t[i] >= ends[i][end_idx[i]] {
+                if end_idx[i] + 1 == ends[i].len() {
+                    state[i] = LaneState::Done;
+                    out[i] = Ok(stats[i]);
+                    continue;
+                }
+                end_idx[i] += 1;
+                seg[i] += 1;
+                state[i] = LaneState::Fresh;
             }
-            combine(y_new.as_mut(), y.as_ref(), step, &B, &k);
-            f(seg, t + step, y_new.as_ref(), k[6].as_mut());
-            stats.evaluations += 6;
-            let (yv, ynv) = (y.as_ref(), y_new.as_ref());
-            let mut err2 = 0.0;
-            for i in 0..n {
-                if opts.scale[i].is_finite() {
-                    let mut e = 0.0;
-                    for (j, ej) in E.iter().enumerate() {
-                        e += ej * k[j].as_ref()[i];
-                    }
-                    let tol = opts.atol * opts.scale[i] + opts.rtol * yv[i].abs().max(ynv[i].abs());
-                    err2 += (step * e / tol).powi(2);
-                }
+            if state[i] == LaneState::Fresh {
+                f(i, seg[i], t[i], ys[i].as_ref(), k[i][0].as_mut()); // the input's slope changed
+                stats[i].evaluations += 1;
+                state[i] = LaneState::Running;
             }
-            let err = (err2 / in_norm).sqrt(); // NaN when the state blew up: rejected below
-            if err <= 1.0 {
-                t = if last { end } else { t + step };
-                y.as_mut().copy_from_slice(y_new.as_ref());
-                k.swap(0, 6); // first same as last
-                stats.accepted += 1;
-                if !observe(t, y.as_ref()) {
-                    return Ok(stats);
-                }
-                let grow = if err == 0.0 { 5.0 } else { (0.9 * err.powf(-0.2)).clamp(0.2, 5.0) };
-                if !last || grow < 1.0 {
-                    h = (step * grow).min(opts.h_max);
-                }
-            } else {
-                stats.rejected += 1;
-                let shrink = if err.is_finite() { (0.9 * err.powf(-0.2)).clamp(0.1, 0.9) } else { 0.1 };
-                h = step * shrink;
-                if h < opts.h_min {
-                    return Err((t, format!("step size fell below {:.1e} s", opts.h_min)));
+            if state[i] == LaneState::Running {
+                any = true;
+                let end = ends[i][end_idx[i]];
+                last[i] = end - (t[i] + h[i]) < 1e-3 * h[i];
+                step[i] = if last[i] { end - t[i] } else { h[i] };
+            }
+        }
+        if !any {
+            return out;
+        }
+        for (s, a) in [(1usize, &A2[..]), (2, &A3[..]), (3, &A4[..]), (4, &A5[..]), (5, &A6[..])] {
+            for i in 0..L {
+                if state[i] == LaneState::Running {
+                    combine(tmp[i].as_mut(), ys[i].as_ref(), step[i], a, &k[i]);
+                    f(i, seg[i], t[i] + C[s] * step[i], tmp[i].as_ref(), k[i][s].as_mut());
                 }
             }
         }
-        seg += 1;
+        for i in 0..L {
+            if state[i] == LaneState::Running {
+                combine(y_new[i].as_mut(), ys[i].as_ref(), step[i], &B, &k[i]);
+                f(i, seg[i], t[i] + step[i], y_new[i].as_ref(), k[i][6].as_mut());
+            }
+        }
+        for i in 0..L {
+            if state[i] != LaneState::Running {
+                continue;
+            }
+            stats[i].evaluations += 6;
+            let (yv, ynv, o) = (ys[i].as_ref(), y_new[i].as_ref(), opts[i]);
+            let mut err2 = 0.0;
+            for c in 0..yv.len() {
+                if o.scale[c].is_finite() {
+                    let mut e = 0.0;
+                    for (j, ej) in E.iter().enumerate() {
+                        e += ej * k[i][j].as_ref()[c];
+                    }
+                    let tol = o.atol * o.scale[c] + o.rtol * yv[c].abs().max(ynv[c].abs());
+                    err2 += (step[i] * e / tol).powi(2);
+                }
+            }
+            let err = (err2 / in_norm[i]).sqrt(); // NaN when the state blew up: rejected below
+            if err <= 1.0 {
+                t[i] = if last[i] { ends[i][end_idx[i]] } else { t[i] + step[i] };
+                ys[i].as_mut().copy_from_slice(y_new[i].as_ref());
+                k[i].swap(0, 6); // first same as last
+                stats[i].accepted += 1;
+                if !observe(i, t[i], ys[i].as_ref()) {
+                    state[i] = LaneState::Done;
+                    out[i] = Ok(stats[i]);
+                    continue;
+                }
+                let grow = if err == 0.0 { 5.0 } else { (0.9 * err.powf(-0.2)).clamp(0.2, 5.0) };
+                if !last[i] || grow < 1.0 {
+                    h[i] = (step[i] * grow).min(o.h_max);
+                }
+            } else {
+                stats[i].rejected += 1;
+                let shrink = if err.is_finite() { (0.9 * err.powf(-0.2)).clamp(0.1, 0.9) } else { 0.1 };
+                h[i] = step[i] * shrink;
+                if h[i] < o.h_min {
+                    state[i] = LaneState::Done;
+                    out[i] = Err((t[i], format!("step size fell below {:.1e} s", o.h_min)));
+                }
+            }
+        }
     }
-    Ok(stats)
 }
 
 /// out = y + h sum_j a_j k_j
@@ -153,6 +238,31 @@ mod tests {
             0.0, 10.0, &[], &mut y, &opts(1e-9), |_, _| true).unwrap();
         assert!((y[0] - 10f64.cos()).abs() < 1e-7, "{}", y[0]);
         assert!(s.accepted > 10 && s.accepted < 2000);
+    }
+
+    #[test]
+    fn lanes_agree_bitwise_with_single_runs() {
+        let o = Dopri5Options { scale: vec![1.0; 2], ..opts(1e-8) };
+        let rhs = |w: f64| move |_seg: usize, _t: f64, y: &[f64], dy: &mut [f64]| {
+            dy[0] = y[1];
+            dy[1] = -w * w * y[0].sin();
+        };
+        let single = |w: f64, t1: f64| {
+            let mut y = [1.0, 0.0];
+            integrate(rhs(w), 0.0, t1, &[0.0, 0.3], &mut y, &o, |_, _| true).unwrap();
+            y
+        };
+        let mut ys = [[1.0, 0.0]; 3];
+        let ws = [1.0, 3.0, 0.5];
+        let t1s = [2.0, 5.0, 1.0];
+        let r = integrate_lanes(
+            |lane: usize, seg, t, y: &[f64], dy: &mut [f64]| rhs(ws[lane])(seg, t, y, dy),
+            [0.0; 3], t1s, [&[0.0, 0.3][..]; 3], &mut ys, [&o; 3], |_, _, _| true,
+        );
+        for i in 0..3 {
+            assert!(r[i].is_ok());
+            assert_eq!(ys[i], single(ws[i], t1s[i]));
+        }
     }
 
     #[test]

@@ -42,6 +42,17 @@ pub fn plan_steps(model: &Model, wave: &PiecewiseLinear, t_end: f64, dt: f64) ->
         )));
     }
     wave.check_alignment(dt, t_end).map_err(SimError::Input)?;
+    // a first-order lag much faster than the step makes its state stiff: RK4 would diverge
+    let e = &model.effects;
+    for (name, tau) in [("tau_amp", e.tau_amp), ("tau_creep", e.tau_creep), ("tau_sensor", e.tau_sensor)] {
+        if tau > 0.0 && tau * RK4_STABLE_OMEGA_DT < dt {
+            return Err(SimError::Input(format!(
+                "effect parameter '{name}' = {tau:e} s is too short for dt = {dt:e} s (RK4 needs dt <= {:.3e} s); \
+                 use a smaller dt, or 0 to switch the effect off",
+                tau * RK4_STABLE_OMEGA_DT
+            )));
+        }
+    }
     let w = model.mech.highest_frequency();
     if w * dt > RK4_STABLE_OMEGA_DT {
         return Err(SimError::Input(format!(

@@ -81,12 +81,15 @@ class CaseSimulator:
         pnames, enames = _core.param_names(), _core.effect_names()
         for structure, idx in by_structure.items():
             rows_p, rows_e, rows_w, t_ends = [], [], [], []
-            for i in idx:
-                prow = [math.nan if specs[i].params.get(n) is None else float(specs[i].params[n]) for n in pnames]
-                erow = [float(specs[i].effects.get(n, 0.0)) for n in enames]
-                for j in range(n_exp):
-                    rows_p.append(prow)
-                    rows_e.append(erow)
+            prows = [[math.nan if specs[i].params.get(n) is None else float(specs[i].params[n]) for n in pnames]
+                     for i in idx]
+            erows = [[float(specs[i].effects.get(n, 0.0)) for n in enames] for i in idx]
+            # experiment-major: neighbouring points share a duration, so the engine's lanes of
+            # points (which advance together) all stay busy to the end
+            for j in range(n_exp):
+                for a in range(len(idx)):
+                    rows_p.append(prows[a])
+                    rows_e.append(erows[a])
                     rows_w.append(self._wave_rows[j])
                     t_ends.append(horizons[j][0])
             run = _core.start_batch(
@@ -97,12 +100,10 @@ class CaseSimulator:
             res = run.result()
             self.evaluations += len(t_ends)
             traces = res.get("traces", [np.zeros(0)] * len(t_ends))
-            k = 0
-            for i in idx:
+            for a, i in enumerate(idx):
                 for j in range(n_exp):
-                    tr = np.asarray(traces[k])
+                    tr = np.asarray(traces[j * len(idx) + a])
                     if tr.size != horizons[j][1]:  # diverged or invalid point
                         tr = np.full(horizons[j][1], np.nan)
                     out[i].append(tr)
-                    k += 1
         return out

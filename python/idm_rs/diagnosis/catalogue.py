@@ -86,7 +86,9 @@ CATALOGUE: tuple[Effect, ...] = (
     Effect(
         "amplifier_lowpass",
         "the PE voltage lags the command through a first-order amplifier (tau_amp)",
-        (EffectParam("tau_amp", 0.0, 2e-4, 1e-6, "s", starts=(0.0, 5e-6, 3e-5)),),
+        # log scale from 0.3 us: a lag much shorter than the fit's step would make the state
+        # stiff (and is invisible at 10 us sampling anyway)
+        (EffectParam("tau_amp", 3e-7, 2e-4, 1.0, "s", starts=(1e-6, 5e-6, 3e-5), log=True),),
         applies=lambda s, p: True,
     ),
     Effect(
@@ -111,7 +113,7 @@ CATALOGUE: tuple[Effect, ...] = (
     Effect(
         "sensor_lowpass",
         "the sensor reads x1 through a first-order low-pass (tau_sensor)",
-        (EffectParam("tau_sensor", 0.0, 2e-4, 1e-6, "s", starts=(0.0, 1e-5, 5e-5)),),
+        (EffectParam("tau_sensor", 3e-7, 2e-4, 1.0, "s", starts=(1e-6, 1e-5, 5e-5), log=True),),
         applies=lambda s, p: True,
     ),
     Effect(

@@ -10,7 +10,6 @@ from typing import Callable, Mapping, Optional, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 
 from ..recording import Recording
 from .case_model import CaseSimulator, ModelSpec
@@ -132,6 +131,8 @@ class Objective:
 def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max_nfev: int = 40,
         fd_step: float = 1e-3, progress: Optional[Callable[[], None]] = None) -> FitResult:
     """Least squares over `free` (trust-region reflective, bounded), from u = 0."""
+    from scipy.optimize import least_squares  # lazily: it is most of `import idm_rs`'s time
+
     sim = objective.sim
     cache: dict[bytes, NDArray[np.float64]] = {}
 

@@ -72,7 +72,12 @@ def locate(rec: Recording, residuals: Sequence[NDArray[np.float64]], sigma: floa
     items: list[tuple[Experiment, str, float, float, NDArray[np.float64]]] = []
     windows: list[tuple[Experiment, str, float, float, NDArray[np.float64]]] = []
     for e, r in zip(rec.experiments, residuals):
-        for phase, m in phase_masks(e).items():
+        masks = phase_masks(e)
+        # anchor the offset on the rest segment (the body is known to be at rest there): with
+        # the file mean as offset, an error later in the file would show up at rest too
+        if masks["rest"].sum() > 2:
+            r = r - r[masks["rest"]].mean()
+        for phase, m in masks.items():
             if m.any():
                 items.append((e, phase, float(e.t[m][0]), float(e.t[m][-1]), r[m]))
         n_per = max(int(round(window_s * rec.sample_rate_Hz)), 1)

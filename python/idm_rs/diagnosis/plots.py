@@ -170,10 +170,14 @@ def plot_ranking(d: "Diagnosis", directory: Path) -> Path:
     ax.axvline(BIC_THRESHOLD, color="tab:green", ls="--", lw=1, label=f"ΔBIC threshold ({BIC_THRESHOLD:g})")
     ax.axvline(0, color="0.2", lw=0.8)
     ax.set_yticks(y, [c.effect + (" (screened)" if c.screened_only else "") for c in cands], fontsize=9)
+    if any(c.screened_only for c in cands):
+        ax.barh(np.nan, 0, color="0.75", hatch="//", edgecolor="0.4", label="screened only (not refitted)")
     lo, hi = ax.get_xlim()
     ax.set_xlim(lo, hi * 10 if hi > 0 else hi)
     for yi, c in zip(y, cands):
         text = f"RMS {c.rms_after / sigma:.2f}× noise" if math.isfinite(c.rms_after) else "RMS –"
+        if c.screened_only:
+            text = "≈ " + text + " (linearised estimate)"
         if math.isfinite(c.heldout_rms):
             text += f", held-out {c.heldout_rms * 1e9:.2f} nm"
         xpos = max(c.delta_bic, 0.0) if math.isfinite(c.delta_bic) else 0.0

@@ -125,7 +125,8 @@ def refit_model_line(d: "Diagnosis") -> str:
     if cand is None:
         tail = "nothing added" if d.verdict == "none" else "missing term not in the catalogue (unexplained)"
         return f"{eq}   [{base}, calibrated; {tail}]"
-    return f"{eq} + {cand.effect}({format_params(cand)})   [{base}, calibrated; {EFFECT_TERMS.get(cand.effect, '')}]"
+    term = f"{cand.effect}({format_params(cand)})" if candidate_params(cand) else cand.effect
+    return f"{eq} + {term}   [{base}, calibrated; {EFFECT_TERMS.get(cand.effect, '')}]"
 
 
 def _table(headers: Sequence[str], rows: Sequence[Sequence[str]], align: str) -> list[str]:
@@ -147,6 +148,9 @@ def text_report(d: "Diagnosis") -> str:
                  f"nominal {rec.nominal.model.upper()}"
                  + (f" (n = {rec.nominal.n_elements})" if rec.nominal.model == "dps" else "")
                  + f"; {d.simulations} simulated runs in {d.seconds:.1f} s")
+    timings = getattr(d, "timings", None) or {}
+    if timings:
+        lines.append("time per stage: " + ", ".join(f"{k} {v:.1f} s" for k, v in timings.items()))
     lines.append("")
     lines.append(f"VERDICT: {d.verdict.upper()}")
     lines.append(f"  {d.reason}")
