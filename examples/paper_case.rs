@@ -1,5 +1,8 @@
 //! Paper case from Rust alone (used for profiling): `cargo run --release --example paper_case`.
-use idm_rs::{effects::Effects, mechanics::Structure, model::Model, params::Params, simulate::simulate, waveform::PiecewiseLinear};
+use idm_rs::{
+    effects::Effects, mechanics::Structure, model::Model, params::Params, simulate::simulate,
+    waveform::PiecewiseLinear,
+};
 
 fn main() {
     let structure = match std::env::args().nth(1).as_deref() {
@@ -14,5 +17,9 @@ fn main() {
     let w = PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap();
     let t = std::time::Instant::now();
     let r = simulate(&m, &w, 10e-3, 1e-8, 1_000_000).unwrap();
-    println!("{structure:?} x1 = {:.10e} m, {:.1} ns/step", r.final_state[0], t.elapsed().as_secs_f64() * 1e9 / 1e6);
+    println!(
+        "{structure:?} x1 = {:.10e} m, {:.1} ns/step",
+        r.final_state[0],
+        t.elapsed().as_secs_f64() * 1e9 / 1e6
+    );
 }

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use crate::dopri5::{self, Dopri5Options};
 use crate::effects::Effects;
 use crate::mechanics::Structure;
-use crate::model::Model;
+use crate::model::{with_state_size, Model};
 use crate::params::Params;
 use crate::rk4::{Rhs, Rk4};
 use crate::simulate::{plan_steps, rest_state, ModelRhs, SimError};
@@ -138,7 +138,10 @@ struct Accumulator {
 
 impl Accumulator {
     fn new(model: &Model) -> Self {
-        Accumulator { slip_velocity: SLIP_VELOCITY_FACTOR * model.params.stribeck_velocity, ..Default::default() }
+        Accumulator {
+            slip_velocity: SLIP_VELOCITY_FACTOR * model.params.stribeck_velocity,
+            ..Default::default()
+        }
     }
 
     /// Account for the state (v1, Ff) held over a time `span`.
@@ -151,14 +154,27 @@ impl Accumulator {
         }
     }
 
-    fn finish(self, model: &Model, y: &[f64], t_end: f64, cycles: usize, status: Status, dt_used: f64, steps: u64) -> PointMetrics {
+    fn finish(
+        self,
+        model: &Model,
+        y: &[f64],
+        t_end: f64,
+        cycles: usize,
+        status: Status,
+        dt_used: f64,
+        steps: u64,
+    ) -> PointMetrics {
         let v1 = y[model.layout.dof];
         let ff = model.friction_force(y);
         let mut acc = self;
         acc.observe(v1, ff, 0.0); // the final state counts for the peaks only
         PointMetrics {
             final_position: y[0],
-            step_per_cycle: if cycles > 0 { y[0] / cycles as f64 } else { f64::NAN },
+            step_per_cycle: if cycles > 0 {
+                y[0] / cycles as f64
+            } else {
+                f64::NAN
+            },
             peak_velocity: acc.peak_v,
             peak_friction: acc.peak_f,
             slip_fraction: acc.slip_time / t_end,
@@ -171,7 +187,13 @@ impl Accumulator {
 }
 
 fn build_model(cfg: &BatchConfig, spec: &PointSpec) -> Result<Model, String> {
-    Model::new(spec.params, spec.effects, cfg.structure, cfg.piezo_hysteresis, false)
+    Model::new(
+        spec.params,
+        spec.effects,
+        cfg.structure,
+        cfg.piezo_hysteresis,
+        false,
+    )
 }
 
 /// Input over step k of lane: (V at step start, slope), advancing the lane's segment cursor.
@@ -210,7 +232,8 @@ where
     active[..m].fill(true);
     let mut ys: [S; L] = std::array::from_fn(|_| zero.clone());
     let mut rk: Rk4<S, L> = Rk4::new(zero.clone());
-    let mut acc: [Accumulator; L] = std::array::from_fn(|i| Accumulator::new(&models[i.min(m - 1)]));
+    let mut acc: [Accumulator; L] =
+        std::array::from_fn(|i| Accumulator::new(&models[i.min(m - 1)]));
     let mut seg = [0usize; L];
     let mut failed = [f64::NAN; L];
     let mut traces: Vec<Vec<f64>> = (0..m)
@@ -223,7 +246,10 @@ where
             v
         })
         .collect();
-    let bounds: Vec<f64> = models.iter().map(|md| md.presliding_bound() * (1.0 + 1e-6) + 1e-12).collect();
+    let bounds: Vec<f64> = models
+        .iter()
+        .map(|md| md.presliding_bound() * (1.0 + 1e-6) + 1e-12)
+        .collect();
     let (ifh, iv) = (models[0].layout.fh, models[0].layout.dof);
     let mut rhs: [ModelRhs<N, EXTRAS, 1>; L] = std::array::from_fn(|i| ModelRhs {
         model: &models[i.min(m - 1)],
@@ -272,10 +298,25 @@ where
         .map(|i| {
             if failed[i].is_nan() && ys[i].as_ref().iter().all(|x| x.is_finite()) {
                 let t_end = steps[i] as f64 * dt;
-                let metrics = acc[i].finish(&models[i], ys[i].as_ref(), t_end, specs[i].cycles, Status::Ok, dt, steps[i] as u64);
-                Ok(PointOutput { metrics, trace: std::mem::take(&mut traces[i]) })
+                let metrics = acc[i].finish(
+                    &models[i],
+                    ys[i].as_ref(),
+                    t_end,
+                    specs[i].cycles,
+                    Status::Ok,
+                    dt,
+                    steps[i] as u64,
+                );
+                Ok(PointOutput {
+                    metrics,
+                    trace: std::mem::take(&mut traces[i]),
+                })
             } else {
-                Err(if failed[i].is_nan() { steps[i] as f64 * dt } else { failed[i] })
+                Err(if failed[i].is_nan() {
+                    steps[i] as f64 * dt
+                } else {
+                    failed[i]
+                })
             }
         })
         .collect()
@@ -292,60 +333,77 @@ fn rk4_group(
 ) -> Vec<Result<PointOutput, f64>> {
     macro_rules! fixed {
         ($n:literal, $d:literal) => {
-            rk4_lanes::<[f64; $d], $n, false, LANES>(models, specs, dt, steps, record_every, [0.0; $d], cancel)
+            rk4_lanes::<[f64; $d], $n, false, LANES>(
+                models,
+                specs,
+                dt,
+                steps,
+                record_every,
+                [0.0; $d],
+                cancel,
+            )
         };
     }
     let plain = models.iter().all(|m| m.is_plain());
-    match (plain, models[0].layout.dof) {
-        (true, 2) => fixed!(2, 7),
-        (true, 3) => fixed!(3, 9),
-        (true, 4) => fixed!(4, 11),
-        (true, 5) => fixed!(5, 13),
-        (true, 6) => fixed!(6, 15),
-        _ => {
-            let mut out = Vec::with_capacity(models.len());
-            for (i, (m, s)) in models.iter().zip(specs).enumerate() {
-                let r = rk4_lanes::<Vec<f64>, 0, true, 1>(
-                    std::slice::from_ref(m), &[*s], dt, &steps[i..=i], record_every, rest_state(m), cancel,
-                );
-                if r.is_empty() {
-                    return Vec::new(); // cancelled
-                }
-                out.extend(r);
+    with_state_size!(plain, models[0].layout.dof, fixed, {
+        let mut out = Vec::with_capacity(models.len());
+        for (i, (m, s)) in models.iter().zip(specs).enumerate() {
+            let r = rk4_lanes::<Vec<f64>, 0, true, 1>(
+                std::slice::from_ref(m),
+                &[*s],
+                dt,
+                &steps[i..=i],
+                record_every,
+                rest_state(m),
+                cancel,
+            );
+            if r.is_empty() {
+                return Vec::new(); // cancelled
             }
-            out
+            out.extend(r);
         }
-    }
+        out
+    })
 }
 
 /// Adaptive Dormand-Prince runs of up to LANES points with one state layout, interleaved
 /// stage by stage (see dopri5.rs), dispatched to a fixed-size state when plain. Empty if
 /// cancelled.
-fn dopri5_group(cfg: &BatchConfig, models: &[Model], specs: &[&PointSpec], rtol: f64, atol: f64, cancel: &AtomicBool) -> Vec<PointMetrics> {
+fn dopri5_group(
+    cfg: &BatchConfig,
+    models: &[Model],
+    specs: &[&PointSpec],
+    rtol: f64,
+    atol: f64,
+    cancel: &AtomicBool,
+) -> Vec<PointMetrics> {
     macro_rules! fixed {
         ($n:literal, $d:literal) => {
-            dopri5_lanes::<[f64; $d], $n, false, LANES>(cfg, models, specs, rtol, atol, [0.0; $d], cancel)
+            dopri5_lanes::<[f64; $d], $n, false, LANES>(
+                cfg, models, specs, rtol, atol, [0.0; $d], cancel,
+            )
         };
     }
     let plain = models.iter().all(|m| m.is_plain());
-    match (plain, models[0].layout.dof) {
-        (true, 2) => fixed!(2, 7),
-        (true, 3) => fixed!(3, 9),
-        (true, 4) => fixed!(4, 11),
-        (true, 5) => fixed!(5, 13),
-        (true, 6) => fixed!(6, 15),
-        _ => {
-            let mut out = Vec::with_capacity(models.len());
-            for (m, s) in models.iter().zip(specs) {
-                let r = dopri5_lanes::<Vec<f64>, 0, true, 1>(cfg, std::slice::from_ref(m), &[*s], rtol, atol, rest_state(m), cancel);
-                if r.is_empty() {
-                    return Vec::new();
-                }
-                out.extend(r);
+    with_state_size!(plain, models[0].layout.dof, fixed, {
+        let mut out = Vec::with_capacity(models.len());
+        for (m, s) in models.iter().zip(specs) {
+            let r = dopri5_lanes::<Vec<f64>, 0, true, 1>(
+                cfg,
+                std::slice::from_ref(m),
+                &[*s],
+                rtol,
+                atol,
+                rest_state(m),
+                cancel,
+            );
+            if r.is_empty() {
+                return Vec::new();
             }
-            out
+            out.extend(r);
         }
-    }
+        out
+    })
 }
 
 fn dopri5_lanes<S, const N: usize, const EXTRAS: bool, const L: usize>(
@@ -424,9 +482,15 @@ where
         .map(|i| {
             let y = ys[i].as_ref();
             match &results[i] {
-                Ok(stats) if y.iter().all(|x| x.is_finite()) => {
-                    acc[i].finish(&models[i], y, t_end[i], specs[i].cycles, Status::Ok, h_min_used[i], stats.accepted)
-                }
+                Ok(stats) if y.iter().all(|x| x.is_finite()) => acc[i].finish(
+                    &models[i],
+                    y,
+                    t_end[i],
+                    specs[i].cycles,
+                    Status::Ok,
+                    h_min_used[i],
+                    stats.accepted,
+                ),
                 Ok(_) => diverged_metrics(t_end[i], cfg.dt),
                 Err((t, _)) => diverged_metrics(*t, cfg.dt),
             }
@@ -435,11 +499,22 @@ where
 }
 
 fn diverged_metrics(t: f64, dt: f64) -> PointMetrics {
-    PointMetrics { status: Status::Diverged, diverged_at: t, dt_used: dt, ..PointMetrics::not_run() }
+    PointMetrics {
+        status: Status::Diverged,
+        diverged_at: t,
+        dt_used: dt,
+        ..PointMetrics::not_run()
+    }
 }
 
 /// RK4 retry of one diverged point at dt/2, dt/4, ... (recording at the same times).
-fn rk4_retry(cfg: &BatchConfig, model: &Model, spec: &PointSpec, first_failure: f64, cancel: &AtomicBool) -> Option<PointOutput> {
+fn rk4_retry(
+    cfg: &BatchConfig,
+    model: &Model,
+    spec: &PointSpec,
+    first_failure: f64,
+    cancel: &AtomicBool,
+) -> Option<PointOutput> {
     let mut failed_at = first_failure;
     let (mut dt, mut record_every) = (cfg.dt, cfg.record_every);
     for _ in 0..cfg.retries {
@@ -449,15 +524,36 @@ fn rk4_retry(cfg: &BatchConfig, model: &Model, spec: &PointSpec, first_failure: 
             Ok(s) => s,
             Err(_) => break,
         };
-        match rk4_group(dt, record_every, std::slice::from_ref(model), &[spec], &[steps], cancel).pop() {
+        match rk4_group(
+            dt,
+            record_every,
+            std::slice::from_ref(model),
+            &[spec],
+            &[steps],
+            cancel,
+        )
+        .pop()
+        {
             None => return None, // cancelled
             Some(Ok(o)) => {
-                return Some(PointOutput { metrics: PointMetrics { status: Status::Retried, ..o.metrics }, trace: o.trace })
+                return Some(PointOutput {
+                    metrics: PointMetrics {
+                        status: Status::Retried,
+                        ..o.metrics
+                    },
+                    trace: o.trace,
+                })
             }
             Some(Err(t)) => failed_at = t,
         }
     }
-    Some(PointOutput { metrics: PointMetrics { dt_used: dt, ..diverged_metrics(failed_at, dt) }, trace: Vec::new() })
+    Some(PointOutput {
+        metrics: PointMetrics {
+            dt_used: dt,
+            ..diverged_metrics(failed_at, dt)
+        },
+        trace: Vec::new(),
+    })
 }
 
 /// End of the lane group starting at `start`: up to LANES points sharing one state layout.
@@ -471,14 +567,21 @@ fn lane_group_end(valid: &[(usize, Model, usize)], start: usize) -> usize {
 }
 
 /// Run one chunk of points (any size); `None` entries were cancelled before finishing.
-fn run_chunk(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: &AtomicUsize) -> Vec<Option<PointOutput>> {
+fn run_chunk(
+    cfg: &BatchConfig,
+    specs: &[PointSpec],
+    cancel: &AtomicBool,
+    done: &AtomicUsize,
+) -> Vec<Option<PointOutput>> {
     let mut out: Vec<Option<PointOutput>> = vec![None; specs.len()];
     // invalid points are answered at once; valid ones are grouped by layout for the lanes
     let mut valid: Vec<(usize, Model, usize)> = Vec::with_capacity(specs.len());
     for (i, s) in specs.iter().enumerate() {
         let checked = build_model(cfg, s).and_then(|m| {
             let steps = match cfg.method {
-                Method::Rk4 => plan_steps(&m, &s.wave, s.t_end(cfg), cfg.dt).map_err(|e| e.to_string())?,
+                Method::Rk4 => {
+                    plan_steps(&m, &s.wave, s.t_end(cfg), cfg.dt).map_err(|e| e.to_string())?
+                }
                 Method::Dopri5 { .. } => 0,
             };
             Ok((m, steps))
@@ -486,8 +589,14 @@ fn run_chunk(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: 
         match checked {
             Ok((m, steps)) => valid.push((i, m, steps)),
             Err(_) => {
-                let metrics = PointMetrics { status: Status::Invalid, ..PointMetrics::not_run() };
-                out[i] = Some(PointOutput { metrics, trace: Vec::new() });
+                let metrics = PointMetrics {
+                    status: Status::Invalid,
+                    ..PointMetrics::not_run()
+                };
+                out[i] = Some(PointOutput {
+                    metrics,
+                    trace: Vec::new(),
+                });
                 done.fetch_add(1, Ordering::Relaxed);
             }
         }
@@ -537,7 +646,10 @@ fn run_chunk(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: 
                 }
                 for ((i, _, _), metrics) in group.iter().zip(results) {
                     done.fetch_add(1, Ordering::Relaxed);
-                    out[*i] = Some(PointOutput { metrics, trace: Vec::new() });
+                    out[*i] = Some(PointOutput {
+                        metrics,
+                        trace: Vec::new(),
+                    });
                 }
                 start = end;
             }
@@ -553,22 +665,39 @@ pub const CHUNK: usize = LANES;
 
 /// Run every point on the current rayon pool. Unfinished points (after `cancel`) come back as
 /// `Status::NotRun` with NaN metrics; `done` counts finished points as they finish.
-pub fn run_batch(cfg: &BatchConfig, specs: &[PointSpec], cancel: &AtomicBool, done: &AtomicUsize) -> Result<Vec<PointOutput>, SimError> {
+pub fn run_batch(
+    cfg: &BatchConfig,
+    specs: &[PointSpec],
+    cancel: &AtomicBool,
+    done: &AtomicUsize,
+) -> Result<Vec<PointOutput>, SimError> {
     if !(cfg.dt.is_finite() && cfg.dt > 0.0) {
-        return Err(SimError::Input(format!("parameter 'dt' must be positive and finite, got {}", cfg.dt)));
+        return Err(SimError::Input(format!(
+            "parameter 'dt' must be positive and finite, got {}",
+            cfg.dt
+        )));
     }
     if let Method::Dopri5 { rtol, atol } = cfg.method {
         if !(rtol > 0.0 && atol > 0.0 && rtol.is_finite() && atol.is_finite()) {
-            return Err(SimError::Input(format!("'rtol' and 'atol' must be positive, got {rtol}, {atol}")));
+            return Err(SimError::Input(format!(
+                "'rtol' and 'atol' must be positive, got {rtol}, {atol}"
+            )));
         }
         if cfg.record_every > 0 {
-            return Err(SimError::Input("recording readings needs method 'rk4'".into()));
+            return Err(SimError::Input(
+                "recording readings needs method 'rk4'".into(),
+            ));
         }
     }
     Ok(specs
         .par_chunks(CHUNK)
         .flat_map_iter(|chunk| run_chunk(cfg, chunk, cancel, done))
-        .map(|m| m.unwrap_or_else(|| PointOutput { metrics: PointMetrics::not_run(), trace: Vec::new() }))
+        .map(|m| {
+            m.unwrap_or_else(|| PointOutput {
+                metrics: PointMetrics::not_run(),
+                trace: Vec::new(),
+            })
+        })
         .collect())
 }
 
@@ -578,7 +707,15 @@ mod tests {
     use crate::simulate::simulate;
 
     fn cfg(method: Method, structure: Structure) -> BatchConfig {
-        BatchConfig { structure, piezo_hysteresis: true, t_end: 2e-3, dt: 2e-8, method, retries: 2, record_every: 0 }
+        BatchConfig {
+            structure,
+            piezo_hysteresis: true,
+            t_end: 2e-3,
+            dt: 2e-8,
+            method,
+            retries: 2,
+            record_every: 0,
+        }
     }
 
     fn specs(n: usize) -> Vec<PointSpec> {
@@ -590,7 +727,15 @@ mod tests {
                 PointSpec {
                     params: p,
                     effects: Effects::default(),
-                    wave: PiecewiseLinear::sawtooth(40.0 + 10.0 * i as f64, 1000.0, 2, 0.2e-3, true, 0.0).unwrap(),
+                    wave: PiecewiseLinear::sawtooth(
+                        40.0 + 10.0 * i as f64,
+                        1000.0,
+                        2,
+                        0.2e-3,
+                        true,
+                        0.0,
+                    )
+                    .unwrap(),
                     cycles: 2,
                     t_end: None,
                 }
@@ -604,14 +749,22 @@ mod tests {
             let c = cfg(Method::Rk4, structure);
             let sp = specs(7);
             let (cancel, done) = (AtomicBool::new(false), AtomicUsize::new(0));
-            let r: Vec<PointMetrics> = run_batch(&c, &sp, &cancel, &done).unwrap().into_iter().map(|o| o.metrics).collect();
+            let r: Vec<PointMetrics> = run_batch(&c, &sp, &cancel, &done)
+                .unwrap()
+                .into_iter()
+                .map(|o| o.metrics)
+                .collect();
             assert_eq!(done.load(Ordering::Relaxed), 7);
             for (s, m) in sp.iter().zip(&r) {
                 let model = Model::new(s.params, s.effects, structure, true, false).unwrap();
                 let t = simulate(&model, &s.wave, c.t_end, c.dt, 1).unwrap();
                 assert_eq!(m.status, Status::Ok);
                 assert_eq!(m.final_position, t.final_state[0]);
-                let pv = t.velocities.chunks(model.layout.dof).map(|v| v[0].abs()).fold(0.0, f64::max);
+                let pv = t
+                    .velocities
+                    .chunks(model.layout.dof)
+                    .map(|v| v[0].abs())
+                    .fold(0.0, f64::max);
                 let pf = t.friction.iter().fold(0.0f64, |a, f| a.max(f.abs()));
                 assert_eq!(m.peak_velocity, pv);
                 assert_eq!(m.peak_friction, pf);
@@ -625,15 +778,31 @@ mod tests {
         let c = cfg(Method::Rk4, Structure::Lps);
         let sp = specs(9);
         let run = |threads: usize| {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-            pool.install(|| run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap())
-                .into_iter()
-                .map(|o| o.metrics)
-                .collect::<Vec<_>>()
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap()
+            })
+            .into_iter()
+            .map(|o| o.metrics)
+            .collect::<Vec<_>>()
         };
         let bits = |r: Vec<PointMetrics>| -> Vec<[u64; 7]> {
             r.iter()
-                .map(|m| [m.final_position, m.step_per_cycle, m.peak_velocity, m.peak_friction, m.slip_fraction, m.diverged_at, m.dt_used].map(f64::to_bits))
+                .map(|m| {
+                    [
+                        m.final_position,
+                        m.step_per_cycle,
+                        m.peak_velocity,
+                        m.peak_friction,
+                        m.slip_fraction,
+                        m.diverged_at,
+                        m.dt_used,
+                    ]
+                    .map(f64::to_bits)
+                })
                 .collect()
         };
         assert_eq!(bits(run(1)), bits(run(2)));
@@ -644,10 +813,27 @@ mod tests {
         let sp = specs(3);
         let (cancel, done) = (AtomicBool::new(false), AtomicUsize::new(0));
         let a = run_batch(&cfg(Method::Rk4, Structure::Lps), &sp, &cancel, &done).unwrap();
-        let b = run_batch(&cfg(Method::Dopri5 { rtol: 1e-7, atol: 1e-7 }, Structure::Lps), &sp, &cancel, &done).unwrap();
+        let b = run_batch(
+            &cfg(
+                Method::Dopri5 {
+                    rtol: 1e-7,
+                    atol: 1e-7,
+                },
+                Structure::Lps,
+            ),
+            &sp,
+            &cancel,
+            &done,
+        )
+        .unwrap();
         for (x, y) in a.iter().map(|o| o.metrics).zip(b.iter().map(|o| o.metrics)) {
             assert_eq!(y.status, Status::Ok);
-            assert!((x.final_position - y.final_position).abs() < 1e-9, "{} {}", x.final_position, y.final_position);
+            assert!(
+                (x.final_position - y.final_position).abs() < 1e-9,
+                "{} {}",
+                x.final_position,
+                y.final_position
+            );
             assert!(y.steps < 100_000 / 2, "adaptive took {} steps", y.steps);
         }
     }
@@ -659,14 +845,20 @@ mod tests {
         c.t_end = 2e-3;
         let sp = specs(3);
         let metrics = |c: &BatchConfig| -> Vec<PointMetrics> {
-            run_batch(c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap().into_iter().map(|o| o.metrics).collect()
+            run_batch(c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0))
+                .unwrap()
+                .into_iter()
+                .map(|o| o.metrics)
+                .collect()
         };
         let r = metrics(&c);
         assert!(r.iter().any(|m| m.status == Status::Retried), "{r:?}");
         assert!(r.iter().all(|m| m.final_position.is_finite()));
         c.retries = 0;
         let r = metrics(&c);
-        assert!(r.iter().any(|m| m.status == Status::Diverged && m.diverged_at > 0.0 && m.final_position.is_nan()));
+        assert!(r.iter().any(|m| m.status == Status::Diverged
+            && m.diverged_at > 0.0
+            && m.final_position.is_nan()));
     }
 
     #[test]
@@ -674,7 +866,9 @@ mod tests {
         let c = cfg(Method::Rk4, Structure::Lps);
         let cancel = AtomicBool::new(true);
         let r = run_batch(&c, &specs(5), &cancel, &AtomicUsize::new(0)).unwrap();
-        assert!(r.iter().all(|o| o.metrics.status == Status::NotRun && o.metrics.final_position.is_nan()));
+        assert!(r
+            .iter()
+            .all(|o| o.metrics.status == Status::NotRun && o.metrics.final_position.is_nan()));
     }
 
     #[test]

@@ -21,7 +21,12 @@ use crate::params::{Params, PARAM_NAMES};
 use crate::simulate::{plan_steps, simulate as simulate_core, SimError};
 use crate::waveform::PiecewiseLinear;
 
-create_exception!(_core, DivergenceError, PyRuntimeError, "The integration left its physical bounds (a step too large, usually).");
+create_exception!(
+    _core,
+    DivergenceError,
+    PyRuntimeError,
+    "The integration left its physical bounds (a step too large, usually)."
+);
 
 fn value_error(msg: String) -> PyErr {
     PyValueError::new_err(msg)
@@ -41,14 +46,17 @@ fn sim_error(py: Python<'_>, e: SimError) -> PyErr {
 
 /// Run `f` with the GIL released; a panic becomes a RuntimeError instead of tearing down Python.
 fn detached<T: Send, F: FnOnce() -> T + Send>(py: Python<'_>, f: F) -> PyResult<T> {
-    py.detach(|| catch_unwind(AssertUnwindSafe(f))).map_err(|p| {
-        let what = p
-            .downcast_ref::<String>()
-            .cloned()
-            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-            .unwrap_or_else(|| "unknown panic".into());
-        PyRuntimeError::new_err(format!("internal error in idm-rs core (please report): {what}"))
-    })
+    py.detach(|| catch_unwind(AssertUnwindSafe(f)))
+        .map_err(|p| {
+            let what = p
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "unknown panic".into());
+            PyRuntimeError::new_err(format!(
+                "internal error in idm-rs core (please report): {what}"
+            ))
+        })
 }
 
 pub(crate) fn parse_params(params: &HashMap<String, f64>) -> PyResult<Params> {
@@ -65,8 +73,12 @@ pub(crate) fn parse_structure(model: &str, n_elements: usize) -> PyResult<Struct
     match model {
         "lps" => Ok(Structure::Lps),
         "dps" if n_elements >= 1 => Ok(Structure::Dps(n_elements)),
-        "dps" => Err(value_error(format!("parameter 'n_elements' must be at least 1, got {n_elements}"))),
-        other => Err(value_error(format!("parameter 'model' must be 'lps' or 'dps', got '{other}'"))),
+        "dps" => Err(value_error(format!(
+            "parameter 'n_elements' must be at least 1, got {n_elements}"
+        ))),
+        other => Err(value_error(format!(
+            "parameter 'model' must be 'lps' or 'dps', got '{other}'"
+        ))),
     }
 }
 
@@ -74,7 +86,10 @@ pub(crate) fn parse_structure(model: &str, n_elements: usize) -> PyResult<Struct
 #[pyfunction]
 fn resolve_params(params: HashMap<String, f64>) -> PyResult<HashMap<String, f64>> {
     let p = parse_params(&params)?;
-    Ok(PARAM_NAMES.iter().map(|n| (n.to_string(), p.get(n).unwrap())).collect())
+    Ok(PARAM_NAMES
+        .iter()
+        .map(|n| (n.to_string(), p.get(n).unwrap()))
+        .collect())
 }
 
 #[pyfunction]
@@ -90,9 +105,20 @@ fn effect_names() -> Vec<&'static str> {
 /// Highest structural natural frequency [rad/s] of the model.
 #[pyfunction]
 #[pyo3(signature = (params, model, n_elements))]
-fn highest_frequency(params: HashMap<String, f64>, model: &str, n_elements: usize) -> PyResult<f64> {
+fn highest_frequency(
+    params: HashMap<String, f64>,
+    model: &str,
+    n_elements: usize,
+) -> PyResult<f64> {
     let p = parse_params(&params)?;
-    let m = Model::new(p, Effects::default(), parse_structure(model, n_elements)?, false, false).map_err(value_error)?;
+    let m = Model::new(
+        p,
+        Effects::default(),
+        parse_structure(model, n_elements)?,
+        false,
+        false,
+    )
+    .map_err(value_error)?;
     Ok(m.mech.highest_frequency())
 }
 
@@ -119,7 +145,8 @@ fn simulate<'py>(
     let structure = parse_structure(model, n_elements)?;
     let wave = PiecewiseLinear::new(wave_t, wave_v).map_err(value_error)?;
     let m = Model::new(p, e, structure, piezo_hysteresis, energy).map_err(value_error)?;
-    let traj = detached(py, || simulate_core(&m, &wave, t_end, dt, save_every))?.map_err(|e| sim_error(py, e))?;
+    let traj = detached(py, || simulate_core(&m, &wave, t_end, dt, save_every))?
+        .map_err(|e| sim_error(py, e))?;
 
     let nt = traj.t.len();
     let dof = traj.dof;
@@ -148,23 +175,43 @@ fn simulate<'py>(
 }
 
 /// Columns of the per-point waveform matrix given to `start_batch`.
-const WAVE_COLUMNS: [&str; 8] = ["kind", "amplitude", "rise", "fall", "frequency", "cycles", "forward", "delay"];
+const WAVE_COLUMNS: [&str; 8] = [
+    "kind",
+    "amplitude",
+    "rise",
+    "fall",
+    "frequency",
+    "cycles",
+    "forward",
+    "delay",
+];
 
-fn point_wave(row: &[f64], sampled: &Option<(Vec<f64>, Vec<f64>)>) -> Result<(PiecewiseLinear, usize), String> {
+fn point_wave(
+    row: &[f64],
+    sampled: &Option<(Vec<f64>, Vec<f64>)>,
+) -> Result<(PiecewiseLinear, usize), String> {
     let [kind, amplitude, rise, fall, frequency, cycles, forward, delay] = row.try_into().unwrap();
     match kind as i64 {
         0 => Ok((PiecewiseLinear::triangle(amplitude, rise, fall, delay)?, 0)),
         1 => {
             if !(cycles >= 1.0 && cycles.fract() == 0.0) {
-                return Err(format!("parameter 'cycles' must be a positive integer, got {cycles}"));
+                return Err(format!(
+                    "parameter 'cycles' must be a positive integer, got {cycles}"
+                ));
             }
             let c = cycles as usize;
-            Ok((PiecewiseLinear::sawtooth(amplitude, frequency, c, rise, forward != 0.0, delay)?, c))
+            Ok((
+                PiecewiseLinear::sawtooth(amplitude, frequency, c, rise, forward != 0.0, delay)?,
+                c,
+            ))
         }
         _ => {
             // a shared sampled waveform, scaled by the point's `amplitude` (1 = as given)
             let (t, v) = sampled.as_ref().ok_or("sampled waveform missing")?;
-            Ok((PiecewiseLinear::new(t.clone(), v.iter().map(|x| x * amplitude).collect())?, 0))
+            Ok((
+                PiecewiseLinear::new(t.clone(), v.iter().map(|x| x * amplitude).collect())?,
+                0,
+            ))
         }
     }
 }
@@ -200,8 +247,15 @@ impl BatchRun {
 
     /// Wait up to `timeout` seconds (GIL released); True when the batch has finished.
     fn wait(&self, py: Python<'_>, timeout: f64) -> bool {
-        let finished = || self.handle.lock().unwrap().as_ref().map_or(true, |h| h.is_finished());
-        let deadline = std::time::Instant::now() + std::time::Duration::from_secs_f64(timeout.max(0.0));
+        let finished = || {
+            self.handle
+                .lock()
+                .unwrap()
+                .as_ref()
+                .map_or(true, |h| h.is_finished())
+        };
+        let deadline =
+            std::time::Instant::now() + std::time::Duration::from_secs_f64(timeout.max(0.0));
         py.detach(|| loop {
             if finished() {
                 return true;
@@ -215,10 +269,15 @@ impl BatchRun {
 
     /// Join and return the metrics as a dict of arrays (NaN / status 0 for points not run).
     fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let handle = self.handle.lock().unwrap().take().ok_or_else(|| PyRuntimeError::new_err("result already taken"))?;
-        let outcome = py
-            .detach(|| handle.join())
-            .map_err(|_| PyRuntimeError::new_err("internal error in idm-rs batch worker (please report)"))?;
+        let handle = self
+            .handle
+            .lock()
+            .unwrap()
+            .take()
+            .ok_or_else(|| PyRuntimeError::new_err("result already taken"))?;
+        let outcome = py.detach(|| handle.join()).map_err(|_| {
+            PyRuntimeError::new_err("internal error in idm-rs batch worker (please report)")
+        })?;
         let outputs = outcome.map_err(value_error)?;
         let d = PyDict::new(py);
         if outputs.iter().any(|o| !o.trace.is_empty()) {
@@ -237,8 +296,22 @@ impl BatchRun {
         d.set_item("slip_fraction", col(|m| m.slip_fraction).into_pyarray(py))?;
         d.set_item("diverged_at", col(|m| m.diverged_at).into_pyarray(py))?;
         d.set_item("dt_used", col(|m| m.dt_used).into_pyarray(py))?;
-        d.set_item("steps", metrics.iter().map(|m| m.steps).collect::<Vec<u64>>().into_pyarray(py))?;
-        d.set_item("status", metrics.iter().map(|m| m.status as u8).collect::<Vec<u8>>().into_pyarray(py))?;
+        d.set_item(
+            "steps",
+            metrics
+                .iter()
+                .map(|m| m.steps)
+                .collect::<Vec<u64>>()
+                .into_pyarray(py),
+        )?;
+        d.set_item(
+            "status",
+            metrics
+                .iter()
+                .map(|m| m.status as u8)
+                .collect::<Vec<u8>>()
+                .into_pyarray(py),
+        )?;
         Ok(d)
     }
 }
@@ -269,21 +342,43 @@ fn start_batch(
 ) -> PyResult<BatchRun> {
     let n = params.shape()[0];
     let shape_ok = |a: &[usize], cols: usize| a == [n, cols];
-    if !shape_ok(params.shape(), PARAM_NAMES.len()) || !shape_ok(effects.shape(), EFFECT_NAMES.len()) || !shape_ok(waves.shape(), WAVE_COLUMNS.len()) {
+    if !shape_ok(params.shape(), PARAM_NAMES.len())
+        || !shape_ok(effects.shape(), EFFECT_NAMES.len())
+        || !shape_ok(waves.shape(), WAVE_COLUMNS.len())
+    {
         return Err(value_error(format!(
             "batch arrays must be ({n}, {}), ({n}, {}), ({n}, {}); got {:?}, {:?}, {:?}",
-            PARAM_NAMES.len(), EFFECT_NAMES.len(), WAVE_COLUMNS.len(), params.shape(), effects.shape(), waves.shape()
+            PARAM_NAMES.len(),
+            EFFECT_NAMES.len(),
+            WAVE_COLUMNS.len(),
+            params.shape(),
+            effects.shape(),
+            waves.shape()
         )));
     }
     let method = match method {
         "rk4" => Method::Rk4,
         "dopri5" => Method::Dopri5 { rtol, atol },
-        other => return Err(value_error(format!("parameter 'method' must be 'rk4' or 'dopri5', got '{other}'"))),
+        other => {
+            return Err(value_error(format!(
+                "parameter 'method' must be 'rk4' or 'dopri5', got '{other}'"
+            )))
+        }
     };
     if t_ends.as_ref().is_some_and(|t| t.len() != n) {
-        return Err(value_error(format!("'t_ends' must have one duration per point ({n})")));
+        return Err(value_error(format!(
+            "'t_ends' must have one duration per point ({n})"
+        )));
     }
-    let cfg = BatchConfig { structure: parse_structure(model, n_elements)?, piezo_hysteresis, t_end, dt, method, retries, record_every };
+    let cfg = BatchConfig {
+        structure: parse_structure(model, n_elements)?,
+        piezo_hysteresis,
+        t_end,
+        dt,
+        method,
+        retries,
+        record_every,
+    };
     let sampled = match (sampled_t, sampled_v) {
         (Some(t), Some(v)) => Some((t, v)),
         _ => None,
@@ -292,7 +387,10 @@ fn start_batch(
     let pm: Vec<f64> = params.as_array().iter().copied().collect();
     let em: Vec<f64> = effects.as_array().iter().copied().collect();
     let wm: Vec<f64> = waves.as_array().iter().copied().collect();
-    let (cancel, done) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicUsize::new(0)));
+    let (cancel, done) = (
+        Arc::new(AtomicBool::new(false)),
+        Arc::new(AtomicUsize::new(0)),
+    );
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -306,11 +404,18 @@ fn start_batch(
         let mut slot: Vec<Option<usize>> = Vec::with_capacity(n);
         for i in 0..n {
             let prow = &pm[i * np..(i + 1) * np];
-            let pairs: Vec<(&str, f64)> = PARAM_NAMES.iter().copied().zip(prow.iter().copied())
+            let pairs: Vec<(&str, f64)> = PARAM_NAMES
+                .iter()
+                .copied()
+                .zip(prow.iter().copied())
                 .filter(|(name, v)| !(*name == "normal_force" && v.is_nan()))
                 .collect();
             let erow = &em[i * ne..(i + 1) * ne];
-            let epairs: Vec<(&str, f64)> = EFFECT_NAMES.iter().copied().zip(erow.iter().copied()).collect();
+            let epairs: Vec<(&str, f64)> = EFFECT_NAMES
+                .iter()
+                .copied()
+                .zip(erow.iter().copied())
+                .collect();
             let spec = Params::from_pairs(&pairs)
                 .and_then(|p| Ok((p, Effects::from_pairs(&epairs)?)))
                 .and_then(|(p, e)| Ok((p, e, point_wave(&wm[i * nw..(i + 1) * nw], &sampled)?)));
@@ -318,7 +423,13 @@ fn start_batch(
                 Ok((params, effects, (wave, cycles))) => {
                     let t_end = t_ends.as_ref().map(|t| t[i]);
                     slot.push(Some(specs.len()));
-                    specs.push(PointSpec { params, effects, wave, cycles, t_end });
+                    specs.push(PointSpec {
+                        params,
+                        effects,
+                        wave,
+                        cycles,
+                        t_end,
+                    });
                 }
                 Err(_) => {
                     slot.push(None);
@@ -326,15 +437,38 @@ fn start_batch(
                 }
             }
         }
-        let run = || catch_unwind(AssertUnwindSafe(|| pool.install(|| run_batch(&cfg, &specs, &c2, &d2))));
+        let run = || {
+            catch_unwind(AssertUnwindSafe(|| {
+                pool.install(|| run_batch(&cfg, &specs, &c2, &d2))
+            }))
+        };
         let mut results = match run() {
             Ok(r) => r.map_err(|e| e.to_string())?,
             Err(_) => return Err("internal error in idm-rs batch (please report)".into()),
         };
-        let invalid = PointOutput { metrics: PointMetrics { status: Status::Invalid, ..PointMetrics::not_run() }, trace: Vec::new() };
-        Ok(slot.into_iter().map(|s| s.map_or_else(|| invalid.clone(), |k| std::mem::replace(&mut results[k], invalid.clone()))).collect())
+        let invalid = PointOutput {
+            metrics: PointMetrics {
+                status: Status::Invalid,
+                ..PointMetrics::not_run()
+            },
+            trace: Vec::new(),
+        };
+        Ok(slot
+            .into_iter()
+            .map(|s| {
+                s.map_or_else(
+                    || invalid.clone(),
+                    |k| std::mem::replace(&mut results[k], invalid.clone()),
+                )
+            })
+            .collect())
     });
-    Ok(BatchRun { cancel, done, total: n, handle: Mutex::new(Some(handle)) })
+    Ok(BatchRun {
+        cancel,
+        done,
+        total: n,
+        handle: Mutex::new(Some(handle)),
+    })
 }
 
 /// Raise ValueError if a run with these settings would be refused (step, duration, model).
@@ -352,13 +486,21 @@ fn check_plan(
     n_elements: usize,
     method: &str,
 ) -> PyResult<()> {
-    let m = Model::new(parse_params(&params)?, parse_effects(&effects)?, parse_structure(model, n_elements)?, false, false)
-        .map_err(value_error)?;
+    let m = Model::new(
+        parse_params(&params)?,
+        parse_effects(&effects)?,
+        parse_structure(model, n_elements)?,
+        false,
+        false,
+    )
+    .map_err(value_error)?;
     let wave = PiecewiseLinear::new(wave_t, wave_v).map_err(value_error)?;
     if method == "rk4" {
         plan_steps(&m, &wave, t_end, dt).map_err(|e| value_error(e.to_string()))?;
     } else if !(t_end.is_finite() && t_end > 0.0 && dt.is_finite() && dt > 0.0) {
-        return Err(value_error(format!("'t_end' and 'dt' must be positive and finite, got {t_end}, {dt}")));
+        return Err(value_error(format!(
+            "'t_end' and 'dt' must be positive and finite, got {t_end}, {dt}"
+        )));
     }
     Ok(())
 }

@@ -33,13 +33,37 @@ const C: [f64; 7] = [0.0, 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0, 1.0, 1.0]
 const A2: [f64; 1] = [1.0 / 5.0];
 const A3: [f64; 2] = [3.0 / 40.0, 9.0 / 40.0];
 const A4: [f64; 3] = [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0];
-const A5: [f64; 4] = [19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0];
-const A6: [f64; 5] = [9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0, -5103.0 / 18656.0];
+const A5: [f64; 4] = [
+    19372.0 / 6561.0,
+    -25360.0 / 2187.0,
+    64448.0 / 6561.0,
+    -212.0 / 729.0,
+];
+const A6: [f64; 5] = [
+    9017.0 / 3168.0,
+    -355.0 / 33.0,
+    46732.0 / 5247.0,
+    49.0 / 176.0,
+    -5103.0 / 18656.0,
+];
 /// fifth-order weights (also the last stage's coefficients: first same as last)
-const B: [f64; 6] = [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0];
+const B: [f64; 6] = [
+    35.0 / 384.0,
+    0.0,
+    500.0 / 1113.0,
+    125.0 / 192.0,
+    -2187.0 / 6784.0,
+    11.0 / 84.0,
+];
 /// difference between the fifth- and fourth-order weights
 const E: [f64; 7] = [
-    71.0 / 57600.0, 0.0, -71.0 / 16695.0, 71.0 / 1920.0, -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0,
+    71.0 / 57600.0,
+    0.0,
+    -71.0 / 16695.0,
+    71.0 / 1920.0,
+    -17253.0 / 339200.0,
+    22.0 / 525.0,
+    -1.0 / 40.0,
 ];
 
 /// Integrate `y` from `t0` to `t1`. `observe(t, y)` sees every accepted step and returns false
@@ -105,7 +129,8 @@ where
     let mut k: [[S; 7]; L] = std::array::from_fn(|_| std::array::from_fn(|_| zero.clone()));
     let mut tmp: [S; L] = std::array::from_fn(|_| zero.clone());
     let mut y_new: [S; L] = std::array::from_fn(|_| zero.clone());
-    let mut out: [Result<Dopri5Stats, (f64, String)>; L] = std::array::from_fn(|_| Ok(Dopri5Stats::default()));
+    let mut out: [Result<Dopri5Stats, (f64, String)>; L] =
+        std::array::from_fn(|_| Ok(Dopri5Stats::default()));
     let mut stats = [Dopri5Stats::default(); L];
     let mut state = [LaneState::Fresh; L];
     let mut t = t0;
@@ -115,14 +140,31 @@ where
     // segment boundaries of each lane: every stop inside (t0, t1), then t1
     let ends: Vec<Vec<f64>> = (0..L)
         .map(|i| {
-            let mut e: Vec<f64> = stops[i].iter().copied().filter(|&s| s > t0[i] && s < t1[i]).collect();
+            let mut e: Vec<f64> = stops[i]
+                .iter()
+                .copied()
+                .filter(|&s| s > t0[i] && s < t1[i])
+                .collect();
             e.push(t1[i]);
             e
         })
         .collect();
     let mut end_idx = [0usize; L];
-    let mut seg: [usize; L] = std::array::from_fn(|i| stops[i].iter().filter(|&&s| s <= t0[i]).count().saturating_sub(1));
-    let in_norm: [f64; L] = std::array::from_fn(|i| opts[i].scale.iter().filter(|s| s.is_finite()).count().max(1) as f64);
+    let mut seg: [usize; L] = std::array::from_fn(|i| {
+        stops[i]
+            .iter()
+            .filter(|&&s| s <= t0[i])
+            .count()
+            .saturating_sub(1)
+    });
+    let in_norm: [f64; L] = std::array::from_fn(|i| {
+        opts[i]
+            .scale
+            .iter()
+            .filter(|s| s.is_finite())
+            .count()
+            .max(1) as f64
+    });
     loop {
         // start segments, or finish lanes that reached their end
         let mut any = false;
@@ -152,18 +194,36 @@ where
         if !any {
             return out;
         }
-        for (s, a) in [(1usize, &A2[..]), (2, &A3[..]), (3, &A4[..]), (4, &A5[..]), (5, &A6[..])] {
+        for (s, a) in [
+            (1usize, &A2[..]),
+            (2, &A3[..]),
+            (3, &A4[..]),
+            (4, &A5[..]),
+            (5, &A6[..]),
+        ] {
             for i in 0..L {
                 if state[i] == LaneState::Running {
                     combine(tmp[i].as_mut(), ys[i].as_ref(), step[i], a, &k[i]);
-                    f(i, seg[i], t[i] + C[s] * step[i], tmp[i].as_ref(), k[i][s].as_mut());
+                    f(
+                        i,
+                        seg[i],
+                        t[i] + C[s] * step[i],
+                        tmp[i].as_ref(),
+                        k[i][s].as_mut(),
+                    );
                 }
             }
         }
         for i in 0..L {
             if state[i] == LaneState::Running {
                 combine(y_new[i].as_mut(), ys[i].as_ref(), step[i], &B, &k[i]);
-                f(i, seg[i], t[i] + step[i], y_new[i].as_ref(), k[i][6].as_mut());
+                f(
+                    i,
+                    seg[i],
+                    t[i] + step[i],
+                    y_new[i].as_ref(),
+                    k[i][6].as_mut(),
+                );
             }
         }
         for i in 0..L {
@@ -185,7 +245,11 @@ where
             }
             let err = (err2 / in_norm[i]).sqrt(); // NaN when the state blew up: rejected below
             if err <= 1.0 {
-                t[i] = if last[i] { ends[i][end_idx[i]] } else { t[i] + step[i] };
+                t[i] = if last[i] {
+                    ends[i][end_idx[i]]
+                } else {
+                    t[i] + step[i]
+                };
                 ys[i].as_mut().copy_from_slice(y_new[i].as_ref());
                 k[i].swap(0, 6); // first same as last
                 stats[i].accepted += 1;
@@ -194,13 +258,21 @@ where
                     out[i] = Ok(stats[i]);
                     continue;
                 }
-                let grow = if err == 0.0 { 5.0 } else { (0.9 * err.powf(-0.2)).clamp(0.2, 5.0) };
+                let grow = if err == 0.0 {
+                    5.0
+                } else {
+                    (0.9 * err.powf(-0.2)).clamp(0.2, 5.0)
+                };
                 if !last[i] || grow < 1.0 {
                     h[i] = (step[i] * grow).min(o.h_max);
                 }
             } else {
                 stats[i].rejected += 1;
-                let shrink = if err.is_finite() { (0.9 * err.powf(-0.2)).clamp(0.1, 0.9) } else { 0.1 };
+                let shrink = if err.is_finite() {
+                    (0.9 * err.powf(-0.2)).clamp(0.1, 0.9)
+                } else {
+                    0.1
+                };
                 h[i] = step[i] * shrink;
                 if h[i] < o.h_min {
                     state[i] = LaneState::Done;
@@ -228,24 +300,47 @@ mod tests {
     use super::*;
 
     fn opts(rtol: f64) -> Dopri5Options {
-        Dopri5Options { rtol, atol: rtol, scale: vec![1.0; 2], h_init: 1e-3, h_min: 1e-12, h_max: 1.0 }
+        Dopri5Options {
+            rtol,
+            atol: rtol,
+            scale: vec![1.0; 2],
+            h_init: 1e-3,
+            h_min: 1e-12,
+            h_max: 1.0,
+        }
     }
 
     #[test]
     fn harmonic_oscillator_meets_tolerance() {
         let mut y = [1.0, 0.0];
-        let s = integrate(|_, _, y: &[f64], dy: &mut [f64]| { dy[0] = y[1]; dy[1] = -y[0]; },
-            0.0, 10.0, &[], &mut y, &opts(1e-9), |_, _| true).unwrap();
+        let s = integrate(
+            |_, _, y: &[f64], dy: &mut [f64]| {
+                dy[0] = y[1];
+                dy[1] = -y[0];
+            },
+            0.0,
+            10.0,
+            &[],
+            &mut y,
+            &opts(1e-9),
+            |_, _| true,
+        )
+        .unwrap();
         assert!((y[0] - 10f64.cos()).abs() < 1e-7, "{}", y[0]);
         assert!(s.accepted > 10 && s.accepted < 2000);
     }
 
     #[test]
     fn lanes_agree_bitwise_with_single_runs() {
-        let o = Dopri5Options { scale: vec![1.0; 2], ..opts(1e-8) };
-        let rhs = |w: f64| move |_seg: usize, _t: f64, y: &[f64], dy: &mut [f64]| {
-            dy[0] = y[1];
-            dy[1] = -w * w * y[0].sin();
+        let o = Dopri5Options {
+            scale: vec![1.0; 2],
+            ..opts(1e-8)
+        };
+        let rhs = |w: f64| {
+            move |_seg: usize, _t: f64, y: &[f64], dy: &mut [f64]| {
+                dy[0] = y[1];
+                dy[1] = -w * w * y[0].sin();
+            }
         };
         let single = |w: f64, t1: f64| {
             let mut y = [1.0, 0.0];
@@ -257,7 +352,12 @@ mod tests {
         let t1s = [2.0, 5.0, 1.0];
         let r = integrate_lanes(
             |lane: usize, seg, t, y: &[f64], dy: &mut [f64]| rhs(ws[lane])(seg, t, y, dy),
-            [0.0; 3], t1s, [&[0.0, 0.3][..]; 3], &mut ys, [&o; 3], |_, _, _| true,
+            [0.0; 3],
+            t1s,
+            [&[0.0, 0.3][..]; 3],
+            &mut ys,
+            [&o; 3],
+            |_, _, _| true,
         );
         for i in 0..3 {
             assert!(r[i].is_ok());
@@ -270,9 +370,23 @@ mod tests {
         // dy/dt = slope of the segment: 1 on [0,1), -2 on [1,3)
         let mut y = [0.0];
         let mut times = vec![];
-        let o = Dopri5Options { scale: vec![1.0], ..opts(1e-10) };
-        integrate(|seg, _, _: &[f64], dy: &mut [f64]| dy[0] = if seg == 0 { 1.0 } else { -2.0 },
-            0.0, 3.0, &[0.0, 1.0, 3.0], &mut y, &o, |t, _| { times.push(t); true }).unwrap();
+        let o = Dopri5Options {
+            scale: vec![1.0],
+            ..opts(1e-10)
+        };
+        integrate(
+            |seg, _, _: &[f64], dy: &mut [f64]| dy[0] = if seg == 0 { 1.0 } else { -2.0 },
+            0.0,
+            3.0,
+            &[0.0, 1.0, 3.0],
+            &mut y,
+            &o,
+            |t, _| {
+                times.push(t);
+                true
+            },
+        )
+        .unwrap();
         assert!(times.contains(&1.0));
         assert!((y[0] - (1.0 - 4.0)).abs() < 1e-12, "{}", y[0]);
     }

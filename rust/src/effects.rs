@@ -7,7 +7,14 @@ use crate::params::GRAVITY;
 
 /// Parameter names, as in the catalogue, in field order of [`Effects`].
 pub const EFFECT_NAMES: [&str; 9] = [
-    "theta_rad", "k_ground", "tau_amp", "kappa", "tau_creep", "c_weight", "eps", "tau_sensor",
+    "theta_rad",
+    "k_ground",
+    "tau_amp",
+    "kappa",
+    "tau_creep",
+    "c_weight",
+    "eps",
+    "tau_sensor",
     "drift_rate",
 ];
 
@@ -69,8 +76,15 @@ impl Effects {
 
     pub fn validate(&self) -> Result<(), String> {
         let all = [
-            self.theta_rad, self.k_ground, self.tau_amp, self.kappa, self.tau_creep,
-            self.c_weight, self.eps, self.tau_sensor, self.drift_rate,
+            self.theta_rad,
+            self.k_ground,
+            self.tau_amp,
+            self.kappa,
+            self.tau_creep,
+            self.c_weight,
+            self.eps,
+            self.tau_sensor,
+            self.drift_rate,
         ];
         for (name, v) in EFFECT_NAMES.iter().zip(all) {
             if !v.is_finite() {
@@ -78,18 +92,29 @@ impl Effects {
             }
         }
         for (name, v) in [
-            ("k_ground", self.k_ground), ("tau_amp", self.tau_amp), ("tau_creep", self.tau_creep),
-            ("c_weight", self.c_weight), ("tau_sensor", self.tau_sensor),
+            ("k_ground", self.k_ground),
+            ("tau_amp", self.tau_amp),
+            ("tau_creep", self.tau_creep),
+            ("c_weight", self.c_weight),
+            ("tau_sensor", self.tau_sensor),
         ] {
             if v < 0.0 {
-                return Err(format!("effect parameter '{name}' must be non-negative, got {v}"));
+                return Err(format!(
+                    "effect parameter '{name}' must be non-negative, got {v}"
+                ));
             }
         }
         if self.eps.abs() >= 1.0 {
-            return Err(format!("effect parameter 'eps' must lie in (-1, 1), got {}", self.eps));
+            return Err(format!(
+                "effect parameter 'eps' must lie in (-1, 1), got {}",
+                self.eps
+            ));
         }
         if self.theta_rad.abs() >= std::f64::consts::FRAC_PI_2 {
-            return Err(format!("effect parameter 'theta_rad' must lie in (-pi/2, pi/2), got {}", self.theta_rad));
+            return Err(format!(
+                "effect parameter 'theta_rad' must lie in (-pi/2, pi/2), got {}",
+                self.theta_rad
+            ));
         }
         if self.kappa != 0.0 && self.tau_creep == 0.0 {
             return Err("effect parameter 'kappa' needs a positive 'tau_creep'".into());
@@ -132,15 +157,24 @@ mod tests {
 
     #[test]
     fn incline_pulls_backward_for_positive_tilt() {
-        let e = Effects { theta_rad: 0.01, ..Default::default() };
+        let e = Effects {
+            theta_rad: 0.01,
+            ..Default::default()
+        };
         assert!((e.incline_force(1.0) + GRAVITY * 0.01f64.sin()).abs() < 1e-15);
         assert!(e.normal_scale() < 1.0);
     }
 
     #[test]
     fn bad_effect_values_are_named() {
-        assert!(Effects::from_pairs(&[("tau_amp", -1.0)]).unwrap_err().contains("'tau_amp'"));
-        assert!(Effects::from_pairs(&[("eps", 1.5)]).unwrap_err().contains("'eps'"));
-        assert!(Effects::from_pairs(&[("wind", 1.0)]).unwrap_err().contains("'wind'"));
+        assert!(Effects::from_pairs(&[("tau_amp", -1.0)])
+            .unwrap_err()
+            .contains("'tau_amp'"));
+        assert!(Effects::from_pairs(&[("eps", 1.5)])
+            .unwrap_err()
+            .contains("'eps'"));
+        assert!(Effects::from_pairs(&[("wind", 1.0)])
+            .unwrap_err()
+            .contains("'wind'"));
     }
 }

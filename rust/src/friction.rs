@@ -6,7 +6,13 @@ use crate::params::Params;
 /// Sign that is 0 at 0 (f64::signum gives +1 there).
 #[inline(always)]
 pub fn sign0(x: f64) -> f64 {
-    if x > 0.0 { 1.0 } else if x < 0.0 { -1.0 } else { 0.0 }
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
 }
 
 /// Leuven friction constants, precomputed once per run.
@@ -56,10 +62,18 @@ impl Leuven {
         } else {
             let x = v.abs() * self.inv_vs;
             // (|v|/vs)^2 as a product: powf would be the most expensive call in the step
-            let e = if self.delta_is_two { x * x } else { x.powf(self.delta) };
+            let e = if self.delta_is_two {
+                x * x
+            } else {
+                x.powf(self.delta)
+            };
             self.fc + self.fs_minus_fc * (-e).exp()
         };
-        if self.eps == 0.0 { s } else { s * (1.0 + self.eps * sign0(v)) }
+        if self.eps == 0.0 {
+            s
+        } else {
+            s * (1.0 + self.eps * sign0(v))
+        }
     }
 
     /// (dg/dt [m/s], dFh/dt [N/s]) at main-body velocity `v` [m/s] and presliding force `fh` [N].

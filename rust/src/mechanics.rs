@@ -118,7 +118,14 @@ impl Mechanics {
     }
 
     #[inline(always)]
-    fn accelerations_fixed<const N: usize>(&self, q: &[f64], v: &[f64], f_main: f64, f_weight: f64, acc: &mut [f64]) {
+    fn accelerations_fixed<const N: usize>(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        f_main: f64,
+        f_weight: f64,
+        acc: &mut [f64],
+    ) {
         let q: &[f64; N] = q.try_into().unwrap();
         let v: &[f64; N] = v.try_into().unwrap();
         let acc: &mut [f64; N] = acc.try_into().unwrap();
@@ -157,10 +164,17 @@ impl Mechanics {
             Some(c) => c,
             None => return f64::INFINITY,
         };
-        let linv = chol.l().try_inverse().unwrap_or_else(|| DMatrix::zeros(self.dof, self.dof));
+        let linv = chol
+            .l()
+            .try_inverse()
+            .unwrap_or_else(|| DMatrix::zeros(self.dof, self.dof));
         let a = &linv * &self.stiffness * linv.transpose();
         let sym = (&a + a.transpose()) * 0.5;
-        let w2 = sym.symmetric_eigenvalues().iter().copied().fold(0.0f64, f64::max);
+        let w2 = sym
+            .symmetric_eigenvalues()
+            .iter()
+            .copied()
+            .fold(0.0f64, f64::max);
         w2.max(0.0).sqrt()
     }
 
@@ -179,12 +193,16 @@ impl Mechanics {
 
     /// Column sums of Mp: 1'Mp v is the PE's momentum [kg m/s].
     pub fn pe_mass_column_sums(&self) -> Vec<f64> {
-        (0..self.dof).map(|j| self.pe_mass_matrix.column(j).sum()).collect()
+        (0..self.dof)
+            .map(|j| self.pe_mass_matrix.column(j).sum())
+            .collect()
     }
 
     /// 1'M v [kg m/s].
     pub fn momentum(&self, v: &[f64]) -> f64 {
-        (0..self.dof).map(|j| self.mass.column(j).sum() * v[j]).sum()
+        (0..self.dof)
+            .map(|j| self.mass.column(j).sum() * v[j])
+            .sum()
     }
 }
 

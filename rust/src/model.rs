@@ -7,6 +7,23 @@ use crate::mechanics::{Mechanics, Structure};
 use crate::params::Params;
 use crate::piezo::{piezo_force, PiezoHysteresis};
 
+/// Dispatch on the state size: `$fixed!(N, D)` for a plain state (see [`Model::is_plain`]) of
+/// a common node count N (D = 2N + 3 components), `$dynamic` otherwise. The fixed sizes let
+/// the compiler keep a step's state in registers; the physics is the same code either way.
+macro_rules! with_state_size {
+    ($plain:expr, $dof:expr, $fixed:ident, $dynamic:expr) => {
+        match ($plain, $dof) {
+            (true, 2) => $fixed!(2, 7),
+            (true, 3) => $fixed!(3, 9),
+            (true, 4) => $fixed!(4, 11),
+            (true, 5) => $fixed!(5, 13),
+            (true, 6) => $fixed!(6, 15),
+            _ => $dynamic,
+        }
+    };
+}
+pub(crate) use with_state_size;
+
 /// Number of energy/impulse accounting states (see [`Layout::accounting`]).
 pub const N_ACCOUNTING: usize = 7;
 
@@ -44,7 +61,17 @@ impl Layout {
         let xc = take(e.tau_creep > 0.0, 1);
         let xs = take(e.tau_sensor > 0.0, 1);
         let accounting = take(accounting, N_ACCOUNTING);
-        Layout { dof, g: 2 * dof, fh: 2 * dof + 1, h: 2 * dof + 2, vpe, xc, xs, accounting, dim: next }
+        Layout {
+            dof,
+            g: 2 * dof,
+            fh: 2 * dof + 1,
+            h: 2 * dof + 2,
+            vpe,
+            xc,
+            xs,
+            accounting,
+            dim: next,
+        }
     }
 }
 
@@ -84,9 +111,18 @@ impl Model {
         // The PE mass rests on the guide in both structures (MODEL.md's normal force).
         let total_mass = params.m1 + params.m2 + params.pe_mass();
         Ok(Model {
-            friction: Leuven::new(&params, params.normal_force * effects.normal_scale(), effects.eps),
+            friction: Leuven::new(
+                &params,
+                params.normal_force * effects.normal_scale(),
+                effects.eps,
+            ),
             hysteresis: piezo_hysteresis.then(|| {
-                PiezoHysteresis::new(params.hyst_alpha, params.hyst_beta, params.hyst_gamma, params.d33)
+                PiezoHysteresis::new(
+                    params.hyst_alpha,
+                    params.hyst_beta,
+                    params.hyst_gamma,
+                    params.d33,
+                )
             }),
             kp: params.kp(),
             d33: params.d33,
@@ -106,7 +142,10 @@ impl Model {
     /// Bound on |Fh| [N] (MODEL.md invariant), with the effective normal force and asymmetry.
     pub fn presliding_bound(&self) -> f64 {
         let p = &self.params;
-        let fs = p.mu_s.max(p.mu_k) * p.normal_force * self.effects.normal_scale() * (1.0 + self.effects.eps.abs());
+        let fs = p.mu_s.max(p.mu_k)
+            * p.normal_force
+            * self.effects.normal_scale()
+            * (1.0 + self.effects.eps.abs());
         fs.min(p.fric_alpha / (p.fric_beta + p.fric_gamma))
     }
 
@@ -137,7 +176,11 @@ impl Model {
         s[l.g] = f64::INFINITY;
         s[l.fh] = fs;
         s[l.h] = stroke;
-        for (idx, scale) in [(l.vpe, v_max.abs().max(1.0)), (l.xc, stroke), (l.xs, stroke)] {
+        for (idx, scale) in [
+            (l.vpe, v_max.abs().max(1.0)),
+            (l.xc, stroke),
+            (l.xs, stroke),
+        ] {
             if let Some(i) = idx {
                 s[i] = scale;
             }
@@ -197,7 +240,11 @@ impl Model {
         let n = if N > 0 { N } else { l.dof };
         let (ig, ifh, ih) = (2 * n, 2 * n + 1, 2 * n + 2);
         let (q, v) = (&y[..n], &y[n..2 * n]);
-        let (v_pe, dv_pe) = if EXTRAS { self.pe_voltage(v_cmd, dv_cmd, y) } else { (v_cmd, dv_cmd) };
+        let (v_pe, dv_pe) = if EXTRAS {
+            self.pe_voltage(v_cmd, dv_cmd, y)
+        } else {
+            (v_cmd, dv_cmd)
+        };
         let h = y[ih];
         dy[ih] = self.hysteresis.map_or(0.0, |hy| hy.rate(dv_pe, h));
         let mut xc = 0.0;
@@ -206,7 +253,11 @@ impl Model {
                 dy[i] = dv_pe;
             }
             if let Some(i) = l.xc {
-                dy[i] = first_order_rate(self.effects.kappa * self.d33 * v_pe, y[i], self.inv_tau_creep);
+                dy[i] = first_order_rate(
+                    self.effects.kappa * self.d33 * v_pe,
+                    y[i],
+                    self.inv_tau_creep,
+                );
                 xc = y[i];
             }
         }
@@ -223,7 +274,13 @@ impl Model {
         for i in 0..n {
             dy[i] = v[i];
         }
-        self.mech.accelerations(q, v, (fp + f_ext_main) - ff, f_ext_weight - fp, &mut dy[n..2 * n]);
+        self.mech.accelerations(
+            q,
+            v,
+            (fp + f_ext_main) - ff,
+            f_ext_weight - fp,
+            &mut dy[n..2 * n],
+        );
 
         if EXTRAS {
             if let Some(i) = l.xs {
@@ -236,7 +293,12 @@ impl Model {
                 dy[a + 3] = f_ext_main * v[0] + f_ext_weight * v[n - 1];
                 dy[a + 4] = ff;
                 dy[a + 5] = self.params.rayleigh_alpha
-                    * self.pe_mass_sums.iter().zip(v).map(|(m, vi)| m * vi).sum::<f64>();
+                    * self
+                        .pe_mass_sums
+                        .iter()
+                        .zip(v)
+                        .map(|(m, vi)| m * vi)
+                        .sum::<f64>();
                 dy[a + 6] = f_ext_main + f_ext_weight;
             }
         }

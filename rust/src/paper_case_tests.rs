@@ -25,7 +25,14 @@ fn paper_case_final_positions_match_model_md() {
 
 #[test]
 fn too_large_step_is_reported_as_divergence() {
-    let m = Model::new(Params::paper(), Effects::default(), Structure::Lps, true, false).unwrap();
+    let m = Model::new(
+        Params::paper(),
+        Effects::default(),
+        Structure::Lps,
+        true,
+        false,
+    )
+    .unwrap();
     let w = PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap();
     match simulate(&m, &w, 10e-3, 5e-7, 100) {
         Err(crate::simulate::SimError::Diverged { t, message }) => {

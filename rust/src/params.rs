@@ -8,10 +8,29 @@ pub const GRAVITY: f64 = 9.81;
 
 /// Every parameter name, in the order of the fields of [`Params`].
 pub const PARAM_NAMES: [&str; 23] = [
-    "m1", "m2", "pe_area", "pe_youngs", "pe_length", "pe_density", "d33", "rayleigh_alpha",
-    "rayleigh_beta", "hyst_alpha", "hyst_beta", "hyst_gamma", "fric_alpha", "fric_beta",
-    "fric_gamma", "fric_n", "stribeck_velocity", "stribeck_exponent", "mu_k", "mu_s", "sigma1",
-    "sigma2", "normal_force",
+    "m1",
+    "m2",
+    "pe_area",
+    "pe_youngs",
+    "pe_length",
+    "pe_density",
+    "d33",
+    "rayleigh_alpha",
+    "rayleigh_beta",
+    "hyst_alpha",
+    "hyst_beta",
+    "hyst_gamma",
+    "fric_alpha",
+    "fric_beta",
+    "fric_gamma",
+    "fric_n",
+    "stribeck_velocity",
+    "stribeck_exponent",
+    "mu_k",
+    "mu_s",
+    "sigma1",
+    "sigma2",
+    "normal_force",
 ];
 
 /// IDM parameters (SI units). Field docs give the paper's symbol.
@@ -119,16 +138,37 @@ impl Params {
     }
 
     pub fn get(&self, name: &str) -> Option<f64> {
-        self.fields().into_iter().find(|(n, _)| *n == name).map(|(_, v)| v)
+        self.fields()
+            .into_iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, v)| v)
     }
 
     fn fields(&self) -> [(&'static str, f64); 23] {
         let v = [
-            self.m1, self.m2, self.pe_area, self.pe_youngs, self.pe_length, self.pe_density,
-            self.d33, self.rayleigh_alpha, self.rayleigh_beta, self.hyst_alpha, self.hyst_beta,
-            self.hyst_gamma, self.fric_alpha, self.fric_beta, self.fric_gamma, self.fric_n,
-            self.stribeck_velocity, self.stribeck_exponent, self.mu_k, self.mu_s, self.sigma1,
-            self.sigma2, self.normal_force,
+            self.m1,
+            self.m2,
+            self.pe_area,
+            self.pe_youngs,
+            self.pe_length,
+            self.pe_density,
+            self.d33,
+            self.rayleigh_alpha,
+            self.rayleigh_beta,
+            self.hyst_alpha,
+            self.hyst_beta,
+            self.hyst_gamma,
+            self.fric_alpha,
+            self.fric_beta,
+            self.fric_gamma,
+            self.fric_n,
+            self.stribeck_velocity,
+            self.stribeck_exponent,
+            self.mu_k,
+            self.mu_s,
+            self.sigma1,
+            self.sigma2,
+            self.normal_force,
         ];
         std::array::from_fn(|i| (PARAM_NAMES[i], v[i]))
     }
@@ -159,7 +199,12 @@ impl Params {
             "sigma1" => &mut self.sigma1,
             "sigma2" => &mut self.sigma2,
             "normal_force" => &mut self.normal_force,
-            _ => return Err(format!("unknown parameter '{name}'; known: {}", PARAM_NAMES.join(", "))),
+            _ => {
+                return Err(format!(
+                    "unknown parameter '{name}'; known: {}",
+                    PARAM_NAMES.join(", ")
+                ))
+            }
         };
         *slot = value;
         Ok(())
@@ -188,12 +233,19 @@ impl Params {
             }
         }
         let positive = [
-            ("m1", self.m1), ("m2", self.m2), ("pe_area", self.pe_area),
-            ("pe_youngs", self.pe_youngs), ("pe_length", self.pe_length), ("d33", self.d33),
-            ("fric_alpha", self.fric_alpha), ("fric_n", self.fric_n),
+            ("m1", self.m1),
+            ("m2", self.m2),
+            ("pe_area", self.pe_area),
+            ("pe_youngs", self.pe_youngs),
+            ("pe_length", self.pe_length),
+            ("d33", self.d33),
+            ("fric_alpha", self.fric_alpha),
+            ("fric_n", self.fric_n),
             ("stribeck_velocity", self.stribeck_velocity),
-            ("stribeck_exponent", self.stribeck_exponent), ("mu_k", self.mu_k),
-            ("mu_s", self.mu_s), ("normal_force", self.normal_force),
+            ("stribeck_exponent", self.stribeck_exponent),
+            ("mu_k", self.mu_k),
+            ("mu_s", self.mu_s),
+            ("normal_force", self.normal_force),
         ];
         for (name, v) in positive {
             if v <= 0.0 {
@@ -201,9 +253,12 @@ impl Params {
             }
         }
         let non_negative = [
-            ("pe_density", self.pe_density), ("rayleigh_alpha", self.rayleigh_alpha),
-            ("rayleigh_beta", self.rayleigh_beta), ("fric_beta", self.fric_beta),
-            ("sigma1", self.sigma1), ("sigma2", self.sigma2),
+            ("pe_density", self.pe_density),
+            ("rayleigh_alpha", self.rayleigh_alpha),
+            ("rayleigh_beta", self.rayleigh_beta),
+            ("fric_beta", self.fric_beta),
+            ("sigma1", self.sigma1),
+            ("sigma2", self.sigma2),
         ];
         for (name, v) in non_negative {
             if v < 0.0 {
@@ -235,9 +290,15 @@ mod tests {
 
     #[test]
     fn unknown_and_bad_values_are_named() {
-        assert!(Params::from_pairs(&[("mass", 1.0)]).unwrap_err().contains("'mass'"));
-        assert!(Params::from_pairs(&[("m1", -1.0)]).unwrap_err().contains("'m1'"));
-        assert!(Params::from_pairs(&[("d33", f64::NAN)]).unwrap_err().contains("'d33'"));
+        assert!(Params::from_pairs(&[("mass", 1.0)])
+            .unwrap_err()
+            .contains("'mass'"));
+        assert!(Params::from_pairs(&[("m1", -1.0)])
+            .unwrap_err()
+            .contains("'m1'"));
+        assert!(Params::from_pairs(&[("d33", f64::NAN)])
+            .unwrap_err()
+            .contains("'d33'"));
     }
 
     #[test]

@@ -13,7 +13,11 @@ pub struct PiezoHysteresis {
 
 impl PiezoHysteresis {
     pub fn new(ap: f64, bp: f64, cp: f64, d33: f64) -> Self {
-        PiezoHysteresis { ap_d33: ap * d33, bp, cp }
+        PiezoHysteresis {
+            ap_d33: ap * d33,
+            bp,
+            cp,
+        }
     }
 
     /// dh/dt = ap d33 dV/dt - bp |dV/dt| h - cp dV/dt |h| [m/s], for dV/dt in V/s and h in m.
@@ -47,7 +51,10 @@ mod tests {
             h
         };
         let (slow, fast) = (integrate(1e3), integrate(1e6));
-        assert!((slow - fast).abs() < 1e-12 * slow.abs().max(1e-9), "{slow} {fast}");
+        assert!(
+            (slow - fast).abs() < 1e-12 * slow.abs().max(1e-9),
+            "{slow} {fast}"
+        );
         assert!(slow > 0.0 && slow < 0.4297 * 1.24e-7 * 80.0);
     }
 

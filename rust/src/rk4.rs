@@ -36,18 +36,18 @@ impl<S: AsRef<[f64]> + AsMut<[f64]> + Clone, const L: usize> Rk4<S, L> {
     /// Buffers shaped like `zero` (which should be all zeros).
     pub fn new(zero: S) -> Self {
         let z = || std::array::from_fn(|_| zero.clone());
-        Rk4 { k1: z(), k2: z(), k3: z(), k4: z(), tmp: z() }
+        Rk4 {
+            k1: z(),
+            k2: z(),
+            k3: z(),
+            k4: z(),
+            tmp: z(),
+        }
     }
 
     /// Advance every lane `i` with `active[i]` by one step `dt`.
     #[inline(always)]
-    pub fn step_lanes<F: Rhs>(
-        &mut self,
-        f: &mut F,
-        dt: f64,
-        ys: &mut [S; L],
-        active: &[bool; L],
-    ) {
+    pub fn step_lanes<F: Rhs>(&mut self, f: &mut F, dt: f64, ys: &mut [S; L], active: &[bool; L]) {
         let h2 = 0.5 * dt;
         for i in 0..L {
             if active[i] {
@@ -56,27 +56,47 @@ impl<S: AsRef<[f64]> + AsMut<[f64]> + Clone, const L: usize> Rk4<S, L> {
         }
         for i in 0..L {
             if active[i] {
-                axpy(self.tmp[i].as_mut(), ys[i].as_ref(), h2, self.k1[i].as_ref());
+                axpy(
+                    self.tmp[i].as_mut(),
+                    ys[i].as_ref(),
+                    h2,
+                    self.k1[i].as_ref(),
+                );
                 f.eval(i, 0.5, self.tmp[i].as_ref(), self.k2[i].as_mut());
             }
         }
         for i in 0..L {
             if active[i] {
-                axpy(self.tmp[i].as_mut(), ys[i].as_ref(), h2, self.k2[i].as_ref());
+                axpy(
+                    self.tmp[i].as_mut(),
+                    ys[i].as_ref(),
+                    h2,
+                    self.k2[i].as_ref(),
+                );
                 f.eval(i, 0.5, self.tmp[i].as_ref(), self.k3[i].as_mut());
             }
         }
         for i in 0..L {
             if active[i] {
-                axpy(self.tmp[i].as_mut(), ys[i].as_ref(), dt, self.k3[i].as_ref());
+                axpy(
+                    self.tmp[i].as_mut(),
+                    ys[i].as_ref(),
+                    dt,
+                    self.k3[i].as_ref(),
+                );
                 f.eval(i, 1.0, self.tmp[i].as_ref(), self.k4[i].as_mut());
             }
         }
         let h6 = dt / 6.0;
         for i in 0..L {
             if active[i] {
-                let (y, k1, k2, k3, k4) =
-                    (ys[i].as_mut(), self.k1[i].as_ref(), self.k2[i].as_ref(), self.k3[i].as_ref(), self.k4[i].as_ref());
+                let (y, k1, k2, k3, k4) = (
+                    ys[i].as_mut(),
+                    self.k1[i].as_ref(),
+                    self.k2[i].as_ref(),
+                    self.k3[i].as_ref(),
+                    self.k4[i].as_ref(),
+                );
                 for j in 0..y.len() {
                     y[j] += h6 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j]);
                 }

@@ -1,7 +1,7 @@
 //! The simulation driver: steps the model with RK4 under a piecewise-linear input, checks for
 //! divergence every step, and hands each state to an observer (saving, metrics).
 
-use crate::model::Model;
+use crate::model::{with_state_size, Model};
 use crate::rk4::{Rhs, Rk4};
 use crate::waveform::PiecewiseLinear;
 
@@ -28,12 +28,21 @@ impl std::fmt::Display for SimError {
 
 /// Number of steps of size `dt` in `t_end`, refusing a `dt` that does not divide it or that the
 /// structure's highest mode makes unstable.
-pub fn plan_steps(model: &Model, wave: &PiecewiseLinear, t_end: f64, dt: f64) -> Result<usize, SimError> {
+pub fn plan_steps(
+    model: &Model,
+    wave: &PiecewiseLinear,
+    t_end: f64,
+    dt: f64,
+) -> Result<usize, SimError> {
     if !(dt.is_finite() && dt > 0.0) {
-        return Err(SimError::Input(format!("parameter 'dt' must be positive and finite, got {dt}")));
+        return Err(SimError::Input(format!(
+            "parameter 'dt' must be positive and finite, got {dt}"
+        )));
     }
     if !(t_end.is_finite() && t_end > 0.0) {
-        return Err(SimError::Input(format!("parameter 't_end' must be positive and finite, got {t_end}")));
+        return Err(SimError::Input(format!(
+            "parameter 't_end' must be positive and finite, got {t_end}"
+        )));
     }
     let steps = (t_end / dt).round();
     if (steps * dt - t_end).abs() > 1e-6 * dt || steps < 1.0 {
@@ -44,7 +53,11 @@ pub fn plan_steps(model: &Model, wave: &PiecewiseLinear, t_end: f64, dt: f64) ->
     wave.check_alignment(dt, t_end).map_err(SimError::Input)?;
     // a first-order lag much faster than the step makes its state stiff: RK4 would diverge
     let e = &model.effects;
-    for (name, tau) in [("tau_amp", e.tau_amp), ("tau_creep", e.tau_creep), ("tau_sensor", e.tau_sensor)] {
+    for (name, tau) in [
+        ("tau_amp", e.tau_amp),
+        ("tau_creep", e.tau_creep),
+        ("tau_sensor", e.tau_sensor),
+    ] {
         if tau > 0.0 && tau * RK4_STABLE_OMEGA_DT < dt {
             return Err(SimError::Input(format!(
                 "effect parameter '{name}' = {tau:e} s is too short for dt = {dt:e} s (RK4 needs dt <= {:.3e} s); \
@@ -82,7 +95,12 @@ pub struct ModelRhs<'a, const N: usize, const EXTRAS: bool, const L: usize = 1> 
 impl<const N: usize, const EXTRAS: bool, const L: usize> Rhs for ModelRhs<'_, N, EXTRAS, L> {
     #[inline(always)]
     fn eval(&mut self, lane: usize, c: f64, y: &[f64], dy: &mut [f64]) {
-        let out = self.model.rhs_impl::<N, EXTRAS>(self.v0[lane] + self.slope[lane] * c * self.dt, self.slope[lane], y, dy);
+        let out = self.model.rhs_impl::<N, EXTRAS>(
+            self.v0[lane] + self.slope[lane] * c * self.dt,
+            self.slope[lane],
+            y,
+            dy,
+        );
         if c == 0.0 {
             self.ff_gdot[lane] = out;
         }
@@ -110,19 +128,12 @@ pub fn integrate<O: FnMut(usize, f64, &[f64], f64)>(
             r
         }};
     }
-    match (model.is_plain(), model.layout.dof) {
-        (true, 2) => fixed!(2, 7),
-        (true, 3) => fixed!(3, 9),
-        (true, 4) => fixed!(4, 11),
-        (true, 5) => fixed!(5, 13),
-        (true, 6) => fixed!(6, 15),
-        _ => {
-            let mut v = y.to_vec();
-            let r = integrate_with::<_, _, 0, true>(model, wave, dt, steps, &mut v, observe);
-            y.copy_from_slice(&v);
-            r
-        }
-    }
+    with_state_size!(model.is_plain(), model.layout.dof, fixed, {
+        let mut v = y.to_vec();
+        let r = integrate_with::<_, _, 0, true>(model, wave, dt, steps, &mut v, observe);
+        y.copy_from_slice(&v);
+        r
+    })
 }
 
 #[inline(always)]
@@ -159,7 +170,13 @@ where
             let s = (bv[seg + 1] - bv[seg]) / (bt[seg + 1] - bt[seg]);
             (bv[seg] + s * (t0 - bt[seg]), s)
         };
-        let mut f = ModelRhs::<N, EXTRAS> { model, v0: [v0], slope: [slope], dt, ff_gdot: [(0.0, 0.0)] };
+        let mut f = ModelRhs::<N, EXTRAS> {
+            model,
+            v0: [v0],
+            slope: [slope],
+            dt,
+            ff_gdot: [(0.0, 0.0)],
+        };
         rk.step(&mut f, dt, y);
         let t1 = (k + 1) as f64 * dt;
         let ys = y.as_ref();
@@ -181,8 +198,16 @@ where
 fn diverged(model: &Model, dt: f64, t: f64, y: &[f64]) -> SimError {
     let l = model.layout;
     let v = y[l.dof];
-    let stiff = if v.is_finite() { model.friction.sliding_stiffness(v) } else { f64::NAN };
-    let hint = if stiff.is_finite() && stiff > 0.0 { (RK4_STABLE_OMEGA_DT / stiff).min(dt / 2.0) } else { dt / 4.0 };
+    let stiff = if v.is_finite() {
+        model.friction.sliding_stiffness(v)
+    } else {
+        f64::NAN
+    };
+    let hint = if stiff.is_finite() && stiff > 0.0 {
+        (RK4_STABLE_OMEGA_DT / stiff).min(dt / 2.0)
+    } else {
+        dt / 4.0
+    };
     SimError::Diverged {
         t,
         message: format!(
@@ -242,7 +267,8 @@ impl Trajectory {
         self.voltage.push(v_cmd);
         self.reading.push(model.reading(t, y));
         if let Some(a) = l.accounting {
-            self.accounting.extend_from_slice(&y[a..a + crate::model::N_ACCOUNTING]);
+            self.accounting
+                .extend_from_slice(&y[a..a + crate::model::N_ACCOUNTING]);
             self.kinetic.push(model.mech.kinetic(&y[n..2 * n]));
             self.strain.push(model.mech.strain(&y[..n]));
             self.momentum.push(model.mech.momentum(&y[n..2 * n]));
@@ -259,11 +285,16 @@ pub fn simulate(
     save_every: usize,
 ) -> Result<Trajectory, SimError> {
     if save_every == 0 {
-        return Err(SimError::Input("parameter 'save_every' must be at least 1".into()));
+        return Err(SimError::Input(
+            "parameter 'save_every' must be at least 1".into(),
+        ));
     }
     let steps = plan_steps(model, wave, t_end, dt)?;
     let mut y = rest_state(model);
-    let mut out = Trajectory { dof: model.layout.dof, ..Default::default() };
+    let mut out = Trajectory {
+        dof: model.layout.dof,
+        ..Default::default()
+    };
     out.record(model, 0.0, &y, wave.value(0.0));
     let mut until_save = save_every;
     integrate(model, wave, dt, steps, &mut y, |k, t, s, v| {

@@ -12,7 +12,11 @@ pub struct PiecewiseLinear {
 impl PiecewiseLinear {
     pub fn new(t: Vec<f64>, v: Vec<f64>) -> Result<Self, String> {
         if t.len() != v.len() {
-            return Err(format!("waveform: {} times but {} voltages", t.len(), v.len()));
+            return Err(format!(
+                "waveform: {} times but {} voltages",
+                t.len(),
+                v.len()
+            ));
         }
         if t.is_empty() {
             return Err("waveform: needs at least one sample".into());
@@ -23,7 +27,10 @@ impl PiecewiseLinear {
         if let Some(i) = t.windows(2).position(|w| w[1] <= w[0]) {
             return Err(format!(
                 "waveform: times must increase strictly (t[{}] = {} >= t[{}] = {})",
-                i, t[i], i + 1, t[i + 1]
+                i,
+                t[i],
+                i + 1,
+                t[i + 1]
             ));
         }
         Ok(PiecewiseLinear { t, v })
@@ -66,7 +73,9 @@ impl PiecewiseLinear {
         }
         let period = 1.0 / frequency;
         if rise >= period {
-            return Err(format!("parameter 'rise' ({rise} s) must be shorter than the period ({period} s)"));
+            return Err(format!(
+                "parameter 'rise' ({rise} s) must be shorter than the period ({period} s)"
+            ));
         }
         let peak_at = if forward { rise } else { period - rise };
         let mut t = vec![0.0];
@@ -122,10 +131,14 @@ impl PiecewiseLinear {
     /// which breakpoint and a `dt` that would.
     pub fn check_alignment(&self, dt: f64, t_end: f64) -> Result<(), String> {
         let misaligned = |step: f64| {
-            self.t.iter().copied().filter(|&ti| ti > 0.0 && ti < t_end).find(|&ti| {
-                let r = ti / step;
-                (r - r.round()).abs() > 1e-6
-            })
+            self.t
+                .iter()
+                .copied()
+                .filter(|&ti| ti > 0.0 && ti < t_end)
+                .find(|&ti| {
+                    let r = ti / step;
+                    (r - r.round()).abs() > 1e-6
+                })
         };
         if let Some(ti) = misaligned(dt) {
             let hint = (2..=1000)
@@ -143,17 +156,29 @@ impl PiecewiseLinear {
 }
 
 fn finite(name: &str, x: f64) -> Result<(), String> {
-    if x.is_finite() { Ok(()) } else { Err(format!("parameter '{name}' must be finite, got {x}")) }
+    if x.is_finite() {
+        Ok(())
+    } else {
+        Err(format!("parameter '{name}' must be finite, got {x}"))
+    }
 }
 
 fn positive(name: &str, x: f64) -> Result<(), String> {
     finite(name, x)?;
-    if x > 0.0 { Ok(()) } else { Err(format!("parameter '{name}' must be positive, got {x}")) }
+    if x > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("parameter '{name}' must be positive, got {x}"))
+    }
 }
 
 fn non_negative(name: &str, x: f64) -> Result<(), String> {
     finite(name, x)?;
-    if x >= 0.0 { Ok(()) } else { Err(format!("parameter '{name}' must be non-negative, got {x}")) }
+    if x >= 0.0 {
+        Ok(())
+    } else {
+        Err(format!("parameter '{name}' must be non-negative, got {x}"))
+    }
 }
 
 #[cfg(test)]

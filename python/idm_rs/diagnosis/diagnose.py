@@ -251,7 +251,11 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
         k = len(cal_free) + len(eff.params) + n_off
         if i < refit_top:
             base = ModelSpec(eff.structure(structure0), dict(cal1.spec.params), dict(cal1.spec.effects))
-            free = cal1_at + [ep.free(v) for ep, v in zip(eff.params, screen1[eid]["estimate"])]
+            # start from the screened estimate or the best multi-start value, whichever fits
+            # the first cycle better (a linearised estimate can overshoot to a bound)
+            starts = [[ep.free(v) for ep, v in zip(eff.params, screen1[eid][key])] for key in ("estimate", "start")]
+            chis = [obj1.chi2(apply(base, cal1_at + st, np.zeros(len(cal1_at) + len(st)))) for st in starts]
+            free = cal1_at + starts[int(np.argmin(chis))]
             r = fit_progressive(obj, base, free, max_nfev=(12, 10, 10), progress=tick)
             eff_names = [ep.name for ep in eff.params]
             cand = Candidate(
