@@ -28,7 +28,7 @@ SEPARATION = 10.0
 NOISE_RATIO_OK = 1.1
 #: lag-1 autocorrelation z-score above which a residual counts as systematic
 WHITENESS_Z = 5.0
-#: candidates refitted in full after the linearised screening
+#: candidates refitted over everything after the one-cycle fits of all of them
 REFIT_TOP = 4
 
 
@@ -48,7 +48,7 @@ class Candidate:
     rms_after: float  #: [m]
     heldout_rms: float  #: RMS on the held-out experiment after fitting the others [m] (NaN if not run)
     whiteness_z: float  #: lag-1 autocorrelation of the residual, as a z-score
-    screened_only: bool  #: True when only the linearised screening was run (values are estimates)
+    screened_only: bool  #: True when fitted over the first cycle only (not refined over everything)
     residuals: list[NDArray[np.float64]] = field(default_factory=list, repr=False)
     spec: Optional[ModelSpec] = field(default=None, repr=False)
 
@@ -232,49 +232,54 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     ho_cal = heldout_rms(cal.spec, cal_at)
     lap("held-out")
 
-    # 2. screen every applicable effect, linearised about the calibrated model: over one cycle
-    # (where linearisation is safe even if a missing effect biased the calibration) and over
-    # everything (where slow effects show best)
+    # 2. every applicable effect fitted over the first cycle, where the misfit is smooth (a
+    # linearisation about the calibration is not enough: when an effect is large, the
+    # nominal-only calibration compensates it with far-off parameters)
     effects = [e for e in CATALOGUE if e.applies(structure0, p0)]
-    screen1 = {s["effect"].id: s for s in _screen(obj1, cal1, cal1_at, effects, sigma)}
-    screen_all = {s["effect"].id: s for s in _screen(obj, cal, cal_at, effects, sigma)}
-    rank1 = {k: i for i, k in enumerate(sorted(screen1, key=lambda k: -screen1[k]["delta_chi2"]))}
-    rank_all = {k: i for i, k in enumerate(sorted(screen_all, key=lambda k: -screen_all[k]["delta_chi2"]))}
-    order = sorted(screen1, key=lambda k: (min(rank1[k], rank_all[k]), rank1[k]))
-    lap("screening")
-
-    # 3. refit the most promising effects in full, from the one-cycle calibration with the
-    # effect at its screened estimate, over growing horizons
-    ranking: list[Candidate] = []
-    for i, eid in enumerate(order):
-        eff: Effect = screen1[eid]["effect"]
-        k = len(cal_free) + len(eff.params) + n_off
-        if i < refit_top:
-            base = ModelSpec(eff.structure(structure0), dict(cal1.spec.params), dict(cal1.spec.effects))
-            # start from the screened estimate or the best multi-start value, whichever fits
-            # the first cycle better (a linearised estimate can overshoot to a bound)
-            starts = [[ep.free(v) for ep, v in zip(eff.params, screen1[eid][key])] for key in ("estimate", "start")]
-            chis = [obj1.chi2(apply(base, cal1_at + st, np.zeros(len(cal1_at) + len(st)))) for st in starts]
-            free = cal1_at + starts[int(np.argmin(chis))]
-            r = fit_progressive(obj, base, free, max_nfev=(12, 10, 10), progress=tick)
-            eff_names = [ep.name for ep in eff.params]
-            cand = Candidate(
-                eff.id, eff.description, _report_params(eff, r), {n_: r.std[n_] for n_ in eff_names},
-                {n_: r.values[n_] for n_ in CALIBRATED}, r.chi2, k, r.chi2 + k * ln_n,
-                bic_cal - (r.chi2 + k * ln_n), r.rms, math.nan, whiteness_z(r.residuals), False,
-                r.residuals, r.spec)
-            cand._free = [f.at(r.values[f.name]) for f in free]  # type: ignore[attr-defined]
-            cand._base = base  # type: ignore[attr-defined]
+    n1 = obj1.n
+    first: list[tuple[Effect, FitResult, list[FreeParam], ModelSpec]] = []
+    for eff in effects:
+        base = ModelSpec(eff.structure(structure0), dict(cal1.spec.params), dict(cal1.spec.effects))
+        grids = [ep.starts for ep in eff.params]
+        combos = [tuple(s) for s in np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(grids), -1).T] if grids else [()]
+        starts = [[ep.free(v) for ep, v in zip(eff.params, c)] for c in combos]
+        if len(starts) > 1:  # the best multi-start value, judged over the first cycle
+            preds = obj1.predict([apply(base, cal1_at + st, np.zeros(len(cal1_at) + len(st))) for st in starts])
+            st = starts[int(np.argmin([float(np.sum(obj1.vector(p) ** 2)) for p in preds]))]
         else:
-            s = screen_all[eid]
-            chi2 = max(cal.chi2 - s["delta_chi2"], 0.0)
-            cand = Candidate(eff.id, eff.description, _report_params(eff, None, s), {}, {}, chi2, k,
-                             chi2 + k * ln_n, bic_cal - (chi2 + k * ln_n), sigma * math.sqrt(chi2 / n), math.nan,
-                             math.nan, True)
+            st = starts[0]
+        free = cal1_at + st
+        r1 = fit(obj1, base, free, max_nfev=15, progress=tick)
+        first.append((eff, r1, free, base))
+    first.sort(key=lambda x: x[1].chi2 + len(x[2]) * math.log(n1))
+    lap("one-cycle fits")
+
+    # 3. the leading effects refitted over two cycles and everything, from their one-cycle fit
+    ranking: list[Candidate] = []
+    for i, (eff, r1, free, base) in enumerate(first):
+        k = len(cal_free) + len(eff.params) + n_off
+        eff_names = [ep.name for ep in eff.params]
+        start = [f.at(r1.values[f.name]) for f in free]
+        if i < refit_top:
+            r = fit_progressive(obj, base, start, horizons=(2, None), max_nfev=(12, 10), progress=tick)
+            full = True
+        else:  # reported with its one-cycle parameters, evaluated over everything
+            spec = apply(base, start, np.zeros(len(start)))
+            res, _ = obj.profiled(obj.predict([spec])[0])
+            chi2 = float(sum(np.sum(x * x) for x in res)) / sigma**2
+            r = FitResult(r1.values, r1.std, chi2, n, res, [], spec, 0, True, "one-cycle fit only")
+            full = False
+        cand = Candidate(
+            eff.id, eff.description, _report_params(eff, r), {n_: r.std[n_] for n_ in eff_names},
+            {n_: r.values[n_] for n_ in CALIBRATED}, r.chi2, k, r.chi2 + k * ln_n,
+            bic_cal - (r.chi2 + k * ln_n), r.rms, math.nan, whiteness_z(r.residuals), not full,
+            r.residuals, r.spec)
+        cand._free = [f.at(r.values[f.name]) for f in free]  # type: ignore[attr-defined]
+        cand._base = base  # type: ignore[attr-defined]
         ranking.append(cand)
-    # refitted candidates first (their numbers are real fits), then the screened-only estimates
-    ranking.sort(key=lambda c: (c.screened_only, -c.delta_bic))
     lap("refits")
+    # candidates refitted over everything first, then those fitted over the first cycle only
+    ranking.sort(key=lambda c: (c.screened_only, -c.delta_bic))
     # held-out prediction for the leading refitted candidates
     for c in [c for c in ranking if not c.screened_only][:2]:
         c.heldout_rms = heldout_rms(c._base, c._free)  # type: ignore[attr-defined]
@@ -294,85 +299,15 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     )
 
 
-def _report_params(eff: Effect, r: Optional[FitResult], screened: Optional[dict] = None) -> dict[str, float]:
+def _report_params(eff: Effect, r: FitResult) -> dict[str, float]:
     """Effect parameters under their catalogue names (mu_s rather than the fitted excess)."""
-    vals = {ep.name: (r.values[ep.name] if r else screened["estimate"][i]) for i, ep in enumerate(eff.params)}
+    vals = {ep.name: r.values[ep.name] for ep in eff.params}
     if eff.id == "stribeck":
-        mu_k = r.values["mu_k"] if r else screened["mu_k"]
+        mu_k = r.values["mu_k"]
         return {"mu_s": mu_k * (1.0 + vals["mu_s_excess"]), "mu_k": mu_k}
     if eff.id == "pe_mass":
         return {}
     return vals
-
-
-def _screen(obj: Objective, cal: FitResult, cal_at: list[FreeParam], effects: Sequence[Effect],
-            sigma: float) -> list[dict]:
-    """Rao-score screening: the chi^2 drop a Gauss-Newton step would give when each effect's
-    parameters join the calibrated ones, from one batch of Jacobian columns. Multi-start values
-    of nonlinear parameters are compared by their own chi^2 first."""
-    from scipy.optimize import lsq_linear
-
-    r0 = np.concatenate(cal.residuals) / sigma
-    h = 1e-3
-    specs: list[ModelSpec] = []
-    # nominal columns
-    for j in range(len(cal_at)):
-        u = np.zeros(len(cal_at))
-        u[j] = h
-        specs.append(apply(cal.spec, cal_at, u))
-    plan = []
-    for eff in effects:
-        base = ModelSpec(eff.structure(cal.spec.structure), dict(cal.spec.params), dict(cal.spec.effects))
-        grids = [ep.starts for ep in eff.params]
-        starts = [tuple(s) for s in np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(grids), -1).T] if grids else [()]
-        entry = {"effect": eff, "base": base, "starts": starts, "start_idx": len(specs)}
-        for st in starts:  # the effect at each start
-            free = [ep.free(v) for ep, v in zip(eff.params, st)]
-            specs.append(apply(base, free, np.zeros(len(free))))
-        plan.append(entry)
-    preds = obj.predict(specs)
-    Jn = np.stack([(obj.vector(preds[j]) - r0) / h for j in range(len(cal_at))], axis=1)
-    # second pass: derivatives of the effect parameters at the best start
-    specs2, plan2 = [], []
-    for entry in plan:
-        eff = entry["effect"]
-        chis = [float(np.sum(obj.vector(preds[entry["start_idx"] + i]) ** 2)) for i in range(len(entry["starts"]))]
-        best = int(np.argmin(chis))
-        entry["start"] = entry["starts"][best]
-        entry["r_start"] = obj.vector(preds[entry["start_idx"] + best])
-        free = [ep.free(v) for ep, v in zip(eff.params, entry["start"])]
-        entry["free"] = free
-        idx = len(specs2)
-        for j, f in enumerate(free):
-            lo, hi = f.u_bounds()
-            u = np.zeros(len(free))
-            u[j] = h if h <= hi else -h
-            specs2.append(apply(entry["base"], free, u))
-        entry["cols"] = (idx, [(h if h <= f.u_bounds()[1] else -h) for f in free])
-        plan2.append(entry)
-    preds2 = obj.predict(specs2) if specs2 else []
-    out = []
-    # baseline: what a further step in the nominal parameters alone would gain (the calibration
-    # stops near, not at, its optimum); each effect is credited only with what it adds
-    lo_n = np.array([f.u_bounds()[0] for f in cal_at])
-    hi_n = np.array([f.u_bounds()[1] for f in cal_at])
-    du_n = lsq_linear(Jn, -r0, bounds=(np.minimum(lo_n, -1e-12), np.maximum(hi_n, 1e-12))).x
-    chi2_cal = float(np.sum((r0 + Jn @ du_n) ** 2))
-    for entry in plan2:
-        idx, steps = entry["cols"]
-        rs = entry["r_start"]
-        Je = [(obj.vector(preds2[idx + j]) - rs) / s for j, s in enumerate(steps)]
-        A = np.concatenate([Jn, np.stack(Je, axis=1)], axis=1) if Je else Jn
-        # bounded Gauss-Newton step from the start point: chi2 at the linearised optimum
-        bounds = [f.u_bounds() for f in cal_at] + [f.u_bounds() for f in entry["free"]]
-        lo = np.array([b[0] for b in bounds])
-        hi = np.array([b[1] for b in bounds])
-        du = lsq_linear(A, -rs, bounds=(np.minimum(lo, -1e-12), np.maximum(hi, 1e-12))).x
-        chi2_lin = float(np.sum((rs + A @ du) ** 2))
-        est = [f.value(float(np.clip(d, *f.u_bounds()))) for f, d in zip(entry["free"], du[Jn.shape[1]:])]
-        out.append({"effect": entry["effect"], "start": entry["start"], "delta_chi2": chi2_cal - chi2_lin,
-                    "estimate": est, "mu_k": cal.values["mu_k"]})
-    return out
 
 
 def _verdict(ranking: list[Candidate], cal: FitResult, noise: NoiseEstimate, wz_cal: float,

@@ -171,7 +171,7 @@ def plot_ranking(d: "Diagnosis", directory: Path) -> Path:
     ax.axvline(0, color="0.2", lw=0.8)
     ax.set_yticks(y, [c.effect + (" (screened)" if c.screened_only else "") for c in cands], fontsize=9)
     if any(c.screened_only for c in cands):
-        ax.barh(np.nan, 0, color="0.75", hatch="//", edgecolor="0.4", label="screened only (not refitted)")
+        ax.barh(np.nan, 0, color="0.75", hatch="//", edgecolor="0.4", label="screened: one-cycle fit only")
     lo, hi = ax.get_xlim()
     ax.set_xlim(lo, hi * 10 if hi > 0 else hi)
     for yi, c in zip(y, cands):

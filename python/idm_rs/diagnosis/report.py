@@ -221,8 +221,8 @@ def text_report(d: "Diagnosis") -> str:
                      "screened" if c.screened_only else "refit"])
     lines += _table(["#", "effect", "fitted parameters (±1σ)", "RMS after", "/ noise", "ΔBIC", "held-out RMS",
                      "fit"], rows, "rllrrrrl")
-    lines.append("  screened: linearised estimate about the calibrated model, not refitted "
-                 "(values are estimates, no uncertainty)")
+    lines.append("  screened: fitted over the first drive cycle only, then evaluated over everything "
+                 "(not refined; its numbers understate what the effect could do)")
 
     lines += ["", "Refit model:", "  " + refit_model_line(d)]
     return "\n".join(lines) + "\n"
