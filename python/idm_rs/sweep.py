@@ -281,12 +281,17 @@ def sweep(
     threads = int(threads or os.cpu_count() or 1)
     t0 = time.perf_counter()
     complete = True
-    bar = _progress_bar(n, progress)
+    bar = None
     try:
+        bar = _progress_bar(n, progress)
         if client is not None:
             complete = _run_dask(plan, out, client, max(block_size, DASK_MIN_BLOCK), bar)
         else:
             complete = _run_local(plan, out, threads, block_size, bar)
+    except KeyboardInterrupt:  # between blocks or before the first: nothing finished is lost
+        complete = False
+        warnings.warn(f"sweep interrupted: {int(np.count_nonzero(out['status']))} of {n} points finished; "
+                      "the rest are NaN (attrs['complete'] = 0)", RuntimeWarning, stacklevel=2)
     finally:
         if bar is not None:
             bar.close()
