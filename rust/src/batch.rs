@@ -601,59 +601,47 @@ fn run_chunk(
             }
         }
     }
-    match cfg.method {
-        Method::Rk4 => {
-            let mut start = 0;
-            while start < valid.len() {
-                if cancel.load(Ordering::Relaxed) {
-                    break;
-                }
-                let end = lane_group_end(&valid, start);
-                let group = &valid[start..end];
-                let models: Vec<Model> = group.iter().map(|(_, m, _)| m.clone()).collect();
-                let gspecs: Vec<&PointSpec> = group.iter().map(|(i, _, _)| &specs[*i]).collect();
+    // lane groups: up to LANES points sharing one state layout, run together
+    let mut start = 0;
+    while start < valid.len() {
+        if cancel.load(Ordering::Relaxed) {
+            break;
+        }
+        let end = lane_group_end(&valid, start);
+        let group = &valid[start..end];
+        let models: Vec<Model> = group.iter().map(|(_, m, _)| m.clone()).collect();
+        let gspecs: Vec<&PointSpec> = group.iter().map(|(i, _, _)| &specs[*i]).collect();
+        let results: Vec<Option<PointOutput>> = match cfg.method {
+            Method::Rk4 => {
                 let steps: Vec<usize> = group.iter().map(|(_, _, s)| *s).collect();
-                let results = rk4_group(cfg.dt, cfg.record_every, &models, &gspecs, &steps, cancel);
-                if results.is_empty() {
+                let r = rk4_group(cfg.dt, cfg.record_every, &models, &gspecs, &steps, cancel);
+                if r.is_empty() {
                     break; // cancelled
                 }
-                for ((i, m, _), r) in group.iter().zip(results) {
-                    let res = match r {
+                group
+                    .iter()
+                    .zip(r)
+                    .map(|((i, m, _), r)| match r {
                         Ok(x) => Some(x),
                         Err(t) => rk4_retry(cfg, m, &specs[*i], t, cancel),
-                    };
-                    if res.is_some() {
-                        done.fetch_add(1, Ordering::Relaxed);
-                    }
-                    out[*i] = res;
-                }
-                start = end;
+                    })
+                    .collect()
             }
-        }
-        Method::Dopri5 { rtol, atol } => {
-            let mut start = 0;
-            while start < valid.len() {
-                if cancel.load(Ordering::Relaxed) {
-                    break;
-                }
-                let end = lane_group_end(&valid, start);
-                let group = &valid[start..end];
-                let models: Vec<Model> = group.iter().map(|(_, m, _)| m.clone()).collect();
-                let gspecs: Vec<&PointSpec> = group.iter().map(|(i, _, _)| &specs[*i]).collect();
-                let results = dopri5_group(cfg, &models, &gspecs, rtol, atol, cancel);
-                if results.is_empty() {
+            Method::Dopri5 { rtol, atol } => {
+                let r = dopri5_group(cfg, &models, &gspecs, rtol, atol, cancel);
+                if r.is_empty() {
                     break; // cancelled
                 }
-                for ((i, _, _), metrics) in group.iter().zip(results) {
-                    done.fetch_add(1, Ordering::Relaxed);
-                    out[*i] = Some(PointOutput {
-                        metrics,
-                        trace: Vec::new(),
-                    });
-                }
-                start = end;
+                r.into_iter().map(|metrics| Some(PointOutput { metrics, trace: Vec::new() })).collect()
             }
+        };
+        for ((i, _, _), res) in group.iter().zip(results) {
+            if res.is_some() {
+                done.fetch_add(1, Ordering::Relaxed);
+            }
+            out[*i] = res;
         }
+        start = end;
     }
     out
 }
