@@ -10,7 +10,7 @@ typed Python API. Quick start::
     r.final_position                                      # x1(10 ms) [m]
 """
 
-from ._core import __version__
+from .engine import __version__
 from .effects import Effects
 from .params import Params
 from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate

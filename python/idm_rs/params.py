@@ -6,7 +6,7 @@ import dataclasses
 from dataclasses import dataclass, fields
 from typing import Any, Mapping, Optional
 
-from . import _core
+from . import engine
 
 GRAVITY = 9.81  # m/s^2, as in MODEL.md's default normal force
 
@@ -83,7 +83,7 @@ class Params:
                 except (TypeError, ValueError):
                     raise TypeError(f"parameter '{f.name}' must be a number, got {v!r}") from None
             object.__setattr__(self, f.name, float(v))
-        _core.resolve_params(self._given())  # raises ValueError naming the parameter
+        engine.resolve_params(self._given())  # raises ValueError naming the parameter
 
     def _given(self) -> dict[str, float]:
         d = {f.name: getattr(self, f.name) for f in fields(self)}
@@ -126,4 +126,4 @@ class Params:
 
     def to_dict(self, resolved: bool = True) -> dict[str, float]:
         """All parameters; with ``resolved`` the derived normal force is filled in."""
-        return dict(_core.resolve_params(self._given())) if resolved else self._given()
+        return dict(engine.resolve_params(self._given())) if resolved else self._given()

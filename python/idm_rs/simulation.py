@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Literal, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from . import _core
+from . import engine
 from .effects import Effects
 from .params import PARAM_INFO, Params
 from .waveforms import Waveform
@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     import xarray
 
 Model = Literal["lps", "dps"]
-DivergenceError = _core.DivergenceError
+DivergenceError = engine.DivergenceError
 
 
 @dataclass(frozen=True)
@@ -183,7 +183,7 @@ def simulate(
         if isinstance(value, bool) or int(value) != value or value < 1:
             raise ValueError(f"parameter '{name}' must be a positive integer, got {value!r}")
     bt, bv = waveform.breakpoints()
-    out = _core.simulate(
+    out = engine.simulate(
         params._given(),
         effects.active(),
         np.asarray(bt, dtype=float).tolist(),

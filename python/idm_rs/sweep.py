@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, Literal, Mapping, Optional, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import _core
+from . import engine
 from .effects import Effects
 from .params import PARAM_INFO, Params
 from .waveforms import Sampled, Sawtooth, Triangle, Waveform
@@ -95,15 +95,15 @@ class _Plan:
         """Parameter, effect and waveform matrices of the flat points `flat`."""
         n = flat.size
         idx = np.unravel_index(flat, self.shape)
-        pnames = _core.param_names()
+        pnames = engine.param_names()
         base = self.params.to_dict(resolved=False)
         pm = np.empty((n, len(pnames)))
         for j, name in enumerate(pnames):
             pm[:, j] = base.get(name, math.nan)  # NaN normal_force: derived per point
-        enames = _core.effect_names()
+        enames = engine.effect_names()
         em = np.tile([getattr(self.effects, e) for e in enames], (n, 1)).astype(float)
         wm = np.tile(_wave_row(self.waveform), (n, 1))
-        wcol = {c: j for j, c in enumerate(_core.wave_columns())}
+        wcol = {c: j for j, c in enumerate(engine.wave_columns())}
         for axis, (name, vals) in enumerate(zip(self.names, self.values)):
             v = vals[idx[axis]]
             if name in pnames:
@@ -128,7 +128,7 @@ class _Plan:
 
 
 def _wave_row(w: Waveform) -> list[float]:
-    cols = _core.wave_columns()
+    cols = engine.wave_columns()
     row = dict.fromkeys(cols, 0.0)
     if isinstance(w, Triangle):
         row.update(kind=0, amplitude=w.amplitude, rise=w.rise, fall=w.fall, delay=w.delay)
@@ -190,7 +190,7 @@ def _start(plan: _Plan, start: int, stop: int, threads: int) -> Any:
     st = sv = None
     if isinstance(plan.waveform, Sampled):
         st, sv = plan.waveform.t.tolist(), plan.waveform.voltage.tolist()
-    return _core.start_batch(pm, em, wm, st, sv, plan.model, plan.n_elements, plan.piezo_hysteresis,
+    return engine.start_batch(pm, em, wm, st, sv, plan.model, plan.n_elements, plan.piezo_hysteresis,
                              plan.t_end, plan.dt, plan.method, plan.rtol, plan.atol, plan.retries, threads)
 
 
@@ -353,15 +353,15 @@ def _validate_axes(plan: _Plan) -> None:
     flat = np.array(sorted(cross))
     pm, em, wm = plan.arrays_at(flat)
     for k in range(flat.size):
-        p = {n: float(v) for n, v in zip(_core.param_names(), pm[k]) if not (n == "normal_force" and math.isnan(v))}
-        eff = {n: float(v) for n, v in zip(_core.effect_names(), em[k]) if v != 0.0}
+        p = {n: float(v) for n, v in zip(engine.param_names(), pm[k]) if not (n == "normal_force" and math.isnan(v))}
+        eff = {n: float(v) for n, v in zip(engine.effect_names(), em[k]) if v != 0.0}
         bt, bv = _point_waveform(plan.waveform, wm[k]).breakpoints()
-        _core.check_plan(p, eff, bt.tolist(), bv.tolist(), plan.t_end, plan.dt, plan.model, plan.n_elements,
+        engine.check_plan(p, eff, bt.tolist(), bv.tolist(), plan.t_end, plan.dt, plan.model, plan.n_elements,
                          plan.method)
 
 
 def _point_waveform(w: Waveform, row: NDArray[np.float64]) -> Waveform:
-    c = dict(zip(_core.wave_columns(), row))
+    c = dict(zip(engine.wave_columns(), row))
     if isinstance(w, Triangle):
         return Triangle(c["amplitude"], c["rise"], c["fall"], c["delay"])
     if isinstance(w, Sawtooth):

@@ -11,7 +11,7 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import _core
+from .. import engine
 from ..recording import Recording
 
 #: RK4 step used for fits [s]: within ~1e-11 m of dt = 5e-8 on the dev cases (noise is ~1e-9 m),
@@ -53,7 +53,7 @@ class CaseSimulator:
         if abs(self.record_every * dt - step) > 1e-9 * step:
             raise ValueError(f"fit step {dt} s does not divide the sample step {step} s")
         self._wave_rows = []
-        cols = _core.wave_columns()
+        cols = engine.wave_columns()
         for e in recording.experiments:
             row = dict.fromkeys(cols, 0.0)
             row.update(kind=1, amplitude=e.amplitude_V, rise=e.edge_s, frequency=e.frequency_Hz, cycles=e.cycles,
@@ -78,7 +78,7 @@ class CaseSimulator:
             by_structure.setdefault(s.structure, []).append(i)
         n_exp = len(self.recording.experiments)
         horizons = [self.horizon(j, cycles) for j in range(n_exp)]
-        pnames, enames = _core.param_names(), _core.effect_names()
+        pnames, enames = engine.param_names(), engine.effect_names()
         for structure, idx in by_structure.items():
             rows_p, rows_e, rows_w, t_ends = [], [], [], []
             prows = [[math.nan if specs[i].params.get(n) is None else float(specs[i].params[n]) for n in pnames]
@@ -92,7 +92,7 @@ class CaseSimulator:
                     rows_e.append(erows[a])
                     rows_w.append(self._wave_rows[j])
                     t_ends.append(horizons[j][0])
-            run = _core.start_batch(
+            run = engine.start_batch(
                 np.asarray(rows_p), np.asarray(rows_e), np.asarray(rows_w), None, None,
                 structure.model, structure.n_elements, structure.piezo_hysteresis,
                 max(t_ends), self.dt, "rk4", 0.0, 0.0, 2, self.threads, t_ends, self.record_every,

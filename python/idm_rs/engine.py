@@ -1,0 +1,37 @@
+"""The one module that talks to the native core (``idm_rs._core``, Rust through PyO3).
+
+Everything else in the package calls the engine through the names here, so a change of the
+binding touches this file only. Arrays cross the boundary as numpy arrays (zero-copy views
+where the layout allows).
+"""
+
+from __future__ import annotations
+
+from . import _core
+
+__version__: str = _core.__version__
+DivergenceError = _core.DivergenceError
+BatchRun = _core.BatchRun
+
+simulate = _core.simulate
+start_batch = _core.start_batch
+check_plan = _core.check_plan
+resolve_params = _core.resolve_params
+param_names = _core.param_names
+effect_names = _core.effect_names
+wave_columns = _core.wave_columns
+highest_frequency = _core.highest_frequency
+
+__all__ = [
+    "BatchRun",
+    "DivergenceError",
+    "__version__",
+    "check_plan",
+    "effect_names",
+    "highest_frequency",
+    "param_names",
+    "resolve_params",
+    "simulate",
+    "start_batch",
+    "wave_columns",
+]
