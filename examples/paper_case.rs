@@ -1,6 +1,6 @@
 //! Paper case from Rust alone (used for profiling): `cargo run --release --example paper_case`.
 use idm_rs::{
-    effects::Effects, mechanics::Structure, model::Model, params::Params, simulate::simulate,
+    effects::Effects, mechanics::Structure, model::Model, params::Params, simulate::simulate_from_rest,
     waveform::PiecewiseLinear,
 };
 
@@ -16,7 +16,7 @@ fn main() {
     let m = Model::new(p, Effects::default(), structure, true, false).unwrap();
     let w = PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap();
     let t = std::time::Instant::now();
-    let r = simulate(&m, &w, 10e-3, 1e-8, 1_000_000).unwrap();
+    let r = simulate_from_rest(&m, &w, 10e-3, 1e-8, 1_000_000).unwrap();
     println!(
         "{structure:?} x1 = {:.10e} m, {:.1} ns/step",
         r.final_state[0],

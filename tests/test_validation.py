@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs import _core
+from idm_rs import engine
 
 PAPER_WAVE = idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=9.5e-3)
 SHORT_WAVE = idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=0.5e-3)
@@ -130,7 +130,7 @@ def test_dt_too_large_for_the_dps_structure_is_refused_up_front():
         idm_rs.simulate(idm_rs.Params(), SHORT_WAVE, 1e-3, dt=1e-7, model="dps", n_elements=100)
     m = re.search(r"use dt <= ([0-9.eE+-]+) s", str(exc.value))
     assert m, str(exc.value)
-    w = _core.highest_frequency(idm_rs.Params()._given(), "dps", 100)
+    w = engine.highest_frequency(idm_rs.Params()._given(), engine.RunConfig(model="dps", n_elements=100))
     assert float(m.group(1)) * w == pytest.approx(2.5, rel=1e-3)
     with pytest.raises(ValueError, match="highest structural mode"):
         idm_rs.simulate(idm_rs.Params(), SHORT_WAVE, 1e-3, dt=5e-7, model="dps", n_elements=40)

@@ -1,8 +1,8 @@
 """The one module that talks to the native core (``idm_rs._core``, Rust through PyO3).
 
 Everything else in the package calls the engine through the names here, so a change of the
-binding touches this file only. Arrays cross the boundary as numpy arrays (zero-copy views
-where the layout allows).
+binding touches this file only. Arrays cross the boundary as numpy arrays: C-contiguous float64
+inputs are read in place (zero copy), outputs are handed over without a copy.
 """
 
 from __future__ import annotations
@@ -12,26 +12,31 @@ from . import _core
 __version__: str = _core.__version__
 DivergenceError = _core.DivergenceError
 BatchRun = _core.BatchRun
+#: how to run (structure + method + batch options), checked on construction
+RunConfig = _core.RunConfig
 
 simulate = _core.simulate
 start_batch = _core.start_batch
-check_plan = _core.check_plan
+check_run = _core.check_run
+state_components = _core.state_components
 resolve_params = _core.resolve_params
 param_names = _core.param_names
 effect_names = _core.effect_names
-wave_columns = _core.wave_columns
+wave_fields = _core.wave_fields
 highest_frequency = _core.highest_frequency
 
 __all__ = [
     "BatchRun",
     "DivergenceError",
+    "RunConfig",
     "__version__",
-    "check_plan",
+    "check_run",
     "effect_names",
     "highest_frequency",
     "param_names",
     "resolve_params",
     "simulate",
     "start_batch",
-    "wave_columns",
+    "state_components",
+    "wave_fields",
 ]

@@ -5,12 +5,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, Optional
 
+import math
+
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from . import engine
 from .effects import Effects
 from .params import PARAM_INFO, Params
+from .state import State
 from .waveforms import Waveform
 
 if TYPE_CHECKING:
@@ -84,11 +87,15 @@ class SimulationResult:
     waveform: Waveform
     model: str
     n_elements: int
-    dt: float
+    dt: float  #: RK4 step, or the first step of an adaptive run [s]
     piezo_hysteresis: bool
     effects: Effects
     energy: Optional[EnergyBudget] = None
-    final_state: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0), repr=False)
+    #: the state at t_end; pass it as ``initial_state`` (with ``t_start=t_end``) to continue
+    final_state: State = field(default_factory=lambda: State([], []), repr=False)
+    method: str = "rk4"  #: "rk4" or "dopri5"
+    rtol: float = math.nan  #: adaptive tolerances (NaN for RK4)
+    atol: float = math.nan
 
     @property
     def main_body(self) -> NDArray[np.float64]:
@@ -139,7 +146,9 @@ class SimulationResult:
                 "model": self.model,
                 "n_elements": self.n_elements,
                 "dt_s": self.dt,
-                "method": "rk4",
+                "method": self.method,
+                "rtol": self.rtol,
+                "atol": self.atol,
                 "piezo_hysteresis": int(self.piezo_hysteresis),
                 "waveform": repr(self.waveform),
                 "final_position_m": self.final_position,
@@ -157,7 +166,7 @@ def simulate(
     params: Params,
     waveform: Waveform,
     t_end: float,
-    dt: float = 1e-8,
+    dt: Optional[float] = None,
     model: Model = "dps",
     n_elements: int = 4,
     save_every: int = 100,
@@ -165,16 +174,35 @@ def simulate(
     piezo_hysteresis: bool = True,
     effects: Optional[Effects] = None,
     energy: bool = False,
+    method: Literal["rk4", "dopri5"] = "rk4",
+    rtol: float = 1e-7,
+    atol: float = 1e-7,
+    first_step: Optional[float] = None,
+    t_start: float = 0.0,
+    initial_state: Optional[ArrayLike] = None,
 ) -> SimulationResult:
-    """Simulate the IDM from rest over [0, ``t_end``] s with fixed-step RK4 of step ``dt`` [s].
+    """Simulate the IDM over [``t_start``, ``t_end``] s, from rest or from ``initial_state``.
 
     ``model`` is ``"lps"`` (two lumped masses) or ``"dps"`` (the PE as ``n_elements`` FEM bar
-    elements). The waveform's breakpoints must fall on step boundaries and ``dt`` must divide
-    ``t_end``; otherwise a ValueError says which breakpoint and suggests a ``dt``. A step too
-    large for the structure is refused up front; one too large for the friction state during
-    sliding raises :class:`DivergenceError` with the time and a smaller step to try.
-    ``energy=True`` integrates the energy and momentum budgets alongside (``result.energy``).
-    The GIL is released while the Rust core runs.
+    elements).
+
+    ``method="rk4"`` (the reference): fixed step ``dt`` [s] (default 1e-8). The waveform's
+    breakpoints must fall on step boundaries and ``dt`` must divide the span; otherwise a
+    ValueError says which breakpoint and suggests a ``dt``. A step too large for the structure is
+    refused up front; one too large for the friction state during sliding raises
+    :class:`DivergenceError` with the time and a smaller step to try.
+    ``method="dopri5"``: adaptive Dormand-Prince 5(4) with ``rtol`` and ``atol`` (``atol`` in
+    units of each state's natural scale: the free stroke d33·V for positions, Fs for forces) and
+    no ``dt``; ``first_step`` [s] is an optional first trial step (as ``solve_ivp``'s); it lands
+    exactly on every breakpoint. ``save_every`` counts accepted steps either way.
+
+    ``initial_state`` (a :class:`State`, e.g. a previous result's ``final_state``, or any array
+    of the model's state size) with ``t_start`` [s] continues or restarts a run: with RK4 and a
+    ``t_start`` on the step grid, ``simulate(..., t_end=4e-3)`` followed by
+    ``simulate(..., t_start=4e-3, t_end=10e-3, initial_state=r.final_state)`` equals the 10 ms
+    run bit for bit. ``energy=True`` integrates the energy and momentum budgets alongside
+    (``result.energy``; they then start from the initial state's accounting components). The GIL
+    is released while the Rust core runs.
     """
     if not isinstance(params, Params):
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
@@ -182,19 +210,28 @@ def simulate(
     for name, value in (("n_elements", n_elements), ("save_every", save_every)):
         if isinstance(value, bool) or int(value) != value or value < 1:
             raise ValueError(f"parameter '{name}' must be a positive integer, got {value!r}")
+    if method not in ("rk4", "dopri5"):
+        raise ValueError(f"parameter 'method' must be 'rk4' or 'dopri5', got {method!r}")
+    if method == "rk4" and dt is None:
+        dt = 1e-8
+    step = float(first_step if method == "dopri5" and first_step is not None else (dt if dt is not None else 1e-8))
+    from .batch import Structure
+
+    config = Structure(str(model), int(n_elements), bool(piezo_hysteresis)).config(  # type: ignore[arg-type]
+        method=method, dt=step, rtol=float(rtol), atol=float(atol), first_step=step)
     bt, bv = waveform.breakpoints()
+    y0 = None if initial_state is None else np.ascontiguousarray(initial_state, dtype=float).ravel()
     out = engine.simulate(
         params._given(),
         effects.active(),
-        np.asarray(bt, dtype=float).tolist(),
-        np.asarray(bv, dtype=float).tolist(),
+        np.ascontiguousarray(bt, dtype=float),
+        np.ascontiguousarray(bv, dtype=float),
+        float(t_start),
         float(t_end),
-        float(dt),
-        str(model),
-        int(n_elements),
+        config,
         int(save_every),
-        bool(piezo_hysteresis),
         bool(energy),
+        y0,
     )
     budget = None
     if energy:
@@ -227,9 +264,12 @@ def simulate(
         waveform=waveform,
         model=str(model),
         n_elements=int(n_elements) if model == "dps" else 1,
-        dt=float(dt),
+        dt=step,
         piezo_hysteresis=bool(piezo_hysteresis),
         effects=effects,
         energy=budget,
-        final_state=out["final_state"],
+        final_state=State(out["final_state"], out["state_components"], float(out["t"][-1])),
+        method=method,
+        rtol=float(rtol) if method == "dopri5" else math.nan,
+        atol=float(atol) if method == "dopri5" else math.nan,
     )

@@ -21,6 +21,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import engine
+from .batch import Structure, Tables, param_row
+from .batch import start as start_batch
 from .effects import Effects
 from .params import PARAM_INFO, Params
 from .waveforms import Sampled, Sawtooth, Triangle, Waveform
@@ -87,23 +89,25 @@ class _Plan:
     def size(self) -> int:
         return int(np.prod(self.shape, dtype=np.int64))
 
-    def arrays(self, start: int, stop: int) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """Parameter, effect and waveform matrices of flat points [start, stop)."""
-        return self.arrays_at(np.arange(start, stop))
+    @property
+    def structure(self) -> Structure:
+        return Structure(self.model, self.n_elements, self.piezo_hysteresis)  # type: ignore[arg-type]
 
-    def arrays_at(self, flat: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """Parameter, effect and waveform matrices of the flat points `flat`."""
+    def tables(self, start: int, stop: int) -> Tables:
+        """The engine's tables of flat points [start, stop)."""
+        return self.tables_at(np.arange(start, stop))
+
+    def tables_at(self, flat: NDArray[np.int64]) -> Tables:
+        """The engine's tables of the flat points `flat`."""
         n = flat.size
         idx = np.unravel_index(flat, self.shape)
         pnames = engine.param_names()
-        base = self.params.to_dict(resolved=False)
-        pm = np.empty((n, len(pnames)))
-        for j, name in enumerate(pnames):
-            pm[:, j] = base.get(name, math.nan)  # NaN normal_force: derived per point
+        pm = np.tile(param_row(self.params), (n, 1))  # NaN normal_force: derived per point
         enames = engine.effect_names()
         em = np.tile([getattr(self.effects, e) for e in enames], (n, 1)).astype(float)
-        wm = np.tile(_wave_row(self.waveform), (n, 1))
-        wcol = {c: j for j, c in enumerate(engine.wave_columns())}
+        wnames = engine.wave_fields(self.waveform.batch_kind)
+        base = self.waveform.batch_fields()
+        wm = np.tile([base[c] for c in wnames], (n, 1)).astype(float)
         for axis, (name, vals) in enumerate(zip(self.names, self.values)):
             v = vals[idx[axis]]
             if name in pnames:
@@ -111,9 +115,9 @@ class _Plan:
             elif name in enames:
                 em[:, enames.index(name)] = v
             elif name in ("voltage", "amplitude"):
-                wm[:, wcol["amplitude"]] = v
+                wm[:, wnames.index("amplitude")] = v
             elif name in WAVE_FIELDS:
-                wm[:, wcol[name]] = v
+                wm[:, wnames.index(name)] = v
         # derived axes, applied after the plain ones so they see the swept m1, Ap, l
         col = {name: j for j, name in enumerate(pnames)}
         for axis, (name, vals) in enumerate(zip(self.names, self.values)):
@@ -124,20 +128,8 @@ class _Plan:
                 pm[:, col["pe_density"]] = v * pm[:, col["m1"]] / (pm[:, col["pe_area"]] * pm[:, col["pe_length"]])
             elif name == "stiffness":
                 pm[:, col["pe_youngs"]] = v * pm[:, col["pe_length"]] / pm[:, col["pe_area"]]
-        return pm, em, wm
-
-
-def _wave_row(w: Waveform) -> list[float]:
-    cols = engine.wave_columns()
-    row = dict.fromkeys(cols, 0.0)
-    if isinstance(w, Triangle):
-        row.update(kind=0, amplitude=w.amplitude, rise=w.rise, fall=w.fall, delay=w.delay)
-    elif isinstance(w, Sawtooth):
-        row.update(kind=1, amplitude=w.amplitude, rise=w.rise, frequency=w.frequency, cycles=w.cycles,
-                   forward=1.0 if w.direction == "forward" else 0.0, delay=w.delay)
-    else:
-        row.update(kind=2, amplitude=1.0)
-    return [float(row[c]) for c in cols]
+        sampled = (self.waveform.t, self.waveform.voltage) if isinstance(self.waveform, Sampled) else None
+        return Tables(pm, em, self.waveform.batch_kind, wm, sampled)
 
 
 def _axis_info(name: str) -> tuple[str, str]:
@@ -186,12 +178,8 @@ def _check_grid(grid: Mapping[str, ArrayLike], waveform: Waveform) -> tuple[tupl
 
 
 def _start(plan: _Plan, start: int, stop: int, threads: int) -> Any:
-    pm, em, wm = plan.arrays(start, stop)
-    st = sv = None
-    if isinstance(plan.waveform, Sampled):
-        st, sv = plan.waveform.t.tolist(), plan.waveform.voltage.tolist()
-    return engine.start_batch(pm, em, wm, st, sv, plan.model, plan.n_elements, plan.piezo_hysteresis,
-                             plan.t_end, plan.dt, plan.method, plan.rtol, plan.atol, plan.retries, threads)
+    return start_batch(plan.tables(start, stop), plan.structure, t_end=plan.t_end, method=plan.method, dt=plan.dt,
+                       rtol=plan.rtol, atol=plan.atol, first_step=plan.dt, retries=plan.retries, threads=threads)
 
 
 def run_block(plan: _Plan, start: int, stop: int, threads: int = 1) -> dict[str, NDArray[Any]]:
@@ -351,22 +339,16 @@ def _validate_axes(plan: _Plan) -> None:
             m[a] = i
             cross.add(int(np.ravel_multi_index(m, plan.shape)))
     flat = np.array(sorted(cross))
-    pm, em, wm = plan.arrays_at(flat)
+    tables = plan.tables_at(flat)
+    pnames, enames = engine.param_names(), engine.effect_names()
+    wnames = engine.wave_fields(tables.wave_kind)
+    config = plan.structure.config(method=plan.method, dt=plan.dt, rtol=plan.rtol, atol=plan.atol)
     for k in range(flat.size):
-        p = {n: float(v) for n, v in zip(engine.param_names(), pm[k]) if not (n == "normal_force" and math.isnan(v))}
-        eff = {n: float(v) for n, v in zip(engine.effect_names(), em[k]) if v != 0.0}
-        bt, bv = _point_waveform(plan.waveform, wm[k]).breakpoints()
-        engine.check_plan(p, eff, bt.tolist(), bv.tolist(), plan.t_end, plan.dt, plan.model, plan.n_elements,
-                         plan.method)
-
-
-def _point_waveform(w: Waveform, row: NDArray[np.float64]) -> Waveform:
-    c = dict(zip(engine.wave_columns(), row))
-    if isinstance(w, Triangle):
-        return Triangle(c["amplitude"], c["rise"], c["fall"], c["delay"])
-    if isinstance(w, Sawtooth):
-        return Sawtooth(c["amplitude"], c["frequency"], int(c["cycles"]), c["rise"], w.direction, c["delay"])
-    return Sampled(w.t, w.voltage * c["amplitude"])
+        p = {n: float(v) for n, v in zip(pnames, tables.params[k]) if not (n == "normal_force" and math.isnan(v))}
+        eff = {n: float(v) for n, v in zip(enames, tables.effects[k]) if v != 0.0}
+        bt, bv = plan.waveform.with_fields(dict(zip(wnames, tables.wave_fields[k]))).breakpoints()
+        engine.check_run(p, eff, np.ascontiguousarray(bt, dtype=float), np.ascontiguousarray(bv, dtype=float),
+                         0.0, plan.t_end, config)
 
 
 def _progress_bar(total: int, show: bool) -> Any:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal, Union
+from typing import Literal, Mapping, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,6 +50,17 @@ class Triangle:
         """End of the wave [s]."""
         return self.delay + self.rise + self.fall
 
+    #: the batch engine's name for this family
+    batch_kind = "triangle"
+
+    def batch_fields(self) -> dict[str, float]:
+        """This wave's per-point fields in the batch engine (see ``engine.wave_fields``)."""
+        return {"amplitude": self.amplitude, "rise": self.rise, "fall": self.fall, "delay": self.delay}
+
+    def with_fields(self, f: Mapping[str, float]) -> "Triangle":
+        """The same family with batch fields ``f`` (a sweep point's wave)."""
+        return Triangle(f["amplitude"], f["rise"], f["fall"], f["delay"])
+
 
 @dataclass(frozen=True)
 class Sawtooth:
@@ -91,6 +102,18 @@ class Sawtooth:
         """End of the last cycle [s]."""
         return self.delay + self.cycles * self.period
 
+    batch_kind = "sawtooth"
+
+    def batch_fields(self) -> dict[str, float]:
+        """This wave's per-point fields in the batch engine (see ``engine.wave_fields``)."""
+        return {"amplitude": self.amplitude, "frequency": self.frequency, "cycles": float(self.cycles),
+                "rise": self.rise, "forward": 1.0 if self.direction == "forward" else 0.0, "delay": self.delay}
+
+    def with_fields(self, f: Mapping[str, float]) -> "Sawtooth":
+        """The same family with batch fields ``f`` (a sweep point's wave)."""
+        return Sawtooth(f["amplitude"], f["frequency"], int(f["cycles"]), f["rise"],
+                        "forward" if f["forward"] else "backward", f["delay"])
+
     def breakpoints(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         peak = self.rise if self.direction == "forward" else self.period - self.rise
         t = [0.0] + ([self.delay] if self.delay > 0 else [])
@@ -128,6 +151,16 @@ class Sampled:
 
     def breakpoints(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         return self.t, self.voltage
+
+    batch_kind = "sampled"
+
+    def batch_fields(self) -> dict[str, float]:
+        """Per-point field in the batch engine: a scale on the shared samples (1 = as given)."""
+        return {"amplitude": 1.0}
+
+    def with_fields(self, f: Mapping[str, float]) -> "Sampled":
+        """These samples scaled by ``f["amplitude"]``."""
+        return Sampled(self.t, self.voltage * f["amplitude"])
 
     @property
     def duration(self) -> float:

@@ -1,24 +1,25 @@
-//! Thin PyO3 layer: converts Python values, releases the GIL, calls the pure-Rust core, and maps
-//! errors to Python exceptions. No numerics here.
+//! Thin PyO3 layer: numpy views in (zero copy where contiguous), the pure-Rust core called with
+//! the GIL released, numpy arrays out (moved, not copied), errors mapped to Python exceptions.
+//! No numerics and no threads here: the batch's thread, pool and cancellation live in
+//! `batch::runner`.
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
-use std::thread::JoinHandle;
 
-use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyList};
 
-use crate::batch::{run_batch, BatchConfig, Method, PointMetrics, PointOutput, PointSpec, Status};
+use crate::batch::{BatchConfig, BatchRunner, PointMetrics, PointTables, WaveFamily};
+use crate::drive::{check_task, Method, SimError, Task};
 use crate::effects::{Effects, EFFECT_NAMES};
 use crate::mechanics::Structure;
 use crate::model::{Model, N_ACCOUNTING};
 use crate::params::{Params, PARAM_NAMES};
-use crate::simulate::{plan_steps, simulate as simulate_core, SimError};
+use crate::simulate::simulate as simulate_core;
 use crate::waveform::PiecewiseLinear;
 
 create_exception!(
@@ -28,8 +29,8 @@ create_exception!(
     "The integration left its physical bounds (a step too large, usually)."
 );
 
-fn value_error(msg: String) -> PyErr {
-    PyValueError::new_err(msg)
+fn value_error(msg: impl Into<String>) -> PyErr {
+    PyValueError::new_err(msg.into())
 }
 
 fn sim_error(py: Python<'_>, e: SimError) -> PyErr {
@@ -46,39 +47,152 @@ fn sim_error(py: Python<'_>, e: SimError) -> PyErr {
 
 /// Run `f` with the GIL released; a panic becomes a RuntimeError instead of tearing down Python.
 fn detached<T: Send, F: FnOnce() -> T + Send>(py: Python<'_>, f: F) -> PyResult<T> {
-    py.detach(|| catch_unwind(AssertUnwindSafe(f)))
-        .map_err(|p| {
-            let what = p
-                .downcast_ref::<String>()
-                .cloned()
-                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-                .unwrap_or_else(|| "unknown panic".into());
-            PyRuntimeError::new_err(format!(
-                "internal error in idm-rs core (please report): {what}"
-            ))
-        })
+    py.detach(|| catch_unwind(AssertUnwindSafe(f))).map_err(|p| {
+        let what = p
+            .downcast_ref::<String>()
+            .cloned()
+            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+            .unwrap_or_else(|| "unknown panic".into());
+        PyRuntimeError::new_err(format!(
+            "internal error in idm-rs core (please report): {what}"
+        ))
+    })
 }
 
-pub(crate) fn parse_params(params: &HashMap<String, f64>) -> PyResult<Params> {
+/// A contiguous view of a 1-D array, or a copy when it is strided.
+fn slice1<'a>(a: &'a PyReadonlyArray1<'_, f64>) -> Cow<'a, [f64]> {
+    match a.as_slice() {
+        Ok(s) => Cow::Borrowed(s),
+        Err(_) => Cow::Owned(a.as_array().iter().copied().collect()),
+    }
+}
+
+/// A row-major view of a 2-D array, or a copy when it is not C-contiguous.
+fn slice2<'a>(a: &'a PyReadonlyArray2<'_, f64>) -> Cow<'a, [f64]> {
+    match a.as_slice() {
+        Ok(s) => Cow::Borrowed(s),
+        Err(_) => Cow::Owned(a.as_array().iter().copied().collect()),
+    }
+}
+
+fn parse_params(params: &HashMap<String, f64>) -> PyResult<Params> {
     let pairs: Vec<(&str, f64)> = params.iter().map(|(k, v)| (k.as_str(), *v)).collect();
     Params::from_pairs(&pairs).map_err(value_error)
 }
 
-pub(crate) fn parse_effects(effects: &HashMap<String, f64>) -> PyResult<Effects> {
+fn parse_effects(effects: &HashMap<String, f64>) -> PyResult<Effects> {
     let pairs: Vec<(&str, f64)> = effects.iter().map(|(k, v)| (k.as_str(), *v)).collect();
     Effects::from_pairs(&pairs).map_err(value_error)
 }
 
-pub(crate) fn parse_structure(model: &str, n_elements: usize) -> PyResult<Structure> {
-    match model {
-        "lps" => Ok(Structure::Lps),
-        "dps" if n_elements >= 1 => Ok(Structure::Dps(n_elements)),
-        "dps" => Err(value_error(format!(
-            "parameter 'n_elements' must be at least 1, got {n_elements}"
-        ))),
-        other => Err(value_error(format!(
-            "parameter 'model' must be 'lps' or 'dps', got '{other}'"
-        ))),
+/// How to run: the model's structure and the integration method, shared by `simulate` and the
+/// batch. Built once in Python with keywords; checked on construction.
+#[pyclass(module = "idm_rs._core", frozen, get_all)]
+#[derive(Clone, Debug)]
+struct RunConfig {
+    /// "lps" or "dps"
+    model: String,
+    /// FEM elements of the DPS bar
+    n_elements: usize,
+    /// whether the piezo hysteresis state h runs
+    piezo_hysteresis: bool,
+    /// "rk4" or "dopri5"
+    method: String,
+    /// RK4 step [s]
+    dt: f64,
+    /// adaptive tolerances (atol in units of each state's scale)
+    rtol: f64,
+    atol: f64,
+    /// adaptive first trial step [s]
+    first_step: f64,
+    /// RK4 retries at dt/2, dt/4, ... for a diverging batch point
+    retries: u32,
+    /// batch worker threads
+    threads: usize,
+    /// batch: record the sensor reading every this many RK4 steps (0: none)
+    record_every: usize,
+    /// batch: return each point's final state
+    final_states: bool,
+}
+
+impl RunConfig {
+    fn structure(&self) -> PyResult<Structure> {
+        match self.model.as_str() {
+            "lps" => Ok(Structure::Lps),
+            "dps" if self.n_elements >= 1 => Ok(Structure::Dps(self.n_elements)),
+            "dps" => Err(value_error(format!(
+                "parameter 'n_elements' must be at least 1, got {}",
+                self.n_elements
+            ))),
+            other => Err(value_error(format!(
+                "parameter 'model' must be 'lps' or 'dps', got '{other}'"
+            ))),
+        }
+    }
+
+    fn method(&self) -> PyResult<Method> {
+        let m = match self.method.as_str() {
+            "rk4" => Method::Rk4 { dt: self.dt },
+            "dopri5" => Method::Dopri5 {
+                rtol: self.rtol,
+                atol: self.atol,
+                first_step: self.first_step,
+            },
+            other => {
+                return Err(value_error(format!(
+                    "parameter 'method' must be 'rk4' or 'dopri5', got '{other}'"
+                )))
+            }
+        };
+        m.validate().map_err(value_error)?;
+        Ok(m)
+    }
+
+    fn model(&self, p: Params, e: Effects, accounting: bool) -> PyResult<Model> {
+        Model::new(p, e, self.structure()?, self.piezo_hysteresis, accounting).map_err(value_error)
+    }
+}
+
+#[pymethods]
+impl RunConfig {
+    #[new]
+    #[pyo3(signature = (*, model="dps".to_string(), n_elements=4, piezo_hysteresis=true, method="rk4".to_string(), dt=1e-8, rtol=1e-7, atol=1e-7, first_step=None, retries=2, threads=1, record_every=0, final_states=false))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        model: String,
+        n_elements: usize,
+        piezo_hysteresis: bool,
+        method: String,
+        dt: f64,
+        rtol: f64,
+        atol: f64,
+        first_step: Option<f64>,
+        retries: u32,
+        threads: usize,
+        record_every: usize,
+        final_states: bool,
+    ) -> PyResult<Self> {
+        let c = RunConfig {
+            model,
+            n_elements,
+            piezo_hysteresis,
+            method,
+            dt,
+            rtol,
+            atol,
+            first_step: first_step.unwrap_or(dt),
+            retries,
+            threads: threads.max(1),
+            record_every,
+            final_states,
+        };
+        c.structure()?;
+        c.method()?;
+        Ok(c)
+    }
+
+    fn __repr__(&self) -> String {
+        format!("{self:?}")
     }
 }
 
@@ -102,57 +216,95 @@ fn effect_names() -> Vec<&'static str> {
     EFFECT_NAMES.to_vec()
 }
 
+/// Per-point waveform fields of a batch of `kind` ("triangle", "sawtooth", "sampled").
+#[pyfunction]
+fn wave_fields(kind: &str) -> PyResult<Vec<&'static str>> {
+    let fam = WaveFamily::new(kind, Some((vec![0.0], vec![0.0]))).map_err(value_error)?;
+    Ok(fam.fields().to_vec())
+}
+
 /// Highest structural natural frequency [rad/s] of the model.
 #[pyfunction]
-#[pyo3(signature = (params, model, n_elements))]
-fn highest_frequency(
-    params: HashMap<String, f64>,
-    model: &str,
-    n_elements: usize,
-) -> PyResult<f64> {
-    let p = parse_params(&params)?;
-    let m = Model::new(
-        p,
-        Effects::default(),
-        parse_structure(model, n_elements)?,
-        false,
-        false,
-    )
-    .map_err(value_error)?;
+fn highest_frequency(params: HashMap<String, f64>, config: &RunConfig) -> PyResult<f64> {
+    let m = config.model(parse_params(&params)?, Effects::default(), false)?;
     Ok(m.mech.highest_frequency())
+}
+
+/// Name and unit of every state component of the model (see `Layout::components`).
+#[pyfunction]
+#[pyo3(signature = (params, effects, config, energy=false))]
+fn state_components(
+    params: HashMap<String, f64>,
+    effects: HashMap<String, f64>,
+    config: &RunConfig,
+    energy: bool,
+) -> PyResult<Vec<(String, &'static str)>> {
+    let m = config.model(parse_params(&params)?, parse_effects(&effects)?, energy)?;
+    Ok(m.layout.components())
+}
+
+/// Raise ValueError if a run with these settings would be refused (span, step, model, state).
+#[pyfunction]
+#[pyo3(signature = (params, effects, wave_t, wave_v, t_start, t_end, config, initial_state=None))]
+#[allow(clippy::too_many_arguments)]
+fn check_run(
+    params: HashMap<String, f64>,
+    effects: HashMap<String, f64>,
+    wave_t: PyReadonlyArray1<'_, f64>,
+    wave_v: PyReadonlyArray1<'_, f64>,
+    t_start: f64,
+    t_end: f64,
+    config: &RunConfig,
+    initial_state: Option<PyReadonlyArray1<'_, f64>>,
+) -> PyResult<()> {
+    let m = config.model(parse_params(&params)?, parse_effects(&effects)?, false)?;
+    let wave = PiecewiseLinear::new(slice1(&wave_t).into_owned(), slice1(&wave_v).into_owned())
+        .map_err(value_error)?;
+    let y0 = initial_state.as_ref().map(slice1);
+    let rest = m.rest_state();
+    let task = Task {
+        model: &m,
+        wave: &wave,
+        t_start,
+        t_end,
+        y0: y0.as_deref().unwrap_or(&rest),
+    };
+    check_task(&task, &config.method()?).map_err(|e| value_error(e.to_string()))
 }
 
 /// Simulate one run; returns a dict of numpy arrays (see `idm_rs.simulate`).
 #[pyfunction]
-#[pyo3(signature = (params, effects, wave_t, wave_v, t_end, dt, model, n_elements, save_every, piezo_hysteresis, energy))]
+#[pyo3(signature = (params, effects, wave_t, wave_v, t_start, t_end, config, save_every, energy, initial_state=None))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
     params: HashMap<String, f64>,
     effects: HashMap<String, f64>,
-    wave_t: Vec<f64>,
-    wave_v: Vec<f64>,
+    wave_t: PyReadonlyArray1<'_, f64>,
+    wave_v: PyReadonlyArray1<'_, f64>,
+    t_start: f64,
     t_end: f64,
-    dt: f64,
-    model: &str,
-    n_elements: usize,
+    config: &RunConfig,
     save_every: usize,
-    piezo_hysteresis: bool,
     energy: bool,
+    initial_state: Option<PyReadonlyArray1<'_, f64>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let p = parse_params(&params)?;
-    let e = parse_effects(&effects)?;
-    let structure = parse_structure(model, n_elements)?;
-    let wave = PiecewiseLinear::new(wave_t, wave_v).map_err(value_error)?;
-    let m = Model::new(p, e, structure, piezo_hysteresis, energy).map_err(value_error)?;
-    let traj = detached(py, || simulate_core(&m, &wave, t_end, dt, save_every))?
+    let m = config.model(parse_params(&params)?, parse_effects(&effects)?, energy)?;
+    let method = config.method()?;
+    let wave = PiecewiseLinear::new(slice1(&wave_t).into_owned(), slice1(&wave_v).into_owned())
+        .map_err(value_error)?;
+    let y0: Vec<f64> = match &initial_state {
+        Some(a) => slice1(a).into_owned(),
+        None => m.rest_state(),
+    };
+    let traj = detached(py, || simulate_core(&m, &wave, t_start, t_end, &y0, &method, save_every))?
         .map_err(|e| sim_error(py, e))?;
 
     let nt = traj.t.len();
     let dof = traj.dof;
     let d = PyDict::new(py);
     let arr2 = |v: Vec<f64>, cols: usize| -> PyResult<Bound<'py, PyAny>> {
-        Ok(PyArray1::from_vec(py, v).reshape([nt, cols])?.into_any())
+        Ok(v.into_pyarray(py).reshape([nt, cols])?.into_any())
     };
     d.set_item("t", traj.t.into_pyarray(py))?;
     d.set_item("nodes", arr2(traj.nodes, dof)?)?;
@@ -165,6 +317,7 @@ fn simulate<'py>(
     d.set_item("voltage", traj.voltage.into_pyarray(py))?;
     d.set_item("reading", traj.reading.into_pyarray(py))?;
     d.set_item("final_state", traj.final_state.into_pyarray(py))?;
+    d.set_item("state_components", m.layout.components())?;
     if energy {
         d.set_item("accounting", arr2(traj.accounting, N_ACCOUNTING)?)?;
         d.set_item("kinetic", traj.kinetic.into_pyarray(py))?;
@@ -174,118 +327,58 @@ fn simulate<'py>(
     Ok(d)
 }
 
-/// Columns of the per-point waveform matrix given to `start_batch`.
-const WAVE_COLUMNS: [&str; 8] = [
-    "kind",
-    "amplitude",
-    "rise",
-    "fall",
-    "frequency",
-    "cycles",
-    "forward",
-    "delay",
-];
-
-fn point_wave(
-    row: &[f64],
-    sampled: &Option<(Vec<f64>, Vec<f64>)>,
-) -> Result<(PiecewiseLinear, usize), String> {
-    let [kind, amplitude, rise, fall, frequency, cycles, forward, delay] = row.try_into().unwrap();
-    match kind as i64 {
-        0 => Ok((PiecewiseLinear::triangle(amplitude, rise, fall, delay)?, 0)),
-        1 => {
-            if !(cycles >= 1.0 && cycles.fract() == 0.0) {
-                return Err(format!(
-                    "parameter 'cycles' must be a positive integer, got {cycles}"
-                ));
-            }
-            let c = cycles as usize;
-            Ok((
-                PiecewiseLinear::sawtooth(amplitude, frequency, c, rise, forward != 0.0, delay)?,
-                c,
-            ))
-        }
-        _ => {
-            // a shared sampled waveform, scaled by the point's `amplitude` (1 = as given)
-            let (t, v) = sampled.as_ref().ok_or("sampled waveform missing")?;
-            Ok((
-                PiecewiseLinear::new(t.clone(), v.iter().map(|x| x * amplitude).collect())?,
-                0,
-            ))
-        }
-    }
-}
-
-type BatchOutcome = Result<Vec<PointOutput>, String>;
-
-/// A batch running on a background thread (with its own rayon pool), so that Python can show
-/// progress and cancel it on Ctrl-C while the GIL is free.
+/// A batch running on a background thread (see `batch::runner`).
 #[pyclass(module = "idm_rs._core")]
 struct BatchRun {
-    cancel: Arc<AtomicBool>,
-    done: Arc<AtomicUsize>,
-    total: usize,
-    handle: Mutex<Option<JoinHandle<BatchOutcome>>>,
+    runner: BatchRunner,
+    state_dim: Option<usize>,
 }
 
 #[pymethods]
 impl BatchRun {
     /// Points finished so far.
     fn progress(&self) -> usize {
-        self.done.load(Ordering::Relaxed)
+        self.runner.progress()
     }
 
     #[getter]
     fn total(&self) -> usize {
-        self.total
+        self.runner.total()
     }
 
     /// Ask the workers to stop; points already finished are kept.
     fn cancel(&self) {
-        self.cancel.store(true, Ordering::Relaxed);
+        self.runner.cancel();
     }
 
     /// Wait up to `timeout` seconds (GIL released); True when the batch has finished.
     fn wait(&self, py: Python<'_>, timeout: f64) -> bool {
-        let finished = || {
-            self.handle
-                .lock()
-                .unwrap()
-                .as_ref()
-                .map_or(true, |h| h.is_finished())
-        };
-        let deadline =
-            std::time::Instant::now() + std::time::Duration::from_secs_f64(timeout.max(0.0));
-        py.detach(|| loop {
-            if finished() {
-                return true;
-            }
-            if std::time::Instant::now() >= deadline {
-                return false;
-            }
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        })
+        py.detach(|| self.runner.wait(timeout))
     }
 
-    /// Join and return the metrics as a dict of arrays (NaN / status 0 for points not run).
+    /// Join and return the metrics as a dict of arrays (NaN / status 0 for points not run),
+    /// with `traces` (a list of arrays) when readings were recorded and `final_states`
+    /// (points x state, NaN rows where a point did not finish) when asked for.
     fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let handle = self
-            .handle
-            .lock()
-            .unwrap()
-            .take()
-            .ok_or_else(|| PyRuntimeError::new_err("result already taken"))?;
-        let outcome = py.detach(|| handle.join()).map_err(|_| {
-            PyRuntimeError::new_err("internal error in idm-rs batch worker (please report)")
-        })?;
-        let outputs = outcome.map_err(value_error)?;
+        let outputs = py
+            .detach(|| self.runner.join())
+            .map_err(|e| if e.contains("already taken") { PyRuntimeError::new_err(e) } else { value_error(e) })?;
         let d = PyDict::new(py);
         if outputs.iter().any(|o| !o.trace.is_empty()) {
-            let traces = pyo3::types::PyList::empty(py);
+            let traces = PyList::empty(py);
             for o in &outputs {
                 traces.append(PyArray1::from_slice(py, &o.trace))?;
             }
             d.set_item("traces", traces)?;
+        }
+        if let Some(dim) = self.state_dim {
+            let mut states = vec![f64::NAN; outputs.len() * dim];
+            for (row, o) in states.chunks_mut(dim).zip(&outputs) {
+                if o.final_state.len() == dim {
+                    row.copy_from_slice(&o.final_state);
+                }
+            }
+            d.set_item("final_states", states.into_pyarray(py).reshape([outputs.len(), dim])?)?;
         }
         let metrics: Vec<PointMetrics> = outputs.into_iter().map(|o| o.metrics).collect();
         let col = |f: fn(&PointMetrics) -> f64| metrics.iter().map(f).collect::<Vec<f64>>();
@@ -296,228 +389,82 @@ impl BatchRun {
         d.set_item("slip_fraction", col(|m| m.slip_fraction).into_pyarray(py))?;
         d.set_item("diverged_at", col(|m| m.diverged_at).into_pyarray(py))?;
         d.set_item("dt_used", col(|m| m.dt_used).into_pyarray(py))?;
-        d.set_item(
-            "steps",
-            metrics
-                .iter()
-                .map(|m| m.steps)
-                .collect::<Vec<u64>>()
-                .into_pyarray(py),
-        )?;
-        d.set_item(
-            "status",
-            metrics
-                .iter()
-                .map(|m| m.status as u8)
-                .collect::<Vec<u8>>()
-                .into_pyarray(py),
-        )?;
+        let steps: Vec<u64> = metrics.iter().map(|m| m.steps).collect();
+        d.set_item("steps", steps.into_pyarray(py))?;
+        let status: Vec<u8> = metrics.iter().map(|m| m.status as u8).collect();
+        d.set_item("status", status.into_pyarray(py))?;
         Ok(d)
     }
 }
 
-/// Start a batch. `params`: (P, 23) in `param_names()` order, NaN normal_force = derived;
-/// `effects`: (P, 9) in `effect_names()` order; `waves`: (P, 8) in `WAVE_COLUMNS` order.
+/// Start a batch. One row per point: `params` (P, 23) in `param_names()` order (NaN
+/// normal_force = derived), `effects` (P, 9) in `effect_names()` order, `wave_fields` (P, k) in
+/// `wave_fields(wave_kind)` order; optional per-point `t_ends`, `t_starts` [s] and
+/// `initial_states` (P, state size).
 #[pyfunction]
-#[pyo3(signature = (params, effects, waves, sampled_t, sampled_v, model, n_elements, piezo_hysteresis, t_end, dt, method, rtol, atol, retries, threads, t_ends=None, record_every=0))]
+#[pyo3(signature = (config, t_end, params, effects, wave_kind, wave_fields, sampled=None, t_ends=None, t_starts=None, initial_states=None))]
 #[allow(clippy::too_many_arguments)]
 fn start_batch(
+    py: Python<'_>,
+    config: &RunConfig,
+    t_end: f64,
     params: PyReadonlyArray2<'_, f64>,
     effects: PyReadonlyArray2<'_, f64>,
-    waves: PyReadonlyArray2<'_, f64>,
-    sampled_t: Option<Vec<f64>>,
-    sampled_v: Option<Vec<f64>>,
-    model: &str,
-    n_elements: usize,
-    piezo_hysteresis: bool,
-    t_end: f64,
-    dt: f64,
-    method: &str,
-    rtol: f64,
-    atol: f64,
-    retries: u32,
-    threads: usize,
-    t_ends: Option<Vec<f64>>,
-    record_every: usize,
+    wave_kind: &str,
+    wave_fields: PyReadonlyArray2<'_, f64>,
+    sampled: Option<(PyReadonlyArray1<'_, f64>, PyReadonlyArray1<'_, f64>)>,
+    t_ends: Option<PyReadonlyArray1<'_, f64>>,
+    t_starts: Option<PyReadonlyArray1<'_, f64>>,
+    initial_states: Option<PyReadonlyArray2<'_, f64>>,
 ) -> PyResult<BatchRun> {
-    let n = params.shape()[0];
-    let shape_ok = |a: &[usize], cols: usize| a == [n, cols];
-    if !shape_ok(params.shape(), PARAM_NAMES.len())
-        || !shape_ok(effects.shape(), EFFECT_NAMES.len())
-        || !shape_ok(waves.shape(), WAVE_COLUMNS.len())
-    {
-        return Err(value_error(format!(
-            "batch arrays must be ({n}, {}), ({n}, {}), ({n}, {}); got {:?}, {:?}, {:?}",
-            PARAM_NAMES.len(),
-            EFFECT_NAMES.len(),
-            WAVE_COLUMNS.len(),
-            params.shape(),
-            effects.shape(),
-            waves.shape()
-        )));
-    }
-    let method = match method {
-        "rk4" => Method::Rk4,
-        "dopri5" => Method::Dopri5 { rtol, atol },
-        other => {
-            return Err(value_error(format!(
-                "parameter 'method' must be 'rk4' or 'dopri5', got '{other}'"
-            )))
-        }
-    };
-    if t_ends.as_ref().is_some_and(|t| t.len() != n) {
-        return Err(value_error(format!(
-            "'t_ends' must have one duration per point ({n})"
-        )));
-    }
+    let samples = sampled
+        .as_ref()
+        .map(|(t, v)| (slice1(t).into_owned(), slice1(v).into_owned()));
+    let family = WaveFamily::new(wave_kind, samples).map_err(value_error)?;
     let cfg = BatchConfig {
-        structure: parse_structure(model, n_elements)?,
-        piezo_hysteresis,
+        structure: config.structure()?,
+        piezo_hysteresis: config.piezo_hysteresis,
         t_end,
-        dt,
-        method,
-        retries,
-        record_every,
+        method: config.method()?,
+        retries: config.retries,
+        record_every: config.record_every,
+        final_states: config.final_states,
     };
-    let sampled = match (sampled_t, sampled_v) {
-        (Some(t), Some(v)) => Some((t, v)),
-        _ => None,
+    let (p, e, w) = (slice2(&params), slice2(&effects), slice2(&wave_fields));
+    let (te, ts) = (t_ends.as_ref().map(slice1), t_starts.as_ref().map(slice1));
+    let st = initial_states.as_ref().map(|a| (slice2(a), a.shape()[1]));
+    let tables = PointTables {
+        params: &p,
+        effects: &e,
+        waves: &w,
+        family: &family,
+        t_ends: te.as_deref(),
+        t_starts: ts.as_deref(),
+        states: st.as_ref().map(|(s, d)| (&s[..], *d)),
     };
-    // copies: the worker thread must not touch Python memory
-    let pm: Vec<f64> = params.as_array().iter().copied().collect();
-    let em: Vec<f64> = effects.as_array().iter().copied().collect();
-    let wm: Vec<f64> = waves.as_array().iter().copied().collect();
-    let (cancel, done) = (
-        Arc::new(AtomicBool::new(false)),
-        Arc::new(AtomicUsize::new(0)),
-    );
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| PyRuntimeError::new_err(format!("cannot start worker threads: {e}")))?;
-    let (c2, d2) = (cancel.clone(), done.clone());
-    let handle = std::thread::spawn(move || -> BatchOutcome {
-        let (np, ne, nw) = (PARAM_NAMES.len(), EFFECT_NAMES.len(), WAVE_COLUMNS.len());
-        // a point whose values are invalid (a negative mass from a sweep axis, say) is flagged
-        // Status::Invalid; it does not stop the others
-        let mut specs = Vec::with_capacity(n);
-        let mut slot: Vec<Option<usize>> = Vec::with_capacity(n);
-        for i in 0..n {
-            let prow = &pm[i * np..(i + 1) * np];
-            let pairs: Vec<(&str, f64)> = PARAM_NAMES
-                .iter()
-                .copied()
-                .zip(prow.iter().copied())
-                .filter(|(name, v)| !(*name == "normal_force" && v.is_nan()))
-                .collect();
-            let erow = &em[i * ne..(i + 1) * ne];
-            let epairs: Vec<(&str, f64)> = EFFECT_NAMES
-                .iter()
-                .copied()
-                .zip(erow.iter().copied())
-                .collect();
-            let spec = Params::from_pairs(&pairs)
-                .and_then(|p| Ok((p, Effects::from_pairs(&epairs)?)))
-                .and_then(|(p, e)| Ok((p, e, point_wave(&wm[i * nw..(i + 1) * nw], &sampled)?)));
-            match spec {
-                Ok((params, effects, (wave, cycles))) => {
-                    let t_end = t_ends.as_ref().map(|t| t[i]);
-                    slot.push(Some(specs.len()));
-                    specs.push(PointSpec {
-                        params,
-                        effects,
-                        wave,
-                        cycles,
-                        t_end,
-                    });
-                }
-                Err(_) => {
-                    slot.push(None);
-                    d2.fetch_add(1, Ordering::Relaxed);
-                }
-            }
-        }
-        let run = || {
-            catch_unwind(AssertUnwindSafe(|| {
-                pool.install(|| run_batch(&cfg, &specs, &c2, &d2))
-            }))
-        };
-        let mut results = match run() {
-            Ok(r) => r.map_err(|e| e.to_string())?,
-            Err(_) => return Err("internal error in idm-rs batch (please report)".into()),
-        };
-        let invalid = PointOutput {
-            metrics: PointMetrics {
-                status: Status::Invalid,
-                ..PointMetrics::not_run()
-            },
-            trace: Vec::new(),
-        };
-        Ok(slot
-            .into_iter()
-            .map(|s| {
-                s.map_or_else(
-                    || invalid.clone(),
-                    |k| std::mem::replace(&mut results[k], invalid.clone()),
-                )
-            })
-            .collect())
+    let points = detached(py, || tables.points())?.map_err(value_error)?;
+    let state_dim = config.final_states.then(|| {
+        points
+            .iter()
+            .flatten()
+            .next()
+            .and_then(|s| Model::new(s.params, s.effects, cfg.structure, cfg.piezo_hysteresis, false).ok())
+            .map_or(0, |m| m.layout.dim)
     });
-    Ok(BatchRun {
-        cancel,
-        done,
-        total: n,
-        handle: Mutex::new(Some(handle)),
-    })
-}
-
-/// Raise ValueError if a run with these settings would be refused (step, duration, model).
-#[pyfunction]
-#[pyo3(signature = (params, effects, wave_t, wave_v, t_end, dt, model, n_elements, method))]
-#[allow(clippy::too_many_arguments)]
-fn check_plan(
-    params: HashMap<String, f64>,
-    effects: HashMap<String, f64>,
-    wave_t: Vec<f64>,
-    wave_v: Vec<f64>,
-    t_end: f64,
-    dt: f64,
-    model: &str,
-    n_elements: usize,
-    method: &str,
-) -> PyResult<()> {
-    let m = Model::new(
-        parse_params(&params)?,
-        parse_effects(&effects)?,
-        parse_structure(model, n_elements)?,
-        false,
-        false,
-    )
-    .map_err(value_error)?;
-    let wave = PiecewiseLinear::new(wave_t, wave_v).map_err(value_error)?;
-    if method == "rk4" {
-        plan_steps(&m, &wave, t_end, dt).map_err(|e| value_error(e.to_string()))?;
-    } else if !(t_end.is_finite() && t_end > 0.0 && dt.is_finite() && dt > 0.0) {
-        return Err(value_error(format!(
-            "'t_end' and 'dt' must be positive and finite, got {t_end}, {dt}"
-        )));
-    }
-    Ok(())
-}
-
-#[pyfunction]
-fn wave_columns() -> Vec<&'static str> {
-    WAVE_COLUMNS.to_vec()
+    let runner = BatchRunner::start(cfg, points, config.threads).map_err(PyRuntimeError::new_err)?;
+    Ok(BatchRun { runner, state_dim })
 }
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<BatchRun>()?;
+    m.add_class::<RunConfig>()?;
     m.add_function(wrap_pyfunction!(start_batch, m)?)?;
-    m.add_function(wrap_pyfunction!(wave_columns, m)?)?;
-    m.add_function(wrap_pyfunction!(check_plan, m)?)?;
+    m.add_function(wrap_pyfunction!(wave_fields, m)?)?;
+    m.add_function(wrap_pyfunction!(check_run, m)?)?;
     m.add("DivergenceError", m.py().get_type::<DivergenceError>())?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(state_components, m)?)?;
     m.add_function(wrap_pyfunction!(resolve_params, m)?)?;
     m.add_function(wrap_pyfunction!(param_names, m)?)?;
     m.add_function(wrap_pyfunction!(effect_names, m)?)?;

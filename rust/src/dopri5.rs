@@ -1,7 +1,9 @@
-//! Adaptive Dormand-Prince 5(4) with FSAL and an elementary step controller. Like `rk4`, it knows
-//! nothing of the physics: the right-hand side is `f(segment, t, y, dy)`; the caller passes the
-//! input's breakpoints as `stops` and the integrator lands on each exactly, never stepping
-//! across a kink of the input (the method's order would be lost there).
+//! Adaptive Dormand-Prince 5(4) with first-same-as-last stages and an elementary step-size
+//! controller. Like `rk4`, it knows nothing of the physics; the driver hands it each lane's
+//! segment end (the next input breakpoint or the end of the run) and it lands there exactly,
+//! never stepping across a kink of the input (the method's order would be lost there).
+
+use crate::stepper::{Attempt, Rhs, State, Stepper};
 
 /// Tolerances and limits.
 #[derive(Clone, Debug)]
@@ -21,7 +23,7 @@ pub struct Dopri5Options {
     pub h_max: f64,
 }
 
-/// Counters of a finished run.
+/// Counters of a run.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Dopri5Stats {
     pub accepted: u64,
@@ -66,133 +68,76 @@ const E: [f64; 7] = [
     -1.0 / 40.0,
 ];
 
-/// Integrate `y` from `t0` to `t1`. `observe(t, y)` sees every accepted step and returns false
-/// to stop early (cancellation). Errors with (t, message) when the step falls below `h_min`
-/// or the state turns non-finite. Generic over the storage like `rk4`: a fixed `[f64; D]`
-/// keeps the small models' stages in registers.
-pub fn integrate<S, F, O>(
-    mut f: F,
-    t0: f64,
-    t1: f64,
-    stops: &[f64],
-    y: &mut S,
-    opts: &Dopri5Options,
-    mut observe: O,
-) -> Result<Dopri5Stats, (f64, String)>
-where
-    S: AsRef<[f64]> + AsMut<[f64]> + Clone,
-    F: FnMut(usize, f64, &[f64], &mut [f64]),
-    O: FnMut(f64, &[f64]) -> bool,
-{
-    let ys: &mut [S; 1] = std::slice::from_mut(y).try_into().unwrap();
-    let [r] = integrate_lanes(
-        |_, seg, t, s: &[f64], ds: &mut [f64]| f(seg, t, s, ds),
-        [t0],
-        [t1],
-        [stops],
-        ys,
-        [opts],
-        |_, t, s: &[f64]| observe(t, s),
-    );
-    r
+/// Stages, step sizes and options of `L` lanes; each lane keeps its own step size.
+pub struct Dopri5<S, const L: usize = 1> {
+    opts: [Dopri5Options; L],
+    k: [[S; 7]; L],
+    tmp: [S; L],
+    y_new: [S; L],
+    h: [f64; L],
+    /// the first stage must be evaluated afresh (start, or a new input segment)
+    fresh: [bool; L],
+    /// number of components in each lane's error norm
+    in_norm: [f64; L],
+    pub stats: [Dopri5Stats; L],
 }
 
-/// Where one lane stands.
-#[derive(Clone, Copy, PartialEq)]
-enum LaneState {
-    /// needs a fresh first stage (start, or a new input segment)
-    Fresh,
-    Running,
-    Done,
-}
-
-/// `L` independent adaptive integrations advanced attempt by attempt, stage by stage, so one
-/// core works on several dependency chains at once (a single one is latency-bound, see rk4.rs).
-/// Each lane keeps its own step size, segments and end time; its arithmetic is exactly that of
-/// a one-lane run. `f(lane, segment, t, y, dy)`; `observe(lane, t, y)`.
-pub fn integrate_lanes<S, F, O, const L: usize>(
-    mut f: F,
-    t0: [f64; L],
-    t1: [f64; L],
-    stops: [&[f64]; L],
-    ys: &mut [S; L],
-    opts: [&Dopri5Options; L],
-    mut observe: O,
-) -> [Result<Dopri5Stats, (f64, String)>; L]
-where
-    S: AsRef<[f64]> + AsMut<[f64]> + Clone,
-    F: FnMut(usize, usize, f64, &[f64], &mut [f64]),
-    O: FnMut(usize, f64, &[f64]) -> bool,
-{
-    let mut zero = ys[0].clone();
-    zero.as_mut().fill(0.0);
-    let mut k: [[S; 7]; L] = std::array::from_fn(|_| std::array::from_fn(|_| zero.clone()));
-    let mut tmp: [S; L] = std::array::from_fn(|_| zero.clone());
-    let mut y_new: [S; L] = std::array::from_fn(|_| zero.clone());
-    let mut out: [Result<Dopri5Stats, (f64, String)>; L] =
-        std::array::from_fn(|_| Ok(Dopri5Stats::default()));
-    let mut stats = [Dopri5Stats::default(); L];
-    let mut state = [LaneState::Fresh; L];
-    let mut t = t0;
-    let mut h: [f64; L] = std::array::from_fn(|i| opts[i].h_init.min(opts[i].h_max));
-    let mut step = [0.0; L];
-    let mut last = [false; L];
-    // segment boundaries of each lane: every stop inside (t0, t1), then t1
-    let ends: Vec<Vec<f64>> = (0..L)
-        .map(|i| {
-            let mut e: Vec<f64> = stops[i]
-                .iter()
-                .copied()
-                .filter(|&s| s > t0[i] && s < t1[i])
-                .collect();
-            e.push(t1[i]);
-            e
-        })
-        .collect();
-    let mut end_idx = [0usize; L];
-    let mut seg: [usize; L] = std::array::from_fn(|i| {
-        stops[i]
-            .iter()
-            .filter(|&&s| s <= t0[i])
-            .count()
-            .saturating_sub(1)
-    });
-    let in_norm: [f64; L] = std::array::from_fn(|i| {
-        opts[i]
-            .scale
-            .iter()
-            .filter(|s| s.is_finite())
-            .count()
-            .max(1) as f64
-    });
-    loop {
-        // start segments, or finish lanes that reached their end
-        let mut any = false;
-        for i in 0..L {
-            if state[i] != LaneState::Done && t[i] >= ends[i][end_idx[i]] {
-                if end_idx[i] + 1 == ends[i].len() {
-                    state[i] = LaneState::Done;
-                    out[i] = Ok(stats[i]);
-                    continue;
-                }
-                end_idx[i] += 1;
-                seg[i] += 1;
-                state[i] = LaneState::Fresh;
-            }
-            if state[i] == LaneState::Fresh {
-                f(i, seg[i], t[i], ys[i].as_ref(), k[i][0].as_mut()); // the input's slope changed
-                stats[i].evaluations += 1;
-                state[i] = LaneState::Running;
-            }
-            if state[i] == LaneState::Running {
-                any = true;
-                let end = ends[i][end_idx[i]];
-                last[i] = end - (t[i] + h[i]) < 1e-3 * h[i];
-                step[i] = if last[i] { end - t[i] } else { h[i] };
-            }
+impl<S: State, const L: usize> Dopri5<S, L> {
+    /// Buffers shaped like `zero` (all zeros), one set of options per lane.
+    pub fn new(opts: [Dopri5Options; L], zero: S) -> Self {
+        let h = std::array::from_fn(|i| opts[i].h_init.min(opts[i].h_max));
+        let in_norm = std::array::from_fn(|i| {
+            opts[i].scale.iter().filter(|s| s.is_finite()).count().max(1) as f64
+        });
+        Dopri5 {
+            k: std::array::from_fn(|_| std::array::from_fn(|_| zero.clone())),
+            tmp: std::array::from_fn(|_| zero.clone()),
+            y_new: std::array::from_fn(|_| zero.clone()),
+            h,
+            fresh: [true; L],
+            in_norm,
+            stats: [Dopri5Stats::default(); L],
+            opts,
         }
-        if !any {
-            return out;
+    }
+}
+
+impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
+    const FIXED_STEP: bool = false;
+    const EVALUATES_START: bool = false;
+
+    /// The error control keeps the state near, not on, the bound's side: only a state that is
+    /// no longer finite counts as diverged.
+    fn bound_slack(&self) -> f64 {
+        f64::INFINITY
+    }
+
+    fn restart(&mut self, lane: usize) {
+        self.fresh[lane] = true;
+    }
+
+    #[inline(always)]
+    fn attempt<F: Rhs>(
+        &mut self,
+        f: &mut F,
+        ys: &mut [S; L],
+        t: &[f64; L],
+        end: &[f64; L],
+        active: &[bool; L],
+    ) -> [Attempt; L] {
+        let mut step = [0.0; L];
+        let mut last = [false; L];
+        for i in 0..L {
+            if active[i] {
+                if self.fresh[i] {
+                    f.eval(i, 0.0, ys[i].as_ref(), self.k[i][0].as_mut());
+                    self.stats[i].evaluations += 1;
+                    self.fresh[i] = false;
+                }
+                let h = self.h[i];
+                last[i] = end[i] - (t[i] + h) < 1e-3 * h;
+                step[i] = if last[i] { end[i] - t[i] } else { h };
+            }
         }
         for (s, a) in [
             (1usize, &A2[..]),
@@ -202,84 +147,76 @@ where
             (5, &A6[..]),
         ] {
             for i in 0..L {
-                if state[i] == LaneState::Running {
-                    combine(tmp[i].as_mut(), ys[i].as_ref(), step[i], a, &k[i]);
-                    f(
-                        i,
-                        seg[i],
-                        t[i] + C[s] * step[i],
-                        tmp[i].as_ref(),
-                        k[i][s].as_mut(),
-                    );
+                if active[i] {
+                    combine(self.tmp[i].as_mut(), ys[i].as_ref(), step[i], a, &self.k[i]);
+                    f.eval(i, C[s] * step[i], self.tmp[i].as_ref(), self.k[i][s].as_mut());
                 }
             }
         }
         for i in 0..L {
-            if state[i] == LaneState::Running {
-                combine(y_new[i].as_mut(), ys[i].as_ref(), step[i], &B, &k[i]);
-                f(
-                    i,
-                    seg[i],
-                    t[i] + step[i],
-                    y_new[i].as_ref(),
-                    k[i][6].as_mut(),
-                );
+            if active[i] {
+                combine(self.y_new[i].as_mut(), ys[i].as_ref(), step[i], &B, &self.k[i]);
+                f.eval(i, step[i], self.y_new[i].as_ref(), self.k[i][6].as_mut());
             }
         }
-        for i in 0..L {
-            if state[i] != LaneState::Running {
-                continue;
+        std::array::from_fn(|i| {
+            if !active[i] {
+                return Attempt::Idle;
             }
-            stats[i].evaluations += 6;
-            let (yv, ynv, o) = (ys[i].as_ref(), y_new[i].as_ref(), opts[i]);
-            let mut err2 = 0.0;
-            for c in 0..yv.len() {
-                if o.scale[c].is_finite() {
-                    let mut e = 0.0;
-                    for (j, ej) in E.iter().enumerate() {
-                        e += ej * k[i][j].as_ref()[c];
-                    }
-                    let tol = o.atol * o.scale[c] + o.rtol * yv[c].abs().max(ynv[c].abs());
-                    err2 += (step[i] * e / tol).powi(2);
-                }
-            }
-            let err = (err2 / in_norm[i]).sqrt(); // NaN when the state blew up: rejected below
+            self.stats[i].evaluations += 6;
+            let err = self.error_norm(i, ys[i].as_ref(), step[i]); // NaN when the state blew up
+            let o = &self.opts[i];
             if err <= 1.0 {
-                t[i] = if last[i] {
-                    ends[i][end_idx[i]]
-                } else {
-                    t[i] + step[i]
-                };
-                ys[i].as_mut().copy_from_slice(y_new[i].as_ref());
-                k[i].swap(0, 6); // first same as last
-                stats[i].accepted += 1;
-                if !observe(i, t[i], ys[i].as_ref()) {
-                    state[i] = LaneState::Done;
-                    out[i] = Ok(stats[i]);
-                    continue;
-                }
+                ys[i].as_mut().copy_from_slice(self.y_new[i].as_ref());
+                self.k[i].swap(0, 6); // first same as last
+                self.stats[i].accepted += 1;
                 let grow = if err == 0.0 {
                     5.0
                 } else {
                     (0.9 * err.powf(-0.2)).clamp(0.2, 5.0)
                 };
                 if !last[i] || grow < 1.0 {
-                    h[i] = (step[i] * grow).min(o.h_max);
+                    self.h[i] = (step[i] * grow).min(o.h_max);
+                }
+                Attempt::Accepted {
+                    step: step[i],
+                    last: last[i],
                 }
             } else {
-                stats[i].rejected += 1;
+                self.stats[i].rejected += 1;
                 let shrink = if err.is_finite() {
                     (0.9 * err.powf(-0.2)).clamp(0.1, 0.9)
                 } else {
                     0.1
                 };
-                h[i] = step[i] * shrink;
-                if h[i] < o.h_min {
-                    state[i] = LaneState::Done;
-                    out[i] = Err((t[i], format!("step size fell below {:.1e} s", o.h_min)));
+                self.h[i] = step[i] * shrink;
+                if self.h[i] < o.h_min {
+                    Attempt::Failed(format!("step size fell below {:.1e} s", o.h_min))
+                } else {
+                    Attempt::Rejected
                 }
             }
+        })
+    }
+}
+
+impl<S: State, const L: usize> Dopri5<S, L> {
+    /// Scaled RMS of the embedded error estimate of lane `i`'s last attempt [-].
+    #[inline(always)]
+    fn error_norm(&self, i: usize, y: &[f64], step: f64) -> f64 {
+        let (ynv, o, k) = (self.y_new[i].as_ref(), &self.opts[i], &self.k[i]);
+        let mut err2 = 0.0;
+        for c in 0..y.len() {
+            if o.scale[c].is_finite() {
+                let mut e = 0.0;
+                for (j, ej) in E.iter().enumerate() {
+                    e += ej * k[j].as_ref()[c];
+                }
+                let tol = o.atol * o.scale[c] + o.rtol * y[c].abs().max(ynv[c].abs());
+                err2 += (step * e / tol).powi(2);
+            }
         }
+        (err2 / self.in_norm[i]).sqrt()
     }
 }
 
@@ -310,84 +247,56 @@ mod tests {
         }
     }
 
-    #[test]
-    fn harmonic_oscillator_meets_tolerance() {
-        let mut y = [1.0, 0.0];
-        let s = integrate(
-            |_, _, y: &[f64], dy: &mut [f64]| {
-                dy[0] = y[1];
-                dy[1] = -y[0];
-            },
-            0.0,
-            10.0,
-            &[],
-            &mut y,
-            &opts(1e-9),
-            |_, _| true,
-        )
-        .unwrap();
-        assert!((y[0] - 10f64.cos()).abs() < 1e-7, "{}", y[0]);
-        assert!(s.accepted > 10 && s.accepted < 2000);
-    }
-
-    #[test]
-    fn lanes_agree_bitwise_with_single_runs() {
-        let o = Dopri5Options {
-            scale: vec![1.0; 2],
-            ..opts(1e-8)
-        };
-        let rhs = |w: f64| {
-            move |_seg: usize, _t: f64, y: &[f64], dy: &mut [f64]| {
-                dy[0] = y[1];
-                dy[1] = -w * w * y[0].sin();
+    /// Lanes integrated from 0 to `t1[i]` with the bare stepper.
+    fn run<F: Rhs, const L: usize>(f: &mut F, ys: &mut [[f64; 2]; L], t1: [f64; L], o: &Dopri5Options) {
+        let mut st: Dopri5<[f64; 2], L> = Dopri5::new(std::array::from_fn(|_| o.clone()), [0.0; 2]);
+        let mut t = [0.0; L];
+        let mut active = [true; L];
+        while active.iter().any(|&a| a) {
+            let r = st.attempt(f, ys, &t, &t1, &active);
+            for i in 0..L {
+                match r[i] {
+                    Attempt::Accepted { step, last } => {
+                        t[i] = if last { t1[i] } else { t[i] + step };
+                        active[i] = t[i] < t1[i];
+                    }
+                    Attempt::Failed(_) => panic!("failed"),
+                    _ => {}
+                }
             }
-        };
-        let single = |w: f64, t1: f64| {
-            let mut y = [1.0, 0.0];
-            integrate(rhs(w), 0.0, t1, &[0.0, 0.3], &mut y, &o, |_, _| true).unwrap();
-            y
-        };
-        let mut ys = [[1.0, 0.0]; 3];
-        let ws = [1.0, 3.0, 0.5];
-        let t1s = [2.0, 5.0, 1.0];
-        let r = integrate_lanes(
-            |lane: usize, seg, t, y: &[f64], dy: &mut [f64]| rhs(ws[lane])(seg, t, y, dy),
-            [0.0; 3],
-            t1s,
-            [&[0.0, 0.3][..]; 3],
-            &mut ys,
-            [&o; 3],
-            |_, _, _| true,
-        );
-        for i in 0..3 {
-            assert!(r[i].is_ok());
-            assert_eq!(ys[i], single(ws[i], t1s[i]));
         }
     }
 
     #[test]
-    fn lands_exactly_on_stops_and_switches_segments() {
-        // dy/dt = slope of the segment: 1 on [0,1), -2 on [1,3)
-        let mut y = [0.0];
-        let mut times = vec![];
-        let o = Dopri5Options {
-            scale: vec![1.0],
-            ..opts(1e-10)
+    fn harmonic_oscillator_meets_tolerance() {
+        let mut y = [[1.0, 0.0]];
+        let mut f = |_l: usize, _tau: f64, y: &[f64], dy: &mut [f64]| {
+            dy[0] = y[1];
+            dy[1] = -y[0];
         };
-        integrate(
-            |seg, _, _: &[f64], dy: &mut [f64]| dy[0] = if seg == 0 { 1.0 } else { -2.0 },
-            0.0,
-            3.0,
-            &[0.0, 1.0, 3.0],
-            &mut y,
-            &o,
-            |t, _| {
-                times.push(t);
-                true
-            },
-        )
-        .unwrap();
-        assert!(times.contains(&1.0));
-        assert!((y[0] - (1.0 - 4.0)).abs() < 1e-12, "{}", y[0]);
+        run(&mut f, &mut y, [10.0], &opts(1e-9));
+        assert!((y[0][0] - 10f64.cos()).abs() < 1e-7, "{}", y[0][0]);
+    }
+
+    #[test]
+    fn lanes_agree_bitwise_with_single_runs() {
+        let o = opts(1e-8);
+        let ws = [1.0, 3.0, 0.5];
+        let t1s = [2.0, 5.0, 1.0];
+        let mut ys = [[1.0, 0.0]; 3];
+        let mut f = |lane: usize, _tau: f64, y: &[f64], dy: &mut [f64]| {
+            dy[0] = y[1];
+            dy[1] = -ws[lane] * ws[lane] * y[0].sin();
+        };
+        run(&mut f, &mut ys, t1s, &o);
+        for i in 0..3 {
+            let mut y = [[1.0, 0.0]];
+            let mut g = |_l: usize, _tau: f64, y: &[f64], dy: &mut [f64]| {
+                dy[0] = y[1];
+                dy[1] = -ws[i] * ws[i] * y[0].sin();
+            };
+            run(&mut g, &mut y, [t1s[i]], &o);
+            assert_eq!(ys[i], y[0]);
+        }
     }
 }

@@ -127,6 +127,16 @@ impl Effects {
         -total_mass * GRAVITY * self.theta_rad.sin()
     }
 
+    /// The first-order lags that are on, by parameter name, with their time constants [s]: a
+    /// lag much faster than a fixed step makes its state stiff.
+    pub fn lags(&self) -> [(&'static str, f64); 3] {
+        [
+            ("tau_amp", self.tau_amp),
+            ("tau_creep", self.tau_creep),
+            ("tau_sensor", self.tau_sensor),
+        ]
+    }
+
     /// Factor on the normal force from the tilt.
     pub fn normal_scale(&self) -> f64 {
         self.theta_rad.cos()

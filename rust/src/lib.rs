@@ -5,6 +5,7 @@
 
 pub mod batch;
 pub mod dopri5;
+pub mod drive;
 pub mod effects;
 pub mod friction;
 pub mod mechanics;
@@ -13,6 +14,7 @@ pub mod params;
 pub mod piezo;
 pub mod rk4;
 pub mod simulate;
+pub mod stepper;
 pub mod waveform;
 
 #[cfg(test)]

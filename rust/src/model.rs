@@ -48,7 +48,43 @@ pub struct Layout {
     pub dim: usize,
 }
 
+/// Names and units of the accounting states, in layout order.
+const ACCOUNTING_COMPONENTS: [(&str, &str); N_ACCOUNTING] = [
+    ("w_input", "J"),
+    ("w_friction", "J"),
+    ("w_damping", "J"),
+    ("w_external", "J"),
+    ("i_friction", "N s"),
+    ("i_rayleigh", "N s"),
+    ("i_external", "N s"),
+];
+
 impl Layout {
+    /// Name and unit of every state component, in order: `q0..` nodal displacements [m] (node 0
+    /// the main body, the last the weight), `v0..` nodal velocities [m/s], `g` asperity
+    /// deformation [m], `fh` presliding force [N], `h` piezo hysteresis [m], then the effect
+    /// states that are on (`v_pe` PE voltage [V], `x_creep` creep extension [m], `x_sensor`
+    /// sensor reading [m]) and the accounting states.
+    pub fn components(&self) -> Vec<(String, &'static str)> {
+        let mut c: Vec<(String, &'static str)> = Vec::with_capacity(self.dim);
+        c.extend((0..self.dof).map(|i| (format!("q{i}"), "m")));
+        c.extend((0..self.dof).map(|i| (format!("v{i}"), "m/s")));
+        c.extend([("g".into(), "m"), ("fh".into(), "N"), ("h".into(), "m")]);
+        for (idx, name, unit) in [
+            (self.vpe, "v_pe", "V"),
+            (self.xc, "x_creep", "m"),
+            (self.xs, "x_sensor", "m"),
+        ] {
+            if idx.is_some() {
+                c.push((name.into(), unit));
+            }
+        }
+        if self.accounting.is_some() {
+            c.extend(ACCOUNTING_COMPONENTS.iter().map(|(n, u)| (n.to_string(), *u)));
+        }
+        c
+    }
+
     fn new(dof: usize, e: &Effects, accounting: bool) -> Self {
         let mut next = 2 * dof + 3;
         let mut take = |on: bool, len: usize| {
@@ -147,6 +183,47 @@ impl Model {
             * self.effects.normal_scale()
             * (1.0 + self.effects.eps.abs());
         fs.min(p.fric_alpha / (p.fric_beta + p.fric_gamma))
+    }
+
+    /// The state at rest: everything zero (the paper's initial condition).
+    pub fn rest_state(&self) -> Vec<f64> {
+        vec![0.0; self.layout.dim]
+    }
+
+    /// Refuse an initial state of the wrong size, not finite, or with |Fh| beyond its bound (the
+    /// friction law cannot start there); the message names the component.
+    pub fn check_state(&self, y: &[f64]) -> Result<(), String> {
+        let names = self.layout.components();
+        if y.len() != names.len() {
+            return Err(format!(
+                "initial state has {} components but this model has {} ({})",
+                y.len(),
+                names.len(),
+                names.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", ")
+            ));
+        }
+        if let Some(i) = y.iter().position(|x| !x.is_finite()) {
+            return Err(format!(
+                "initial state component '{}' must be finite, got {}",
+                names[i].0, y[i]
+            ));
+        }
+        let fh = y[self.layout.fh];
+        if fh.abs() > self.presliding_bound() * (1.0 + 1e-6) + 1e-12 {
+            return Err(format!(
+                "initial state component 'fh' = {fh:e} N exceeds the presliding bound {:e} N",
+                self.presliding_bound()
+            ));
+        }
+        Ok(())
+    }
+
+    /// The divergence criterion: the state is no longer finite where it matters, or |Fh| left
+    /// its bound [N] (which a correct solution never does; see MODEL.md's invariants).
+    #[inline(always)]
+    pub fn is_diverged(&self, y: &[f64], fh_bound: f64) -> bool {
+        let l = &self.layout;
+        !(y[l.fh].abs() <= fh_bound) || !y[l.dof].is_finite() || !y[0].is_finite()
     }
 
     /// PE voltage and its rate [V, V/s] given the commanded ones (the amplifier may lag).

@@ -4,7 +4,7 @@ use crate::effects::Effects;
 use crate::mechanics::Structure;
 use crate::model::Model;
 use crate::params::Params;
-use crate::simulate::simulate;
+use crate::simulate::simulate_from_rest as simulate;
 use crate::waveform::PiecewiseLinear;
 
 fn paper_run(structure: Structure, dt: f64) -> f64 {
@@ -35,10 +35,71 @@ fn too_large_step_is_reported_as_divergence() {
     .unwrap();
     let w = PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap();
     match simulate(&m, &w, 10e-3, 5e-7, 100) {
-        Err(crate::simulate::SimError::Diverged { t, message }) => {
+        Err(crate::drive::SimError::Diverged { t, message }) => {
             assert!(t > 0.0 && t < 10e-3);
             assert!(message.contains("try dt <="), "{message}");
         }
         other => panic!("expected divergence, got {other:?}"),
     }
+}
+
+/// The paper case's final positions to the last bit (RK4, dt = 1e-8): a refactor of the engine
+/// must not change them. (Values of commit 5eeb5d8, before the single driver.)
+#[test]
+fn paper_case_final_positions_are_pinned_to_the_bit() {
+    assert_eq!(paper_run(Structure::Lps, 1e-8).to_bits(), 0x3ebc2738ea19fa1d);
+    assert_eq!(paper_run(Structure::Dps(4), 1e-8).to_bits(), 0x3ebcb2e3bae1b355);
+}
+
+/// RK4 batch outputs (metrics and recorded traces of 18 points: LPS and DPS4, effects with extra
+/// states, mixed durations, a retried point) folded into one number, pinned like the paper case.
+#[test]
+fn rk4_batch_outputs_are_pinned_to_the_bit() {
+    use crate::batch::*;
+    use crate::drive::Method;
+    use std::sync::atomic::{AtomicBool, AtomicUsize};
+    let mut specs = Vec::new();
+    for i in 0..9 {
+        let mut p = Params::paper();
+        p.m2 = 0.15 + 0.05 * i as f64;
+        p.normal_force = p.default_normal_force();
+        let mut e = Effects::default();
+        if i % 3 == 1 {
+            e.tau_sensor = 2e-5;
+            e.k_ground = 3e3;
+        }
+        if i % 3 == 2 {
+            e.tau_amp = 3e-6;
+            e.kappa = 0.01;
+            e.tau_creep = 1e-3;
+            e.drift_rate = 1e-6;
+        }
+        let w = PiecewiseLinear::sawtooth(40.0 + 10.0 * i as f64, 1000.0, 2, 0.2e-3, i % 2 == 0, 0.1e-3);
+        let mut sp = PointSpec::new(p, e, w.unwrap(), 2);
+        sp.t_end = if i == 4 { Some(1.5e-3) } else { None };
+        specs.push(sp);
+    }
+    let mut digest = 0u64;
+    for structure in [Structure::Lps, Structure::Dps(4)] {
+        let cfg = BatchConfig {
+            structure,
+            piezo_hysteresis: true,
+            t_end: 2.1e-3,
+            method: Method::Rk4 { dt: 5e-8 },
+            retries: 2,
+            record_every: 25,
+            final_states: false,
+        };
+        let r = run_batch(&cfg, &specs, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        for o in &r {
+            let m = o.metrics;
+            let values = [m.final_position, m.step_per_cycle, m.peak_velocity, m.peak_friction, m.slip_fraction, m.dt_used];
+            for x in values.iter().chain(&o.trace) {
+                digest = digest.rotate_left(5) ^ x.to_bits();
+            }
+            digest = digest.rotate_left(5) ^ (m.steps + 1000 * m.status as u64);
+        }
+    }
+    eprintln!("digest {digest:#018x}");
+    assert_eq!(digest, 0x8a450cd85fedae43);
 }

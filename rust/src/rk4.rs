@@ -1,30 +1,20 @@
-//! Classical fixed-step fourth-order Runge-Kutta over a flat state vector. It knows nothing of
-//! the physics: the right-hand side is an [`Rhs`] `f.eval(lane, c, y, dy)` where `c` in
-//! {0, 1/2, 1} is the stage's fraction of the step (the caller maps it to time and input).
+//! Classical fixed-step fourth-order Runge-Kutta over a flat state vector (the reference
+//! method). It knows nothing of the physics: the right-hand side is an [`Rhs`] evaluated at
+//! offsets 0, dt/2 and dt from the step's start.
 //!
 //! Generic over the storage: a `Vec<f64>` for any state size, or a fixed `[f64; D]` so that for
-//! the common small models the whole step stays in registers. One step can advance `L`
-//! independent systems ("lanes") stage by stage: a single trajectory is latency-bound (each
-//! stage waits on an exp and a division), and interleaving independent lanes fills the idle
-//! execution units. Each lane's arithmetic is exactly that of a one-lane step.
+//! the common small models the whole step stays in registers. One step advances `L` independent
+//! systems ("lanes") stage by stage: a single trajectory is latency-bound (each stage waits on an
+//! exp and a division), and interleaving independent lanes fills the idle execution units. Each
+//! lane's arithmetic is exactly that of a one-lane step.
 
-/// A right-hand side. A trait rather than a bare closure so that implementations can be
-/// `#[inline(always)]`: a call per stage with the state spilled to memory costs as much as
-/// the physics. Closures implement it too.
-pub trait Rhs {
-    fn eval(&mut self, lane: usize, c: f64, y: &[f64], dy: &mut [f64]);
-}
+use crate::stepper::{Attempt, Rhs, State, Stepper};
 
-impl<F: FnMut(usize, f64, &[f64], &mut [f64])> Rhs for F {
-    #[inline(always)]
-    fn eval(&mut self, lane: usize, c: f64, y: &[f64], dy: &mut [f64]) {
-        self(lane, c, y, dy)
-    }
-}
-
-/// Stage buffers for `L` lanes, allocated once per run.
+/// Step size and stage buffers for `L` lanes, allocated once per run.
 #[derive(Clone, Debug)]
 pub struct Rk4<S, const L: usize = 1> {
+    /// the step [s]
+    pub dt: f64,
     k1: [S; L],
     k2: [S; L],
     k3: [S; L],
@@ -32,11 +22,12 @@ pub struct Rk4<S, const L: usize = 1> {
     tmp: [S; L],
 }
 
-impl<S: AsRef<[f64]> + AsMut<[f64]> + Clone, const L: usize> Rk4<S, L> {
-    /// Buffers shaped like `zero` (which should be all zeros).
-    pub fn new(zero: S) -> Self {
+impl<S: State, const L: usize> Rk4<S, L> {
+    /// Step `dt` [s]; buffers shaped like `zero` (which should be all zeros).
+    pub fn new(dt: f64, zero: S) -> Self {
         let z = || std::array::from_fn(|_| zero.clone());
         Rk4 {
+            dt,
             k1: z(),
             k2: z(),
             k3: z(),
@@ -62,7 +53,7 @@ impl<S: AsRef<[f64]> + AsMut<[f64]> + Clone, const L: usize> Rk4<S, L> {
                     h2,
                     self.k1[i].as_ref(),
                 );
-                f.eval(i, 0.5, self.tmp[i].as_ref(), self.k2[i].as_mut());
+                f.eval(i, h2, self.tmp[i].as_ref(), self.k2[i].as_mut());
             }
         }
         for i in 0..L {
@@ -73,7 +64,7 @@ impl<S: AsRef<[f64]> + AsMut<[f64]> + Clone, const L: usize> Rk4<S, L> {
                     h2,
                     self.k2[i].as_ref(),
                 );
-                f.eval(i, 0.5, self.tmp[i].as_ref(), self.k3[i].as_mut());
+                f.eval(i, h2, self.tmp[i].as_ref(), self.k3[i].as_mut());
             }
         }
         for i in 0..L {
@@ -84,7 +75,7 @@ impl<S: AsRef<[f64]> + AsMut<[f64]> + Clone, const L: usize> Rk4<S, L> {
                     dt,
                     self.k3[i].as_ref(),
                 );
-                f.eval(i, 1.0, self.tmp[i].as_ref(), self.k4[i].as_mut());
+                f.eval(i, dt, self.tmp[i].as_ref(), self.k4[i].as_mut());
             }
         }
         let h6 = dt / 6.0;
@@ -105,12 +96,46 @@ impl<S: AsRef<[f64]> + AsMut<[f64]> + Clone, const L: usize> Rk4<S, L> {
     }
 }
 
-impl<S: AsRef<[f64]> + AsMut<[f64]> + Clone> Rk4<S, 1> {
-    /// Advance `y` by one step `dt` (the one-lane case).
+impl<S: State> Rk4<S, 1> {
+    /// Advance `y` by one step (the one-lane case).
     #[inline(always)]
-    pub fn step<F: Rhs>(&mut self, f: &mut F, dt: f64, y: &mut S) {
+    pub fn step<F: Rhs>(&mut self, f: &mut F, y: &mut S) {
         let ys: &mut [S; 1] = std::slice::from_mut(y).try_into().unwrap();
-        self.step_lanes(f, dt, ys, &[true]);
+        self.step_lanes(f, self.dt, ys, &[true]);
+    }
+}
+
+impl<S: State, const L: usize> Stepper<S, L> for Rk4<S, L> {
+    const FIXED_STEP: bool = true;
+    const EVALUATES_START: bool = true;
+
+    /// RK4 may overshoot the bound by its truncation error.
+    fn bound_slack(&self) -> f64 {
+        1e-6
+    }
+
+    fn restart(&mut self, _lane: usize) {}
+
+    #[inline(always)]
+    fn attempt<F: Rhs>(
+        &mut self,
+        f: &mut F,
+        ys: &mut [S; L],
+        _t: &[f64; L],
+        _end: &[f64; L],
+        active: &[bool; L],
+    ) -> [Attempt; L] {
+        self.step_lanes(f, self.dt, ys, active);
+        std::array::from_fn(|i| {
+            if active[i] {
+                Attempt::Accepted {
+                    step: self.dt,
+                    last: false,
+                }
+            } else {
+                Attempt::Idle
+            }
+        })
     }
 }
 
@@ -134,13 +159,13 @@ mod tests {
     fn oscillator_error(n: usize) -> f64 {
         let dt = 10.0 / n as f64;
         let mut y = [1.0, 0.0];
-        let mut rk = Rk4::new([0.0; 2]);
+        let mut rk = Rk4::new(dt, [0.0; 2]);
         let mut f = |_l: usize, _c: f64, y: &[f64], dy: &mut [f64]| {
             dy[0] = y[1];
             dy[1] = -y[0];
         };
         for _ in 0..n {
-            rk.step(&mut f, dt, &mut y);
+            rk.step(&mut f, &mut y);
         }
         (y[0] - 10f64.cos()).abs()
     }
@@ -156,11 +181,11 @@ mod tests {
         let mut a = [0.3, -0.2];
         let mut v = vec![0.3, -0.2];
         let mut lanes = [[0.3, -0.2], [1.0, 0.0], [0.3, -0.2]];
-        let (mut ra, mut rv) = (Rk4::new([0.0; 2]), Rk4::new(vec![0.0; 2]));
-        let mut rl: Rk4<[f64; 2], 3> = Rk4::new([0.0; 2]);
+        let (mut ra, mut rv) = (Rk4::new(0.01, [0.0; 2]), Rk4::new(0.01, vec![0.0; 2]));
+        let mut rl: Rk4<[f64; 2], 3> = Rk4::new(0.01, [0.0; 2]);
         for _ in 0..100 {
-            ra.step(&mut pendulum, 0.01, &mut a);
-            rv.step(&mut pendulum, 0.01, &mut v);
+            ra.step(&mut pendulum, &mut a);
+            rv.step(&mut pendulum, &mut v);
             rl.step_lanes(&mut pendulum, 0.01, &mut lanes, &[true, true, true]);
         }
         assert_eq!(a.to_vec(), v);

@@ -1,225 +1,12 @@
-//! The simulation driver: steps the model with RK4 under a piecewise-linear input, checks for
-//! divergence every step, and hands each state to an observer (saving, metrics).
+//! One run, saved: the driver (`drive.rs`) with a [`Trajectory`] as its observer. From rest or
+//! from any state, by RK4 or an adaptive method; the final state comes back so a run can be
+//! continued or restarted mid-record.
 
-use crate::model::{with_state_size, Model};
-use crate::rk4::{Rhs, Rk4};
+use std::sync::atomic::AtomicBool;
+
+use crate::drive::{divergence_message, run_tasks, LaneEnd, Method, Observer, SimError, Task};
+use crate::model::Model;
 use crate::waveform::PiecewiseLinear;
-
-/// RK4's stability limit on the imaginary axis is 2 sqrt 2; keep a margin.
-const RK4_STABLE_OMEGA_DT: f64 = 2.5;
-
-/// Why a run stopped without a result.
-#[derive(Clone, Debug, PartialEq)]
-pub enum SimError {
-    /// Bad input (parameters, step size, waveform); the message names what is wrong.
-    Input(String),
-    /// The state left its physical bounds or became non-finite at time `t` [s].
-    Diverged { t: f64, message: String },
-}
-
-impl std::fmt::Display for SimError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            SimError::Input(m) => write!(f, "{m}"),
-            SimError::Diverged { message, .. } => write!(f, "{message}"),
-        }
-    }
-}
-
-/// Number of steps of size `dt` in `t_end`, refusing a `dt` that does not divide it or that the
-/// structure's highest mode makes unstable.
-pub fn plan_steps(
-    model: &Model,
-    wave: &PiecewiseLinear,
-    t_end: f64,
-    dt: f64,
-) -> Result<usize, SimError> {
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(SimError::Input(format!(
-            "parameter 'dt' must be positive and finite, got {dt}"
-        )));
-    }
-    if !(t_end.is_finite() && t_end > 0.0) {
-        return Err(SimError::Input(format!(
-            "parameter 't_end' must be positive and finite, got {t_end}"
-        )));
-    }
-    let steps = (t_end / dt).round();
-    if (steps * dt - t_end).abs() > 1e-6 * dt || steps < 1.0 {
-        return Err(SimError::Input(format!(
-            "dt = {dt:e} s does not divide t_end = {t_end:e} s into whole steps"
-        )));
-    }
-    wave.check_alignment(dt, t_end).map_err(SimError::Input)?;
-    // a first-order lag much faster than the step makes its state stiff: RK4 would diverge
-    let e = &model.effects;
-    for (name, tau) in [
-        ("tau_amp", e.tau_amp),
-        ("tau_creep", e.tau_creep),
-        ("tau_sensor", e.tau_sensor),
-    ] {
-        if tau > 0.0 && tau * RK4_STABLE_OMEGA_DT < dt {
-            return Err(SimError::Input(format!(
-                "effect parameter '{name}' = {tau:e} s is too short for dt = {dt:e} s (RK4 needs dt <= {:.3e} s); \
-                 use a smaller dt, or 0 to switch the effect off",
-                tau * RK4_STABLE_OMEGA_DT
-            )));
-        }
-    }
-    let w = model.mech.highest_frequency();
-    if w * dt > RK4_STABLE_OMEGA_DT {
-        return Err(SimError::Input(format!(
-            "dt = {dt:e} s is unstable for the highest structural mode ({w:.4e} rad/s); \
-             use dt <= {:.3e} s",
-            RK4_STABLE_OMEGA_DT / w
-        )));
-    }
-    Ok(steps as usize)
-}
-
-/// Initial state: at rest, everything zero (MODEL.md, FORMAT.md).
-pub fn rest_state(model: &Model) -> Vec<f64> {
-    vec![0.0; model.layout.dim]
-}
-
-/// The model under a linear input over one step, per lane: V = v0 + slope c dt. Keeps
-/// (Ff, dg/dt) of each lane's first stage, i.e. at the state at the start of the step.
-pub struct ModelRhs<'a, const N: usize, const EXTRAS: bool, const L: usize = 1> {
-    pub model: &'a Model,
-    pub v0: [f64; L],
-    pub slope: [f64; L],
-    pub dt: f64,
-    pub ff_gdot: [(f64, f64); L],
-}
-
-impl<const N: usize, const EXTRAS: bool, const L: usize> Rhs for ModelRhs<'_, N, EXTRAS, L> {
-    #[inline(always)]
-    fn eval(&mut self, lane: usize, c: f64, y: &[f64], dy: &mut [f64]) {
-        let out = self.model.rhs_impl::<N, EXTRAS>(
-            self.v0[lane] + self.slope[lane] * c * self.dt,
-            self.slope[lane],
-            y,
-            dy,
-        );
-        if c == 0.0 {
-            self.ff_gdot[lane] = out;
-        }
-    }
-}
-
-/// Integrate `steps` steps of `dt` from `y` (at t = 0). After every step the observer gets
-/// (step index k >= 1, t, state, commanded voltage). Stops with `Diverged` as soon as the
-/// state is non-finite or |Fh| leaves its bound.
-pub fn integrate<O: FnMut(usize, f64, &[f64], f64)>(
-    model: &Model,
-    wave: &PiecewiseLinear,
-    dt: f64,
-    steps: usize,
-    y: &mut [f64],
-    observe: O,
-) -> Result<(), SimError> {
-    // Plain states of the common sizes run on stack arrays (see rk4.rs); same arithmetic.
-    macro_rules! fixed {
-        ($n:literal, $d:literal) => {{
-            let mut a = [0.0; $d];
-            a.copy_from_slice(y);
-            let r = integrate_with::<_, _, $n, false>(model, wave, dt, steps, &mut a, observe);
-            y.copy_from_slice(&a);
-            r
-        }};
-    }
-    with_state_size!(model.is_plain(), model.layout.dof, fixed, {
-        let mut v = y.to_vec();
-        let r = integrate_with::<_, _, 0, true>(model, wave, dt, steps, &mut v, observe);
-        y.copy_from_slice(&v);
-        r
-    })
-}
-
-#[inline(always)]
-fn integrate_with<S, O, const N: usize, const EXTRAS: bool>(
-    model: &Model,
-    wave: &PiecewiseLinear,
-    dt: f64,
-    steps: usize,
-    y: &mut S,
-    mut observe: O,
-) -> Result<(), SimError>
-where
-    S: AsRef<[f64]> + AsMut<[f64]> + Clone,
-    O: FnMut(usize, f64, &[f64], f64),
-{
-    let mut zero = y.clone();
-    zero.as_mut().fill(0.0);
-    let mut rk = Rk4::new(zero);
-    let l = model.layout;
-    // a hair above the bound: RK4 may overshoot it by its truncation error
-    let bound = model.presliding_bound() * (1.0 + 1e-6) + 1e-12;
-    let (bt, bv) = (wave.times(), wave.values());
-    let mut seg = 0usize;
-    for k in 0..steps {
-        let t0 = k as f64 * dt;
-        let t_mid = t0 + 0.5 * dt;
-        while seg + 1 < bt.len() && bt[seg + 1] <= t_mid {
-            seg += 1;
-        }
-        // breakpoints sit on step boundaries, so the slope is constant over the whole step
-        let (v0, slope) = if t_mid < bt[0] || seg + 1 >= bt.len() {
-            (bv[seg], 0.0)
-        } else {
-            let s = (bv[seg + 1] - bv[seg]) / (bt[seg + 1] - bt[seg]);
-            (bv[seg] + s * (t0 - bt[seg]), s)
-        };
-        let mut f = ModelRhs::<N, EXTRAS> {
-            model,
-            v0: [v0],
-            slope: [slope],
-            dt,
-            ff_gdot: [(0.0, 0.0)],
-        };
-        rk.step(&mut f, dt, y);
-        let t1 = (k + 1) as f64 * dt;
-        let ys = y.as_ref();
-        let fh = ys[l.fh];
-        if !(fh.abs() <= bound) || !ys[l.dof].is_finite() || !ys[0].is_finite() {
-            return Err(diverged(model, dt, t1, ys));
-        }
-        observe(k + 1, t1, ys, v0 + slope * dt);
-    }
-    if let Some(i) = y.as_ref().iter().position(|x| !x.is_finite()) {
-        return Err(SimError::Diverged {
-            t: steps as f64 * dt,
-            message: format!("state component {i} is not finite at the end of the run"),
-        });
-    }
-    Ok(())
-}
-
-fn diverged(model: &Model, dt: f64, t: f64, y: &[f64]) -> SimError {
-    let l = model.layout;
-    let v = y[l.dof];
-    let stiff = if v.is_finite() {
-        model.friction.sliding_stiffness(v)
-    } else {
-        f64::NAN
-    };
-    let hint = if stiff.is_finite() && stiff > 0.0 {
-        (RK4_STABLE_OMEGA_DT / stiff).min(dt / 2.0)
-    } else {
-        dt / 4.0
-    };
-    SimError::Diverged {
-        t,
-        message: format!(
-            "integration diverged at t = {t:.6e} s (Fh = {:.4e} N, bound {:.4e} N; v1 = {:.4e} m/s): \
-             dt = {dt:e} s is too large for the friction state's stiffness during sliding; \
-             try dt <= {hint:.2e} s",
-            y[l.fh],
-            model.presliding_bound(),
-            v
-        ),
-    }
-}
 
 /// Saved trajectory; each per-time array has one entry per saved time.
 #[derive(Clone, Debug, Default)]
@@ -276,12 +63,42 @@ impl Trajectory {
     }
 }
 
-/// Run from rest to `t_end` with step `dt`, saving every `save_every` steps (and the last).
+/// Saves a [`Trajectory`] every `save_every` accepted steps, plus the first and last state.
+struct Saver<'a> {
+    model: &'a Model,
+    wave: &'a PiecewiseLinear,
+    save_every: usize,
+    until_save: usize,
+    out: Trajectory,
+}
+
+impl Observer for Saver<'_> {
+    fn start(&mut self, _task: usize, t: f64, y: &[f64]) {
+        self.out.record(self.model, t, y, self.wave.value(t));
+    }
+
+    #[inline(always)]
+    fn step(&mut self, _task: usize, t: f64, _span: f64, y: &[f64], v: f64, _s: Option<(f64, f64)>, last: bool) {
+        self.until_save -= 1; // a countdown, not k % save_every: no division in the step loop
+        if self.until_save == 0 || last {
+            self.out.record(self.model, t, y, v);
+            self.until_save = self.save_every;
+        }
+    }
+}
+
+/// Run `model` under `wave` from `t_start` to `t_end` [s] starting in state `y0` (see
+/// [`Model::rest_state`], [`crate::model::Layout::components`]) with `method`, saving every
+/// `save_every` accepted steps (and the first and last states). `final_state` holds the state
+/// at `t_end`: a run continued from it equals the uninterrupted run (bit for bit with RK4 when
+/// the step times coincide, i.e. `t_start` is a multiple of dt).
 pub fn simulate(
     model: &Model,
     wave: &PiecewiseLinear,
+    t_start: f64,
     t_end: f64,
-    dt: f64,
+    y0: &[f64],
+    method: &Method,
     save_every: usize,
 ) -> Result<Trajectory, SimError> {
     if save_every == 0 {
@@ -289,21 +106,130 @@ pub fn simulate(
             "parameter 'save_every' must be at least 1".into(),
         ));
     }
-    let steps = plan_steps(model, wave, t_end, dt)?;
-    let mut y = rest_state(model);
-    let mut out = Trajectory {
-        dof: model.layout.dof,
-        ..Default::default()
+    let task = Task {
+        model,
+        wave,
+        t_start,
+        t_end,
+        y0,
     };
-    out.record(model, 0.0, &y, wave.value(0.0));
-    let mut until_save = save_every;
-    integrate(model, wave, dt, steps, &mut y, |k, t, s, v| {
-        until_save -= 1; // a countdown, not k % save_every: no division in the step loop
-        if until_save == 0 || k == steps {
-            out.record(model, t, s, v);
-            until_save = save_every;
+    crate::drive::check_task(&task, method)?;
+    let mut saver = Saver {
+        model,
+        wave,
+        save_every,
+        until_save: save_every,
+        out: Trajectory {
+            dof: model.layout.dof,
+            ..Default::default()
+        },
+    };
+    let never = AtomicBool::new(false);
+    let (end, y) = run_tasks::<_, 1>(&[task], method, &mut saver, &never)
+        .expect("not cancelled")
+        .pop()
+        .expect("one task");
+    match end {
+        LaneEnd::Diverged { t, why } => {
+            let message = match (why, method) {
+                (None, Method::Rk4 { dt }) => divergence_message(model, *dt, t, &y),
+                (why, _) => format!(
+                    "integration diverged at t = {t:.6e} s: {}; tighten rtol/atol or use method 'rk4' with a small dt",
+                    why.unwrap_or_else(|| "the state is no longer finite".into())
+                ),
+            };
+            Err(SimError::Diverged { t, message })
         }
-    })?;
-    out.final_state = y;
-    Ok(out)
+        LaneEnd::Finished { .. } => {
+            if let Some(i) = y.iter().position(|x| !x.is_finite()) {
+                return Err(SimError::Diverged {
+                    t: t_end,
+                    message: format!(
+                        "state component '{}' is not finite at the end of the run",
+                        model.layout.components()[i].0
+                    ),
+                });
+            }
+            let mut out = saver.out;
+            out.final_state = y;
+            Ok(out)
+        }
+    }
+}
+
+/// Run from rest over [0, `t_end`] with RK4 of step `dt` [s], saving every `save_every` steps:
+/// the paper's setting.
+pub fn simulate_from_rest(
+    model: &Model,
+    wave: &PiecewiseLinear,
+    t_end: f64,
+    dt: f64,
+    save_every: usize,
+) -> Result<Trajectory, SimError> {
+    simulate(model, wave, 0.0, t_end, &model.rest_state(), &Method::Rk4 { dt }, save_every)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::Effects;
+    use crate::mechanics::Structure;
+    use crate::params::Params;
+
+    fn paper(structure: Structure, effects: Effects) -> (Model, PiecewiseLinear) {
+        let m = Model::new(Params::paper(), effects, structure, true, false).unwrap();
+        (m, PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap())
+    }
+
+    #[test]
+    fn rk4_continued_from_the_final_state_equals_the_whole_run_bitwise() {
+        let e = Effects {
+            tau_sensor: 2e-5,
+            ..Default::default()
+        };
+        for (structure, effects) in [(Structure::Lps, Effects::default()), (Structure::Dps(4), e)] {
+            let (m, w) = paper(structure, effects);
+            let rk4 = Method::Rk4 { dt: 1e-8 };
+            let whole = simulate(&m, &w, 0.0, 6e-3, &m.rest_state(), &rk4, 1000).unwrap();
+            let a = simulate(&m, &w, 0.0, 2.3e-3, &m.rest_state(), &rk4, 1000).unwrap();
+            let b = simulate(&m, &w, 2.3e-3, 6e-3, &a.final_state, &rk4, 1000).unwrap();
+            assert_eq!(b.final_state, whole.final_state);
+            assert_eq!(b.t[0], 2.3e-3);
+            assert_eq!(*b.reading.last().unwrap(), *whole.reading.last().unwrap());
+        }
+    }
+
+    #[test]
+    fn dopri5_single_run_agrees_with_rk4_to_a_nanometre() {
+        let (m, w) = paper(Structure::Lps, Effects::default());
+        let rk4 = simulate(&m, &w, 0.0, 10e-3, &m.rest_state(), &Method::Rk4 { dt: 1e-8 }, 1000).unwrap();
+        let ad = Method::Dopri5 {
+            rtol: 1e-8,
+            atol: 1e-8,
+            first_step: 1e-8,
+        };
+        let d = simulate(&m, &w, 0.0, 10e-3, &m.rest_state(), &ad, 100).unwrap();
+        assert!((d.final_state[0] - rk4.final_state[0]).abs() < 1e-9);
+        assert_eq!(*d.t.last().unwrap(), 10e-3);
+        assert!(d.t.len() < rk4.t.len(), "{} saves", d.t.len());
+        // and continued mid-record from its own final state
+        let a = simulate(&m, &w, 0.0, 4e-3, &m.rest_state(), &ad, 100).unwrap();
+        let b = simulate(&m, &w, 4e-3, 10e-3, &a.final_state, &ad, 100).unwrap();
+        assert!((b.final_state[0] - rk4.final_state[0]).abs() < 1e-9);
+    }
+
+    #[test]
+    fn bad_initial_states_and_spans_are_refused_by_name() {
+        let (m, w) = paper(Structure::Lps, Effects::default());
+        let rk4 = Method::Rk4 { dt: 1e-8 };
+        let err = |y: &[f64], t0: f64| simulate(&m, &w, t0, 1e-3, y, &rk4, 10).unwrap_err().to_string();
+        assert!(err(&[0.0; 3], 0.0).contains("q0, q1, v0, v1, g, fh, h"));
+        let mut y = m.rest_state();
+        y[m.layout.fh] = 1e3;
+        assert!(err(&y, 0.0).contains("'fh'"));
+        y[m.layout.fh] = f64::NAN;
+        assert!(err(&y, 0.0).contains("must be finite"));
+        assert!(err(&m.rest_state(), 0.5e-8).contains("t_start"));
+        assert!(err(&m.rest_state(), 2e-3).contains("t_start"));
+    }
 }

@@ -155,6 +155,68 @@ impl PiecewiseLinear {
     }
 }
 
+/// Walks a waveform's breakpoints as a run advances: segments are visited in order, so no
+/// search per step. Steps never straddle a breakpoint (the driver lands on each), so the input
+/// over a step is linear: V(t0 + tau) = V(t0) + slope tau.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Cursor {
+    seg: usize,
+}
+
+impl Cursor {
+    /// A cursor placed at time `t` [s].
+    pub fn at(wave: &PiecewiseLinear, t: f64) -> Self {
+        Cursor {
+            seg: wave.segment(t),
+        }
+    }
+
+    /// The segment index the cursor is on.
+    pub fn segment(&self) -> usize {
+        self.seg
+    }
+
+    /// Move onto the segment holding `probe` [s] (a time strictly inside the coming step, or the
+    /// step's start for a step that starts exactly on a breakpoint); true if it moved.
+    #[inline(always)]
+    pub fn advance(&mut self, wave: &PiecewiseLinear, probe: f64) -> bool {
+        let bt = &wave.t;
+        let before = self.seg;
+        while self.seg + 1 < bt.len() && bt[self.seg + 1] <= probe {
+            self.seg += 1;
+        }
+        self.seg != before
+    }
+
+    /// (V(t0) [V], slope [V/s]) over a step starting at `t0` [s] inside the current segment;
+    /// `probe` as for [`Cursor::advance`]. Before the first and after the last breakpoint the
+    /// input holds its value (slope 0).
+    #[inline(always)]
+    pub fn input(&self, wave: &PiecewiseLinear, t0: f64, probe: f64) -> (f64, f64) {
+        let (seg, bv) = (self.seg, &wave.v);
+        if probe < wave.t[0] || seg + 1 >= wave.t.len() {
+            (bv[seg], 0.0)
+        } else {
+            let s = wave.slope(seg, probe);
+            (bv[seg] + s * (t0 - wave.t[seg]), s)
+        }
+    }
+
+    /// The next breakpoint after `t` [s] (infinite after the last): where an adaptive step must
+    /// land.
+    #[inline(always)]
+    pub fn next_breakpoint(&self, wave: &PiecewiseLinear, t: f64) -> f64 {
+        let bt = &wave.t;
+        if t < bt[0] {
+            bt[0]
+        } else if self.seg + 1 < bt.len() {
+            bt[self.seg + 1]
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
 fn finite(name: &str, x: f64) -> Result<(), String> {
     if x.is_finite() {
         Ok(())

@@ -12,20 +12,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import engine
+from ..batch import Structure, Tables, param_row
+from ..batch import run as run_batch
 from ..recording import Recording
+from ..waveforms import Sawtooth
 
 #: RK4 step used for fits [s]: within ~1e-11 m of dt = 5e-8 on the dev cases (noise is ~1e-9 m),
 #: divides the 5 and 10 us sample steps and the 0.5 ms edges; a point that diverges is retried at dt/2
 FIT_DT = 2e-7
-
-
-@dataclass(frozen=True)
-class Structure:
-    """The model's structure: LPS or DPS (with elements) and whether h (piezo hysteresis) runs."""
-
-    model: str
-    n_elements: int
-    piezo_hysteresis: bool
 
 
 @dataclass(frozen=True)
@@ -52,13 +46,12 @@ class CaseSimulator:
         self.record_every = int(round(step / dt))
         if abs(self.record_every * dt - step) > 1e-9 * step:
             raise ValueError(f"fit step {dt} s does not divide the sample step {step} s")
-        self._wave_rows = []
-        cols = engine.wave_columns()
-        for e in recording.experiments:
-            row = dict.fromkeys(cols, 0.0)
-            row.update(kind=1, amplitude=e.amplitude_V, rise=e.edge_s, frequency=e.frequency_Hz, cycles=e.cycles,
-                       forward=1.0 if e.direction == "forward" else 0.0, delay=e.rest_s)
-            self._wave_rows.append([float(row[c]) for c in cols])
+        names = engine.wave_fields(Sawtooth.batch_kind)
+        self._wave_rows = [
+            [Sawtooth(e.amplitude_V, e.frequency_Hz, e.cycles, e.edge_s, e.direction, e.rest_s).batch_fields()[c]
+             for c in names]
+            for e in recording.experiments
+        ]
         self.evaluations = 0  # simulated experiment runs, for reports
 
     def horizon(self, j: int, cycles: Optional[int]) -> tuple[float, int]:
@@ -78,11 +71,10 @@ class CaseSimulator:
             by_structure.setdefault(s.structure, []).append(i)
         n_exp = len(self.recording.experiments)
         horizons = [self.horizon(j, cycles) for j in range(n_exp)]
-        pnames, enames = engine.param_names(), engine.effect_names()
+        enames = engine.effect_names()
         for structure, idx in by_structure.items():
             rows_p, rows_e, rows_w, t_ends = [], [], [], []
-            prows = [[math.nan if specs[i].params.get(n) is None else float(specs[i].params[n]) for n in pnames]
-                     for i in idx]
+            prows = [param_row(specs[i].params) for i in idx]
             erows = [[float(specs[i].effects.get(n, 0.0)) for n in enames] for i in idx]
             # experiment-major: neighbouring points share a duration, so the engine's lanes of
             # points (which advance together) all stay busy to the end
@@ -92,12 +84,10 @@ class CaseSimulator:
                     rows_e.append(erows[a])
                     rows_w.append(self._wave_rows[j])
                     t_ends.append(horizons[j][0])
-            run = engine.start_batch(
-                np.asarray(rows_p), np.asarray(rows_e), np.asarray(rows_w), None, None,
-                structure.model, structure.n_elements, structure.piezo_hysteresis,
-                max(t_ends), self.dt, "rk4", 0.0, 0.0, 2, self.threads, t_ends, self.record_every,
-            )
-            res = run.result()
+            tables = Tables(np.asarray(rows_p), np.asarray(rows_e), Sawtooth.batch_kind, np.asarray(rows_w),
+                            t_ends=np.asarray(t_ends))
+            res = run_batch(tables, structure, t_end=max(t_ends), method="rk4", dt=self.dt, retries=2,
+                            threads=self.threads, record_every=self.record_every)
             self.evaluations += len(t_ends)
             traces = res.get("traces", [np.zeros(0)] * len(t_ends))
             for a, i in enumerate(idx):

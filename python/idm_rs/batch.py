@@ -1,0 +1,168 @@
+"""The batch engine from Python: many independent runs (parameters, effects, input, span,
+initial state), each reduced to metrics inside the Rust loop, optionally with its sensor
+reading every few steps and its final state. ``idm_rs.sweep`` and the diagnosis's fits are
+built on it; use it directly for a list of runs that is not a grid::
+
+    from idm_rs.batch import Point, Structure, run
+    pts = [Point(idm_rs.Params(m2=m2), waveform=idm_rs.Triangle()) for m2 in (0.2, 0.3)]
+    out = run(pts, Structure("lps"), t_end=10e-3, dt=1e-8)
+    out["final_position"]                    # x1(t_end) per point [m]
+
+Points go to Rust as tables (one row per point); the waveform of every point of a batch is of
+one family (triangle, sawtooth or sampled) with per-point fields.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, Literal, Mapping, Optional, Sequence, Union
+
+import numpy as np
+from numpy.typing import NDArray
+
+from . import engine
+from .effects import Effects
+from .params import Params
+from .waveforms import Sampled, Waveform
+
+
+@dataclass(frozen=True)
+class Structure:
+    """The model's structure: ``model`` "lps" (two lumped masses) or "dps" (the PE as
+    ``n_elements`` FEM bar elements), and whether the piezo hysteresis state h runs."""
+
+    model: Literal["lps", "dps"] = "dps"
+    n_elements: int = 4
+    piezo_hysteresis: bool = True
+
+    def config(self, **how: Any) -> Any:
+        """An ``engine.RunConfig`` of this structure with the method settings ``how``."""
+        return engine.RunConfig(model=self.model, n_elements=int(self.n_elements),
+                                piezo_hysteresis=bool(self.piezo_hysteresis), **how)
+
+
+ParamValues = Union[Params, Mapping[str, Optional[float]]]
+
+
+@dataclass(frozen=True, eq=False)
+class Point:
+    """One run of a batch. ``params``: a :class:`Params`, or a mapping of parameter values
+    (missing names take Table 1; ``normal_force`` None = derived from the masses).
+    ``t_end`` [s] overrides the batch's; ``t_start`` [s] and ``initial_state`` (see
+    :class:`idm_rs.State`) restart a run mid-record."""
+
+    params: ParamValues
+    effects: Effects = field(default_factory=Effects)
+    waveform: Optional[Waveform] = None
+    t_end: Optional[float] = None
+    t_start: float = 0.0
+    initial_state: Optional[NDArray[np.float64]] = None
+
+
+def param_row(params: ParamValues) -> list[float]:
+    """A point's parameter row in the engine's order; NaN normal force = derived."""
+    given = params.to_dict(resolved=False) if isinstance(params, Params) else dict(params)
+    defaults = Params().to_dict(resolved=False)
+    row = []
+    for name in engine.param_names():
+        v = given.get(name, defaults.get(name))
+        row.append(math.nan if v is None else float(v))
+    return row
+
+
+@dataclass(frozen=True, eq=False)
+class Tables:
+    """Per-point tables, one row per point, as the engine takes them."""
+
+    params: NDArray[np.float64]  #: (P, len(param_names())), NaN normal_force = derived
+    effects: NDArray[np.float64]  #: (P, len(effect_names()))
+    wave_kind: str  #: "triangle", "sawtooth" or "sampled"
+    wave_fields: NDArray[np.float64]  #: (P, len(wave_fields(wave_kind)))
+    sampled: Optional[tuple[NDArray[np.float64], NDArray[np.float64]]] = None
+    t_ends: Optional[NDArray[np.float64]] = None
+    t_starts: Optional[NDArray[np.float64]] = None
+    initial_states: Optional[NDArray[np.float64]] = None
+
+    @property
+    def size(self) -> int:
+        return int(self.params.shape[0])
+
+    @classmethod
+    def from_points(cls, points: Sequence[Point], waveform: Optional[Waveform] = None) -> "Tables":
+        """Tables of `points` (each with its own waveform, or `waveform` for all); every waveform
+        must be of one family."""
+        waves = [p.waveform or waveform for p in points]
+        if any(w is None for w in waves):
+            raise ValueError("every point needs a waveform (or give one for all)")
+        kinds = {w.batch_kind for w in waves}  # type: ignore[union-attr]
+        if len(kinds) != 1:
+            raise ValueError(f"the points of one batch need one waveform family, got {sorted(kinds)}")
+        kind = kinds.pop()
+        names = engine.wave_fields(kind)
+        sampled = None
+        if kind == "sampled":
+            first = waves[0]
+            assert isinstance(first, Sampled)
+            if any(not (np.array_equal(w.t, first.t) and np.array_equal(w.voltage, first.voltage)) for w in waves):
+                raise ValueError("the points of one batch share one sampled waveform")
+            sampled = (first.t, first.voltage)
+        fields = np.array([[w.batch_fields()[n] for n in names] for w in waves], dtype=float)  # type: ignore[union-attr]
+        enames = engine.effect_names()
+        effects = np.array([[getattr(p.effects, n) for n in enames] for p in points], dtype=float)
+        params = np.array([param_row(p.params) for p in points], dtype=float)
+        t_ends = None
+        if any(p.t_end is not None for p in points):
+            t_ends = np.array([math.nan if p.t_end is None else p.t_end for p in points], dtype=float)
+        t_starts = np.array([p.t_start for p in points], dtype=float) if any(p.t_start for p in points) else None
+        states = None
+        if any(p.initial_state is not None for p in points):
+            if any(p.initial_state is None for p in points):
+                raise ValueError("give an initial state for every point of a batch, or for none")
+            states = np.stack([np.asarray(p.initial_state, dtype=float) for p in points])
+        return cls(params.reshape(len(points), -1), effects.reshape(len(points), -1), kind,
+                   fields.reshape(len(points), -1), sampled, t_ends, t_starts, states)
+
+
+def start(tables: Tables, structure: Structure, *, t_end: float, method: str = "rk4", dt: float = 1e-8,
+          rtol: float = 1e-7, atol: float = 1e-7, first_step: Optional[float] = None, retries: int = 2,
+          threads: Optional[int] = None, record_every: int = 0, final_states: bool = False) -> Any:
+    """Start the batch on a background thread; returns an ``engine.BatchRun`` (``progress()``,
+    ``wait(timeout)``, ``cancel()``, ``result()``). Settings as in :func:`run`."""
+    config = structure.config(method=method, dt=float(dt), rtol=float(rtol), atol=float(atol),
+                              first_step=None if first_step is None else float(first_step), retries=int(retries),
+                              threads=int(threads or os.cpu_count() or 1), record_every=int(record_every),
+                              final_states=bool(final_states))
+    t_ends = tables.t_ends
+    if t_ends is not None:
+        t_ends = np.where(np.isnan(t_ends), float(t_end), t_ends)
+    return engine.start_batch(config, float(t_end), _c(tables.params), _c(tables.effects), tables.wave_kind,
+                              _c(tables.wave_fields), tables.sampled, _c(t_ends), _c(tables.t_starts),
+                              _c(tables.initial_states))
+
+
+def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: float, **how: Any) -> dict[str, Any]:
+    """Run a batch to the end and return its outputs: metric arrays (``final_position`` [m],
+    ``step_per_cycle`` [m], ``peak_velocity`` [m/s], ``peak_friction`` [N], ``slip_fraction``,
+    ``status``, ``diverged_at`` [s], ``dt_used`` [s], ``steps``), ``traces`` (sensor readings
+    [m] every ``record_every`` RK4 steps from the start, one array per point) and
+    ``final_states`` (points x state) when asked.
+
+    ``how``: ``method`` ("rk4" or "dopri5"), ``dt`` [s] (RK4 step), ``rtol``/``atol`` and
+    ``first_step`` [s] (dopri5), ``retries`` (RK4 retries at dt/2, dt/4 of a diverging point),
+    ``threads``, ``record_every``, ``final_states``."""
+    tables = points if isinstance(points, Tables) else Tables.from_points(points)
+    handle = start(tables, structure, t_end=t_end, **how)
+    try:
+        while not handle.wait(0.1):
+            pass
+    except KeyboardInterrupt:
+        handle.cancel()
+        raise
+    return dict(handle.result())
+
+
+def _c(a: Optional[NDArray[np.float64]]) -> Optional[NDArray[np.float64]]:
+    """C-contiguous float64 (the engine then reads it in place)."""
+    return None if a is None else np.ascontiguousarray(a, dtype=np.float64)

@@ -1,0 +1,292 @@
+//! The batch engine behind sweeps and fits: many independent points (parameters, effects,
+//! input, span, initial state), each reduced to a few metrics inside the loop (`metrics.rs`) —
+//! no trajectory is stored, so memory is O(points x metrics). Points run in parallel with rayon
+//! (`run.rs`), grouped into lanes of the one driver (`drive.rs`); a background thread with
+//! progress and cancellation runs a whole batch (`runner.rs`). Every point's arithmetic is
+//! exactly that of `simulate` for the same settings, so results do not depend on thread count,
+//! chunking or lane grouping.
+
+mod metrics;
+mod points;
+mod run;
+mod runner;
+
+pub use metrics::{PointMetrics, SLIP_VELOCITY_FACTOR};
+pub use run::{run_batch, CHUNK, LANES};
+pub use points::{PointTables, WaveFamily};
+pub use runner::BatchRunner;
+
+use crate::drive::Method;
+use crate::effects::Effects;
+use crate::mechanics::Structure;
+use crate::params::Params;
+use crate::waveform::PiecewiseLinear;
+
+/// What is common to every point of a batch.
+#[derive(Clone, Copy, Debug)]
+pub struct BatchConfig {
+    pub structure: Structure,
+    pub piezo_hysteresis: bool,
+    /// end of every point's run unless the point sets its own [s]
+    pub t_end: f64,
+    pub method: Method,
+    /// RK4: on divergence, retry with dt/2, dt/4, ... this many times before flagging the point
+    pub retries: u32,
+    /// RK4: record the sensor reading at the start and every `record_every` steps (0: none). The
+    /// only per-time output of a batch; fits compare it with recordings.
+    pub record_every: usize,
+    /// return each point's final state (to continue it, or to chain segments of a record)
+    pub final_states: bool,
+}
+
+/// One point: its parameters, effects, input and the number of drive cycles (0 if not a train).
+#[derive(Clone, Debug)]
+pub struct PointSpec {
+    pub params: Params,
+    pub effects: Effects,
+    pub wave: PiecewiseLinear,
+    pub cycles: usize,
+    /// this point's end time [s] if it differs from the batch's `t_end`
+    pub t_end: Option<f64>,
+    /// start time [s] (0: from the beginning of the input)
+    pub t_start: f64,
+    /// initial state (see `Layout::components`); `None`: at rest
+    pub y0: Option<Vec<f64>>,
+}
+
+impl PointSpec {
+    /// A point run from rest over [0, the batch's t_end].
+    pub fn new(params: Params, effects: Effects, wave: PiecewiseLinear, cycles: usize) -> Self {
+        PointSpec {
+            params,
+            effects,
+            wave,
+            cycles,
+            t_end: None,
+            t_start: 0.0,
+            y0: None,
+        }
+    }
+
+    pub fn t_end(&self, cfg: &BatchConfig) -> f64 {
+        self.t_end.unwrap_or(cfg.t_end)
+    }
+}
+
+/// What a point gives back: its metrics, its recorded reading and its final state if asked.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointOutput {
+    pub metrics: PointMetrics,
+    pub trace: Vec<f64>,
+    pub final_state: Vec<f64>,
+}
+
+impl PointOutput {
+    pub fn with_status(status: Status) -> Self {
+        PointOutput {
+            metrics: PointMetrics::with_status(status),
+            trace: Vec::new(),
+            final_state: Vec::new(),
+        }
+    }
+}
+
+/// Outcome of a point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Status {
+    /// not run (the batch was cancelled first)
+    NotRun = 0,
+    Ok = 1,
+    /// diverged at the requested dt, finished at a smaller one (see `dt_used`)
+    Retried = 2,
+    /// diverged at every step tried (`diverged_at` holds the time)
+    Diverged = 3,
+    /// the point's parameters, input or initial state are invalid
+    Invalid = 4,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Model;
+    use crate::simulate::simulate_from_rest as simulate;
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+    const RK4: Method = Method::Rk4 { dt: 2e-8 };
+
+    fn cfg(method: Method, structure: Structure) -> BatchConfig {
+        BatchConfig {
+            structure,
+            piezo_hysteresis: true,
+            t_end: 2e-3,
+            method,
+            retries: 2,
+            record_every: 0,
+            final_states: false,
+        }
+    }
+
+    fn specs(n: usize) -> Vec<PointSpec> {
+        (0..n)
+            .map(|i| {
+                let mut p = Params::paper();
+                p.m2 = 0.15 + 0.05 * i as f64;
+                p.normal_force = p.default_normal_force();
+                PointSpec::new(
+                    p,
+                    Effects::default(),
+                    PiecewiseLinear::sawtooth(40.0 + 10.0 * i as f64, 1000.0, 2, 0.2e-3, true, 0.0)
+                        .unwrap(),
+                    2,
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn rk4_batch_equals_simulate_bitwise() {
+        for structure in [Structure::Lps, Structure::Dps(4)] {
+            let c = cfg(RK4, structure);
+            let sp = specs(7);
+            let (cancel, done) = (AtomicBool::new(false), AtomicUsize::new(0));
+            let r: Vec<PointMetrics> = run_batch(&c, &sp, &cancel, &done)
+                .unwrap()
+                .into_iter()
+                .map(|o| o.metrics)
+                .collect();
+            assert_eq!(done.load(Ordering::Relaxed), 7);
+            for (s, m) in sp.iter().zip(&r) {
+                let model = Model::new(s.params, s.effects, structure, true, false).unwrap();
+                let t = simulate(&model, &s.wave, c.t_end, 2e-8, 1).unwrap();
+                assert_eq!(m.status, Status::Ok);
+                assert_eq!(m.final_position, t.final_state[0]);
+                let pv = t
+                    .velocities
+                    .chunks(model.layout.dof)
+                    .map(|v| v[0].abs())
+                    .fold(0.0, f64::max);
+                let pf = t.friction.iter().fold(0.0f64, |a, f| a.max(f.abs()));
+                assert_eq!(m.peak_velocity, pv);
+                assert_eq!(m.peak_friction, pf);
+                assert!(m.slip_fraction > 0.0 && m.slip_fraction < 1.0);
+            }
+        }
+    }
+
+    #[test]
+    fn results_do_not_depend_on_thread_count() {
+        let c = cfg(RK4, Structure::Lps);
+        let sp = specs(9);
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap()
+            })
+            .into_iter()
+            .map(|o| o.metrics)
+            .collect::<Vec<_>>()
+        };
+        let bits = |r: Vec<PointMetrics>| -> Vec<[u64; 7]> {
+            r.iter()
+                .map(|m| {
+                    [
+                        m.final_position,
+                        m.step_per_cycle,
+                        m.peak_velocity,
+                        m.peak_friction,
+                        m.slip_fraction,
+                        m.diverged_at,
+                        m.dt_used,
+                    ]
+                    .map(f64::to_bits)
+                })
+                .collect()
+        };
+        assert_eq!(bits(run(1)), bits(run(2)));
+    }
+
+    #[test]
+    fn dopri5_agrees_with_rk4_to_a_nanometre() {
+        let sp = specs(3);
+        let (cancel, done) = (AtomicBool::new(false), AtomicUsize::new(0));
+        let a = run_batch(&cfg(RK4, Structure::Lps), &sp, &cancel, &done).unwrap();
+        let b = run_batch(
+            &cfg(
+                Method::Dopri5 {
+                    rtol: 1e-7,
+                    atol: 1e-7,
+                    first_step: 2e-8,
+                },
+                Structure::Lps,
+            ),
+            &sp,
+            &cancel,
+            &done,
+        )
+        .unwrap();
+        for (x, y) in a.iter().map(|o| o.metrics).zip(b.iter().map(|o| o.metrics)) {
+            assert_eq!(y.status, Status::Ok);
+            assert!(
+                (x.final_position - y.final_position).abs() < 1e-9,
+                "{} {}",
+                x.final_position,
+                y.final_position
+            );
+            assert!(y.steps < 100_000 / 2, "adaptive took {} steps", y.steps);
+        }
+    }
+
+    #[test]
+    fn diverging_point_is_retried_and_does_not_poison_others() {
+        let mut c = cfg(RK4, Structure::Lps);
+        c.method = Method::Rk4 { dt: 4e-7 };
+        c.t_end = 2e-3;
+        let sp = specs(3);
+        let metrics = |c: &BatchConfig| -> Vec<PointMetrics> {
+            run_batch(c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0))
+                .unwrap()
+                .into_iter()
+                .map(|o| o.metrics)
+                .collect()
+        };
+        let r = metrics(&c);
+        assert!(r.iter().any(|m| m.status == Status::Retried), "{r:?}");
+        assert!(r.iter().all(|m| m.final_position.is_finite()));
+        c.retries = 0;
+        let r = metrics(&c);
+        assert!(r.iter().any(|m| m.status == Status::Diverged
+            && m.diverged_at > 0.0
+            && m.final_position.is_nan()));
+    }
+
+    #[test]
+    fn cancelled_batch_returns_not_run_points() {
+        let c = cfg(RK4, Structure::Lps);
+        let cancel = AtomicBool::new(true);
+        let r = run_batch(&c, &specs(5), &cancel, &AtomicUsize::new(0)).unwrap();
+        assert!(r
+            .iter()
+            .all(|o| o.metrics.status == Status::NotRun && o.metrics.final_position.is_nan()));
+    }
+
+    #[test]
+    fn recorded_traces_equal_simulate_readings_for_mixed_durations() {
+        let mut c = cfg(RK4, Structure::Dps(4));
+        c.record_every = 50;
+        let mut sp = specs(5);
+        sp[1].t_end = Some(1e-3);
+        sp[3].t_end = Some(1.5e-3);
+        sp[4].effects.tau_sensor = 2e-5; // an extra state: takes the general path
+        let r = run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        for (s, o) in sp.iter().zip(&r) {
+            let model = Model::new(s.params, s.effects, Structure::Dps(4), true, false).unwrap();
+            let t = simulate(&model, &s.wave, s.t_end.unwrap_or(c.t_end), 2e-8, 50).unwrap();
+            assert_eq!(o.trace, t.reading);
+            assert_eq!(o.metrics.final_position, t.final_state[0]);
+        }
+    }
+}

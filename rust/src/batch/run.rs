@@ -1,0 +1,230 @@
+//! Running a batch: points checked, grouped into lanes of one state layout, driven, retried at a
+//! smaller step when RK4 diverges, in parallel over rayon's pool.
+
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use rayon::prelude::*;
+
+use crate::drive::{check_task, run_tasks, LaneEnd, Method, SimError, Task};
+use crate::model::Model;
+
+use super::metrics::{MetricsObserver, PointMetrics};
+use super::{BatchConfig, PointOutput, PointSpec, Status};
+
+/// Points advanced together per core (see `stepper.rs`).
+pub const LANES: usize = 4;
+
+/// Points per rayon task: one lane group. A task is milliseconds of work or more, so
+/// scheduling costs nothing, and small tasks balance the threads when a batch has few points
+/// (a fit's Jacobian) or points of very different cost.
+pub const CHUNK: usize = LANES;
+
+/// A point that passed its checks: model, initial state and planned RK4 steps (0 if adaptive).
+struct Ready<'a> {
+    index: usize,
+    spec: &'a PointSpec,
+    model: Model,
+    y0: Vec<f64>,
+    steps: usize,
+}
+
+fn prepare<'a>(cfg: &BatchConfig, index: usize, spec: &'a PointSpec) -> Result<Ready<'a>, String> {
+    let model = Model::new(
+        spec.params,
+        spec.effects,
+        cfg.structure,
+        cfg.piezo_hysteresis,
+        false,
+    )?;
+    let y0 = spec.y0.clone().unwrap_or_else(|| model.rest_state());
+    let (t_start, t_end) = (spec.t_start, spec.t_end(cfg));
+    let task = Task {
+        model: &model,
+        wave: &spec.wave,
+        t_start,
+        t_end,
+        y0: &y0,
+    };
+    check_task(&task, &cfg.method).map_err(|e| e.to_string())?;
+    let steps = match cfg.method {
+        Method::Rk4 { dt } => ((t_end - t_start) / dt).round() as usize,
+        Method::Dopri5 { .. } => 0,
+    };
+    Ok(Ready {
+        index,
+        spec,
+        model,
+        y0,
+        steps,
+    })
+}
+
+/// Drive a lane group with `method`. `Err(t)` marks a point that diverged at time `t` [s] (the
+/// caller may retry it); `None` if cancelled.
+fn run_group(
+    cfg: &BatchConfig,
+    method: &Method,
+    record_every: usize,
+    group: &[&Ready],
+    cancel: &AtomicBool,
+) -> Option<Vec<Result<PointOutput, f64>>> {
+    let tasks: Vec<Task> = group
+        .iter()
+        .map(|r| Task {
+            model: &r.model,
+            wave: &r.spec.wave,
+            t_start: r.spec.t_start,
+            t_end: r.spec.t_end(cfg),
+            y0: &r.y0,
+        })
+        .collect();
+    let steps: Vec<usize> = group.iter().map(|r| r.steps).collect();
+    let mut obs = MetricsObserver::new(group.iter().map(|r| &r.model).collect(), record_every, &steps);
+    let ends = run_tasks::<_, LANES>(&tasks, method, &mut obs, cancel)?;
+    Some(
+        ends.into_iter()
+            .enumerate()
+            .map(|(i, (end, y))| match end {
+                LaneEnd::Finished { steps, min_step } if y.iter().all(|x| x.is_finite()) => {
+                    let (duration, dt_used) = match *method {
+                        // the planned duration, as a whole number of steps
+                        Method::Rk4 { dt } => (steps as f64 * dt, dt),
+                        Method::Dopri5 { .. } => (tasks[i].t_end - tasks[i].t_start, min_step),
+                    };
+                    Ok(PointOutput {
+                        metrics: obs.finish(i, &y, duration, group[i].spec.cycles, dt_used, steps),
+                        trace: std::mem::take(&mut obs.traces[i]),
+                        final_state: if cfg.final_states { y } else { Vec::new() },
+                    })
+                }
+                LaneEnd::Finished { .. } => Err(tasks[i].t_end),
+                LaneEnd::Diverged { t, .. } => Err(t),
+            })
+            .collect(),
+    )
+}
+
+/// What a diverged point reports after its retries (if any) at RK4 steps dt/2, dt/4, ...
+/// (recording at the same times). `None` if cancelled.
+fn retry(cfg: &BatchConfig, ready: &Ready, first_failure: f64, cancel: &AtomicBool) -> Option<PointOutput> {
+    let (mut method, mut record_every) = (cfg.method, cfg.record_every);
+    let mut failed_at = first_failure;
+    let first_step = match method {
+        Method::Rk4 { dt } => dt,
+        Method::Dopri5 { first_step, .. } => first_step,
+    };
+    let mut dt_tried = first_step;
+    if let Method::Rk4 { dt } = cfg.method {
+        let mut dt = dt;
+        for _ in 0..cfg.retries {
+            dt /= 2.0;
+            dt_tried = dt;
+            record_every *= 2;
+            method = Method::Rk4 { dt };
+            let steps = match crate::drive::plan_steps(
+                &ready.model,
+                &ready.spec.wave,
+                ready.spec.t_start,
+                ready.spec.t_end(cfg),
+                dt,
+            ) {
+                Ok(s) => s,
+                Err(_) => break,
+            };
+            let r = Ready { steps, y0: ready.y0.clone(), model: ready.model.clone(), ..*ready };
+            match run_group(cfg, &method, record_every, &[&r], cancel)?.pop() {
+                Some(Ok(o)) => {
+                    return Some(PointOutput {
+                        metrics: PointMetrics {
+                            status: Status::Retried,
+                            ..o.metrics
+                        },
+                        ..o
+                    })
+                }
+                Some(Err(t)) => failed_at = t,
+                None => break,
+            }
+        }
+    }
+    Some(PointOutput {
+        metrics: PointMetrics::diverged(failed_at, dt_tried),
+        trace: Vec::new(),
+        final_state: Vec::new(),
+    })
+}
+
+/// End of the lane group starting at `start`: up to LANES points sharing one state layout.
+fn lane_group_end(valid: &[Ready], start: usize) -> usize {
+    let dim = valid[start].model.layout.dim;
+    let mut end = start + 1;
+    while end < valid.len() && end - start < LANES && valid[end].model.layout.dim == dim {
+        end += 1;
+    }
+    end
+}
+
+/// Run one chunk of points (any size); `None` entries were cancelled before finishing.
+fn run_chunk(
+    cfg: &BatchConfig,
+    specs: &[PointSpec],
+    cancel: &AtomicBool,
+    done: &AtomicUsize,
+) -> Vec<Option<PointOutput>> {
+    let mut out: Vec<Option<PointOutput>> = vec![None; specs.len()];
+    // invalid points are answered at once; valid ones are grouped by layout for the lanes
+    let mut valid: Vec<Ready> = Vec::with_capacity(specs.len());
+    for (i, s) in specs.iter().enumerate() {
+        match prepare(cfg, i, s) {
+            Ok(r) => valid.push(r),
+            Err(_) => {
+                out[i] = Some(PointOutput::with_status(Status::Invalid));
+                done.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+    let mut start = 0;
+    while start < valid.len() {
+        if cancel.load(Ordering::Relaxed) {
+            break;
+        }
+        let end = lane_group_end(&valid, start);
+        let group: Vec<&Ready> = valid[start..end].iter().collect();
+        let Some(results) = run_group(cfg, &cfg.method, cfg.record_every, &group, cancel) else {
+            break; // cancelled
+        };
+        for (r, res) in group.iter().zip(results) {
+            let res = match res {
+                Ok(x) => Some(x),
+                Err(t) => retry(cfg, r, t, cancel),
+            };
+            if res.is_some() {
+                done.fetch_add(1, Ordering::Relaxed);
+            }
+            out[r.index] = res;
+        }
+        start = end;
+    }
+    out
+}
+
+/// Run every point on the current rayon pool. Unfinished points (after `cancel`) come back as
+/// `Status::NotRun` with NaN metrics; `done` counts finished points as they finish.
+pub fn run_batch(
+    cfg: &BatchConfig,
+    specs: &[PointSpec],
+    cancel: &AtomicBool,
+    done: &AtomicUsize,
+) -> Result<Vec<PointOutput>, SimError> {
+    cfg.method.validate().map_err(SimError::Input)?;
+    if matches!(cfg.method, Method::Dopri5 { .. }) && cfg.record_every > 0 {
+        return Err(SimError::Input(
+            "recording readings needs method 'rk4'".into(),
+        ));
+    }
+    Ok(specs
+        .par_chunks(CHUNK)
+        .flat_map_iter(|chunk| run_chunk(cfg, chunk, cancel, done))
+        .map(|m| m.unwrap_or_else(|| PointOutput::with_status(Status::NotRun)))
+        .collect())
+}

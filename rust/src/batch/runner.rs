@@ -1,0 +1,123 @@
+//! A batch on a background thread with its own rayon pool, so a caller (Python) can show
+//! progress and cancel it while the work runs. Points that could not even be built (an invalid
+//! value from a sweep axis, say) are flagged `Invalid` in place; they do not stop the others.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use super::run::run_batch;
+use super::{BatchConfig, PointOutput, PointSpec, Status};
+
+type Outcome = Result<Vec<PointOutput>, String>;
+
+/// A running batch.
+pub struct BatchRunner {
+    cancel: Arc<AtomicBool>,
+    done: Arc<AtomicUsize>,
+    total: usize,
+    handle: Mutex<Option<JoinHandle<Outcome>>>,
+}
+
+impl BatchRunner {
+    /// Start `points` (each built, or the reason it could not be) on `threads` worker threads.
+    pub fn start(
+        cfg: BatchConfig,
+        points: Vec<Result<PointSpec, String>>,
+        threads: usize,
+    ) -> Result<Self, String> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| format!("cannot start worker threads: {e}"))?;
+        let (cancel, done) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicUsize::new(0)));
+        let (c2, d2) = (cancel.clone(), done.clone());
+        let total = points.len();
+        let handle = std::thread::spawn(move || -> Outcome {
+            let mut slot = Vec::with_capacity(points.len());
+            let mut specs = Vec::with_capacity(points.len());
+            for p in points {
+                match p {
+                    Ok(s) => {
+                        slot.push(Some(specs.len()));
+                        specs.push(s);
+                    }
+                    Err(_) => {
+                        slot.push(None);
+                        d2.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+            }
+            let run = catch_unwind(AssertUnwindSafe(|| {
+                pool.install(|| run_batch(&cfg, &specs, &c2, &d2))
+            }));
+            let mut results = match run {
+                Ok(r) => r.map_err(|e| e.to_string())?,
+                Err(_) => return Err("internal error in idm-rs batch (please report)".into()),
+            };
+            let invalid = PointOutput::with_status(Status::Invalid);
+            Ok(slot
+                .into_iter()
+                .map(|s| match s {
+                    Some(k) => std::mem::replace(&mut results[k], invalid.clone()),
+                    None => invalid.clone(),
+                })
+                .collect())
+        });
+        Ok(BatchRunner {
+            cancel,
+            done,
+            total,
+            handle: Mutex::new(Some(handle)),
+        })
+    }
+
+    /// Points finished so far.
+    pub fn progress(&self) -> usize {
+        self.done.load(Ordering::Relaxed)
+    }
+
+    pub fn total(&self) -> usize {
+        self.total
+    }
+
+    /// Ask the workers to stop; points already finished are kept.
+    pub fn cancel(&self) {
+        self.cancel.store(true, Ordering::Relaxed);
+    }
+
+    /// Wait up to `timeout` [s]; true once the batch has finished.
+    pub fn wait(&self, timeout: f64) -> bool {
+        let deadline = Instant::now() + Duration::from_secs_f64(timeout.clamp(0.0, 1e9));
+        loop {
+            let finished = self
+                .handle
+                .lock()
+                .unwrap()
+                .as_ref()
+                .map_or(true, |h| h.is_finished());
+            if finished {
+                return true;
+            }
+            if Instant::now() >= deadline {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// Wait for the end and take the outputs (in point order; `NotRun` where cancelled).
+    pub fn join(&self) -> Result<Vec<PointOutput>, String> {
+        let handle = self
+            .handle
+            .lock()
+            .unwrap()
+            .take()
+            .ok_or("result already taken")?;
+        handle
+            .join()
+            .map_err(|_| "internal error in idm-rs batch worker (please report)".to_string())?
+    }
+}

@@ -1,0 +1,458 @@
+//! The one driver every run goes through, single trajectories and batch points alike: it plans
+//! the steps, walks the input's breakpoints, sets each lane's input for the step, asks the
+//! integrator ([`Stepper`]) to attempt it, checks the model's divergence criterion, and hands
+//! every accepted state to an [`Observer`] (saving a trajectory, recording sensor readings,
+//! accumulating sweep metrics are observers).
+//!
+//! Up to `L` runs ("lanes") of one state layout advance together, stage by stage (see
+//! `stepper.rs`); a lane's arithmetic is exactly that of a run alone, so results do not depend on
+//! how runs are grouped.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use crate::dopri5::{Dopri5, Dopri5Options};
+use crate::model::{with_state_size, Model};
+use crate::rk4::Rk4;
+use crate::stepper::{Attempt, Rhs, State, Stepper};
+use crate::waveform::{Cursor, PiecewiseLinear};
+
+/// RK4's stability limit on the imaginary axis is 2 sqrt 2; keep a margin.
+pub const RK4_STABLE_OMEGA_DT: f64 = 2.5;
+/// How often (in attempts) a running group looks at the cancel flag.
+const CANCEL_CHECK_ATTEMPTS: usize = 1 << 14;
+/// Smallest step an adaptive method may take before the run counts as diverged [s].
+const ADAPTIVE_H_MIN: f64 = 1e-14;
+
+/// Integration method of a run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Method {
+    /// Fixed-step classical RK4 with step `dt` [s] (the reference).
+    Rk4 { dt: f64 },
+    /// Adaptive Dormand-Prince 5(4); `atol` in units of each state's natural scale (see
+    /// [`Model::state_scales`]), `first_step` [s] the first trial step.
+    Dopri5 { rtol: f64, atol: f64, first_step: f64 },
+}
+
+impl Method {
+    /// Refuse tolerances or steps that are not positive and finite.
+    pub fn validate(&self) -> Result<(), String> {
+        match *self {
+            Method::Rk4 { dt } => {
+                if !(dt.is_finite() && dt > 0.0) {
+                    return Err(format!("parameter 'dt' must be positive and finite, got {dt}"));
+                }
+            }
+            Method::Dopri5 {
+                rtol,
+                atol,
+                first_step,
+            } => {
+                if !(rtol > 0.0 && atol > 0.0 && rtol.is_finite() && atol.is_finite()) {
+                    return Err(format!(
+                        "'rtol' and 'atol' must be positive, got {rtol}, {atol}"
+                    ));
+                }
+                if !(first_step.is_finite() && first_step > 0.0) {
+                    return Err(format!(
+                        "parameter 'first_step' must be positive and finite, got {first_step}"
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why a run stopped without a result.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SimError {
+    /// Bad input (parameters, step size, waveform, initial state); the message names what.
+    Input(String),
+    /// The state left its physical bounds or became non-finite at time `t` [s].
+    Diverged { t: f64, message: String },
+}
+
+impl std::fmt::Display for SimError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SimError::Input(m) => write!(f, "{m}"),
+            SimError::Diverged { message, .. } => write!(f, "{message}"),
+        }
+    }
+}
+
+/// One run: a model under an input from `t_start` to `t_end` [s], starting from `y0`.
+#[derive(Clone, Copy, Debug)]
+pub struct Task<'a> {
+    pub model: &'a Model,
+    pub wave: &'a PiecewiseLinear,
+    pub t_start: f64,
+    pub t_end: f64,
+    pub y0: &'a [f64],
+}
+
+/// How a run ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LaneEnd {
+    /// Reached `t_end` after `steps` accepted steps, the smallest `min_step` [s] long.
+    Finished { steps: u64, min_step: f64 },
+    /// Diverged at time `t` [s] (the state there is the run's final state); `why` for adaptive
+    /// methods whose step collapsed.
+    Diverged { t: f64, why: Option<String> },
+}
+
+/// Sees a run's states as they are accepted.
+pub trait Observer {
+    /// Task `task` starts at time `t` [s] in state `y`.
+    fn start(&mut self, task: usize, t: f64, y: &[f64]);
+    /// Task `task` accepted a step of `span` [s] ending at time `t` [s] in state `y`, with the
+    /// commanded voltage `v_cmd` [V] there; `start` is the model's (Ff [N], dg/dt [m/s]) at the
+    /// state the step started from when the integrator evaluated it (RK4's first stage);
+    /// `last` marks the run's final step.
+    #[allow(clippy::too_many_arguments)]
+    fn step(
+        &mut self,
+        task: usize,
+        t: f64,
+        span: f64,
+        y: &[f64],
+        v_cmd: f64,
+        start: Option<(f64, f64)>,
+        last: bool,
+    );
+}
+
+/// Number of RK4 steps of `dt` from `t_start` to `t_end`, refusing a `dt` that does not divide
+/// them into whole steps or the input's breakpoints, or that the structure's highest mode or a
+/// fast effect lag makes unstable. The message names the parameter and a step that works.
+pub fn plan_steps(
+    model: &Model,
+    wave: &PiecewiseLinear,
+    t_start: f64,
+    t_end: f64,
+    dt: f64,
+) -> Result<usize, SimError> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(SimError::Input(format!(
+            "parameter 'dt' must be positive and finite, got {dt}"
+        )));
+    }
+    check_span(t_start, t_end)?;
+    let whole = |x: f64| (x / dt - (x / dt).round()).abs() <= 1e-6;
+    if !whole(t_start) {
+        return Err(SimError::Input(format!(
+            "t_start = {t_start:e} s is not a whole number of steps dt = {dt:e} s; \
+             start on a multiple of dt"
+        )));
+    }
+    let steps = ((t_end - t_start) / dt).round();
+    if (steps * dt - (t_end - t_start)).abs() > 1e-6 * dt || steps < 1.0 {
+        return Err(SimError::Input(format!(
+            "dt = {dt:e} s does not divide t_end = {t_end:e} s into whole steps"
+        )));
+    }
+    wave.check_alignment(dt, t_end).map_err(SimError::Input)?;
+    // a first-order lag much faster than the step makes its state stiff: RK4 would diverge
+    for (name, tau) in model.effects.lags() {
+        if tau > 0.0 && tau * RK4_STABLE_OMEGA_DT < dt {
+            return Err(SimError::Input(format!(
+                "effect parameter '{name}' = {tau:e} s is too short for dt = {dt:e} s (RK4 needs dt <= {:.3e} s); \
+                 use a smaller dt, or 0 to switch the effect off",
+                tau * RK4_STABLE_OMEGA_DT
+            )));
+        }
+    }
+    let w = model.mech.highest_frequency();
+    if w * dt > RK4_STABLE_OMEGA_DT {
+        return Err(SimError::Input(format!(
+            "dt = {dt:e} s is unstable for the highest structural mode ({w:.4e} rad/s); \
+             use dt <= {:.3e} s",
+            RK4_STABLE_OMEGA_DT / w
+        )));
+    }
+    Ok(steps as usize)
+}
+
+/// Refuse a time span that is not finite or not increasing.
+pub fn check_span(t_start: f64, t_end: f64) -> Result<(), SimError> {
+    if !(t_end.is_finite() && t_end > 0.0) {
+        return Err(SimError::Input(format!(
+            "parameter 't_end' must be positive and finite, got {t_end}"
+        )));
+    }
+    if !(t_start.is_finite() && t_start >= 0.0 && t_start < t_end) {
+        return Err(SimError::Input(format!(
+            "parameter 't_start' must be finite, non-negative and before t_end = {t_end:e} s, got {t_start}"
+        )));
+    }
+    Ok(())
+}
+
+/// Check a run's settings before any work: the span, and for RK4 the step plan.
+pub fn check_task(task: &Task, method: &Method) -> Result<(), SimError> {
+    method.validate().map_err(SimError::Input)?;
+    task.model
+        .check_state(task.y0)
+        .map_err(SimError::Input)?;
+    match *method {
+        Method::Rk4 { dt } => plan_steps(task.model, task.wave, task.t_start, task.t_end, dt).map(|_| ()),
+        Method::Dopri5 { .. } => check_span(task.t_start, task.t_end),
+    }
+}
+
+/// The message of a divergence at time `t` [s] in state `y` with RK4 step `dt` [s]: where the
+/// state left its bounds and a step to try (from the friction state's stiffness there).
+pub fn divergence_message(model: &Model, dt: f64, t: f64, y: &[f64]) -> String {
+    let l = model.layout;
+    let v = y[l.dof];
+    let stiff = if v.is_finite() {
+        model.friction.sliding_stiffness(v)
+    } else {
+        f64::NAN
+    };
+    let hint = if stiff.is_finite() && stiff > 0.0 {
+        (RK4_STABLE_OMEGA_DT / stiff).min(dt / 2.0)
+    } else {
+        dt / 4.0
+    };
+    format!(
+        "integration diverged at t = {t:.6e} s (Fh = {:.4e} N, bound {:.4e} N; v1 = {:.4e} m/s): \
+         dt = {dt:e} s is too large for the friction state's stiffness during sliding; \
+         try dt <= {hint:.2e} s",
+        y[l.fh],
+        model.presliding_bound(),
+        v
+    )
+}
+
+/// The model under a linear input over one step, per lane: V = v0 + slope tau. Keeps each
+/// lane's (Ff, dg/dt) from its evaluation at tau = 0, i.e. at the state the step starts from.
+pub struct ModelRhs<'a, const N: usize, const EXTRAS: bool, const L: usize> {
+    pub models: [&'a Model; L],
+    pub v0: [f64; L],
+    pub slope: [f64; L],
+    pub at_start: [(f64, f64); L],
+}
+
+impl<const N: usize, const EXTRAS: bool, const L: usize> Rhs for ModelRhs<'_, N, EXTRAS, L> {
+    #[inline(always)]
+    fn eval(&mut self, lane: usize, tau: f64, y: &[f64], dy: &mut [f64]) {
+        let out = self.models[lane].rhs_impl::<N, EXTRAS>(
+            self.v0[lane] + self.slope[lane] * tau,
+            self.slope[lane],
+            y,
+            dy,
+        );
+        if tau == 0.0 {
+            self.at_start[lane] = out;
+        }
+    }
+}
+
+/// Advance up to `L` tasks of one state layout together (`tasks[i]` on lane i; unused lanes idle)
+/// from their initial states in `ys`, which end holding the final states. `first` is the index
+/// the observer sees for lane 0; `dt` [s] the step of a fixed-step stepper. `None` if cancelled.
+#[allow(clippy::too_many_arguments)]
+fn drive_lanes<S, St, O, const N: usize, const EXTRAS: bool, const L: usize>(
+    tasks: &[Task],
+    first: usize,
+    dt: f64,
+    stepper: &mut St,
+    ys: &mut [S; L],
+    observer: &mut O,
+    cancel: &AtomicBool,
+) -> Option<Vec<LaneEnd>>
+where
+    S: State,
+    St: Stepper<S, L>,
+    O: Observer,
+{
+    let m = tasks.len();
+    let lane = |i: usize| i.min(m - 1); // idle lanes point at a real model
+    let mut rhs: ModelRhs<N, EXTRAS, L> = ModelRhs {
+        models: std::array::from_fn(|i| tasks[lane(i)].model),
+        v0: [0.0; L],
+        slope: [0.0; L],
+        at_start: [(0.0, 0.0); L],
+    };
+    let slack = stepper.bound_slack();
+    let bound: [f64; L] = std::array::from_fn(|i| {
+        tasks[lane(i)].model.presliding_bound() * (1.0 + slack) + 1e-12
+    });
+    let mut active = [false; L];
+    let mut t = [0.0; L];
+    let mut end = [0.0; L];
+    let mut cursor = [Cursor::default(); L];
+    // fixed step: the step index of each lane from t = 0 (step times are exact multiples)
+    let mut k = [0usize; L];
+    let mut k_end = [0usize; L];
+    let mut steps = [0u64; L];
+    let mut min_step = [f64::INFINITY; L];
+    let mut out: Vec<Option<LaneEnd>> = vec![None; m];
+    for i in 0..m {
+        let task = &tasks[i];
+        active[i] = true;
+        t[i] = task.t_start;
+        cursor[i] = Cursor::at(task.wave, task.t_start);
+        if St::FIXED_STEP {
+            k[i] = (task.t_start / dt).round() as usize;
+            k_end[i] = k[i] + ((task.t_end - task.t_start) / dt).round() as usize;
+        }
+        stepper.restart(i);
+        observer.start(first + i, task.t_start, ys[i].as_ref());
+    }
+    let mut attempts = 0usize;
+    loop {
+        if attempts % CANCEL_CHECK_ATTEMPTS == 0 && cancel.load(Ordering::Relaxed) {
+            return None;
+        }
+        attempts += 1;
+        let mut any = false;
+        for i in 0..m {
+            if !active[i] {
+                continue;
+            }
+            let wave = tasks[i].wave;
+            let (v0, s) = if St::FIXED_STEP {
+                let t0 = k[i] as f64 * dt;
+                t[i] = t0;
+                // breakpoints sit on step boundaries: the step's midpoint names its segment
+                let probe = t0 + 0.5 * dt;
+                cursor[i].advance(wave, probe);
+                end[i] = t0 + dt;
+                cursor[i].input(wave, t0, probe)
+            } else {
+                if cursor[i].advance(wave, t[i]) {
+                    stepper.restart(i); // the input's slope changed
+                }
+                end[i] = cursor[i].next_breakpoint(wave, t[i]).min(tasks[i].t_end);
+                cursor[i].input(wave, t[i], t[i])
+            };
+            rhs.v0[i] = v0;
+            rhs.slope[i] = s;
+            any = true;
+        }
+        if !any {
+            break;
+        }
+        let results = stepper.attempt(&mut rhs, ys, &t, &end, &active);
+        for i in 0..m {
+            let (step, last) = match &results[i] {
+                Attempt::Accepted { step, last } => (*step, *last),
+                Attempt::Failed(why) => {
+                    active[i] = false;
+                    out[i] = Some(LaneEnd::Diverged {
+                        t: t[i],
+                        why: Some(why.clone()),
+                    });
+                    continue;
+                }
+                Attempt::Idle | Attempt::Rejected => continue,
+            };
+            let (t_new, span, done) = if St::FIXED_STEP {
+                k[i] += 1;
+                ((k[i] as f64) * dt, dt, k[i] == k_end[i])
+            } else {
+                let t_new = if last { end[i] } else { t[i] + step };
+                (t_new, t_new - t[i], t_new >= tasks[i].t_end)
+            };
+            t[i] = t_new;
+            let y = ys[i].as_ref();
+            if tasks[i].model.is_diverged(y, bound[i]) {
+                active[i] = false;
+                out[i] = Some(LaneEnd::Diverged { t: t_new, why: None });
+                continue;
+            }
+            steps[i] += 1;
+            min_step[i] = min_step[i].min(span);
+            let start = St::EVALUATES_START.then(|| rhs.at_start[i]);
+            let v_cmd = rhs.v0[i] + rhs.slope[i] * step;
+            observer.step(first + i, t_new, span, y, v_cmd, start, done);
+            if done {
+                active[i] = false;
+                out[i] = Some(LaneEnd::Finished {
+                    steps: steps[i],
+                    min_step: min_step[i],
+                });
+            }
+        }
+    }
+    Some(
+        out.into_iter()
+            .map(|o| o.expect("every lane ends"))
+            .collect(),
+    )
+}
+
+/// Dormand-Prince options for a task: error scales from the model and the input's peak.
+fn dopri5_options(task: &Task, rtol: f64, atol: f64, first_step: f64) -> Dopri5Options {
+    let v_max = task.wave.values().iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    Dopri5Options {
+        rtol,
+        atol,
+        scale: task.model.state_scales(v_max),
+        h_init: first_step,
+        h_min: ADAPTIVE_H_MIN,
+        h_max: ((task.t_end - task.t_start) / 10.0).max(first_step),
+    }
+}
+
+/// Run `tasks` (one state layout) with `method`, `L` at a time when their state is plain and of
+/// a common size (register-resident, lane-interleaved), one at a time otherwise. The observer
+/// sees task indices into `tasks`. Returns each task's end and final state; `None` if cancelled.
+pub fn run_tasks<O: Observer, const L: usize>(
+    tasks: &[Task],
+    method: &Method,
+    observer: &mut O,
+    cancel: &AtomicBool,
+) -> Option<Vec<(LaneEnd, Vec<f64>)>> {
+    let mut out = Vec::with_capacity(tasks.len());
+    if tasks.is_empty() {
+        return Some(out);
+    }
+    macro_rules! group {
+        ($s:ty, $n:literal, $extras:literal, $l:expr, $zero:expr, $chunk:expr, $first:expr) => {{
+            let chunk: &[Task] = $chunk;
+            let mut ys: [$s; $l] = std::array::from_fn(|i| {
+                let mut y: $s = $zero;
+                <$s as AsMut<[f64]>>::as_mut(&mut y).copy_from_slice(chunk[i.min(chunk.len() - 1)].y0);
+                y
+            });
+            let ends = match *method {
+                Method::Rk4 { dt } => {
+                    let mut st: Rk4<$s, $l> = Rk4::new(dt, $zero);
+                    drive_lanes::<$s, _, O, $n, $extras, $l>(chunk, $first, dt, &mut st, &mut ys, observer, cancel)?
+                }
+                Method::Dopri5 {
+                    rtol,
+                    atol,
+                    first_step,
+                } => {
+                    let opts = std::array::from_fn(|i| {
+                        dopri5_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step)
+                    });
+                    let mut st: Dopri5<$s, $l> = Dopri5::new(opts, $zero);
+                    drive_lanes::<$s, _, O, $n, $extras, $l>(chunk, $first, 0.0, &mut st, &mut ys, observer, cancel)?
+                }
+            };
+            for (e, y) in ends.into_iter().zip(ys.iter()) {
+                out.push((e, <$s as AsRef<[f64]>>::as_ref(y).to_vec()));
+            }
+        }};
+    }
+    macro_rules! fixed {
+        ($n:literal, $d:literal) => {{
+            for (c, chunk) in tasks.chunks(L).enumerate() {
+                group!([f64; $d], $n, false, L, [0.0; $d], chunk, c * L);
+            }
+        }};
+    }
+    let plain = tasks.iter().all(|t| t.model.is_plain());
+    let dim = tasks[0].model.layout.dim;
+    with_state_size!(plain, tasks[0].model.layout.dof, fixed, {
+        for (c, task) in tasks.iter().enumerate() {
+            group!(Vec<f64>, 0, true, 1, vec![0.0; dim], std::slice::from_ref(task), c);
+        }
+    });
+    Some(out)
+}

@@ -1,0 +1,66 @@
+//! What every integrator offers the driver (`drive.rs`): one right-hand-side signature and one
+//! "attempt a step on every lane" call. An integrator knows nothing of the physics or of the
+//! input waveform; the driver sets each lane's input for the step before the attempt.
+//!
+//! Adding an integrator means one file implementing [`Stepper`] and one arm of
+//! `drive::Method`.
+
+/// State storage: a `Vec<f64>` for any size, or a fixed `[f64; D]` that stays in registers.
+pub trait State: AsRef<[f64]> + AsMut<[f64]> + Clone {}
+impl<S: AsRef<[f64]> + AsMut<[f64]> + Clone> State for S {}
+
+/// A right-hand side over one step: `dy = f(y)` for `lane` at offset `tau` [s] from the start
+/// of the step (the input is linear over a step). A trait rather than a bare closure so that
+/// implementations can be `#[inline(always)]`; closures implement it too.
+pub trait Rhs {
+    fn eval(&mut self, lane: usize, tau: f64, y: &[f64], dy: &mut [f64]);
+}
+
+impl<F: FnMut(usize, f64, &[f64], &mut [f64])> Rhs for F {
+    #[inline(always)]
+    fn eval(&mut self, lane: usize, tau: f64, y: &[f64], dy: &mut [f64]) {
+        self(lane, tau, y, dy)
+    }
+}
+
+/// What became of one lane's attempt.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Attempt {
+    /// The lane did not take part (inactive).
+    Idle,
+    /// The state advanced by `step` [s]; `last` when the step was stretched or cut to land on
+    /// the segment's end exactly.
+    Accepted { step: f64, last: bool },
+    /// Error too large: the state is unchanged, retry with the stepper's smaller proposal.
+    Rejected,
+    /// The step size collapsed: the run cannot continue (the message says why).
+    Failed(String),
+}
+
+/// An integrator advancing `L` independent systems ("lanes") attempt by attempt, stage by
+/// stage, so one core works on several dependency chains at once (one trajectory alone is
+/// latency-bound). Each lane's arithmetic is exactly that of a one-lane run.
+pub trait Stepper<S: State, const L: usize> {
+    /// Fixed-step methods take exactly this step [s] every time; the driver then counts steps
+    /// and computes step times as multiples of it (exact, reproducible across restarts).
+    const FIXED_STEP: bool;
+    /// True when every accepted step evaluated the right-hand side at the state it started from
+    /// (its first stage), so observers may reuse what that evaluation computed.
+    const EVALUATES_START: bool;
+    /// Relative slack on the presliding-force bound before a state counts as diverged: the
+    /// method's local error may overshoot the bound by this much.
+    fn bound_slack(&self) -> f64;
+    /// Forget anything carried from a previous step of `lane` (first-same-as-last stages): it
+    /// starts anew, or the input's slope changed.
+    fn restart(&mut self, lane: usize);
+    /// Try one step on every lane with `active[i]`, from time `t[i]`, never past `end[i]`.
+    /// Accepted steps overwrite `ys[i]`.
+    fn attempt<F: Rhs>(
+        &mut self,
+        f: &mut F,
+        ys: &mut [S; L],
+        t: &[f64; L],
+        end: &[f64; L],
+        active: &[bool; L],
+    ) -> [Attempt; L];
+}
