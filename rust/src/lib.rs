@@ -12,6 +12,7 @@ pub mod mechanics;
 pub mod model;
 pub mod params;
 pub mod piezo;
+pub mod rig;
 pub mod rk4;
 pub mod simulate;
 pub mod stepper;

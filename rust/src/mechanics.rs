@@ -4,15 +4,18 @@
 //! precomputed products M^-1 K, M^-1 C and the two columns of M^-1 that the forces load.
 
 use crate::params::Params;
+use crate::rig::RigDrive;
 use nalgebra::DMatrix;
 
-/// Which structural model.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Which mechanism: the IDM's two structures, or a friction test rig.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Structure {
     /// Lumped parameter system: two masses, spring kp, damper beta_c kp; massless PE.
     Lps,
     /// Distributed parameter system: the PE as `n` two-node bar elements.
     Dps(usize),
+    /// One body on the friction element driven by the input (see `rig.rs`); no PE.
+    Rig(RigDrive),
 }
 
 /// Assembled matrices and the dense products the right-hand side uses (row-major).
@@ -74,6 +77,11 @@ impl Mechanics {
                 m[(n, n)] += p.m2;
                 let c = &mp * p.rayleigh_alpha + &kp * p.rayleigh_beta;
                 Self::from_matrices(m, c, kp, mp)
+            }
+            Structure::Rig(drive) => {
+                drive.validate()?;
+                let (m, c, k) = drive.matrices(p);
+                Self::from_matrices(m, c, k, DMatrix::zeros(1, 1))
             }
         }
     }

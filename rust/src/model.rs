@@ -6,6 +6,7 @@ use crate::friction::Leuven;
 use crate::mechanics::{Mechanics, Structure};
 use crate::params::Params;
 use crate::piezo::{piezo_force, PiezoHysteresis};
+use crate::rig::RigDrive;
 
 /// Dispatch on the state size: `$fixed!(N, D)` for a plain state (see [`Model::is_plain`]) of
 /// a common node count N (D = 2N + 3 components), `$dynamic` otherwise. The fixed sizes let
@@ -13,6 +14,7 @@ use crate::piezo::{piezo_force, PiezoHysteresis};
 macro_rules! with_state_size {
     ($plain:expr, $dof:expr, $fixed:ident, $dynamic:expr) => {
         match ($plain, $dof) {
+            (true, 1) => $fixed!(1, 5),
             (true, 2) => $fixed!(2, 7),
             (true, 3) => $fixed!(3, 9),
             (true, 4) => $fixed!(4, 11),
@@ -121,6 +123,8 @@ pub struct Model {
     pub friction: Leuven,
     pub layout: Layout,
     hysteresis: Option<PiezoHysteresis>,
+    /// the input drives a rig's body instead of a piezo element
+    rig: Option<RigDrive>,
     kp: f64,
     d33: f64,
     /// constant external force on the main body (incline) [N]
@@ -144,8 +148,19 @@ impl Model {
         let mech = Mechanics::new(&params, structure)?;
         let layout = Layout::new(mech.dof, &effects, accounting);
         let inv = |tau: f64| if tau > 0.0 { 1.0 / tau } else { 0.0 };
-        // The PE mass rests on the guide in both structures (MODEL.md's normal force).
-        let total_mass = params.m1 + params.m2 + params.pe_mass();
+        let rig = match structure {
+            Structure::Rig(d) => {
+                RigDrive::check_effects(&effects, piezo_hysteresis)?;
+                Some(d)
+            }
+            _ => None,
+        };
+        // The PE mass rests on the guide in both IDM structures (MODEL.md's normal force);
+        // a rig is its one body.
+        let total_mass = match rig {
+            Some(_) => params.m1,
+            None => params.m1 + params.m2 + params.pe_mass(),
+        };
         Ok(Model {
             friction: Leuven::new(
                 &params,
@@ -160,6 +175,7 @@ impl Model {
                     params.d33,
                 )
             }),
+            rig,
             kp: params.kp(),
             d33: params.d33,
             f_incline: effects.incline_force(total_mass),
@@ -351,20 +367,35 @@ impl Model {
         for i in 0..n {
             dy[i] = v[i];
         }
-        self.mech.accelerations(
-            q,
-            v,
-            (fp + f_ext_main) - ff,
-            f_ext_weight - fp,
-            &mut dy[n..2 * n],
-        );
+        let f_drive = match &self.rig {
+            None => {
+                self.mech.accelerations(
+                    q,
+                    v,
+                    (fp + f_ext_main) - ff,
+                    f_ext_weight - fp,
+                    &mut dy[n..2 * n],
+                );
+                fp
+            }
+            Some(rig) => {
+                let fd = rig.input_force(v_pe, dv_pe);
+                self.mech
+                    .accelerations(q, v, (fd + f_ext_main) - ff, 0.0, &mut dy[n..2 * n]);
+                fd
+            }
+        };
 
         if EXTRAS {
             if let Some(i) = l.xs {
                 dy[i] = first_order_rate(q[0], y[i], self.inv_tau_sensor);
             }
             if let Some(a) = l.accounting {
-                dy[a] = fp * (v[0] - v[n - 1]);
+                // work of the piezo force on both ends, or of the rig's drive on its body
+                dy[a] = match self.rig {
+                    None => f_drive * (v[0] - v[n - 1]),
+                    Some(_) => f_drive * v[0],
+                };
                 dy[a + 1] = ff * v[0];
                 dy[a + 2] = self.mech.dissipation(v);
                 dy[a + 3] = f_ext_main * v[0] + f_ext_weight * v[n - 1];

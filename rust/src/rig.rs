@@ -1,0 +1,178 @@
+//! A friction test rig as a mechanism of the engine: one body (mass `m1`) on the same Leuven
+//! friction element as the IDM's main body, driven by the input u(t) — either through a spring
+//! and damper whose far end follows u as a position [m] (the spring–slider), or by u as a force
+//! [N] on the body (a force-driven stage). No piezo element; the effects that act on the body
+//! (incline, spring to ground, friction asymmetry, sensor lag, drift) apply as on the IDM.
+
+use nalgebra::DMatrix;
+
+use crate::effects::Effects;
+use crate::params::Params;
+
+/// How the input drives the body.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RigDrive {
+    /// u(t) [m] moves the far end of a spring `stiffness` [N/m] with a damper `damping` [N s/m]
+    /// in parallel: force k (u - x) + c (du/dt - v).
+    Position { stiffness: f64, damping: f64 },
+    /// u(t) [N] is the force on the body.
+    Force,
+}
+
+impl RigDrive {
+    /// Refuse a spring or damper that is negative or not finite (the message names it).
+    pub fn validate(&self) -> Result<(), String> {
+        if let RigDrive::Position { stiffness, damping } = *self {
+            for (name, v) in [("rig_stiffness", stiffness), ("rig_damping", damping)] {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(format!("parameter '{name}' must be finite and non-negative, got {v}"));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Mass, damping and stiffness matrices (1 x 1) of the body on its spring.
+    pub fn matrices(&self, p: &Params) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+        let (k, c) = match *self {
+            RigDrive::Position { stiffness, damping } => (stiffness, damping),
+            RigDrive::Force => (0.0, 0.0),
+        };
+        (
+            DMatrix::from_element(1, 1, p.m1),
+            DMatrix::from_element(1, 1, c),
+            DMatrix::from_element(1, 1, k),
+        )
+    }
+
+    /// The drive's force on the body [N] beyond the spring's restoring part (which the
+    /// stiffness matrix carries): k u + c du/dt for a position drive, u for a force drive.
+    #[inline(always)]
+    pub fn input_force(&self, u: f64, du: f64) -> f64 {
+        match *self {
+            RigDrive::Position { stiffness, damping } => stiffness * u + damping * du,
+            RigDrive::Force => u,
+        }
+    }
+
+    /// Refuse effects and switches that need the piezo element or the weight.
+    pub fn check_effects(e: &Effects, piezo_hysteresis: bool) -> Result<(), String> {
+        if piezo_hysteresis {
+            return Err("the rig has no piezo element: use piezo_hysteresis=False".into());
+        }
+        for (name, v) in [
+            ("tau_amp", e.tau_amp),
+            ("kappa", e.kappa),
+            ("tau_creep", e.tau_creep),
+            ("c_weight", e.c_weight),
+        ] {
+            if v != 0.0 {
+                return Err(format!(
+                    "effect parameter '{name}' acts on the piezo element or the weight, which the rig does not have; set it to 0"
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::drive::Method;
+    use crate::mechanics::Structure;
+    use crate::model::Model;
+    use crate::simulate::simulate;
+    use crate::waveform::PiecewiseLinear;
+
+    fn rig_params() -> Params {
+        let mut p = Params::paper();
+        p.m1 = 0.5;
+        p.normal_force = 0.5 * crate::params::GRAVITY;
+        p
+    }
+
+    fn run(drive: RigDrive, wave: &PiecewiseLinear, t_end: f64, dt: f64) -> (Model, crate::simulate::Trajectory) {
+        let m = Model::new(rig_params(), Effects::default(), Structure::Rig(drive), false, false).unwrap();
+        let r = simulate(&m, wave, 0.0, t_end, &m.rest_state(), &Method::Rk4 { dt }, 1).unwrap();
+        (m, r)
+    }
+
+    #[test]
+    fn spring_slider_sticks_until_the_spring_force_reaches_static_friction() {
+        // pulled at 1 mm/s through 2e4 N/m: breakaway when k (V t - x) = Fs
+        let (k, speed) = (2e4, 1e-3);
+        let drive = RigDrive::Position {
+            stiffness: k,
+            damping: 0.0,
+        };
+        let wave = PiecewiseLinear::new(vec![0.0, 1.0], vec![0.0, speed]).unwrap();
+        let (m, r) = run(drive, &wave, 0.2, 1e-7);
+        let p = rig_params();
+        let fs = p.mu_s * p.normal_force;
+        // sticking: before breakaway the body moves only by presliding micro-slip, a tiny
+        // fraction of the spring's stretch Fs / k
+        let slip = r
+            .velocities
+            .iter()
+            .position(|v| v.abs() > 0.1 * p.stribeck_velocity)
+            .expect("the body breaks away");
+        let t_slip = r.t[slip];
+        let x_slip = r.nodes[slip];
+        let spring = k * (speed * t_slip - x_slip);
+        assert!(x_slip.abs() < 1e-3 * fs / k, "x at breakaway {x_slip}");
+        assert!((spring / fs - 1.0).abs() < 0.02, "spring force at breakaway {spring} vs Fs {fs}");
+        assert!(m.friction_force(&r.final_state).abs() <= m.presliding_bound() * (1.0 + 1e-6));
+    }
+
+    #[test]
+    fn steady_sliding_friction_is_the_stribeck_curve_at_the_drive_speed() {
+        // fast, stiff, damped drive: the body slides steadily at the drive speed
+        let speed = 0.02;
+        let drive = RigDrive::Position {
+            stiffness: 1e5,
+            damping: 500.0,
+        };
+        let wave = PiecewiseLinear::new(vec![0.0, 1.0], vec![0.0, speed]).unwrap();
+        let (m, r) = run(drive, &wave, 0.05, 2e-8);
+        let y = &r.final_state;
+        let v = y[m.layout.dof];
+        assert!((v / speed - 1.0).abs() < 1e-6, "v = {v}");
+        let p = rig_params();
+        let (fc, fs) = (p.mu_k * p.normal_force, p.mu_s * p.normal_force);
+        let stribeck = fc + (fs - fc) * (-(speed / p.stribeck_velocity).powf(p.stribeck_exponent)).exp();
+        let expected = stribeck + p.sigma2 * speed;
+        let ff = m.friction_force(y);
+        assert!((ff / expected - 1.0).abs() < 1e-6, "Ff {ff} vs {expected}");
+    }
+
+    #[test]
+    fn a_force_below_friction_holds_the_body_and_one_above_moves_it() {
+        let p = rig_params();
+        let hold = |scale: f64| {
+            let f = scale * p.mu_s * p.normal_force;
+            let wave = PiecewiseLinear::new(vec![0.0, 1e-3], vec![0.0, f]).unwrap();
+            let (m, r) = run(RigDrive::Force, &wave, 20e-3, 2e-8);
+            (r.final_state[0], r.final_state[m.layout.dof])
+        };
+        // below Fc: presliding only (nanometres) and at rest
+        let (x, v) = hold(0.8);
+        assert!(x.abs() < 1e-8 && v.abs() < 1e-6, "x = {x}, v = {v}");
+        // above Fs: it accelerates away
+        let (x, v) = hold(1.2);
+        assert!(x > 1e-5 && v > 1e-3, "x = {x}, v = {v}");
+    }
+
+    #[test]
+    fn rig_refuses_piezo_effects_by_name() {
+        let e = Effects {
+            c_weight: 1.0,
+            ..Default::default()
+        };
+        let drive = Structure::Rig(RigDrive::Force);
+        let err = Model::new(rig_params(), e, drive, false, false).unwrap_err();
+        assert!(err.contains("'c_weight'"), "{err}");
+        let err = Model::new(rig_params(), Effects::default(), drive, true, false).unwrap_err();
+        assert!(err.contains("piezo_hysteresis"), "{err}");
+    }
+}
