@@ -29,18 +29,42 @@ from .waveforms import Sampled, Waveform
 
 
 @dataclass(frozen=True)
-class Structure:
-    """The model's structure: ``model`` "lps" (two lumped masses) or "dps" (the PE as
-    ``n_elements`` FEM bar elements), and whether the piezo hysteresis state h runs."""
+class Rig:
+    """A friction test rig instead of the IDM: one body (mass ``m1``, normal force
+    ``normal_force`` — set it: the default is the IDM's weight) on the same Leuven friction
+    element, driven by the input u(t). ``drive="position"``: u [m] moves the far end of a
+    spring ``stiffness`` [N/m] with a damper ``damping`` [N s/m] (a spring–slider);
+    ``drive="force"``: u [N] is the force on the body. Give it as ``model=Rig(...)``."""
 
-    model: Literal["lps", "dps"] = "dps"
+    drive: Literal["position", "force"] = "position"
+    stiffness: float = 0.0
+    damping: float = 0.0
+
+
+@dataclass(frozen=True)
+class Structure:
+    """The model's structure: ``model`` "lps" (two lumped masses), "dps" (the PE as
+    ``n_elements`` FEM bar elements) or "rig" (see :class:`Rig`), and whether the piezo
+    hysteresis state h runs."""
+
+    model: Literal["lps", "dps", "rig"] = "dps"
     n_elements: int = 4
     piezo_hysteresis: bool = True
+    rig: Optional[Rig] = None
+
+    @classmethod
+    def of(cls, model: Union[str, Rig], n_elements: int = 4, piezo_hysteresis: bool = True) -> "Structure":
+        """From ``simulate``'s keywords: ``model`` is "lps", "dps" or a :class:`Rig`."""
+        if isinstance(model, Rig):
+            return cls("rig", 1, bool(piezo_hysteresis), model)
+        return cls(str(model), int(n_elements), bool(piezo_hysteresis))  # type: ignore[arg-type]
 
     def config(self, **how: Any) -> Any:
         """An ``engine.RunConfig`` of this structure with the method settings ``how``."""
+        rig = self.rig or Rig()
         return engine.RunConfig(model=self.model, n_elements=int(self.n_elements),
-                                piezo_hysteresis=bool(self.piezo_hysteresis), **how)
+                                piezo_hysteresis=bool(self.piezo_hysteresis), rig_drive=rig.drive,
+                                rig_stiffness=float(rig.stiffness), rig_damping=float(rig.damping), **how)
 
 
 ParamValues = Union[Params, Mapping[str, Optional[float]]]

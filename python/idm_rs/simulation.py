@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, Optional
+from typing import TYPE_CHECKING, Literal, Optional, Union
 
 import math
 
@@ -18,6 +18,8 @@ from .waveforms import Waveform
 
 if TYPE_CHECKING:
     import xarray
+
+    from .batch import Rig
 
 Model = Literal["lps", "dps"]
 DivergenceError = engine.DivergenceError
@@ -167,7 +169,7 @@ def simulate(
     waveform: Waveform,
     t_end: float,
     dt: Optional[float] = None,
-    model: Model = "dps",
+    model: Union[Model, "Rig"] = "dps",
     n_elements: int = 4,
     save_every: int = 100,
     *,
@@ -183,8 +185,9 @@ def simulate(
 ) -> SimulationResult:
     """Simulate the IDM over [``t_start``, ``t_end``] s, from rest or from ``initial_state``.
 
-    ``model`` is ``"lps"`` (two lumped masses) or ``"dps"`` (the PE as ``n_elements`` FEM bar
-    elements).
+    ``model`` is ``"lps"`` (two lumped masses), ``"dps"`` (the PE as ``n_elements`` FEM bar
+    elements), or an :class:`idm_rs.batch.Rig` (a friction test rig: one body on the friction
+    element, the waveform its drive position [m] or force [N]; use ``piezo_hysteresis=False``).
 
     ``method="rk4"`` (the reference): fixed step ``dt`` [s] (default 1e-8). The waveform's
     breakpoints must fall on step boundaries and ``dt`` must divide the span; otherwise a
@@ -217,7 +220,8 @@ def simulate(
     step = float(first_step if method == "dopri5" and first_step is not None else (dt if dt is not None else 1e-8))
     from .batch import Structure
 
-    config = Structure(str(model), int(n_elements), bool(piezo_hysteresis)).config(  # type: ignore[arg-type]
+    structure = Structure.of(model, int(n_elements), bool(piezo_hysteresis))
+    config = structure.config(
         method=method, dt=step, rtol=float(rtol), atol=float(atol), first_step=step)
     bt, bv = waveform.breakpoints()
     y0 = None if initial_state is None else np.ascontiguousarray(initial_state, dtype=float).ravel()
@@ -262,7 +266,7 @@ def simulate(
         final_position=float(out["final_state"][0]),
         params=params,
         waveform=waveform,
-        model=str(model),
+        model=structure.model,
         n_elements=int(n_elements) if model == "dps" else 1,
         dt=step,
         piezo_hysteresis=bool(piezo_hysteresis),

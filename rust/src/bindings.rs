@@ -19,6 +19,7 @@ use crate::effects::{Effects, EFFECT_NAMES};
 use crate::mechanics::Structure;
 use crate::model::{Model, N_ACCOUNTING};
 use crate::params::{Params, PARAM_NAMES};
+use crate::rig::RigDrive;
 use crate::simulate::simulate as simulate_core;
 use crate::waveform::PiecewiseLinear;
 
@@ -113,6 +114,11 @@ struct RunConfig {
     record_every: usize,
     /// batch: return each point's final state
     final_states: bool,
+    /// model "rig": "position" (spring to a moving end) or "force" (the input is the force)
+    rig_drive: String,
+    /// model "rig", position drive: spring [N/m] and damper [N s/m] to the moving end
+    rig_stiffness: f64,
+    rig_damping: f64,
 }
 
 impl RunConfig {
@@ -124,8 +130,24 @@ impl RunConfig {
                 "parameter 'n_elements' must be at least 1, got {}",
                 self.n_elements
             ))),
+            "rig" => {
+                let drive = match self.rig_drive.as_str() {
+                    "position" => RigDrive::Position {
+                        stiffness: self.rig_stiffness,
+                        damping: self.rig_damping,
+                    },
+                    "force" => RigDrive::Force,
+                    other => {
+                        return Err(value_error(format!(
+                            "parameter 'rig_drive' must be 'position' or 'force', got '{other}'"
+                        )))
+                    }
+                };
+                drive.validate().map_err(value_error)?;
+                Ok(Structure::Rig(drive))
+            }
             other => Err(value_error(format!(
-                "parameter 'model' must be 'lps' or 'dps', got '{other}'"
+                "parameter 'model' must be 'lps', 'dps' or 'rig', got '{other}'"
             ))),
         }
     }
@@ -156,7 +178,7 @@ impl RunConfig {
 #[pymethods]
 impl RunConfig {
     #[new]
-    #[pyo3(signature = (*, model="dps".to_string(), n_elements=4, piezo_hysteresis=true, method="rk4".to_string(), dt=1e-8, rtol=1e-7, atol=1e-7, first_step=None, retries=2, threads=1, record_every=0, final_states=false))]
+    #[pyo3(signature = (*, model="dps".to_string(), n_elements=4, piezo_hysteresis=true, method="rk4".to_string(), dt=1e-8, rtol=1e-7, atol=1e-7, first_step=None, retries=2, threads=1, record_every=0, final_states=false, rig_drive="position".to_string(), rig_stiffness=0.0, rig_damping=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         model: String,
@@ -171,6 +193,9 @@ impl RunConfig {
         threads: usize,
         record_every: usize,
         final_states: bool,
+        rig_drive: String,
+        rig_stiffness: f64,
+        rig_damping: f64,
     ) -> PyResult<Self> {
         let c = RunConfig {
             model,
@@ -185,6 +210,9 @@ impl RunConfig {
             threads: threads.max(1),
             record_every,
             final_states,
+            rig_drive,
+            rig_stiffness,
+            rig_damping,
         };
         c.structure()?;
         c.method()?;
