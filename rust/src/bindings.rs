@@ -153,21 +153,7 @@ impl RunConfig {
     }
 
     fn method(&self) -> PyResult<Method> {
-        let m = match self.method.as_str() {
-            "rk4" => Method::Rk4 { dt: self.dt },
-            "dopri5" => Method::Dopri5 {
-                rtol: self.rtol,
-                atol: self.atol,
-                first_step: self.first_step,
-            },
-            other => {
-                return Err(value_error(format!(
-                    "parameter 'method' must be 'rk4' or 'dopri5', got '{other}'"
-                )))
-            }
-        };
-        m.validate().map_err(value_error)?;
-        Ok(m)
+        Method::from_name(&self.method, self.dt, self.rtol, self.atol, self.first_step).map_err(value_error)
     }
 
     fn model(&self, p: Params, e: Effects, accounting: bool) -> PyResult<Model> {

@@ -34,6 +34,25 @@ pub enum Method {
 }
 
 impl Method {
+    /// The method called `name` ("rk4", "dopri5") with these settings, validated.
+    pub fn from_name(name: &str, dt: f64, rtol: f64, atol: f64, first_step: f64) -> Result<Self, String> {
+        let m = match name {
+            "rk4" => Method::Rk4 { dt },
+            "dopri5" => Method::Dopri5 {
+                rtol,
+                atol,
+                first_step,
+            },
+            other => {
+                return Err(format!(
+                    "parameter 'method' must be 'rk4' or 'dopri5', got '{other}'"
+                ))
+            }
+        };
+        m.validate()?;
+        Ok(m)
+    }
+
     /// Refuse tolerances or steps that are not positive and finite.
     pub fn validate(&self) -> Result<(), String> {
         match *self {
