@@ -14,6 +14,7 @@ from .engine import __version__
 from .effects import Effects
 from .params import Params
 from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate
+from .state import State
 from .sweep import METRICS, sweep
 from .waveforms import Sampled, Sawtooth, Triangle, Waveform
 from .recording import Recording, RecordingError, load_case
@@ -31,6 +32,7 @@ __all__ = [
     "Sampled",
     "Sawtooth",
     "SimulationResult",
+    "State",
     "Triangle",
     "Waveform",
     "METRICS",

@@ -1,6 +1,12 @@
-"""Type stubs of the private native module (Rust, PyO3). The public API is `idm_rs`."""
+"""Type stubs of the private native module (Rust, PyO3; ``rust/src/bindings.rs``).
 
-from typing import Any, Optional, Sequence
+The public API is ``idm_rs``; inside the package only ``idm_rs.engine`` imports this module.
+Arrays cross the boundary as numpy arrays: C-contiguous float64 inputs are read in place (a
+strided one is copied), outputs are handed over without a copy. Every run releases the GIL.
+Units are SI throughout: times [s], positions [m], velocities [m/s], forces [N], voltages [V].
+"""
+
+from typing import Any, Optional
 
 import numpy as np
 from numpy.typing import NDArray
@@ -8,69 +14,197 @@ from numpy.typing import NDArray
 __version__: str
 
 class DivergenceError(RuntimeError):
-    """The integration left its physical bounds; `t` is the time [s] it happened."""
+    """The integration left its physical bounds (a step too large, usually); the message says
+    where and suggests a smaller step. ``t`` is the time [s] it happened."""
 
     t: float
 
-class BatchRun:
-    """A batch running on a background thread with its own rayon pool."""
+class RunConfig:
+    """How to run: the model's structure and the integration method, shared by ``simulate`` and
+    the batch. Keyword-only; checked on construction (ValueError naming the parameter: a
+    ``model`` other than "lps"/"dps"/"rig", ``n_elements`` < 1 for "dps", a ``method`` other than
+    "rk4"/"dopri5", a non-positive ``dt`` for RK4, non-positive ``rtol``/``atol`` or
+    ``first_step`` for dopri5). Frozen: the attributes are read-only."""
+
+    def __init__(
+        self,
+        *,
+        model: str = "dps",
+        n_elements: int = 4,
+        piezo_hysteresis: bool = True,
+        method: str = "rk4",
+        dt: float = 1e-8,
+        rtol: float = 1e-7,
+        atol: float = 1e-7,
+        first_step: Optional[float] = None,
+        retries: int = 2,
+        threads: int = 1,
+        record_every: int = 0,
+        final_states: bool = False,
+        rig_drive: str = "position",
+        rig_stiffness: float = 0.0,
+        rig_damping: float = 0.0,
+    ) -> None:
+        """``first_step`` None = ``dt``; ``threads`` below 1 counts as 1."""
 
     @property
-    def total(self) -> int: ...
+    def model(self) -> str:
+        """"lps" (two lumped masses) or "dps" (the PE as a FEM bar)."""
+    @property
+    def n_elements(self) -> int:
+        """FEM elements of the DPS bar (ignored by "lps")."""
+    @property
+    def piezo_hysteresis(self) -> bool:
+        """Whether the piezo hysteresis state h runs."""
+    @property
+    def method(self) -> str:
+        """"rk4" (fixed step) or "dopri5" (adaptive Dormand-Prince 5(4))."""
+    @property
+    def dt(self) -> float:
+        """RK4 step [s]."""
+    @property
+    def rtol(self) -> float:
+        """dopri5 relative tolerance [-]."""
+    @property
+    def atol(self) -> float:
+        """dopri5 absolute tolerance, in units of each state's natural scale [-]."""
+    @property
+    def first_step(self) -> float:
+        """dopri5 first trial step [s] (``dt`` when not given)."""
+    @property
+    def retries(self) -> int:
+        """Batch: RK4 retries at dt/2, dt/4, ... of a diverging point."""
+    @property
+    def threads(self) -> int:
+        """Batch worker threads (at least 1)."""
+    @property
+    def record_every(self) -> int:
+        """Batch: record the sensor reading every this many RK4 steps (0: none)."""
+    @property
+    def final_states(self) -> bool:
+        """Batch: return each point's final state."""
+    @property
+    def rig_drive(self) -> str:
+        """Model "rig": "position" (a spring to a moving end, the input in m) or "force" (the
+        input is the force on the body [N])."""
+    @property
+    def rig_stiffness(self) -> float:
+        """Model "rig", position drive: spring to the moving end [N/m]."""
+    @property
+    def rig_damping(self) -> float:
+        """Model "rig", position drive: damper in parallel with the spring [N s/m]."""
+
+class BatchRun:
+    """A batch running on a background thread with its own worker pool (``start_batch``)."""
+
+    @property
+    def total(self) -> int:
+        """Number of points."""
     def progress(self) -> int:
         """Points finished so far."""
     def cancel(self) -> None:
-        """Ask the workers to stop; finished points are kept."""
+        """Ask the workers to stop; points already finished are kept."""
     def wait(self, timeout: float) -> bool:
-        """Wait up to `timeout` s with the GIL released; True once finished."""
+        """Wait up to ``timeout`` [s] with the GIL released; True once the batch has finished."""
     def result(self) -> dict[str, Any]:
-        """Metric arrays (and `traces` when readings were recorded); NaN for points not run."""
+        """Join and return the outputs, one entry per point (NaN / status 0 for points not run):
+        ``final_position`` [m], ``step_per_cycle`` [m], ``peak_velocity`` [m/s],
+        ``peak_friction`` [N], ``slip_fraction`` [-], ``diverged_at`` [s], ``dt_used`` [s]
+        (float64 arrays); ``steps`` (uint64); ``status`` (uint8: 0 not run, 1 ok, 2 retried at a
+        smaller dt, 3 diverged, 4 invalid point); ``traces`` (a list of float64 arrays, the
+        sensor reading [m]) when readings were recorded; ``final_states`` (a list of arrays, one per
+        point, empty where it did not finish) when the config asked for them. A second call
+        raises RuntimeError."""
 
 def simulate(
     params: dict[str, float],
     effects: dict[str, float],
-    wave_t: Sequence[float],
-    wave_v: Sequence[float],
+    wave_t: NDArray[np.float64],
+    wave_v: NDArray[np.float64],
+    t_start: float,
     t_end: float,
-    dt: float,
-    model: str,
-    n_elements: int,
+    config: RunConfig,
     save_every: int,
-    piezo_hysteresis: bool,
     energy: bool,
-) -> dict[str, NDArray[np.float64]]: ...
+    initial_state: Optional[NDArray[np.float64]] = None,
+) -> dict[str, Any]:
+    """Simulate one run over [``t_start``, ``t_end``] [s] under the piecewise-linear input
+    (``wave_t`` [s], ``wave_v`` [V]), from rest or from ``initial_state`` (the model's state
+    size, see ``state_components``). ``params`` and ``effects``: the given values by name
+    (missing parameters take Table 1; effects off). Saves every ``save_every`` accepted steps
+    plus the first and last state.
+
+    Returns numpy arrays with one entry per saved time: ``t`` [s], ``nodes`` [m] and
+    ``velocities`` [m/s] (time x node), ``g`` [m], ``fh`` [N], ``h`` [m], ``friction`` [N],
+    ``piezo_force`` [N], ``voltage`` [V], ``reading`` [m]; ``final_state`` (the state at
+    ``t_end``) and ``state_components`` (list of (name, unit)); with ``energy`` also
+    ``accounting`` (time x 7: works [J] input, friction, damping, external; impulses [N s]
+    friction, Rayleigh, external), ``kinetic`` [J], ``strain`` [J], ``momentum`` [kg m/s].
+
+    Raises ValueError for invalid settings (see ``check_run``) and DivergenceError when the
+    integration leaves its bounds."""
+
 def start_batch(
+    config: RunConfig,
+    t_end: float,
     params: NDArray[np.float64],
     effects: NDArray[np.float64],
-    waves: NDArray[np.float64],
-    sampled_t: Optional[Sequence[float]],
-    sampled_v: Optional[Sequence[float]],
-    model: str,
-    n_elements: int,
-    piezo_hysteresis: bool,
-    t_end: float,
-    dt: float,
-    method: str,
-    rtol: float,
-    atol: float,
-    retries: int,
-    threads: int,
-    t_ends: Optional[Sequence[float]] = None,
-    record_every: int = 0,
-) -> BatchRun: ...
-def check_plan(
+    wave_kind: str,
+    wave_fields: NDArray[np.float64],
+    sampled: Optional[tuple[NDArray[np.float64], NDArray[np.float64]]] = None,
+    t_ends: Optional[NDArray[np.float64]] = None,
+    t_starts: Optional[NDArray[np.float64]] = None,
+    initial_states: Optional[NDArray[np.float64]] = None,
+) -> BatchRun:
+    """Start a batch on a background thread. One row per point: ``params`` (P, 23) in
+    ``param_names()`` order (NaN ``normal_force`` = derived from the masses), ``effects``
+    (P, 9) in ``effect_names()`` order, ``wave_fields`` (P, k) in ``wave_fields(wave_kind)``
+    order; ``wave_kind`` "triangle", "sawtooth" or "sampled" (then ``sampled`` = the shared
+    samples (t [s], V [V])). Optional per point: ``t_ends`` and ``t_starts`` [s] (P,) and
+    ``initial_states`` (P, state size). ``t_end`` [s] is the span of points without their own.
+    A row that is not a valid point gets status 4 (the others run); tables of the wrong shape
+    raise ValueError."""
+
+def check_run(
     params: dict[str, float],
     effects: dict[str, float],
-    wave_t: Sequence[float],
-    wave_v: Sequence[float],
+    wave_t: NDArray[np.float64],
+    wave_v: NDArray[np.float64],
+    t_start: float,
     t_end: float,
-    dt: float,
-    model: str,
-    n_elements: int,
-    method: str,
-) -> None: ...
-def resolve_params(params: dict[str, float]) -> dict[str, float]: ...
-def param_names() -> list[str]: ...
-def effect_names() -> list[str]: ...
-def wave_columns() -> list[str]: ...
-def highest_frequency(params: dict[str, float], model: str, n_elements: int) -> float: ...
+    config: RunConfig,
+    initial_state: Optional[NDArray[np.float64]] = None,
+) -> None:
+    """Raise ValueError if a run with these settings would be refused: the parameters or
+    effects, the input, the span, the method's settings, the RK4 step plan (breakpoints on the
+    step grid, a step stable for the structure), or the initial state (size, finite, |fh| within
+    the presliding bound); the message names what is wrong."""
+
+def state_components(
+    params: dict[str, float],
+    effects: dict[str, float],
+    config: RunConfig,
+    energy: bool = False,
+) -> list[tuple[str, str]]:
+    """Name and unit of every state component of the model, in vector order: ``q0..`` nodal
+    displacements "m", ``v0..`` nodal velocities "m/s", ``g`` "m", ``fh`` "N", ``h`` "m", then
+    the states of effects that are on (``v_pe`` "V", ``x_creep`` "m", ``x_sensor`` "m") and,
+    with ``energy``, the accounting states (``w_input``, ``w_friction``, ``w_damping``,
+    ``w_external`` "J"; ``i_friction``, ``i_rayleigh``, ``i_external`` "N s")."""
+
+def wave_fields(kind: str) -> list[str]:
+    """Per-point waveform fields of a batch of ``kind`` ("triangle": amplitude [V], rise [s],
+    fall [s], delay [s]; "sawtooth": amplitude [V], frequency [Hz], cycles, rise [s],
+    forward (1/0), delay [s]; "sampled": amplitude scale [-]). ValueError for another kind."""
+
+def highest_frequency(params: dict[str, float], config: RunConfig) -> float:
+    """Highest structural natural frequency [rad/s] of the model of ``config``'s structure."""
+
+def resolve_params(params: dict[str, float]) -> dict[str, float]:
+    """Table 1 overridden by ``params``, with the derived normal force [N] filled in (SI)."""
+
+def param_names() -> list[str]:
+    """Parameter names in the batch tables' column order."""
+
+def effect_names() -> list[str]:
+    """Effect names in the batch tables' column order."""

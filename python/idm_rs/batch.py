@@ -171,7 +171,8 @@ def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: 
     ``step_per_cycle`` [m], ``peak_velocity`` [m/s], ``peak_friction`` [N], ``slip_fraction``,
     ``status``, ``diverged_at`` [s], ``dt_used`` [s], ``steps``), ``traces`` (sensor readings
     [m] every ``record_every`` RK4 steps from the start, one array per point) and
-    ``final_states`` (points x state) when asked.
+    ``final_states`` when asked: (points x state), NaN rows where a point did not finish, or a
+    list of arrays when points differ in their state layout (different effect states).
 
     ``how``: ``method`` ("rk4" or "dopri5"), ``dt`` [s] (RK4 step), ``rtol``/``atol`` and
     ``first_step`` [s] (dopri5), ``retries`` (RK4 retries at dt/2, dt/4 of a diverging point),
@@ -184,7 +185,20 @@ def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: 
     except KeyboardInterrupt:
         handle.cancel()
         raise
-    return dict(handle.result())
+    out = dict(handle.result())
+    if "final_states" in out:
+        out["final_states"] = _stack_states(out["final_states"])
+    return out
+
+
+def _stack_states(states: list[NDArray[np.float64]]) -> Union[NDArray[np.float64], list[NDArray[np.float64]]]:
+    """(points x state) with NaN rows for points that did not finish, when every finished point
+    has one layout; otherwise the list (points with different effect states differ in size)."""
+    sizes = {s.size for s in states if s.size}
+    if len(sizes) != 1:
+        return states if sizes else np.full((len(states), 0), np.nan)
+    dim = sizes.pop()
+    return np.stack([s if s.size else np.full(dim, np.nan) for s in states])
 
 
 def _c(a: Optional[NDArray[np.float64]]) -> Optional[NDArray[np.float64]]:

@@ -180,7 +180,7 @@ def simulate(
     rtol: float = 1e-7,
     atol: float = 1e-7,
     first_step: Optional[float] = None,
-    t_start: float = 0.0,
+    t_start: Optional[float] = None,
     initial_state: Optional[ArrayLike] = None,
 ) -> SimulationResult:
     """Simulate the IDM over [``t_start``, ``t_end``] s, from rest or from ``initial_state``.
@@ -200,7 +200,8 @@ def simulate(
     exactly on every breakpoint. ``save_every`` counts accepted steps either way.
 
     ``initial_state`` (a :class:`State`, e.g. a previous result's ``final_state``, or any array
-    of the model's state size) with ``t_start`` [s] continues or restarts a run: with RK4 and a
+    of the model's state size) with ``t_start`` [s] continues or restarts a run (``t_start``
+    defaults to the state's own time for a :class:`State`, else 0): with RK4 and a
     ``t_start`` on the step grid, ``simulate(..., t_end=4e-3)`` followed by
     ``simulate(..., t_start=4e-3, t_end=10e-3, initial_state=r.final_state)`` equals the 10 ms
     run bit for bit. ``energy=True`` integrates the energy and momentum budgets alongside
@@ -223,6 +224,8 @@ def simulate(
     structure = Structure.of(model, int(n_elements), bool(piezo_hysteresis))
     config = structure.config(
         method=method, dt=step, rtol=float(rtol), atol=float(atol), first_step=step)
+    if t_start is None:
+        t_start = initial_state.t if isinstance(initial_state, State) else 0.0
     bt, bv = waveform.breakpoints()
     y0 = None if initial_state is None else np.ascontiguousarray(initial_state, dtype=float).ravel()
     out = engine.simulate(

@@ -49,7 +49,15 @@ class State(np.ndarray):
     def __getitem__(self, key: Any) -> Any:
         if isinstance(key, str):
             return float(np.asarray(self)[self.index(key)])
-        return super().__getitem__(key)
+        # a slice or a picked subset is no longer a state: plain values, no component names
+        return np.asarray(self)[key]
+
+    def __array_wrap__(self, arr: Any, context: Any = None, return_scalar: bool = False) -> Any:
+        # elementwise results keep the components; reductions and reshapes become plain arrays
+        if arr.shape == self.shape:
+            return super().__array_wrap__(arr, context, return_scalar)
+        plain = np.asarray(arr)
+        return plain[()] if return_scalar else plain
 
     def index(self, name: str) -> int:
         """Position of component `name` in the vector."""
@@ -81,6 +89,8 @@ class State(np.ndarray):
         return {n: float(v) for (n, _), v in zip(self.components, np.asarray(self))}
 
     def __repr__(self) -> str:
+        if self.ndim != 1 or len(self.components) != self.size:
+            return repr(np.asarray(self))
         inner = ", ".join(f"{n}={v:.6g} {u}" for (n, u), v in zip(self.components, np.asarray(self)))
         return f"State(t={self.t:g} s: {inner})"
 

@@ -345,7 +345,7 @@ fn simulate<'py>(
 #[pyclass(module = "idm_rs._core")]
 struct BatchRun {
     runner: BatchRunner,
-    state_dim: Option<usize>,
+    final_states: bool,
 }
 
 #[pymethods]
@@ -371,8 +371,8 @@ impl BatchRun {
     }
 
     /// Join and return the metrics as a dict of arrays (NaN / status 0 for points not run),
-    /// with `traces` (a list of arrays) when readings were recorded and `final_states`
-    /// (points x state, NaN rows where a point did not finish) when asked for.
+    /// with `traces` (a list of arrays) when readings were recorded and `final_states` (a list
+    /// of arrays, empty where a point did not finish) when asked for.
     fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let outputs = py
             .detach(|| self.runner.join())
@@ -385,14 +385,13 @@ impl BatchRun {
             }
             d.set_item("traces", traces)?;
         }
-        if let Some(dim) = self.state_dim {
-            let mut states = vec![f64::NAN; outputs.len() * dim];
-            for (row, o) in states.chunks_mut(dim).zip(&outputs) {
-                if o.final_state.len() == dim {
-                    row.copy_from_slice(&o.final_state);
-                }
+        if self.final_states {
+            // one array per point (its layout's size; empty where the point did not finish)
+            let states = PyList::empty(py);
+            for o in &outputs {
+                states.append(PyArray1::from_slice(py, &o.final_state))?;
             }
-            d.set_item("final_states", states.into_pyarray(py).reshape([outputs.len(), dim])?)?;
+            d.set_item("final_states", states)?;
         }
         let metrics: Vec<PointMetrics> = outputs.into_iter().map(|o| o.metrics).collect();
         let col = |f: fn(&PointMetrics) -> f64| metrics.iter().map(f).collect::<Vec<f64>>();
@@ -457,16 +456,11 @@ fn start_batch(
         states: st.as_ref().map(|(s, d)| (&s[..], *d)),
     };
     let points = detached(py, || tables.points())?.map_err(value_error)?;
-    let state_dim = config.final_states.then(|| {
-        points
-            .iter()
-            .flatten()
-            .next()
-            .and_then(|s| Model::new(s.params, s.effects, cfg.structure, cfg.piezo_hysteresis, false).ok())
-            .map_or(0, |m| m.layout.dim)
-    });
-    let runner = BatchRunner::start(cfg, points, config.threads).map_err(PyRuntimeError::new_err)?;
-    Ok(BatchRun { runner, state_dim })
+    let runner = BatchRunner::start(cfg, points, config.threads).map_err(value_error)?;
+    Ok(BatchRun {
+        runner,
+        final_states: config.final_states,
+    })
 }
 
 #[pymodule]

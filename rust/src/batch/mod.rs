@@ -39,6 +39,18 @@ pub struct BatchConfig {
     pub final_states: bool,
 }
 
+impl BatchConfig {
+    /// Refuse a method with bad settings, or recorded readings with an adaptive method (they are
+    /// taken every so many fixed steps).
+    pub fn validate(&self) -> Result<(), String> {
+        self.method.validate()?;
+        if !matches!(self.method, Method::Rk4 { .. }) && self.record_every > 0 {
+            return Err("recording readings needs method 'rk4'".into());
+        }
+        Ok(())
+    }
+}
+
 /// One point: its parameters, effects, input and the number of drive cycles (0 if not a train).
 #[derive(Clone, Debug)]
 pub struct PointSpec {

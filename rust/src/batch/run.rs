@@ -216,12 +216,7 @@ pub fn run_batch(
     cancel: &AtomicBool,
     done: &AtomicUsize,
 ) -> Result<Vec<PointOutput>, SimError> {
-    cfg.method.validate().map_err(SimError::Input)?;
-    if matches!(cfg.method, Method::Dopri5 { .. }) && cfg.record_every > 0 {
-        return Err(SimError::Input(
-            "recording readings needs method 'rk4'".into(),
-        ));
-    }
+    cfg.validate().map_err(SimError::Input)?;
     Ok(specs
         .par_chunks(CHUNK)
         .flat_map_iter(|chunk| run_chunk(cfg, chunk, cancel, done))

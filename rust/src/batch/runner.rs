@@ -28,6 +28,7 @@ impl BatchRunner {
         points: Vec<Result<PointSpec, String>>,
         threads: usize,
     ) -> Result<Self, String> {
+        cfg.validate()?;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()

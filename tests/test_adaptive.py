@@ -1,0 +1,84 @@
+"""Adaptive single runs, ``simulate(..., method="dopri5")``: the paper case agrees with the RK4
+reference, with far fewer steps, and the result says how it was computed."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import idm_rs
+
+P = idm_rs.Params()
+PAPER_WAVE = idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
+
+
+@pytest.fixture(scope="module")
+def rk4() -> idm_rs.SimulationResult:
+    return idm_rs.simulate(P, PAPER_WAVE, t_end=10e-3, dt=1e-8, model="lps")
+
+
+@pytest.fixture(scope="module")
+def dopri5() -> idm_rs.SimulationResult:
+    return idm_rs.simulate(P, PAPER_WAVE, t_end=10e-3, model="lps", method="dopri5", rtol=1e-8, atol=1e-8)
+
+
+def test_dopri5_paper_case_agrees_with_rk4_within_a_nanometre(rk4, dopri5):
+    assert abs(dopri5.final_position - rk4.final_position) < 1e-9
+    # and the whole final state, on each component's scale
+    np.testing.assert_allclose(dopri5.final_state.nodes, rk4.final_state.nodes, rtol=0, atol=1e-9)
+    assert abs(dopri5.final_state["fh"] - rk4.final_state["fh"]) < 1e-3  # N, |Fh| ~ 0.45 N
+
+
+def test_dopri5_saves_fewer_points_than_rk4(rk4, dopri5):
+    # same save_every (100 accepted steps): the adaptive run takes far fewer steps
+    assert len(dopri5.t) < len(rk4.t) / 10
+    assert dopri5.t[0] == 0.0 and dopri5.t[-1] == 10e-3
+    assert np.all(np.diff(dopri5.t) > 0)
+
+
+def test_dopri5_steps_exactly_onto_the_voltage_peak():
+    r = idm_rs.simulate(P, PAPER_WAVE, t_end=1e-3, model="lps", method="dopri5", rtol=1e-8, atol=1e-8, save_every=1)
+    assert 0.5e-3 in r.t
+    assert r.voltage[list(r.t).index(0.5e-3)] == 80.0
+
+
+def test_dopri5_result_records_its_method_and_tolerances(dopri5, rk4):
+    assert dopri5.method == "dopri5"
+    assert dopri5.rtol == 1e-8 and dopri5.atol == 1e-8
+    assert dopri5.final_state.t == 10e-3
+    assert rk4.method == "rk4" and math.isnan(rk4.rtol) and math.isnan(rk4.atol)
+
+
+def test_dopri5_to_xarray_attrs_carry_method_and_rtol(dopri5, rk4):
+    attrs = dopri5.to_xarray().attrs
+    assert attrs["method"] == "dopri5"
+    assert attrs["rtol"] == 1e-8 and attrs["atol"] == 1e-8
+    assert rk4.to_xarray().attrs["method"] == "rk4"
+
+
+def test_dopri5_needs_no_step_on_the_grid():
+    """RK4 refuses a dt that does not divide the span; the adaptive run has no such grid."""
+    with pytest.raises(ValueError, match="dt"):
+        idm_rs.simulate(P, PAPER_WAVE, t_end=1e-3, dt=3e-8, model="lps")
+    r = idm_rs.simulate(P, PAPER_WAVE, t_end=1e-3, model="lps", method="dopri5", first_step=3e-8)
+    assert r.t[-1] == 1e-3
+
+
+def test_looser_tolerance_takes_fewer_steps():
+    kw = dict(t_end=2e-3, model="lps", method="dopri5", save_every=1)
+    tight = idm_rs.simulate(P, PAPER_WAVE, rtol=1e-9, atol=1e-9, **kw)
+    loose = idm_rs.simulate(P, PAPER_WAVE, rtol=1e-5, atol=1e-5, **kw)
+    assert len(loose.t) < len(tight.t)
+
+
+@pytest.mark.parametrize("bad", [dict(rtol=0.0), dict(atol=-1.0), dict(first_step=0.0)])
+def test_non_positive_tolerance_or_first_step_is_refused(bad):
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        idm_rs.simulate(P, PAPER_WAVE, t_end=1e-3, model="lps", method="dopri5", **bad)
+
+
+def test_unknown_method_is_named():
+    with pytest.raises(ValueError, match="'method'"):
+        idm_rs.simulate(P, PAPER_WAVE, t_end=1e-3, model="lps", method="euler")  # type: ignore[arg-type]
