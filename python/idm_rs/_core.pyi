@@ -6,6 +6,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 __version__: str
+#: standard gravity of the default normal force [m/s^2]
+GRAVITY: float
 
 class DivergenceError(RuntimeError):
     """The integration left its physical bounds; `t` is the time [s] it happened."""
@@ -74,3 +76,7 @@ def param_names() -> list[str]: ...
 def effect_names() -> list[str]: ...
 def wave_columns() -> list[str]: ...
 def highest_frequency(params: dict[str, float], model: str, n_elements: int) -> float: ...
+def param_declarations() -> list[dict[str, Any]]:
+    """Table 1: name, symbol, unit, meaning, lower, upper, lower_closed, rule, value (None: derived)."""
+def effect_declarations() -> list[dict[str, Any]]:
+    """The effect catalogue: id, kind, physics, term, params (as in `param_declarations`)."""
