@@ -552,7 +552,8 @@ mod declarations {
         out.set_item("upper", d.domain.upper())?;
         out.set_item("lower_closed", d.domain.lower_closed())?;
         out.set_item("rule", d.domain.rule())?;
-        out.set_item("value", if d.value.is_nan() { None } else { Some(d.value) })?;
+        let value = (!d.value.is_nan()).then_some(d.value); // NaN: derived
+        out.set_item("value", value)?;
         Ok(out)
     }
 

@@ -135,7 +135,11 @@ pub fn check_domains(what: &str, decls: &[ParamDecl], values: &[f64]) -> Result<
     for pass in passes {
         for (d, &v) in decls.iter().zip(values) {
             if pass(&d.domain) && !d.domain.contains(v) {
-                return Err(format!("{what} '{}' must {}, got {v}", d.name, d.domain.rule()));
+                return Err(format!(
+                    "{what} '{}' must {}, got {v}",
+                    d.name,
+                    d.domain.rule()
+                ));
             }
         }
     }

@@ -305,8 +305,16 @@ mod tests {
     fn catalogue_ids_are_unique_and_only_terms_have_fields() {
         for (i, x) in EFFECTS.iter().enumerate() {
             assert!(EFFECTS[..i].iter().all(|y| y.id != x.id), "{}", x.id);
-            let fields = x.params.iter().filter(|p| EFFECT_NAMES.contains(&p.name)).count();
-            let expect = if x.kind == EffectKind::Term { x.params.len() } else { 0 };
+            let fields = x
+                .params
+                .iter()
+                .filter(|p| EFFECT_NAMES.contains(&p.name))
+                .count();
+            let expect = if x.kind == EffectKind::Term {
+                x.params.len()
+            } else {
+                0
+            };
             assert_eq!(fields, expect, "{}", x.id);
             assert!(!x.term.is_empty() && !x.physics.is_empty(), "{}", x.id);
         }

@@ -225,7 +225,12 @@ mod tests {
             assert_eq!(TABLE1.iter().filter(|e| e.name == d.name).count(), 1);
             assert!(!d.unit.is_empty() && !d.symbol.is_empty(), "{}", d.name);
             if d.name != "normal_force" {
-                assert_eq!(p.get(d.name).unwrap().to_bits(), d.value.to_bits(), "{}", d.name);
+                assert_eq!(
+                    p.get(d.name).unwrap().to_bits(),
+                    d.value.to_bits(),
+                    "{}",
+                    d.name
+                );
             }
         }
         assert!(table1("normal_force").value.is_nan());
