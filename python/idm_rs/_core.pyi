@@ -12,6 +12,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 __version__: str
+#: standard gravity of the default normal force [m/s^2]
+GRAVITY: float
 
 class DivergenceError(RuntimeError):
     """The integration left its physical bounds (a step too large, usually); the message says
@@ -208,3 +210,10 @@ def param_names() -> list[str]:
 
 def effect_names() -> list[str]:
     """Effect names in the batch tables' column order."""
+
+def param_declarations() -> list[dict[str, Any]]:
+    """Table 1: name, symbol, unit, meaning, lower, upper, lower_closed, rule, value (None: derived)."""
+
+def effect_declarations() -> list[dict[str, Any]]:
+    """The effect catalogue: id, kind, physics, term, params (as in `param_declarations`)."""
+

@@ -1,36 +1,29 @@
 """Optional physics beyond the paper's model (the catalogue of ``recordings/FORMAT.md``).
 
 Each effect parameter is off at 0. They run inside the Rust engine (extra forces or states),
-so fits and sweeps with an effect run at engine speed.
+so fits and sweeps with an effect run at engine speed. The effects and their parameters are
+declared once, in the Rust core (``rust/src/effects.rs``); the fields of :class:`Effects` and
+their documentation are built from that declaration (``effects.pyi`` gives type checkers the same
+fields; a test keeps it in step).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass, fields
+from dataclasses import fields
+
+from .declarations import EFFECTS, ParamDecl
+
+_DOC = """Effect parameters (SI); all 0 is the paper's model.
+
+    Fields, each ``name`` (its effect): meaning [unit]
+
+"""
 
 
-@dataclass(frozen=True)
-class Effects:
-    """Effect parameters (SI); all 0 is the paper's model.
-
-    ``theta_rad`` [rad]: tilted guide, force −(m1+m2+mPE)·g·sin θ on the main body and normal
-    force × cos θ. ``k_ground`` [N/m]: spring from the main body to ground. ``tau_amp`` [s]:
-    amplifier lag of the PE voltage. ``kappa`` [-], ``tau_creep`` [s]: piezo creep, an extra free
-    extension relaxing to κ·d33·V. ``c_weight`` [N s/m]: viscous drag on the weight. ``eps`` [-]:
-    friction levels × (1 + ε sgn v1). ``tau_sensor`` [s]: the sensor reads x1 through a
-    first-order lag. ``drift_rate`` [m/s]: the reading drifts linearly in time.
-    """
-
-    theta_rad: float = 0.0
-    k_ground: float = 0.0
-    tau_amp: float = 0.0
-    kappa: float = 0.0
-    tau_creep: float = 0.0
-    c_weight: float = 0.0
-    eps: float = 0.0
-    tau_sensor: float = 0.0
-    drift_rate: float = 0.0
+class _EffectsBehaviour:
+    """What an :class:`Effects` does; its fields come from the effect declarations."""
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -42,3 +35,20 @@ class Effects:
     def active(self) -> dict[str, float]:
         """The non-zero parameters."""
         return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) != 0.0}
+
+
+def _field(effect: str, d: ParamDecl) -> tuple[str, type, dataclasses.Field]:
+    meta = {"effect": effect, "symbol": d.symbol, "unit": d.unit, "meaning": d.meaning}
+    return d.name, float, dataclasses.field(default=d.value, metadata=meta)
+
+
+_TERMS = [(e.id, d) for e in EFFECTS if e.kind == "term" for d in e.params]
+
+Effects = dataclasses.make_dataclass(
+    "Effects", [_field(eid, d) for eid, d in _TERMS], bases=(_EffectsBehaviour,), frozen=True,
+    namespace={"__module__": __name__,
+               "__doc__": _DOC + "\n".join(f"    ``{d.name}`` ({eid}): {d.meaning} [{d.unit}]" for eid, d in _TERMS)
+               + "\n"},
+)
+
+__all__ = ["Effects"]

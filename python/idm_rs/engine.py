@@ -24,15 +24,22 @@ param_names = _core.param_names
 effect_names = _core.effect_names
 wave_fields = _core.wave_fields
 highest_frequency = _core.highest_frequency
+# declarations of the model (Table 1, the effect catalogue); typed views in `declarations.py`
+param_declarations = _core.param_declarations
+effect_declarations = _core.effect_declarations
+GRAVITY: float = _core.GRAVITY
 
 __all__ = [
+    "GRAVITY",
     "BatchRun",
     "DivergenceError",
     "RunConfig",
     "__version__",
     "check_run",
+    "effect_declarations",
     "effect_names",
     "highest_frequency",
+    "param_declarations",
     "param_names",
     "resolve_params",
     "simulate",

@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 from . import engine
 from .batch import Structure, Tables, param_row
 from .batch import start as start_batch
+from .declarations import EFFECT_PARAMS, GRAVITY
 from .effects import Effects
 from .params import PARAM_INFO, Params
 from .waveforms import Sampled, Sawtooth, Triangle, Waveform
@@ -140,9 +141,8 @@ def _axis_info(name: str) -> tuple[str, str]:
         return DERIVED_AXES[name]
     if name in WAVE_FIELDS:
         return WAVE_FIELDS[name]
-    effect_units = {"theta_rad": "rad", "k_ground": "N/m", "tau_amp": "s", "kappa": "1", "tau_creep": "s",
-                    "c_weight": "N s/m", "eps": "1", "tau_sensor": "s", "drift_rate": "m/s"}
-    return effect_units[name], f"effect parameter {name}"
+    unit = next(d.unit for d in EFFECT_PARAMS if d.name == name)
+    return unit, f"effect parameter {name}"
 
 
 def _check_grid(grid: Mapping[str, ArrayLike], waveform: Waveform) -> tuple[tuple[str, ...], tuple[NDArray[np.float64], ...]]:
@@ -313,7 +313,7 @@ def sweep(
         "retries": int(retries),
         "piezo_hysteresis": int(piezo_hysteresis),
         "waveform": repr(waveform),
-        "normal_force_rule": "as set" if params.normal_force is not None else "(m1+m2+mPE)*9.81 per point",
+        "normal_force_rule": "as set" if params.normal_force is not None else f"(m1+m2+mPE)*{GRAVITY:g} per point",
         "complete": int(complete),
         "points": n,
         "points_finished": int(np.count_nonzero(out["status"])),

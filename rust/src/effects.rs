@@ -1,68 +1,205 @@
-//! Optional physics beyond the paper's model: the effect catalogue of
-//! `recordings/FORMAT.md`. Each is off at its zero value and has one small function here.
-//! (`pe_mass` is a change of structure, LPS -> DPS, and `piezo_hysteresis` a switch of the
-//! paper's own h state; neither needs a parameter here.)
+//! Optional physics beyond the paper's model: the effect catalogue of `recordings/FORMAT.md`,
+//! declared once in [`EFFECTS`]. Effects that add a term to the engine are off at their zero
+//! value and have one small function here; their parameters are the fields of [`Effects`].
+//! (`pe_mass` is a change of structure, LPS -> DPS, and `piezo_hysteresis` and `stribeck`
+//! switch on parts of the paper's own model; they are declared here too so the catalogue has
+//! one source, but need no field.)
 
-use crate::params::GRAVITY;
+use crate::declare::{check_domains, Domain, EffectDecl, EffectKind, ParamDecl};
+use crate::params::{table1, GRAVITY};
 
-/// Parameter names, as in the catalogue, in field order of [`Effects`].
-pub const EFFECT_NAMES: [&str; 9] = [
-    "theta_rad",
-    "k_ground",
-    "tau_amp",
-    "kappa",
-    "tau_creep",
-    "c_weight",
-    "eps",
-    "tau_sensor",
-    "drift_rate",
-];
+/// Declares the catalogue once. `other` effects change the structure or Table 1 values and
+/// list their parameters as [`ParamDecl`]s; each parameter of a `terms` effect becomes a field
+/// of [`Effects`] (off at 0). From that one list come the struct, [`EFFECTS`],
+/// [`EFFECT_PARAMS`], [`EFFECT_NAMES`], `get` and `set`.
+macro_rules! effects {
+    (
+        other {
+            $( $oid:ident ($okind:ident) {
+                physics: $ophysics:literal,
+                term: $oterm:literal,
+                params: [$($oparam:expr),* $(,)?] $(,)?
+            } )*
+        }
+        terms {
+            $( $tid:ident {
+                physics: $tphysics:literal,
+                term: $tterm:literal,
+                params: { $( $field:ident: $symbol:literal, $unit:literal, $domain:expr, $meaning:literal; )* } $(,)?
+            } )*
+        }
+    ) => {
+        /// Effect parameters (SI). All zero: the paper's model.
+        #[derive(Clone, Copy, Debug, Default, PartialEq)]
+        pub struct Effects {
+            $($(
+                #[doc = concat!(stringify!($tid), ": ", $meaning, " [", $unit, "]")]
+                pub $field: f64,
+            )*)*
+        }
 
-/// Effect parameters (SI). All zero: the paper's model.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Effects {
-    /// incline: guide tilt theta [rad]; force -(m1+m2+mPE) g sin(theta) on the main body and
-    /// normal force times cos(theta)
-    pub theta_rad: f64,
-    /// spring_to_ground: force -k_ground x1 on the main body [N/m]
-    pub k_ground: f64,
-    /// amplifier_lowpass: PE voltage lags the command, dVpe/dt = (Vcmd - Vpe)/tau_amp [s]; 0 = off
-    pub tau_amp: f64,
-    /// piezo_creep: extra free extension, dxc/dt = (kappa d33 V - xc)/tau_creep [-]
-    pub kappa: f64,
-    /// piezo_creep time constant [s]; 0 = off
-    pub tau_creep: f64,
-    /// weight_friction: viscous drag -c_weight v2 on the weight [N s/m]
-    pub c_weight: f64,
-    /// friction_asymmetry: Fc, Fs times (1 + eps sgn v1) [-]
-    pub eps: f64,
-    /// sensor_lowpass: the sensor reads x1 through dx/dt = (x1 - x)/tau_sensor [s]; 0 = off
-    pub tau_sensor: f64,
-    /// thermal_drift: the reading is x1 + drift_rate t [m/s]
-    pub drift_rate: f64,
+        /// Number of effect parameters (fields of [`Effects`]).
+        pub const N_EFFECT_PARAMS: usize = [$($(stringify!($field),)*)*].len();
+
+        /// The parameters of the `terms` effects, in field order of [`Effects`].
+        pub const EFFECT_PARAMS: [ParamDecl; N_EFFECT_PARAMS] = [$($(
+            effects!(@param $field, $symbol, $unit, $domain, $meaning),
+        )*)*];
+
+        /// Parameter names, as in the catalogue, in field order of [`Effects`].
+        pub const EFFECT_NAMES: [&str; N_EFFECT_PARAMS] = [$($(stringify!($field),)*)*];
+
+        /// The catalogue, in the order the diagnosis tries it.
+        pub const EFFECTS: &[EffectDecl] = &[
+            $(EffectDecl {
+                id: stringify!($oid),
+                kind: EffectKind::$okind,
+                physics: $ophysics,
+                term: $oterm,
+                params: &[$($oparam),*],
+            },)*
+            $(EffectDecl {
+                id: stringify!($tid),
+                kind: EffectKind::Term,
+                physics: $tphysics,
+                term: $tterm,
+                params: &[$(effects!(@param $field, $symbol, $unit, $domain, $meaning)),*],
+            },)*
+        ];
+
+        impl Effects {
+            /// Every value, in the order of [`EFFECT_NAMES`].
+            pub fn values(&self) -> [f64; N_EFFECT_PARAMS] {
+                [$($(self.$field,)*)*]
+            }
+
+            fn slot(&mut self, name: &str) -> Option<&mut f64> {
+                match name {
+                    $($(stringify!($field) => Some(&mut self.$field),)*)*
+                    _ => None,
+                }
+            }
+        }
+    };
+    (@param $field:ident, $symbol:literal, $unit:literal, $domain:expr, $meaning:literal) => {
+        ParamDecl {
+            name: stringify!($field),
+            symbol: $symbol,
+            unit: $unit,
+            meaning: $meaning,
+            domain: $domain,
+            value: 0.0,
+        }
+    };
+}
+
+effects! {
+    other {
+        pe_mass (Structure) {
+            physics: "the PE has mass: the device is the DPS (4 elements, consistent mass, Rayleigh damping), not the LPS",
+            term: "PE as a 4-element bar with mass and Rayleigh damping (DPS)",
+            params: [],
+        }
+        piezo_hysteresis (Parameter) {
+            physics: "the PE force has Bouc-Wen hysteresis h (amplitude hyst_alpha; hyst_beta, hyst_gamma as nominal)",
+            term: "Fp = kp (d33 V - h), h' = hyst_alpha d33 V' - hyst_beta |V'| h - hyst_gamma V' |h|",
+            // with h switched on; at hyst_alpha = 0 h stays 0
+            params: [ParamDecl { value: 0.0, ..table1("hyst_alpha") }],
+        }
+        stribeck (Parameter) {
+            physics: "static friction exceeds kinetic friction (mu_s > mu_k: a Stribeck peak)",
+            term: "s(v) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta), Fs = mu_s Fn > Fc",
+            // fitted as the excess, so mu_s >= mu_k holds whatever mu_k the fit is at
+            params: [ParamDecl {
+                name: "mu_s_excess",
+                symbol: "mu_s/mu_k - 1",
+                unit: "1",
+                meaning: "static friction excess, mu_s = mu_k (1 + mu_s_excess)",
+                domain: Domain::NonNegative,
+                value: 0.0,
+            }],
+        }
+    }
+    terms {
+        incline {
+            physics: "the guide is tilted: gravity along it on the device, normal force times cos(theta)",
+            term: "m1 x1'' += -(m1 + m2 + mPE) g sin(theta_rad), Fn *= cos(theta_rad)",
+            params: {
+                theta_rad: "theta", "rad",
+                    Domain::Open { lower: -std::f64::consts::FRAC_PI_2, upper: std::f64::consts::FRAC_PI_2, text: "(-pi/2, pi/2)" },
+                    "guide tilt; force -(m1+m2+mPE) g sin(theta) on the main body, normal force times cos(theta)";
+            },
+        }
+        spring_to_ground {
+            physics: "a spring from the main body to the ground, force -k_ground x1",
+            term: "m1 x1'' += -k_ground x1",
+            params: {
+                k_ground: "k_ground", "N/m", Domain::NonNegative, "stiffness of a spring from the main body to ground";
+            },
+        }
+        amplifier_lowpass {
+            physics: "the PE voltage lags the command through a first-order amplifier (tau_amp)",
+            term: "Vpe' = (Vcmd - Vpe) / tau_amp",
+            params: {
+                tau_amp: "tau_amp", "s", Domain::NonNegative, "amplifier lag of the PE voltage behind the command; 0 = off";
+            },
+        }
+        piezo_creep {
+            physics: "the PE creeps: an extra free extension relaxing to kappa d33 V with time constant tau_creep",
+            term: "xc' = (kappa d33 V - xc) / tau_creep, Fp = kp (d33 V + xc)",
+            params: {
+                kappa: "kappa", "1", Domain::Finite, "creep amplitude, relative to the free extension d33 V";
+                tau_creep: "tau_creep", "s", Domain::NonNegative, "creep time constant; 0 = off";
+            },
+        }
+        weight_friction {
+            physics: "viscous drag on the weight, force -c_weight v2",
+            term: "m2 x2'' += -c_weight x2'",
+            params: {
+                c_weight: "c_weight", "N s/m", Domain::NonNegative, "viscous drag coefficient on the weight";
+            },
+        }
+        friction_asymmetry {
+            physics: "friction levels depend on the sliding direction: Fc, Fs times (1 + eps sgn v1)",
+            term: "Fc, Fs *= (1 + eps sgn x1')",
+            params: {
+                eps: "eps", "1", Domain::Open { lower: -1.0, upper: 1.0, text: "(-1, 1)" },
+                    "friction asymmetry: Fc, Fs times (1 + eps sgn v1)";
+            },
+        }
+        sensor_lowpass {
+            physics: "the sensor reads x1 through a first-order low-pass (tau_sensor)",
+            term: "x' = (x1 - x) / tau_sensor (the reading)",
+            params: {
+                tau_sensor: "tau_sensor", "s", Domain::NonNegative, "sensor lag: the reading follows x1 through a first-order low-pass; 0 = off";
+            },
+        }
+        thermal_drift {
+            physics: "the reading drifts linearly in time (drift_rate)",
+            term: "x = x1 + drift_rate t (the reading)",
+            params: {
+                drift_rate: "drift_rate", "m/s", Domain::Finite, "linear drift of the reading";
+            },
+        }
+    }
 }
 
 impl Effects {
     pub fn set(&mut self, name: &str, value: f64) -> Result<(), String> {
-        let slot = match name {
-            "theta_rad" => &mut self.theta_rad,
-            "k_ground" => &mut self.k_ground,
-            "tau_amp" => &mut self.tau_amp,
-            "kappa" => &mut self.kappa,
-            "tau_creep" => &mut self.tau_creep,
-            "c_weight" => &mut self.c_weight,
-            "eps" => &mut self.eps,
-            "tau_sensor" => &mut self.tau_sensor,
-            "drift_rate" => &mut self.drift_rate,
-            _ => {
-                return Err(format!(
-                    "unknown effect parameter '{name}'; known: {}",
-                    EFFECT_NAMES.join(", ")
-                ))
-            }
-        };
+        let slot = self.slot(name).ok_or_else(|| {
+            format!(
+                "unknown effect parameter '{name}'; known: {}",
+                EFFECT_NAMES.join(", ")
+            )
+        })?;
         *slot = value;
         Ok(())
+    }
+
+    /// One parameter by name; None when unknown.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        let i = EFFECT_NAMES.iter().position(|n| *n == name)?;
+        Some(self.values()[i])
     }
 
     pub fn from_pairs(pairs: &[(&str, f64)]) -> Result<Self, String> {
@@ -74,48 +211,10 @@ impl Effects {
         Ok(e)
     }
 
+    /// Every value finite and in its declared domain; the error names the parameter.
     pub fn validate(&self) -> Result<(), String> {
-        let all = [
-            self.theta_rad,
-            self.k_ground,
-            self.tau_amp,
-            self.kappa,
-            self.tau_creep,
-            self.c_weight,
-            self.eps,
-            self.tau_sensor,
-            self.drift_rate,
-        ];
-        for (name, v) in EFFECT_NAMES.iter().zip(all) {
-            if !v.is_finite() {
-                return Err(format!("effect parameter '{name}' must be finite, got {v}"));
-            }
-        }
-        for (name, v) in [
-            ("k_ground", self.k_ground),
-            ("tau_amp", self.tau_amp),
-            ("tau_creep", self.tau_creep),
-            ("c_weight", self.c_weight),
-            ("tau_sensor", self.tau_sensor),
-        ] {
-            if v < 0.0 {
-                return Err(format!(
-                    "effect parameter '{name}' must be non-negative, got {v}"
-                ));
-            }
-        }
-        if self.eps.abs() >= 1.0 {
-            return Err(format!(
-                "effect parameter 'eps' must lie in (-1, 1), got {}",
-                self.eps
-            ));
-        }
-        if self.theta_rad.abs() >= std::f64::consts::FRAC_PI_2 {
-            return Err(format!(
-                "effect parameter 'theta_rad' must lie in (-pi/2, pi/2), got {}",
-                self.theta_rad
-            ));
-        }
+        check_domains("effect parameter", &EFFECT_PARAMS, &self.values())?;
+        // a relation between two parameters: a creep amplitude needs a time to creep over
         if self.kappa != 0.0 && self.tau_creep == 0.0 {
             return Err("effect parameter 'kappa' needs a positive 'tau_creep'".into());
         }
@@ -186,5 +285,50 @@ mod tests {
         assert!(Effects::from_pairs(&[("wind", 1.0)])
             .unwrap_err()
             .contains("'wind'"));
+    }
+
+    #[test]
+    fn every_field_is_declared_once_with_a_unit() {
+        let mut e = Effects::default();
+        for (i, d) in EFFECT_PARAMS.iter().enumerate() {
+            assert_eq!(EFFECT_NAMES[i], d.name);
+            assert!(!d.unit.is_empty(), "{}", d.name);
+            assert_eq!(d.value, 0.0, "{}: off at 0", d.name);
+            let owners: Vec<&str> = EFFECTS
+                .iter()
+                .filter(|x| x.params.iter().any(|p| p.name == d.name))
+                .map(|x| x.id)
+                .collect();
+            assert_eq!(owners.len(), 1, "{} declared by {owners:?}", d.name);
+            e.set(d.name, (i + 1) as f64).unwrap();
+        }
+        // set and get reach the field of the same name, and nothing else
+        assert_eq!(e.k_ground, 2.0);
+        assert_eq!(e.drift_rate, N_EFFECT_PARAMS as f64);
+        for (i, n) in EFFECT_NAMES.iter().enumerate() {
+            assert_eq!(e.get(n), Some((i + 1) as f64));
+        }
+        assert_eq!(Effects::default().values(), [0.0; N_EFFECT_PARAMS]);
+    }
+
+    #[test]
+    fn catalogue_ids_are_unique_and_only_terms_have_fields() {
+        for (i, x) in EFFECTS.iter().enumerate() {
+            assert!(EFFECTS[..i].iter().all(|y| y.id != x.id), "{}", x.id);
+            let fields = x
+                .params
+                .iter()
+                .filter(|p| EFFECT_NAMES.contains(&p.name))
+                .count();
+            let expect = if x.kind == EffectKind::Term {
+                x.params.len()
+            } else {
+                0
+            };
+            assert_eq!(fields, expect, "{}", x.id);
+            assert!(!x.term.is_empty() && !x.physics.is_empty(), "{}", x.id);
+        }
+        let hyst = EFFECTS.iter().find(|x| x.id == "piezo_hysteresis").unwrap();
+        assert_eq!(hyst.params[0].unit, table1("hyst_alpha").unit);
     }
 }

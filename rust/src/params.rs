@@ -3,115 +3,108 @@
 //! All values are SI. `Params::paper()` is Table 1; `normal_force` defaults to the weight of the
 //! whole device, (m1 + m2 + mPE) g, because the weight and the PE hang on the main body.
 
+use crate::declare::{check_domains, same_name, Domain, ParamDecl};
+
 /// Standard gravity used for the default normal force [m/s^2].
 pub const GRAVITY: f64 = 9.81;
 
-/// Every parameter name, in the order of the fields of [`Params`].
-pub const PARAM_NAMES: [&str; 23] = [
-    "m1",
-    "m2",
-    "pe_area",
-    "pe_youngs",
-    "pe_length",
-    "pe_density",
-    "d33",
-    "rayleigh_alpha",
-    "rayleigh_beta",
-    "hyst_alpha",
-    "hyst_beta",
-    "hyst_gamma",
-    "fric_alpha",
-    "fric_beta",
-    "fric_gamma",
-    "fric_n",
-    "stribeck_velocity",
-    "stribeck_exponent",
-    "mu_k",
-    "mu_s",
-    "sigma1",
-    "sigma2",
-    "normal_force",
-];
+/// Declares Table 1 once: for each parameter its field, the paper's symbol, unit, meaning,
+/// domain and value. From that one list come the fields of [`Params`], [`TABLE1`],
+/// [`PARAM_NAMES`], `Params::paper`, `get` and `set`.
+macro_rules! table1 {
+    ($( $field:ident: $symbol:literal, $unit:literal, $meaning:literal, $domain:expr, $value:expr; )*) => {
+        /// IDM parameters (SI units). Field docs give the paper's symbol.
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        pub struct Params {
+            $(
+                #[doc = concat!($symbol, ", ", $meaning, " [", $unit, "]")]
+                pub $field: f64,
+            )*
+        }
 
-/// IDM parameters (SI units). Field docs give the paper's symbol.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Params {
-    /// m1, main body mass [kg]
-    pub m1: f64,
-    /// m2, weight mass [kg]
-    pub m2: f64,
-    /// Ap, PE cross-section [m^2]
-    pub pe_area: f64,
-    /// Ep, PE Young's modulus [N/m^2]
-    pub pe_youngs: f64,
-    /// l, PE length [m]
-    pub pe_length: f64,
-    /// rho_p, PE density [kg/m^3] (0 allowed: a massless PE)
-    pub pe_density: f64,
-    /// d33, piezoelectric constant [m/V]
-    pub d33: f64,
-    /// alpha_c, mass-proportional Rayleigh damping [1/s]
-    pub rayleigh_alpha: f64,
-    /// beta_c, stiffness-proportional Rayleigh damping [s]
-    pub rayleigh_beta: f64,
-    /// a_p, Bouc-Wen piezo hysteresis [-]
-    pub hyst_alpha: f64,
-    /// b_p, Bouc-Wen piezo hysteresis [1/V]
-    pub hyst_beta: f64,
-    /// c_p, Bouc-Wen piezo hysteresis [1/V]
-    pub hyst_gamma: f64,
-    /// a, presliding stiffness [N/m]
-    pub fric_alpha: f64,
-    /// b, presliding hysteresis shape [1/m]
-    pub fric_beta: f64,
-    /// c, presliding hysteresis shape [1/m]
-    pub fric_gamma: f64,
-    /// n, Leuven transition exponent [-]
-    pub fric_n: f64,
-    /// v_s, Stribeck velocity [m/s]
-    pub stribeck_velocity: f64,
-    /// delta, Stribeck exponent [-]
-    pub stribeck_exponent: f64,
-    /// mu_k, kinetic friction coefficient [-]
-    pub mu_k: f64,
-    /// mu_s, static friction coefficient [-]
-    pub mu_s: f64,
-    /// sigma1 ("r1"), presliding damping [N s/m]
-    pub sigma1: f64,
-    /// sigma2 ("r2"), viscous friction [N s/m]
-    pub sigma2: f64,
-    /// F_n, normal force on the guide [N]
-    pub normal_force: f64,
+        /// Number of parameters in Table 1.
+        pub const N_PARAMS: usize = [$(stringify!($field),)*].len();
+
+        /// Table 1, in the order of the fields of [`Params`].
+        pub const TABLE1: [ParamDecl; N_PARAMS] = [$(
+            ParamDecl {
+                name: stringify!($field),
+                symbol: $symbol,
+                unit: $unit,
+                meaning: $meaning,
+                domain: $domain,
+                value: $value,
+            },
+        )*];
+
+        /// Every parameter name, in the order of the fields of [`Params`].
+        pub const PARAM_NAMES: [&str; N_PARAMS] = [$(stringify!($field),)*];
+
+        impl Params {
+            /// Table 1's values as declared (the normal force still NaN: derived).
+            const fn declared() -> Self {
+                Params { $($field: $value,)* }
+            }
+
+            /// Every value, in the order of [`PARAM_NAMES`].
+            pub fn values(&self) -> [f64; N_PARAMS] {
+                [$(self.$field,)*]
+            }
+
+            fn slot(&mut self, name: &str) -> Option<&mut f64> {
+                match name {
+                    $(stringify!($field) => Some(&mut self.$field),)*
+                    _ => None,
+                }
+            }
+        }
+    };
+}
+
+table1! {
+    m1: "m1", "kg", "main body mass", Domain::Positive, 0.4;
+    m2: "m2", "kg", "weight mass", Domain::Positive, 0.3;
+    pe_area: "Ap", "m^2", "PE cross-section", Domain::Positive, 2.5e-5;
+    pe_youngs: "Ep", "N/m^2", "PE Young's modulus", Domain::Positive, 2.216e10;
+    pe_length: "l", "m", "PE length", Domain::Positive, 2e-2;
+    // 0 allowed: a massless PE
+    pe_density: "rho_p", "kg/m^3", "PE density", Domain::NonNegative, 8000.0;
+    d33: "d33", "m/V", "piezoelectric constant", Domain::Positive, 1.24e-7;
+    rayleigh_alpha: "alpha_c", "1/s", "mass-proportional Rayleigh damping", Domain::NonNegative, 4e3;
+    rayleigh_beta: "beta_c", "s", "stiffness-proportional Rayleigh damping", Domain::NonNegative, 5e-7;
+    hyst_alpha: "a_p", "1", "Bouc-Wen piezo hysteresis amplitude", Domain::Finite, 0.4297;
+    hyst_beta: "b_p", "1/V", "Bouc-Wen piezo hysteresis shape", Domain::Finite, 3.438e-2;
+    hyst_gamma: "c_p", "1/V", "Bouc-Wen piezo hysteresis shape", Domain::Finite, -2.865e-3;
+    fric_alpha: "a", "N/m", "presliding stiffness", Domain::Positive, 2e10;
+    fric_beta: "b", "1/m", "presliding hysteresis shape", Domain::NonNegative, 0.2e10;
+    // may be negative as long as b + c > 0 (see `validate`)
+    fric_gamma: "c", "1/m", "presliding hysteresis shape", Domain::Finite, 0.3e10;
+    fric_n: "n", "1", "Leuven transition-curve exponent", Domain::Positive, 1.0;
+    stribeck_velocity: "v_s", "m/s", "Stribeck velocity", Domain::Positive, 1e-3;
+    stribeck_exponent: "delta", "1", "Stribeck exponent", Domain::Positive, 2.0;
+    mu_k: "mu_k", "1", "kinetic (Coulomb) friction coefficient", Domain::Positive, 0.5;
+    mu_s: "mu_s", "1", "static friction coefficient", Domain::Positive, 0.6;
+    sigma1: "sigma1 (r1)", "N s/m", "presliding damping", Domain::NonNegative, 100.0;
+    sigma2: "sigma2 (r2)", "N s/m", "viscous friction", Domain::NonNegative, 0.4;
+    normal_force: "F_n", "N", "normal force on the guide; default (m1+m2+mPE) g", Domain::Positive, f64::NAN;
+}
+
+/// The declaration of the Table 1 parameter `name`; a compile error in a `const` when unknown.
+pub const fn table1(name: &str) -> ParamDecl {
+    let mut i = 0;
+    while i < TABLE1.len() {
+        if same_name(TABLE1[i].name, name) {
+            return TABLE1[i];
+        }
+        i += 1;
+    }
+    panic!("not a Table 1 parameter")
 }
 
 impl Params {
     /// Table 1 of the paper, with the default normal force.
     pub fn paper() -> Self {
-        let mut p = Params {
-            m1: 0.4,
-            m2: 0.3,
-            pe_area: 2.5e-5,
-            pe_youngs: 2.216e10,
-            pe_length: 2e-2,
-            pe_density: 8000.0,
-            d33: 1.24e-7,
-            rayleigh_alpha: 4e3,
-            rayleigh_beta: 5e-7,
-            hyst_alpha: 0.4297,
-            hyst_beta: 3.438e-2,
-            hyst_gamma: -2.865e-3,
-            fric_alpha: 2e10,
-            fric_beta: 0.2e10,
-            fric_gamma: 0.3e10,
-            fric_n: 1.0,
-            stribeck_velocity: 1e-3,
-            stribeck_exponent: 2.0,
-            mu_k: 0.5,
-            mu_s: 0.6,
-            sigma1: 100.0,
-            sigma2: 0.4,
-            normal_force: 0.0,
-        };
+        let mut p = Params::declared();
         p.normal_force = p.default_normal_force();
         p
     }
@@ -144,68 +137,19 @@ impl Params {
             .map(|(_, v)| v)
     }
 
-    fn fields(&self) -> [(&'static str, f64); 23] {
-        let v = [
-            self.m1,
-            self.m2,
-            self.pe_area,
-            self.pe_youngs,
-            self.pe_length,
-            self.pe_density,
-            self.d33,
-            self.rayleigh_alpha,
-            self.rayleigh_beta,
-            self.hyst_alpha,
-            self.hyst_beta,
-            self.hyst_gamma,
-            self.fric_alpha,
-            self.fric_beta,
-            self.fric_gamma,
-            self.fric_n,
-            self.stribeck_velocity,
-            self.stribeck_exponent,
-            self.mu_k,
-            self.mu_s,
-            self.sigma1,
-            self.sigma2,
-            self.normal_force,
-        ];
+    fn fields(&self) -> [(&'static str, f64); N_PARAMS] {
+        let v = self.values();
         std::array::from_fn(|i| (PARAM_NAMES[i], v[i]))
     }
 
     /// Set one parameter by name; unknown names are refused.
     pub fn set(&mut self, name: &str, value: f64) -> Result<(), String> {
-        let slot = match name {
-            "m1" => &mut self.m1,
-            "m2" => &mut self.m2,
-            "pe_area" => &mut self.pe_area,
-            "pe_youngs" => &mut self.pe_youngs,
-            "pe_length" => &mut self.pe_length,
-            "pe_density" => &mut self.pe_density,
-            "d33" => &mut self.d33,
-            "rayleigh_alpha" => &mut self.rayleigh_alpha,
-            "rayleigh_beta" => &mut self.rayleigh_beta,
-            "hyst_alpha" => &mut self.hyst_alpha,
-            "hyst_beta" => &mut self.hyst_beta,
-            "hyst_gamma" => &mut self.hyst_gamma,
-            "fric_alpha" => &mut self.fric_alpha,
-            "fric_beta" => &mut self.fric_beta,
-            "fric_gamma" => &mut self.fric_gamma,
-            "fric_n" => &mut self.fric_n,
-            "stribeck_velocity" => &mut self.stribeck_velocity,
-            "stribeck_exponent" => &mut self.stribeck_exponent,
-            "mu_k" => &mut self.mu_k,
-            "mu_s" => &mut self.mu_s,
-            "sigma1" => &mut self.sigma1,
-            "sigma2" => &mut self.sigma2,
-            "normal_force" => &mut self.normal_force,
-            _ => {
-                return Err(format!(
-                    "unknown parameter '{name}'; known: {}",
-                    PARAM_NAMES.join(", ")
-                ))
-            }
-        };
+        let slot = self.slot(name).ok_or_else(|| {
+            format!(
+                "unknown parameter '{name}'; known: {}",
+                PARAM_NAMES.join(", ")
+            )
+        })?;
         *slot = value;
         Ok(())
     }
@@ -225,46 +169,10 @@ impl Params {
         Ok(p)
     }
 
-    /// Every value finite; physical sizes positive. The error names the parameter.
+    /// Every value finite and in its declared domain; the error names the parameter.
     pub fn validate(&self) -> Result<(), String> {
-        for (name, v) in self.fields() {
-            if !v.is_finite() {
-                return Err(format!("parameter '{name}' must be finite, got {v}"));
-            }
-        }
-        let positive = [
-            ("m1", self.m1),
-            ("m2", self.m2),
-            ("pe_area", self.pe_area),
-            ("pe_youngs", self.pe_youngs),
-            ("pe_length", self.pe_length),
-            ("d33", self.d33),
-            ("fric_alpha", self.fric_alpha),
-            ("fric_n", self.fric_n),
-            ("stribeck_velocity", self.stribeck_velocity),
-            ("stribeck_exponent", self.stribeck_exponent),
-            ("mu_k", self.mu_k),
-            ("mu_s", self.mu_s),
-            ("normal_force", self.normal_force),
-        ];
-        for (name, v) in positive {
-            if v <= 0.0 {
-                return Err(format!("parameter '{name}' must be positive, got {v}"));
-            }
-        }
-        let non_negative = [
-            ("pe_density", self.pe_density),
-            ("rayleigh_alpha", self.rayleigh_alpha),
-            ("rayleigh_beta", self.rayleigh_beta),
-            ("fric_beta", self.fric_beta),
-            ("sigma1", self.sigma1),
-            ("sigma2", self.sigma2),
-        ];
-        for (name, v) in non_negative {
-            if v < 0.0 {
-                return Err(format!("parameter '{name}' must be non-negative, got {v}"));
-            }
-        }
+        check_domains("parameter", &TABLE1, &self.values())?;
+        // a relation, not a bound of one value: the presliding force a/(b+c) must be bounded
         if self.fric_beta + self.fric_gamma <= 0.0 {
             return Err(format!(
                 "parameters 'fric_beta' + 'fric_gamma' must be positive (bounded presliding force), got {}",
@@ -307,5 +215,25 @@ mod tests {
         assert!((p.normal_force - (1.004 * GRAVITY)).abs() < 1e-12);
         let p = Params::from_pairs(&[("m2", 0.6), ("normal_force", 3.9)]).unwrap();
         assert_eq!(p.normal_force, 3.9);
+    }
+
+    #[test]
+    fn table1_declares_every_field_once_with_the_paper_values() {
+        let p = Params::paper();
+        for (i, d) in TABLE1.iter().enumerate() {
+            assert_eq!(PARAM_NAMES[i], d.name);
+            assert_eq!(TABLE1.iter().filter(|e| e.name == d.name).count(), 1);
+            assert!(!d.unit.is_empty() && !d.symbol.is_empty(), "{}", d.name);
+            if d.name != "normal_force" {
+                assert_eq!(
+                    p.get(d.name).unwrap().to_bits(),
+                    d.value.to_bits(),
+                    "{}",
+                    d.name
+                );
+            }
+        }
+        assert!(table1("normal_force").value.is_nan());
+        assert_eq!(table1("d33").unit, "m/V");
     }
 }

@@ -10,6 +10,7 @@ effect, rank them by BIC and held-out prediction, and give a verdict (a catalogu
 """
 
 from .catalogue import CATALOGUE
-from .diagnose import Candidate, Diagnosis, diagnose
+from .diagnose import diagnose
+from .results import Candidate, Diagnosis
 
 __all__ = ["CATALOGUE", "Candidate", "Diagnosis", "diagnose"]

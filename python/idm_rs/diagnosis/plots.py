@@ -12,11 +12,10 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 
 from .locate import PHASES
+from .results import BIC_THRESHOLD, NOISE_RATIO_OK, Candidate, Diagnosis
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
-
-    from .diagnose import Candidate, Diagnosis
 
 DPI = 120
 C_DATA = "0.45"
@@ -31,7 +30,7 @@ def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
-def refit_candidate(d: "Diagnosis") -> Optional["Candidate"]:
+def refit_candidate(d: Diagnosis) -> Optional[Candidate]:
     """The candidate the plots show as the refitted model: the verdict's, when it names an effect."""
     return next((c for c in d.ranking if c.effect == d.verdict and c.spec is not None), None)
 
@@ -50,7 +49,7 @@ def _save(fig: "Figure", path: Path) -> Path:
     return path
 
 
-def plot_fits(d: "Diagnosis", directory: Path) -> list[Path]:
+def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
     """``fit_<experiment>.png``: voltage; data vs nominal vs refitted model; residuals of the
     calibrated nominal and of the refitted model with the systematic windows shaded."""
     import matplotlib.pyplot as plt
@@ -114,7 +113,7 @@ def plot_fits(d: "Diagnosis", directory: Path) -> list[Path]:
     return paths
 
 
-def plot_residual_phases(d: "Diagnosis", directory: Path) -> Path:
+def plot_residual_phases(d: Diagnosis, directory: Path) -> Path:
     """``residual_phases.png``: share of the excess residual energy of the calibrated model by
     experiment and motion phase, RMS / noise written on each bar, systematic cells outlined."""
     import matplotlib.pyplot as plt
@@ -148,12 +147,10 @@ def plot_residual_phases(d: "Diagnosis", directory: Path) -> Path:
     return _save(fig, directory / "residual_phases.png")
 
 
-def plot_ranking(d: "Diagnosis", directory: Path) -> Path:
+def plot_ranking(d: Diagnosis, directory: Path) -> Path:
     """``ranking.png``: ΔBIC of every candidate (symlog), RMS after / noise and held-out RMS
     written beside each bar, the verdict highlighted, screened-only bars hatched."""
     import matplotlib.pyplot as plt
-
-    from .diagnose import BIC_THRESHOLD
 
     cands = list(d.ranking)
     sigma = d.noise.sigma
@@ -189,12 +186,10 @@ def plot_ranking(d: "Diagnosis", directory: Path) -> Path:
     return _save(fig, directory / "ranking.png")
 
 
-def plot_rms_story(d: "Diagnosis", directory: Path) -> Path:
+def plot_rms_story(d: Diagnosis, directory: Path) -> Path:
     """``rms_story.png``: residual RMS of the nominal, calibrated and refitted models against the
     noise floor (band: the noise estimate's ±1σ uncertainty)."""
     import matplotlib.pyplot as plt
-
-    from .diagnose import NOISE_RATIO_OK
 
     sigma = d.noise.sigma
     cand = refit_candidate(d)
@@ -246,7 +241,7 @@ def plot_rms_story(d: "Diagnosis", directory: Path) -> Path:
     return _save(fig, directory / "rms_story.png")
 
 
-def plot_diagnosis(d: "Diagnosis", directory: Path) -> list[Path]:
+def plot_diagnosis(d: Diagnosis, directory: Path) -> list[Path]:
     """Write every figure of the diagnosis into `directory` (created); returns their paths."""
     import matplotlib
 

@@ -6,40 +6,23 @@ candidate ranking with its evidence, and the refitted model in one line. Units e
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Optional, Sequence
+from typing import Optional, Sequence
 
 from ..params import PARAM_INFO
-from .catalogue import CALIBRATION_RANGE, CATALOGUE
-
-if TYPE_CHECKING:
-    from .diagnose import Candidate, Diagnosis
+from .catalogue import CALIBRATION_RANGE, CATALOGUE, by_id
+from .results import Candidate, Diagnosis
 
 #: experiment x phase locations listed in the report
 TOP_LOCATIONS = 6
 #: systematic time windows listed in the report
 TOP_WINDOWS = 4
 
-#: the term each effect adds to the nominal equations (FORMAT.md's catalogue)
-EFFECT_TERMS: dict[str, str] = {
-    "pe_mass": "PE as a 4-element bar with mass and Rayleigh damping (DPS)",
-    "piezo_hysteresis": "Fp = kp (d33 V - h), h' = hyst_alpha d33 V' - hyst_beta |V'| h - hyst_gamma V' |h|",
-    "stribeck": "s(v) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta), Fs = mu_s Fn > Fc",
-    "incline": "m1 x1'' += -(m1 + m2 + mPE) g sin(theta_rad), Fn *= cos(theta_rad)",
-    "spring_to_ground": "m1 x1'' += -k_ground x1",
-    "amplifier_lowpass": "Vpe' = (Vcmd - Vpe) / tau_amp",
-    "piezo_creep": "xc' = (kappa d33 V - xc) / tau_creep, Fp = kp (d33 V + xc)",
-    "weight_friction": "m2 x2'' += -c_weight x2'",
-    "friction_asymmetry": "Fc, Fs *= (1 + eps sgn x1')",
-    "sensor_lowpass": "x' = (x1 - x) / tau_sensor (the reading)",
-    "thermal_drift": "x = x1 + drift_rate t (the reading)",
-}
-
 _UNITS: dict[str, str] = {ep.name: ep.unit for e in CATALOGUE for ep in e.params}
 _BOUNDS: dict[str, tuple[float, float]] = {ep.name: (ep.lower, ep.upper) for e in CATALOGUE for ep in e.params}
-_UNITS.update({"mu_s": "1", "mu_k": "1"})
 
 
 def _unit(name: str) -> str:
+    # an effect parameter's declared unit, else Table 1's (mu_s, mu_k of a Stribeck fit)
     u = _UNITS.get(name) or (PARAM_INFO[name][1] if name in PARAM_INFO else "")
     return "" if u in ("1", "") else u
 
@@ -86,13 +69,12 @@ def _ratio(x: float, sigma: float) -> str:
     return f"{x / sigma:.2f} ×" if _finite(x) and sigma > 0 else "–"
 
 
-def candidate_params(c: "Candidate") -> list[tuple[str, float, Optional[float]]]:
-    """(name, value, std) of a candidate's effect parameters, in catalogue names."""
+def candidate_params(c: Candidate) -> list[tuple[str, float, Optional[float]]]:
+    """(name, value, std) of a candidate's effect parameters, as reported (the catalogue entry
+    maps a reparametrised fit back: Stribeck's excess to mu_s)."""
     out = []
     for name, v in c.params.items():
-        s = c.std.get(name)
-        if s is None and c.effect == "stribeck" and name == "mu_s" and "mu_s_excess" in c.std:
-            s = c.params.get("mu_k", 0.0) * c.std["mu_s_excess"]  # mu_s = mu_k (1 + excess)
+        s = c.reported_std.get(name)
         out.append((name, float(v), None if s is None else float(s)))
     return out
 
@@ -108,14 +90,14 @@ def _bound_note(name: str, value: float) -> str:
     return " [at bound]" if b is not None and at_bound(value, *b) else ""
 
 
-def format_params(c: "Candidate") -> str:
+def format_params(c: Candidate) -> str:
     items = candidate_params(c)
     if not items:
-        return "(structure only)" if c.effect == "pe_mass" else "–"
+        return "(structure only)" if by_id(c.effect).kind == "structure" else "–"
     return ", ".join(f"{n} = {pm(v, s, _unit(n))}{_bound_note(n, v)}" for n, v, s in items)
 
 
-def refit_model_line(d: "Diagnosis") -> str:
+def refit_model_line(d: Diagnosis) -> str:
     """The refitted model in one line: the nominal structure, calibrated, plus the verdict's effect."""
     nom = d.recording.nominal
     base = f"{nom.model.upper()}" + (f" (n = {nom.n_elements})" if nom.model == "dps" else "")
@@ -126,7 +108,7 @@ def refit_model_line(d: "Diagnosis") -> str:
         tail = "nothing added" if d.verdict == "none" else "missing term not in the catalogue (unexplained)"
         return f"{eq}   [{base}, calibrated; {tail}]"
     term = f"{cand.effect}({format_params(cand)})" if candidate_params(cand) else cand.effect
-    return f"{eq} + {term}   [{base}, calibrated; {EFFECT_TERMS.get(cand.effect, '')}]"
+    return f"{eq} + {term}   [{base}, calibrated; {by_id(cand.effect).term}]"
 
 
 def _table(headers: Sequence[str], rows: Sequence[Sequence[str]], align: str) -> list[str]:
@@ -138,7 +120,7 @@ def _table(headers: Sequence[str], rows: Sequence[Sequence[str]], align: str) ->
     return [line(headers), "  " + "  ".join("-" * w for w in widths)] + [line(r) for r in rows]
 
 
-def text_report(d: "Diagnosis") -> str:
+def text_report(d: Diagnosis) -> str:
     sigma = d.noise.sigma
     rec = d.recording
     lines: list[str] = []

@@ -1,0 +1,137 @@
+"""What a diagnosis returns (:class:`Diagnosis`, with a :class:`Candidate` per catalogue effect
+tried) and the thresholds its verdict uses. The algorithm (:mod:`.diagnose`), the report
+(:mod:`.report`) and the figures (:mod:`.plots`) all read these; this module imports none of them
+at load time."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional, Union
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..recording import Recording
+from .case_model import CaseSimulator, ModelSpec
+from .locate import Location
+from .noise import NoiseEstimate
+
+#: BIC improvement (in chi^2 units) an effect needs to count as found: "very strong" evidence
+#: on the Kass-Raftery scale
+BIC_THRESHOLD = 10.0
+#: an effect must beat the runner-up by this much BIC to be named alone
+SEPARATION = 10.0
+#: residual RMS / noise RMS below which what is left counts as noise
+NOISE_RATIO_OK = 1.1
+#: lag-1 autocorrelation z-score above which a residual counts as systematic
+WHITENESS_Z = 5.0
+#: candidates refitted over everything after the one-cycle fits of all of them
+REFIT_TOP = 4
+
+
+@dataclass
+class Candidate:
+    """One catalogue effect tried on the case."""
+
+    effect: str
+    description: str
+    params: dict[str, float]  #: fitted effect parameters (catalogue names, SI)
+    std: dict[str, float]  #: their 1-sigma uncertainty from the Jacobian
+    calibrated: dict[str, float]  #: the nominal subset refitted alongside
+    chi2: float  #: residual energy / noise variance
+    n_params: int  #: fitted parameters (nominal subset + effect + offsets)
+    bic: float
+    delta_bic: float  #: BIC improvement over the calibrated nominal model (positive: better)
+    rms_after: float  #: [m]
+    heldout_rms: float  #: RMS on the held-out experiment after fitting the others [m] (NaN if not run)
+    whiteness_z: float  #: lag-1 autocorrelation of the residual, as a z-score
+    screened_only: bool  #: True when fitted over the first cycle only (not refined over everything)
+    residuals: list[NDArray[np.float64]] = field(default_factory=list, repr=False)
+    spec: Optional[ModelSpec] = field(default=None, repr=False)
+    #: 1-sigma of `params` where known (for a reparametrised fit, propagated to the reported names)
+    reported_std: dict[str, float] = field(default_factory=dict, repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "effect": self.effect,
+            "params": self.params,
+            "params_std": self.std,
+            "rms_after": self.rms_after,
+            "bic": self.bic,
+            "delta_bic": self.delta_bic,
+            "heldout_rms": None if math.isnan(self.heldout_rms) else self.heldout_rms,
+            "chi2": self.chi2,
+            "n_params": self.n_params,
+            "whiteness_z": self.whiteness_z,
+            "screened_only": self.screened_only,
+            "calibrated": self.calibrated,
+        }
+
+
+@dataclass
+class Diagnosis:
+    """What `diagnose` found. `verdict` is a catalogue id, "none" or "unexplained"."""
+
+    case: str
+    verdict: str
+    reason: str
+    ranking: list[Candidate]
+    noise: NoiseEstimate
+    rms_before: float  #: nominal model, offsets fitted [m]
+    rms_calibrated: float  #: after calibrating the nominal subset [m]
+    rms_after: float  #: after adding the verdict's effect (= calibrated for none/unexplained) [m]
+    calibrated: dict[str, float]
+    calibrated_std: dict[str, float]
+    locations: list[Location]  #: experiment x phase, sorted by share of excess residual energy
+    windows: list[Location]  #: systematic time windows (merged), for plots
+    heldout_experiment: str
+    heldout_rms_calibrated: float
+    whiteness_z_calibrated: float
+    seconds: float
+    timings: dict[str, float]  #: seconds per stage
+    simulations: int
+    recording: Recording = field(repr=False)
+    nominal_residuals: list[NDArray[np.float64]] = field(default_factory=list, repr=False)
+    calibrated_residuals: list[NDArray[np.float64]] = field(default_factory=list, repr=False)
+    nominal_spec: Optional[ModelSpec] = field(default=None, repr=False)
+    calibrated_spec: Optional[ModelSpec] = field(default=None, repr=False)
+    simulator: Optional[CaseSimulator] = field(default=None, repr=False)
+
+    @property
+    def best(self) -> Optional[Candidate]:
+        return self.ranking[0] if self.ranking else None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "case": self.case,
+            "verdict": self.verdict,
+            "reason": self.reason,
+            "ranking": [c.to_dict() for c in self.ranking],
+            "rms_before": self.rms_before,
+            "rms_calibrated": self.rms_calibrated,
+            "rms_after": self.rms_after,
+            "noise_rms": self.noise.sigma,
+            "noise": self.noise.__dict__,
+            "calibrated": self.calibrated,
+            "calibrated_std": self.calibrated_std,
+            "locations": [l.to_dict() for l in self.locations],
+            "systematic_windows": [w.to_dict() for w in self.windows],
+            "heldout_experiment": self.heldout_experiment,
+            "heldout_rms_calibrated": self.heldout_rms_calibrated,
+            "whiteness_z_calibrated": self.whiteness_z_calibrated,
+            "seconds": self.seconds,
+            "timings": self.timings,
+            "simulations": self.simulations,
+        }
+
+    def report(self) -> str:
+        from .report import text_report
+
+        return text_report(self)
+
+    def plot(self, directory: Union[str, Path]) -> list[Path]:
+        from .plots import plot_diagnosis
+
+        return plot_diagnosis(self, Path(directory))
