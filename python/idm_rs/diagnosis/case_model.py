@@ -62,9 +62,12 @@ class CaseSimulator:
         t_end = e.rest_s + cycles / e.frequency_Hz
         return t_end, int(round(t_end * self.recording.sample_rate_Hz)) + 1
 
-    def predict(self, specs: Sequence[ModelSpec], cycles: Optional[int] = None) -> list[list[NDArray[np.float64]]]:
+    def predict(self, specs: Sequence[ModelSpec], cycles: Optional[int] = None,
+                retries: int = 2) -> list[list[NDArray[np.float64]]]:
         """Readings [m] per spec, per experiment (NaN-filled where the run diverged), over the
-        first `cycles` drive cycles of each experiment (None: all of it)."""
+        first `cycles` drive cycles of each experiment (None: all of it). A run that diverges is
+        retried at dt/2, dt/4 ... `retries` times (a population search passes 0: a model that
+        needs a smaller step is far from the data anyway, and retrying costs more than the run)."""
         out: list[list[NDArray[np.float64]]] = [[] for _ in specs]
         by_structure: dict[Structure, list[int]] = {}
         for i, s in enumerate(specs):
@@ -86,7 +89,7 @@ class CaseSimulator:
                     t_ends.append(horizons[j][0])
             tables = Tables(np.asarray(rows_p), np.asarray(rows_e), Sawtooth.batch_kind, np.asarray(rows_w),
                             t_ends=np.asarray(t_ends))
-            res = run_batch(tables, structure, t_end=max(t_ends), method="rk4", dt=self.dt, retries=2,
+            res = run_batch(tables, structure, t_end=max(t_ends), method="rk4", dt=self.dt, retries=retries,
                             threads=self.threads, record_every=self.record_every)
             self.evaluations += len(t_ends)
             traces = res.get("traces", [np.zeros(0)] * len(t_ends))

@@ -119,6 +119,8 @@ class EffectParam:
     #: the physical domain (declared): [physical_lower, physical_upper)
     physical_lower: float = float("-inf")
     physical_upper: float = float("inf")
+    #: the declared "no effect" value: at it the effect vanishes
+    none: float = 0.0
 
     def free(self, start: float) -> FreeParam:
         setter = self.setter or set_effect(self.name)
@@ -171,7 +173,7 @@ def _param(effect: str, d: ParamDecl) -> EffectParam:
         raise ValueError(f"fit bounds [{s.lower}, {s.upper}] of '{d.name}' leave its physical domain "
                          f"(it must {d.rule})")
     return EffectParam(d.name, s.lower, s.upper, s.scale, d.unit, s.starts, s.log, s.setter or _default_setter(d.name),
-                       d.lower, d.upper)
+                       d.lower, d.upper, 0.0 if d.value is None else float(d.value))
 
 
 def _entry(e: EffectDecl) -> Effect:

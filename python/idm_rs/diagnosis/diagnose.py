@@ -20,12 +20,14 @@ from numpy.typing import NDArray
 from ..declarations import GRAVITY
 from ..recording import Recording, load_case
 from .case_model import FIT_DT, CaseSimulator, ModelSpec, Structure
+from .calibration import Calibration
+from .calibration import calibrate as global_calibration
 from .catalogue import CALIBRATED, CALIBRATION_RANGE, CALIBRATION_SCALE, CATALOGUE, Effect
-from .fitting import FitResult, FreeParam, Objective, apply, fit, fit_progressive, set_param
+from .fitting import FitResult, FreeParam, Objective, apply, fit, fit_progressive, set_effect, set_param
 from .locate import locate, merge_windows
 from .noise import NoiseEstimate, estimate_noise
-from .results import (BIC_THRESHOLD, NOISE_RATIO_OK, REFIT_TOP, SEPARATION, WHITENESS_Z, Candidate,
-                      Diagnosis)
+from .results import (BIC_THRESHOLD, NOISE_RATIO_OK, NULL_SIGMAS, REFIT_TOP, SEPARATION, WHITENESS_Z,
+                      Candidate, Diagnosis)
 from .screening import Screened, screen
 
 
@@ -73,7 +75,7 @@ class _Problem:
 
     @property
     def n_offsets(self) -> int:
-        return len(self.rec.experiments)
+        return self.obj.n_offsets
 
     @property
     def ln_n(self) -> float:
@@ -102,6 +104,7 @@ class _Calibration:
     at: list[FreeParam]  #: `free` centred on the full-horizon optimum
     bic: float
     whiteness_z: float
+    search: Calibration  #: the population search and its polishes (convergence evidence)
 
 
 @dataclass
@@ -172,16 +175,15 @@ def _nominal(pb: _Problem) -> _Nominal:
 
 
 def _calibrate(pb: _Problem, nominal: _Nominal) -> _Calibration:
-    """Calibrate the plausibly-off nominal parameters: first over one drive cycle, where the
-    misfit is a smooth function of the parameters; then over two cycles and everything, each
-    stage from the previous optimum."""
+    """Calibrate the plausibly-off nominal parameters globally (see :mod:`.calibration`): a
+    population search over their plausible ranges on the segmented misfit, then independent
+    least-squares polishes over everything."""
     free = _calibration_params(nominal.params)
-    one = fit(pb.obj.with_cycles(1), nominal.spec, free, max_nfev=20, progress=pb.tick)
-    one_at = [f.at(one.values[f.name]) for f in free]
-    cal = fit_progressive(pb.obj, nominal.spec, one_at, horizons=(2, None), max_nfev=(12, 12), progress=pb.tick)
+    g = global_calibration(pb.obj, nominal.spec, free, progress=pb.tick)
+    cal = g.fit
+    at = [f.at(cal.values[f.name]) for f in free]
     bic = cal.chi2 + (len(free) + pb.n_offsets) * pb.ln_n
-    return _Calibration(free, one, one_at, cal, [f.at(cal.values[f.name]) for f in free], bic,
-                        whiteness_z(cal.residuals))
+    return _Calibration(free, cal, at, cal, at, bic, whiteness_z(cal.residuals), g)
 
 
 def _starts(eff: Effect) -> list[list[FreeParam]]:
@@ -237,9 +239,18 @@ def _refit(pb: _Problem, cal: _Calibration, first: list[_FirstFit], screened: di
         start = [p.at(r1.values[p.name]) for p in f.free]
         if i < refit_top:
             alt = cal.one_cycle_at + [ep.free(v) for ep, v in zip(eff.params, screened[eff.id].estimate)]
-            chis = [obj2.chi2(apply(f.base, s, np.zeros(len(s)))) for s in (start, alt)]
-            start = (start, alt)[int(np.argmin(chis))]
+            # ... or from the null model it contains (the effect at "no effect")
+            null_start = cal.at + [ep.free(ep.none) for ep in eff.params]
+            starts = (start, alt, null_start)
+            chis = [obj2.chi2(apply(f.base, s, np.zeros(len(s)))) for s in starts]
+            start = starts[int(np.argmin(chis))]
             r = fit_progressive(pb.obj, f.base, start, horizons=(2, None), max_nfev=(12, 10), progress=pb.tick)
+            null = _at_null(pb, cal, eff, f.base, f.free)
+            if null is not None and r.chi2 >= null.chi2:
+                # every candidate contains the null model: its fit never ends worse than it
+                out.append(_Refit(_candidate(pb, cal, eff, null, False, at_null=True), f.base,
+                                  [p.at(cal.fit.values[p.name]) if p.name in cal.fit.values else p for p in f.free]))
+                continue
         else:
             spec = apply(f.base, start, np.zeros(len(start)))
             res, _ = pb.obj.profiled(pb.obj.predict([spec])[0])
@@ -250,21 +261,70 @@ def _refit(pb: _Problem, cal: _Calibration, first: list[_FirstFit], screened: di
     return out
 
 
-def _candidate(pb: _Problem, cal: _Calibration, eff: Effect, r: FitResult, screened_only: bool) -> Candidate:
+def _candidate(pb: _Problem, cal: _Calibration, eff: Effect, r: FitResult, screened_only: bool,
+               at_null: bool = False) -> Candidate:
     k = len(cal.free) + len(eff.params) + pb.n_offsets
     bic = r.chi2 + k * pb.ln_n
     reported = eff.reported(r.values, r.std)
+    names = [ep.name for ep in eff.params]
+    significance = {ep.name: float(abs(r.values[ep.name] - ep.none) / r.std[ep.name] if r.std[ep.name] > 0 else math.inf)
+                    for ep in eff.params}
+    corr = {a: {b: r.corr.get(a, {}).get(b, math.nan) for b in names} for a in names} if len(names) > 1 else {}
     return Candidate(
         eff.id, eff.description, {n: v for n, (v, _) in reported.items()}, {ep.name: r.std[ep.name] for ep in eff.params},
         {n: r.values[n] for n in CALIBRATED}, r.chi2, k, bic, cal.bic - bic, r.rms, math.nan,
         whiteness_z(r.residuals), screened_only, r.residuals, r.spec,
-        reported_std={n: s for n, (_, s) in reported.items() if s is not None})
+        reported_std={n: s for n, (_, s) in reported.items() if s is not None},
+        significance=significance, correlation=corr, at_null=at_null)
+
+
+def _at_null(pb: _Problem, cal: _Calibration, eff: Effect, base: ModelSpec, free: list[FreeParam]) -> Optional[FitResult]:
+    """The candidate's own model with its effect at the "no effect" value and the nominal subset
+    at the calibration: the null model it contains (None when the effect changes the structure,
+    which has no such point)."""
+    if not eff.params:
+        return None
+    values = dict(cal.fit.values)
+    values.update({ep.name: ep.none for ep in eff.params})
+    std = dict(cal.fit.std)
+    std.update({ep.name: math.inf for ep in eff.params})
+    spec = ModelSpec(base.structure, dict(cal.fit.spec.params), dict(cal.fit.spec.effects))
+    for ep in eff.params:
+        (ep.setter or set_effect(ep.name))(spec.params, spec.effects, ep.none)  # type: ignore[arg-type]
+    return FitResult(values, std, cal.fit.chi2, cal.fit.n, cal.fit.residuals, cal.fit.offsets, spec, 0, True,
+                     "the null model it contains")
+
+
+def _null_refits(pb: _Problem, nominal: _Nominal, cal: _Calibration, refits: list[_Refit],
+                  refit_top: int) -> tuple[_Calibration, str]:
+    """The nominal model (no effect) refitted from the nominal parameters each leading candidate
+    reached: a candidate's fit may find a better basin of the nominal subset, and that credit
+    belongs to the null, not to the effect. The best nominal fit found anywhere is the null;
+    every candidate's ΔBIC is then taken against it, and one no better than it is at null."""
+    best, source = cal, "calibration"
+    for r in sorted(refits, key=lambda x: x.candidate.chi2)[:refit_top]:
+        c = r.candidate
+        if c.screened_only or c.at_null:
+            continue
+        start = [f.at(c.calibrated[f.name]) for f in cal.free]
+        n0 = fit(pb.obj, nominal.spec, start, max_nfev=10, progress=pb.tick)
+        if n0.chi2 < best.fit.chi2 - 1e-6:
+            at = [f.at(n0.values[f.name]) for f in cal.free]
+            bic = n0.chi2 + (len(cal.free) + pb.n_offsets) * pb.ln_n
+            best = _Calibration(cal.free, n0, at, n0, at, bic, whiteness_z(n0.residuals), cal.search)
+            source = f"nominal refit from the {c.effect} fit"
+    for r in refits:
+        c = r.candidate
+        c.delta_bic = best.bic - c.bic
+        if c.chi2 >= best.fit.chi2:
+            c.at_null = True
+    return best, source
 
 
 def _rank_with_heldout(refits: list[_Refit], heldout: _HeldOut) -> list[Candidate]:
     """Candidates refitted over everything first (by ΔBIC), then those fitted over the first
     cycle only; the two leading refitted ones get their held-out prediction."""
-    refits = sorted(refits, key=lambda r: (r.candidate.screened_only, -r.candidate.delta_bic))
+    refits = sorted(refits, key=lambda r: (r.candidate.screened_only, not r.candidate.present, -r.candidate.delta_bic))
     for r in [r for r in refits if not r.candidate.screened_only][:2]:
         r.candidate.heldout_rms = heldout.rms(r.base, r.free)
     return [r.candidate for r in refits]
@@ -295,10 +355,12 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     clock.lap("screening")
     refits = _refit(pb, cal, first, screened, refit_top)
     clock.lap("refits")
+    cal, null_source = _null_refits(pb, nominal, cal, refits, refit_top)
+    clock.lap("null refits")
     ranking = _rank_with_heldout(refits, heldout)
     clock.lap("held-out")
 
-    verdict, reason, rms_after = _verdict(ranking, cal.fit, noise, cal.whiteness_z, ho_cal)
+    verdict, reason, rms_after = _verdict(ranking, cal, noise, ho_cal)
     if bar is not None:
         bar.close()
     return Diagnosis(
@@ -309,36 +371,50 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
         whiteness_z_calibrated=cal.whiteness_z, seconds=time.perf_counter() - t_start, timings=clock.timings,
         simulations=sim.evaluations, recording=rec, nominal_residuals=nominal.residuals,
         calibrated_residuals=cal.fit.residuals, nominal_spec=nominal.spec, calibrated_spec=cal.fit.spec, simulator=sim,
+        calibration_converged=cal.search.converged, calibration_summary=cal.search.summary(),
+        calibration_chi2=[p.chi2 for p in cal.search.polishes], null_source=null_source,
     )
 
 
-def _verdict(ranking: list[Candidate], cal: FitResult, noise: NoiseEstimate, wz_cal: float,
-             ho_cal: float) -> tuple[str, str, float]:
+def _verdict(ranking: list[Candidate], cal: _Calibration, noise: NoiseEstimate, ho_cal: float
+             ) -> tuple[str, str, float]:
+    """An effect is the verdict only if it was refitted over everything, is present (no
+    parameter within NULL_SIGMAS of "no effect"), improves BIC over the best null by
+    BIC_THRESHOLD and leaves noise. Otherwise "none" when the null leaves noise; else
+    "not_converged" when the calibration's independent searches disagreed (the tool's fit
+    failed), else "unexplained"."""
     sigma = noise.sigma
-    cal_ratio = cal.rms / sigma
+    fit, wz_cal = cal.fit, cal.whiteness_z
+    cal_ratio = fit.rms / sigma
     cal_is_noise = cal_ratio <= NOISE_RATIO_OK and wz_cal <= WHITENESS_Z
-    best = ranking[0] if ranking else None
-    second = ranking[1] if len(ranking) > 1 else None
-    if best is None or best.delta_bic < BIC_THRESHOLD or best.screened_only:
+    eligible = [c for c in ranking if not c.screened_only and c.present and c.delta_bic >= BIC_THRESHOLD]
+    best = eligible[0] if eligible else None
+    residual = f"RMS {cal_ratio:.2f} x noise, whiteness z = {wz_cal:.1f}"
+    if best is None:
         if cal_is_noise:
-            return ("none", f"after calibration the residual is noise (RMS {cal_ratio:.2f} x noise, whiteness "
-                    f"z = {wz_cal:.1f}) and no effect improves BIC by {BIC_THRESHOLD:g}", cal.rms)
-        return ("unexplained", f"a systematic residual remains after calibration (RMS {cal_ratio:.2f} x noise, "
-                f"whiteness z = {wz_cal:.1f}) and no catalogue effect reduces it", cal.rms)
+            return ("none", f"after calibration the residual is noise ({residual}) and no effect is supported "
+                    f"(ΔBIC ≥ {BIC_THRESHOLD:g} with its parameters beyond {NULL_SIGMAS:g} σ of 'no effect')", fit.rms)
+        if not cal.search.converged:
+            return ("not_converged", f"the calibration did not converge ({cal.search.summary()}) and a systematic "
+                    f"residual remains ({residual}); no verdict on missing physics", fit.rms)
+        return ("unexplained", f"a systematic residual remains after a converged calibration ({residual}) and "
+                "no catalogue effect explains it", fit.rms)
     ratio = best.rms_after / sigma
     explained = ratio <= NOISE_RATIO_OK and best.whiteness_z <= WHITENESS_Z
-    heldout_ok = math.isnan(best.heldout_rms) or best.heldout_rms <= ho_cal * 1.02
     if not explained:
+        if not cal.search.converged:
+            return ("not_converged", f"the calibration did not converge ({cal.search.summary()}); the best effect "
+                    f"({best.effect}) leaves RMS {ratio:.2f} x noise", fit.rms)
         return ("unexplained", f"the best effect ({best.effect}, ΔBIC {best.delta_bic:.0f}) leaves a systematic "
-                f"residual (RMS {ratio:.2f} x noise, whiteness z = {best.whiteness_z:.1f})", cal.rms)
-    if second is not None and best.delta_bic - second.delta_bic < SEPARATION:
-        note = f"; runner-up {second.effect} is close (ΔBIC {second.delta_bic:.0f})"
-    else:
-        note = ""
-    if not heldout_ok:
+                f"residual (RMS {ratio:.2f} x noise, whiteness z = {best.whiteness_z:.1f})", fit.rms)
+    others = [c for c in eligible[1:]]
+    note = ""
+    if others and best.delta_bic - others[0].delta_bic < SEPARATION:
+        note = f"; runner-up {others[0].effect} is close (ΔBIC {others[0].delta_bic:.0f})"
+    if not (math.isnan(best.heldout_rms) or best.heldout_rms <= ho_cal * 1.02):
         note += "; held-out prediction does not improve"
-    return (best.effect, f"{best.effect} improves BIC by {best.delta_bic:.0f} and leaves noise (RMS {ratio:.2f} x "
-            f"noise){note}", best.rms_after)
+    return (best.effect, f"{best.effect} improves BIC by {best.delta_bic:.0f} over the best null fit and leaves noise "
+            f"(RMS {ratio:.2f} x noise){note}", best.rms_after)
 
 
 def _bar(show: bool, name: str) -> Any:

@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 
 from ..recording import Recording
 from .case_model import CaseSimulator, ModelSpec
+from .segments import segment_starts
 
 Setter = Callable[[dict, dict, float], None]
 
@@ -66,11 +67,13 @@ class FitResult:
     chi2: float
     n: int
     residuals: list[NDArray[np.float64]]  #: per experiment, offsets removed [m]
-    offsets: list[float]  #: fitted sensor offset per experiment [m]
+    offsets: list[float]  #: fitted position offset per segment (or experiment) [m]
     spec: ModelSpec
     nfev: int
     success: bool
     message: str
+    #: correlation of the fitted parameters (from the Jacobian at the optimum)
+    corr: dict[str, dict[str, float]] = field(default_factory=dict)
 
     @property
     def rms(self) -> float:
@@ -85,25 +88,37 @@ def apply(base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64]) ->
 
 
 class Objective:
-    """Residuals in noise units for a recording, offsets profiled per experiment, over the
-    experiments listed and the first `cycles` drive cycles of each (None: everything)."""
+    """Residuals in noise units for a recording over the experiments listed and the first
+    `cycles` drive cycles of each (None: everything). With `segmented` (the default) every drive
+    cycle's segment gets its own position offset (multiple shooting by translation, see
+    :mod:`.segments`); otherwise one offset per experiment (single shooting)."""
 
     def __init__(self, recording: Recording, simulator: CaseSimulator, sigma: float,
-                 experiments: Optional[Sequence[int]] = None, cycles: Optional[int] = None) -> None:
+                 experiments: Optional[Sequence[int]] = None, cycles: Optional[int] = None,
+                 segmented: bool = True) -> None:
         self.recording = recording
         self.sim = simulator
         self.sigma = sigma
         self.cycles = cycles
+        self.segmented = segmented
         self.experiments = list(range(len(recording.experiments))) if experiments is None else list(experiments)
         self.samples = {j: simulator.horizon(j, cycles)[1] for j in self.experiments}
         self.n = sum(self.samples.values())
+        self.starts = {j: (segment_starts(recording.experiments[j], recording.sample_rate_Hz, self.samples[j])
+                           if segmented else [0]) for j in self.experiments}
+        #: nuisance offsets fitted with every model (one per segment, or per experiment)
+        self.n_offsets = sum(len(s) for s in self.starts.values())
         self._bad = 1e3  # residual (noise units) given to samples of a diverged run
 
     def with_cycles(self, cycles: Optional[int]) -> "Objective":
-        return Objective(self.recording, self.sim, self.sigma, self.experiments, cycles)
+        return Objective(self.recording, self.sim, self.sigma, self.experiments, cycles, self.segmented)
 
-    def predict(self, specs: Sequence[ModelSpec]) -> list[list[NDArray[np.float64]]]:
-        return self.sim.predict(specs, self.cycles)
+    def single_shooting(self) -> "Objective":
+        """The same comparison with one offset per experiment (a slip event shifts the rest)."""
+        return Objective(self.recording, self.sim, self.sigma, self.experiments, self.cycles, False)
+
+    def predict(self, specs: Sequence[ModelSpec], retries: int = 2) -> list[list[NDArray[np.float64]]]:
+        return self.sim.predict(specs, self.cycles, retries)
 
     def profiled(self, preds: Sequence[NDArray[np.float64]]) -> tuple[list[NDArray[np.float64]], list[float]]:
         """Residuals [m] with the best offset removed, and those offsets [m]."""
@@ -112,11 +127,15 @@ class Objective:
             d = self.recording.experiments[j].x[: self.samples[j]] - preds[j]
             if not np.all(np.isfinite(d)):
                 res.append(np.full(d.size, self._bad * self.sigma))
-                offs.append(math.nan)
+                offs.extend([math.nan] * len(self.starts[j]))
                 continue
-            o = float(d.mean())
-            res.append(d - o)
-            offs.append(o)
+            r = np.empty_like(d)
+            bounds = self.starts[j] + [d.size]
+            for a, b in zip(bounds[:-1], bounds[1:]):
+                o = float(d[a:b].mean())
+                r[a:b] = d[a:b] - o
+                offs.append(o)
+            res.append(r)
         return res, offs
 
     def vector(self, preds: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
@@ -175,7 +194,7 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     # parameter uncertainty from the Jacobian at the optimum, scaled by the residual variance
     values, std = {}, {}
     J = sol.jac
-    dof = max(objective.n - len(free) - len(objective.experiments), 1)
+    dof = max(objective.n - len(free) - objective.n_offsets, 1)
     s2 = max(chi2 / dof, 1.0)
     try:
         cov_u = np.linalg.pinv(J.T @ J) * s2
@@ -186,7 +205,11 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
         values[f.name] = v
         su = math.sqrt(max(cov_u[j, j], 0.0))
         std[f.name] = abs(v * f.scale * su) if f.log else abs(f.scale * su)
-    return FitResult(values, std, chi2, objective.n, res, offs, spec, int(sol.nfev), bool(sol.success), str(sol.message))
+    d = np.sqrt(np.maximum(np.diag(cov_u), 1e-300))
+    corr = {f.name: {g.name: float(np.clip(cov_u[a, b] / (d[a] * d[b]), -1.0, 1.0)) for b, g in enumerate(free)}
+            for a, f in enumerate(free)}
+    return FitResult(values, std, chi2, objective.n, res, offs, spec, int(sol.nfev), bool(sol.success), str(sol.message),
+                     corr)
 
 
 #: drive cycles fitted at each stage of a progressive fit (None: all). Stick-slip makes the

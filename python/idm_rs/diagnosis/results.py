@@ -29,6 +29,9 @@ NOISE_RATIO_OK = 1.1
 WHITENESS_Z = 5.0
 #: candidates refitted over everything after the one-cycle fits of all of them
 REFIT_TOP = 4
+#: an effect whose fitted parameter lies within this many 1-sigma of its "no effect" value is
+#: indistinguishable from its absence and never the verdict
+NULL_SIGMAS = 2.0
 
 
 @dataclass
@@ -52,6 +55,18 @@ class Candidate:
     spec: Optional[ModelSpec] = field(default=None, repr=False)
     #: 1-sigma of `params` where known (for a reparametrised fit, propagated to the reported names)
     reported_std: dict[str, float] = field(default_factory=dict, repr=False)
+    #: distance of each fitted effect parameter from its "no effect" value, in its 1-sigma
+    significance: dict[str, float] = field(default_factory=dict)
+    #: correlation matrix of the effect's fitted parameters (names in `params` order of the fit)
+    correlation: dict[str, dict[str, float]] = field(default_factory=dict)
+    #: the fit ended no better than the null model, so it is reported at "no effect"
+    at_null: bool = False
+
+    @property
+    def present(self) -> bool:
+        """False when any effect parameter is within NULL_SIGMAS of its "no effect" value (the
+        effect is then indistinguishable from its absence: never the verdict)."""
+        return not self.at_null and all(z > NULL_SIGMAS for z in self.significance.values())
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -67,12 +82,19 @@ class Candidate:
             "whiteness_z": self.whiteness_z,
             "screened_only": self.screened_only,
             "calibrated": self.calibrated,
+            "significance_sigmas": self.significance,
+            "correlation": self.correlation,
+            "present": self.present,
         }
 
 
 @dataclass
 class Diagnosis:
-    """What `diagnose` found. `verdict` is a catalogue id, "none" or "unexplained"."""
+    """What `diagnose` found. `verdict` is a catalogue id; "none" (the calibrated nominal model
+    leaves noise and no effect is supported); "unexplained" (a systematic residual remains that
+    no catalogue effect explains, although the calibration converged); or "not_converged" (the
+    calibration's independent searches did not agree and the residual is not noise: the tool's
+    own fit failed, which says nothing about missing physics)."""
 
     case: str
     verdict: str
@@ -98,6 +120,14 @@ class Diagnosis:
     nominal_spec: Optional[ModelSpec] = field(default=None, repr=False)
     calibrated_spec: Optional[ModelSpec] = field(default=None, repr=False)
     simulator: Optional[CaseSimulator] = field(default=None, repr=False)
+    #: the calibration's convergence evidence: independent polishes agreed
+    calibration_converged: bool = True
+    calibration_summary: str = ""
+    #: chi^2 of each independent calibration polish (noise units), best first
+    calibration_chi2: list[float] = field(default_factory=list)
+    #: null refits: the nominal model refitted from each candidate's nominal parameters; the best
+    #: one found anywhere is the null every candidate is compared with
+    null_source: str = "calibration"
 
     @property
     def best(self) -> Optional[Candidate]:
@@ -124,6 +154,8 @@ class Diagnosis:
             "seconds": self.seconds,
             "timings": self.timings,
             "simulations": self.simulations,
+            "calibration": {"converged": self.calibration_converged, "summary": self.calibration_summary,
+                            "polish_chi2": self.calibration_chi2, "null_from": self.null_source},
         }
 
     def report(self) -> str:
