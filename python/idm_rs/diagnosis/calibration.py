@@ -46,13 +46,16 @@ class Calibration:
 
 
 def search(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, seed: int = 0,
-           progress: Optional[Callable[..., Any]] = None) -> tuple[list[NDArray[np.float64]], float, int]:
+           cycles: int = SEARCH_CYCLES, population_per_param: Optional[int] = None,
+           generations: Optional[int] = None, progress: Optional[Callable[..., Any]] = None
+           ) -> tuple[list[NDArray[np.float64]], float, int]:
     """Differential evolution over the free parameters' bounds (u space) on `objective` over
-    its first SEARCH_CYCLES cycles; returns distinct good members (best first), the best chi^2
-    and the number of models simulated."""
+    its first `cycles` cycles, the free parameters' starting point (u = 0) one member of the
+    first population; returns distinct good members (u, best first), the best chi^2 and the
+    number of models simulated."""
     from scipy.optimize import differential_evolution
 
-    obj = objective.with_cycles(SEARCH_CYCLES)
+    obj = objective.with_cycles(cycles)
     bounds = [f.u_bounds() for f in free]
     count = [0]
 
@@ -67,14 +70,14 @@ def search(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, 
 
     # the nominal point itself is one member of the first population
     n = len(free)
-    popsize = POPULATION_PER_PARAM
+    popsize = population_per_param or POPULATION_PER_PARAM
     rng = np.random.default_rng(seed)
     lo = np.array([b[0] for b in bounds])
     hi = np.array([b[1] for b in bounds])
     init = lo + (hi - lo) * _spread_points(popsize * n, n, rng)
     init[0] = np.clip(np.zeros(n), lo, hi)
     res = differential_evolution(lambda U: chi2_of(U), bounds, vectorized=True, updating="deferred",
-                                 init=init, maxiter=GENERATIONS, tol=1e-3, mutation=(0.5, 1.0),
+                                 init=init, maxiter=generations or GENERATIONS, tol=1e-3, mutation=(0.5, 1.0),
                                  recombination=0.7, seed=seed, polish=False)
     pop, energies = np.asarray(res.population), np.asarray(res.population_energies)
     order = np.argsort(energies)

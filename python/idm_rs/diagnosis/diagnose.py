@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from ..declarations import GRAVITY
 from ..recording import Recording, load_case
 from .case_model import FIT_DT, CaseSimulator, ModelSpec, Structure
-from .calibration import Calibration
+from .calibration import Calibration, search
 from .calibration import calibrate as global_calibration
 from .catalogue import CALIBRATED, CALIBRATION_RANGE, CALIBRATION_SCALE, CATALOGUE, Effect
 from .fitting import FitResult, FreeParam, Objective, apply, fit, fit_progressive, set_effect, set_param
@@ -29,6 +29,16 @@ from .noise import NoiseEstimate, estimate_noise
 from .results import (BIC_THRESHOLD, NOISE_RATIO_OK, NULL_SIGMAS, REFIT_TOP, SEPARATION, WHITENESS_Z,
                       Candidate, Diagnosis)
 from .screening import Screened, screen
+
+#: leading candidates whose nominal parameters seed a refit of the null model
+NULL_REFITS = 2
+#: least-squares evaluations of the final polish of the leading candidate
+POLISH_NFEV = 25
+#: leading candidates fitted with a population search of their own, and its settings
+GLOBAL_CANDIDATES = 2
+CANDIDATE_SEARCH_CYCLES = 2
+CANDIDATE_POPULATION = 4
+CANDIDATE_GENERATIONS = 15
 
 
 def whiteness_z(residuals: Sequence[NDArray[np.float64]]) -> float:
@@ -54,9 +64,20 @@ def _heldout_index(rec: Recording) -> int:
     return max(pool, key=lambda i: rec.experiments[i].n_samples)
 
 
+def _set_tied_friction(params: dict, effects: dict, value: float) -> None:
+    # a nominal without a Stribeck peak (mu_s <= mu_k) keeps none as its level is calibrated:
+    # mu_s follows mu_k, exactly as the stribeck candidate's model at "no effect"
+    params["mu_k"] = value
+    params["mu_s"] = value
+
+
 def _calibration_params(p: dict) -> list[FreeParam]:
+    """The calibrated subset as free parameters within CALIBRATION_RANGE of the nominal values;
+    mu_k carries mu_s along when the nominal has no Stribeck peak."""
     lo, hi = CALIBRATION_RANGE
-    return [FreeParam(n, p[n], lo * p[n], hi * p[n], CALIBRATION_SCALE * p[n], set_param(n)) for n in CALIBRATED]
+    tied = p["mu_s"] <= p["mu_k"]
+    return [FreeParam(n, p[n], lo * p[n], hi * p[n], CALIBRATION_SCALE * p[n],
+                      _set_tied_friction if (n == "mu_k" and tied) else set_param(n)) for n in CALIBRATED]
 
 
 @dataclass
@@ -209,7 +230,7 @@ def _one_cycle_fits(pb: _Problem, nominal: _Nominal, cal: _Calibration) -> list[
         else:
             st = starts[0]
         free = cal1_at + st
-        first.append(_FirstFit(eff, fit(obj1, base, free, max_nfev=15, progress=pb.tick), free, base))
+        first.append(_FirstFit(eff, fit(obj1, base, free, max_nfev=10, progress=pb.tick), free, base))
     return first
 
 
@@ -237,7 +258,25 @@ def _refit(pb: _Problem, cal: _Calibration, first: list[_FirstFit], screened: di
     for i, f in enumerate(first):
         eff, r1 = f.effect, f.fit
         start = [p.at(r1.values[p.name]) for p in f.free]
-        if i < refit_top:
+        if i < GLOBAL_CANDIDATES:
+            # the leading candidates get a population search of their own (the nominal-only
+            # calibration may have compensated the effect with far-off parameters, a basin the
+            # candidate's least squares could not leave), seeded with their one-cycle fit
+            picks, _, _ = search(pb.obj, f.base, start, cycles=CANDIDATE_SEARCH_CYCLES,
+                                 population_per_param=CANDIDATE_POPULATION, generations=CANDIDATE_GENERATIONS,
+                                 progress=pb.tick)
+            found = [p.at(p.value(float(x))) for p, x in zip(start, picks[0])]
+            null_start = cal.at + [ep.free(ep.none) for ep in eff.params]
+            starts = (found, null_start)
+            chis = [obj2.chi2(apply(f.base, s_, np.zeros(len(s_)))) for s_ in starts]
+            start = starts[int(np.argmin(chis))]
+            r = fit_progressive(pb.obj, f.base, start, horizons=(2, None), max_nfev=(10, 10), progress=pb.tick)
+            null = _at_null(pb, cal, eff, f.base, f.free)
+            if null is not None and r.chi2 >= null.chi2:
+                out.append(_Refit(_candidate(pb, cal, eff, null, False, at_null=True), f.base,
+                                  [p.at(cal.fit.values[p.name]) if p.name in cal.fit.values else p for p in f.free]))
+                continue
+        elif i < refit_top:
             alt = cal.one_cycle_at + [ep.free(v) for ep, v in zip(eff.params, screened[eff.id].estimate)]
             # ... or from the null model it contains (the effect at "no effect")
             null_start = cal.at + [ep.free(ep.none) for ep in eff.params]
@@ -321,11 +360,39 @@ def _null_refits(pb: _Problem, nominal: _Nominal, cal: _Calibration, refits: lis
     return best, source
 
 
+def _polish_leader(pb: _Problem, cal: _Calibration, refits: list[_Refit]) -> None:
+    """The leading supported candidate fitted to convergence over everything from its optimum
+    (the refits stop after a fixed budget): its residual is then judged, not the budget's."""
+    lead = next((r for r in _ordered(refits) if _eligible(r.candidate)), None)
+    if lead is None:
+        return
+    eff = next(e for e in CATALOGUE if e.id == lead.candidate.effect)
+    base = ModelSpec(lead.base.structure, dict(lead.candidate.spec.params), dict(lead.candidate.spec.effects))
+    r = fit(pb.obj, base, lead.free, max_nfev=POLISH_NFEV, progress=pb.tick)
+    if r.chi2 < lead.candidate.chi2:
+        c = _candidate(pb, cal, eff, r, screened_only=False)
+        c.delta_bic = cal.bic - c.bic
+        lead.candidate = c
+        lead.free = [p.at(r.values[p.name]) for p in lead.free]
+
+
+def _finite(x: float) -> bool:
+    return isinstance(x, float) and math.isfinite(x)
+
+
+def _eligible(c: Candidate) -> bool:
+    return not c.screened_only and c.present and c.delta_bic >= BIC_THRESHOLD
+
+
+def _ordered(refits: list[_Refit]) -> list[_Refit]:
+    """Refitted candidates first, present ones before those at or near "no effect", by ΔBIC."""
+    return sorted(refits, key=lambda r: (r.candidate.screened_only, not r.candidate.present, -r.candidate.delta_bic))
+
+
 def _rank_with_heldout(refits: list[_Refit], heldout: _HeldOut) -> list[Candidate]:
-    """Candidates refitted over everything first (by ΔBIC), then those fitted over the first
-    cycle only; the two leading refitted ones get their held-out prediction."""
-    refits = sorted(refits, key=lambda r: (r.candidate.screened_only, not r.candidate.present, -r.candidate.delta_bic))
-    for r in [r for r in refits if not r.candidate.screened_only][:2]:
+    """The candidates in rank order; the leading refitted one gets its held-out prediction."""
+    refits = _ordered(refits)
+    for r in [r for r in refits if _eligible(r.candidate)][:1]:
         r.candidate.heldout_rms = heldout.rms(r.base, r.free)
     return [r.candidate for r in refits]
 
@@ -344,21 +411,23 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     clock = _Clock()
     cal = _calibrate(pb, nominal)
     clock.lap("calibration")
-    locations, windows = locate(rec, cal.fit.residuals, pb.sigma)
-    spans = merge_windows(windows, pb.sigma)
     heldout = _HeldOut(pb)
-    ho_cal = heldout.rms(cal.fit.spec, cal.at)
-    clock.lap("held-out")
     first = _one_cycle_fits(pb, nominal, cal)
     clock.lap("one-cycle fits")
     first, screened = _order_by_screening(pb, cal, first)
     clock.lap("screening")
     refits = _refit(pb, cal, first, screened, refit_top)
     clock.lap("refits")
-    cal, null_source = _null_refits(pb, nominal, cal, refits, refit_top)
+    cal, null_source = _null_refits(pb, nominal, cal, refits, NULL_REFITS)
     clock.lap("null refits")
+    _polish_leader(pb, cal, refits)
+    clock.lap("polish")
     ranking = _rank_with_heldout(refits, heldout)
+    # the null's held-out prediction, for comparison, only where a candidate has one
+    ho_cal = heldout.rms(cal.fit.spec, cal.at) if any(_finite(c.heldout_rms) for c in ranking) else math.nan
     clock.lap("held-out")
+    locations, windows = locate(rec, cal.fit.residuals, pb.sigma)
+    spans = merge_windows(windows, pb.sigma)
 
     verdict, reason, rms_after = _verdict(ranking, cal, noise, ho_cal)
     if bar is not None:
@@ -387,7 +456,7 @@ def _verdict(ranking: list[Candidate], cal: _Calibration, noise: NoiseEstimate, 
     fit, wz_cal = cal.fit, cal.whiteness_z
     cal_ratio = fit.rms / sigma
     cal_is_noise = cal_ratio <= NOISE_RATIO_OK and wz_cal <= WHITENESS_Z
-    eligible = [c for c in ranking if not c.screened_only and c.present and c.delta_bic >= BIC_THRESHOLD]
+    eligible = [c for c in ranking if _eligible(c)]
     best = eligible[0] if eligible else None
     residual = f"RMS {cal_ratio:.2f} x noise, whiteness z = {wz_cal:.1f}"
     if best is None:
@@ -411,7 +480,7 @@ def _verdict(ranking: list[Candidate], cal: _Calibration, noise: NoiseEstimate, 
     note = ""
     if others and best.delta_bic - others[0].delta_bic < SEPARATION:
         note = f"; runner-up {others[0].effect} is close (ΔBIC {others[0].delta_bic:.0f})"
-    if not (math.isnan(best.heldout_rms) or best.heldout_rms <= ho_cal * 1.02):
+    if _finite(best.heldout_rms) and _finite(ho_cal) and best.heldout_rms > ho_cal * 1.02:
         note += "; held-out prediction does not improve"
     return (best.effect, f"{best.effect} improves BIC by {best.delta_bic:.0f} over the best null fit and leaves noise "
             f"(RMS {ratio:.2f} x noise){note}", best.rms_after)

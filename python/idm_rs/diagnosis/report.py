@@ -139,7 +139,7 @@ def text_report(d: Diagnosis) -> str:
 
     # --- the RMS story
     best = next((c for c in d.ranking if c.effect == d.verdict), None)
-    lines += ["", "Residual RMS (a sensor offset fitted per file)"]
+    lines += ["", "Residual RMS (a position offset fitted per drive-cycle segment: multiple shooting by translation)"]
     rows = [
         ["noise floor (from the data)", _nm(sigma), "1.00 ×",
          f"rest {_nm(d.noise.rest_sigma)}, 2nd differences {_nm(d.noise.difference_sigma)}, "
@@ -170,6 +170,11 @@ def text_report(d: Diagnosis) -> str:
         rows.append([name, _g(m) + (f" {unit}" if unit else "") if _finite(m) else "–",
                      pm(v, d.calibrated_std.get(name), unit), change + (" [at bound]" if bound else "")])
     lines += _table(["parameter", "meta.json", "calibrated", "change"], rows, "lrrr")
+    summary = getattr(d, "calibration_summary", "")
+    if summary:
+        lines.append(f"  convergence: {summary}; null model from the {getattr(d, 'null_source', 'calibration')}")
+        if not getattr(d, "calibration_converged", True):
+            lines.append("  the independent searches did NOT reach the same optimum: treat the calibration as unreliable")
 
     # --- where the residual lives
     lines += ["", "Where the residual lives (calibrated model; share of the residual energy above the noise)"]
@@ -193,16 +198,30 @@ def text_report(d: Diagnosis) -> str:
         lines.append("  no systematic time window")
 
     # --- candidate ranking
-    lines += ["", "Candidate effects (each refitted with the calibrated subset and the offsets; "
-                  "ΔBIC > 0: better than the calibrated nominal)"]
+    lines += ["", "Candidate effects (each refitted with the calibrated subset and the offsets, started from "
+                  "the null model it contains; ΔBIC > 0: better than the best null fit; σ: distance of the "
+                  "effect parameter from 'no effect' in 1σ — within 2σ the effect is indistinguishable from "
+                  "its absence)"]
     rows = []
     for i, c in enumerate(d.ranking, 1):
         mark = "*" if c.effect == d.verdict else " "
+        sig = getattr(c, "significance", {}) or {}
+        z = min(sig.values()) if sig else math.nan
         rows.append([f"{mark}{i}", c.effect, format_params(c), _nm(c.rms_after), _ratio(c.rms_after, sigma),
-                     f"{c.delta_bic:.1f}", _nm(c.heldout_rms) if _finite(c.heldout_rms) else "–",
-                     "screened" if c.screened_only else "refit"])
-    lines += _table(["#", "effect", "fitted parameters (±1σ)", "RMS after", "/ noise", "ΔBIC", "held-out RMS",
-                     "fit"], rows, "rllrrrrl")
+                     f"{c.delta_bic:.1f}", f"{z:.1f}" if _finite(z) else "–",
+                     _nm(c.heldout_rms) if _finite(c.heldout_rms) else "–",
+                     "at null" if getattr(c, "at_null", False) else ("screened" if c.screened_only else "refit")])
+    lines += _table(["#", "effect", "fitted parameters (±1σ)", "RMS after", "/ noise", "ΔBIC", "σ", "held-out RMS",
+                     "fit"], rows, "rllrrrrrl")
+    for c in d.ranking:
+        corr = getattr(c, "correlation", {}) or {}
+        names = list(corr)
+        for a in range(len(names)):
+            for b in range(a + 1, len(names)):
+                rho = corr[names[a]].get(names[b], math.nan)
+                if _finite(rho) and abs(rho) > 0.8:
+                    lines.append(f"  {c.effect}: {names[a]} and {names[b]} are correlated (ρ = {rho:+.2f}): the data "
+                                 f"constrain a combination of them; each value alone is uncertain beyond its ±1σ")
     lines.append("  screened: fitted over the first drive cycle only, then evaluated over everything "
                  "(not refined; its numbers understate what the effect could do)")
 

@@ -28,7 +28,7 @@ NOISE_RATIO_OK = 1.1
 #: lag-1 autocorrelation z-score above which a residual counts as systematic
 WHITENESS_Z = 5.0
 #: candidates refitted over everything after the one-cycle fits of all of them
-REFIT_TOP = 4
+REFIT_TOP = 3
 #: an effect whose fitted parameter lies within this many 1-sigma of its "no effect" value is
 #: indistinguishable from its absence and never the verdict
 NULL_SIGMAS = 2.0
