@@ -37,6 +37,9 @@ class Calibration:
     evaluations: int  #: models simulated by the search
     converged: bool  #: the independent polishes reached the same optimum
     spread: dict[str, float]  #: largest difference between agreeing polishes, per parameter
+    #: the search's best member (u of each free parameter): the optimum over the first cycle(s),
+    #: before the polish over everything (where a missing effect may pull the nominal values)
+    search_u: Optional[NDArray[np.float64]] = None
 
     def summary(self) -> str:
         chis = ", ".join(f"{p.chi2:.0f}" for p in self.polishes)
@@ -115,4 +118,4 @@ def calibrate(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], 
     # there is ends at the noise floor)
     noise_floor = top.chi2 <= 1.1**2 * top.n
     converged = len(agreeing) >= 2 or noise_floor
-    return Calibration(top, polishes, best, evaluations, converged, spread)
+    return Calibration(top, polishes, best, evaluations, converged, spread, picks[0])

@@ -37,8 +37,8 @@ POLISH_NFEV = 25
 #: leading candidates fitted with a population search of their own, and its settings
 GLOBAL_CANDIDATES = 2
 CANDIDATE_SEARCH_CYCLES = 2
-CANDIDATE_POPULATION = 4
-CANDIDATE_GENERATIONS = 15
+CANDIDATE_POPULATION = 5
+CANDIDATE_GENERATIONS = 20
 
 
 def whiteness_z(residuals: Sequence[NDArray[np.float64]]) -> float:
@@ -204,7 +204,14 @@ def _calibrate(pb: _Problem, nominal: _Nominal) -> _Calibration:
     cal = g.fit
     at = [f.at(cal.values[f.name]) for f in free]
     bic = cal.chi2 + (len(free) + pb.n_offsets) * pb.ln_n
-    return _Calibration(free, cal, at, cal, at, bic, whiteness_z(cal.residuals), g)
+    # the one-cycle optimum (the search's best member): where the candidates' one-cycle fits
+    # start, since over everything a missing effect may have pulled the nominal values away
+    u = g.search_u if g.search_u is not None else np.zeros(len(free))
+    one_at = [f.at(f.value(float(x))) for f, x in zip(free, u)]
+    one_spec = apply(nominal.spec, free, u)
+    one = FitResult({f.name: f.value(float(x)) for f, x in zip(free, u)}, dict(cal.std), g.search_best,
+                    pb.obj.with_cycles(1).n, [], [], one_spec, g.evaluations, True, "population search, one cycle")
+    return _Calibration(free, one, one_at, cal, at, bic, whiteness_z(cal.residuals), g)
 
 
 def _starts(eff: Effect) -> list[list[FreeParam]]:
@@ -258,7 +265,7 @@ def _refit(pb: _Problem, cal: _Calibration, first: list[_FirstFit], screened: di
     for i, f in enumerate(first):
         eff, r1 = f.effect, f.fit
         start = [p.at(r1.values[p.name]) for p in f.free]
-        if i < GLOBAL_CANDIDATES:
+        if i < GLOBAL_CANDIDATES and not _leaves_noise(pb, cal):
             # the leading candidates get a population search of their own (the nominal-only
             # calibration may have compensated the effect with far-off parameters, a basin the
             # candidate's least squares could not leave), seeded with their one-cycle fit
@@ -374,6 +381,12 @@ def _polish_leader(pb: _Problem, cal: _Calibration, refits: list[_Refit]) -> Non
         c.delta_bic = cal.bic - c.bic
         lead.candidate = c
         lead.free = [p.at(r.values[p.name]) for p in lead.free]
+
+
+def _leaves_noise(pb: _Problem, cal: _Calibration) -> bool:
+    """The calibrated null's residual is noise: nothing large is compensated by far-off nominal
+    values, so a candidate's least squares from the null it contains needs no global search."""
+    return cal.fit.rms <= NOISE_RATIO_OK * pb.sigma and cal.whiteness_z <= WHITENESS_Z
 
 
 def _finite(x: float) -> bool:
