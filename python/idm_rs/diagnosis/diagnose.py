@@ -273,7 +273,7 @@ def _refit(pb: _Problem, cal: _Calibration, first: list[_FirstFit], screened: di
                                  population_per_param=CANDIDATE_POPULATION, generations=CANDIDATE_GENERATIONS,
                                  progress=pb.tick)
             found = [p.at(p.value(float(x))) for p, x in zip(start, picks[0])]
-            null_start = cal.at + [ep.free(ep.none) for ep in eff.params]
+            null_start = cal.at + _null_effect_start(eff)
             starts = (found, null_start)
             chis = [obj2.chi2(apply(f.base, s_, np.zeros(len(s_)))) for s_ in starts]
             start = starts[int(np.argmin(chis))]
@@ -286,7 +286,7 @@ def _refit(pb: _Problem, cal: _Calibration, first: list[_FirstFit], screened: di
         elif i < refit_top:
             alt = cal.one_cycle_at + [ep.free(v) for ep, v in zip(eff.params, screened[eff.id].estimate)]
             # ... or from the null model it contains (the effect at "no effect")
-            null_start = cal.at + [ep.free(ep.none) for ep in eff.params]
+            null_start = cal.at + _null_effect_start(eff)
             starts = (start, alt, null_start)
             chis = [obj2.chi2(apply(f.base, s, np.zeros(len(s)))) for s in starts]
             start = starts[int(np.argmin(chis))]
@@ -381,6 +381,14 @@ def _polish_leader(pb: _Problem, cal: _Calibration, refits: list[_Refit]) -> Non
         c.delta_bic = cal.bic - c.bic
         lead.candidate = c
         lead.free = [p.at(r.values[p.name]) for p in lead.free]
+
+
+def _null_effect_start(eff: Effect) -> list[FreeParam]:
+    """The effect's parameters at (next to) "no effect", as a least-squares start. A log-scaled
+    parameter starts at its smallest starting value, not at the floor of its range: there the
+    misfit hardly depends on log(value) and least squares would never leave it. (The guarantee
+    that a candidate never ends worse than its null does not rest on this start; see `_at_null`.)"""
+    return [ep.free(min(ep.starts) if ep.log else ep.none) for ep in eff.params]
 
 
 def _leaves_noise(pb: _Problem, cal: _Calibration) -> bool:
