@@ -2,8 +2,10 @@
 against their answers in ``KEY.json``: the verdict, the residual after refit within 1.2x the noise,
 and the effect's key parameter within 25 %. Skipped where that folder is absent (a user's clone).
 
-Only the smallest case (dev14, 7603 samples) runs by default; the others take 1-3 minutes each on
-a 2-core machine and are marked slow (``pytest -m slow``)."""
+By default a healthy case (dev02: the worst failure is a false alarm) and the smallest effect case
+(dev14, 7603 samples) run; the others take 1-3 minutes each on a 2-core machine and are marked
+slow (``pytest -m slow``). Cases the current pipeline gets wrong are strict xfails with the
+reason (issue 9's closing note): fixing one turns its test red until the marker goes."""
 
 from __future__ import annotations
 
@@ -18,11 +20,14 @@ DEV = Path(__file__).resolve().parents[1].parent / "shared" / "recordings" / "de
 KEY = DEV / "KEY.json"
 
 #: fast cases (LPS nominal or few samples); the first, the smallest, is not slow
+KNOWN_WRONG = "the right effect's own fit does not reach its basin (ends at null / at its start); issue 9"
 CASES = [
-    pytest.param("dev14", id="dev14-weight_friction"),
+    pytest.param("dev02", id="dev02-none"),
+    pytest.param("dev14", id="dev14-weight_friction", marks=pytest.mark.xfail(reason=KNOWN_WRONG, strict=True)),
     pytest.param("dev09", id="dev09-pe_mass", marks=pytest.mark.slow),
     pytest.param("dev01", id="dev01-friction_asymmetry", marks=pytest.mark.slow),
-    pytest.param("dev06", id="dev06-piezo_hysteresis", marks=pytest.mark.slow),
+    pytest.param("dev06", id="dev06-piezo_hysteresis",
+                 marks=[pytest.mark.slow, pytest.mark.xfail(reason=KNOWN_WRONG, strict=True)]),
     pytest.param("dev08", id="dev08-stribeck", marks=pytest.mark.slow),
     pytest.param("dev03", id="dev03-incline", marks=pytest.mark.slow),
 ]
