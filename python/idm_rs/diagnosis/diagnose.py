@@ -265,30 +265,21 @@ def _refit(pb: _Problem, cal: _Calibration, first: list[_FirstFit], screened: di
     for i, f in enumerate(first):
         eff, r1 = f.effect, f.fit
         start = [p.at(r1.values[p.name]) for p in f.free]
-        if i < GLOBAL_CANDIDATES and not _leaves_noise(pb, cal):
-            # the leading candidates get a population search of their own (the nominal-only
-            # calibration may have compensated the effect with far-off parameters, a basin the
-            # candidate's least squares could not leave), seeded with their one-cycle fit
-            picks, _, _ = search(pb.obj, f.base, start, cycles=CANDIDATE_SEARCH_CYCLES,
-                                 population_per_param=CANDIDATE_POPULATION, generations=CANDIDATE_GENERATIONS,
-                                 progress=pb.tick)
-            found = [p.at(p.value(float(x))) for p, x in zip(start, picks[0])]
-            null_start = cal.at + _null_effect_start(eff)
-            starts = (found, null_start)
+        if i < refit_top:
+            if i < GLOBAL_CANDIDATES and not _leaves_noise(pb, cal):
+                # the leading candidates get a population search of their own (the nominal-only
+                # calibration may have compensated the effect with far-off parameters, a basin
+                # the candidate's least squares could not leave), seeded with the one-cycle fit
+                picks, _, _ = search(pb.obj, f.base, start, cycles=CANDIDATE_SEARCH_CYCLES,
+                                     population_per_param=CANDIDATE_POPULATION,
+                                     generations=CANDIDATE_GENERATIONS, progress=pb.tick)
+                starts = [[p.at(p.value(float(x))) for p, x in zip(start, picks[0])]]
+            else:  # the one-cycle fit, or the screened estimate
+                starts = [start, cal.one_cycle_at + [ep.free(v) for ep, v in zip(eff.params, screened[eff.id].estimate)]]
+            # ... or the null model it contains (the effect at "no effect"): whichever fits the
+            # first two cycles best
+            starts.append(cal.at + _null_effect_start(eff))
             chis = [obj2.chi2(apply(f.base, s_, np.zeros(len(s_)))) for s_ in starts]
-            start = starts[int(np.argmin(chis))]
-            r = fit_progressive(pb.obj, f.base, start, horizons=(2, None), max_nfev=(10, 10), progress=pb.tick)
-            null = _at_null(pb, cal, eff, f.base, f.free)
-            if null is not None and r.chi2 >= null.chi2:
-                out.append(_Refit(_candidate(pb, cal, eff, null, False, at_null=True), f.base,
-                                  [p.at(cal.fit.values[p.name]) if p.name in cal.fit.values else p for p in f.free]))
-                continue
-        elif i < refit_top:
-            alt = cal.one_cycle_at + [ep.free(v) for ep, v in zip(eff.params, screened[eff.id].estimate)]
-            # ... or from the null model it contains (the effect at "no effect")
-            null_start = cal.at + _null_effect_start(eff)
-            starts = (start, alt, null_start)
-            chis = [obj2.chi2(apply(f.base, s, np.zeros(len(s)))) for s in starts]
             start = starts[int(np.argmin(chis))]
             r = fit_progressive(pb.obj, f.base, start, horizons=(2, None), max_nfev=(12, 10), progress=pb.tick)
             null = _at_null(pb, cal, eff, f.base, f.free)
