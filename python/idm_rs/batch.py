@@ -14,6 +14,7 @@ one family (triangle, sawtooth or sampled) with per-point fields.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import dataclass, field
@@ -88,12 +89,18 @@ class Point:
 def param_row(params: ParamValues) -> list[float]:
     """A point's parameter row in the engine's order; NaN normal force = derived."""
     given = params.to_dict(resolved=False) if isinstance(params, Params) else dict(params)
-    defaults = Params().to_dict(resolved=False)
+    defaults = _table1()
     row = []
     for name in engine.param_names():
         v = given.get(name, defaults.get(name))
         row.append(math.nan if v is None else float(v))
     return row
+
+
+@functools.lru_cache(maxsize=1)
+def _table1() -> dict[str, Optional[float]]:
+    """Table 1 (normal force None: derived), built once: rows of many points reuse it."""
+    return Params().to_dict(resolved=False)
 
 
 @dataclass(frozen=True, eq=False)

@@ -71,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="run the paper case, print the comparison table, write Figs. 6a-7d",
         description=(
             "Run the paper case (LPS and DPS n = 4, triangle 0 -> 80 V in 0.5 ms, back to 0 V at 10 ms), "
-            "print x1(10 ms) beside the paper's and MODEL.md's values, and write fig6a.png ... fig7d.png "
+            "print x1(10 ms) beside the paper's and the reference values of docs/MODEL.md, and write fig6a.png ... fig7d.png "
             "and paper_case.csv (the trajectories) into DIR."
         ),
     )

@@ -2,7 +2,7 @@
 
 The paper drives the IDM with a single triangular wave, 0 → 80 V in 0.5 ms and back to 0 V at
 10 ms, and reports the main body's position x1 at 10 ms for the lumped (LPS) and distributed
-(DPS, FEM) models. ``MODEL.md`` fixes the conventions the paper leaves open (fall time, normal
+(DPS, FEM) models. ``docs/MODEL.md`` fixes the conventions the paper leaves open (fall time, normal
 force) and gives reference values for them; :func:`comparison_table` sets ours beside both.
 
 Fig. 7 sweeps one parameter at a time around the paper case; :func:`fig7_sweeps` describes the
@@ -28,14 +28,14 @@ from .waveforms import Triangle, Waveform
 PAPER_LPS_UM = 2.413  #: paper: LPS x1(10 ms) [µm]
 PAPER_DPS_UM = 2.459  #: paper: DPS x1(10 ms) [µm]
 
-# --- MODEL.md's reference values for idm-rs's conventions (RK4, dt = 1e-8 s) -------------------
-REFERENCE_LPS_UM = 1.678  #: MODEL.md: LPS x1(10 ms) [µm]
-REFERENCE_DPS4_UM = 1.711  #: MODEL.md: DPS (n = 4) x1(10 ms) [µm]
+# --- docs/MODEL.md's reference values for idm-rs's conventions (RK4, dt = 1e-8 s) -------------------
+REFERENCE_LPS_UM = 1.678  #: docs/MODEL.md: LPS x1(10 ms) [µm]
+REFERENCE_DPS4_UM = 1.711  #: docs/MODEL.md: DPS (n = 4) x1(10 ms) [µm]
 
 # --- the case itself ------------------------------------------------------------------------------
 PAPER_AMPLITUDE = 80.0  #: peak voltage [V]
 PAPER_RISE = 0.5e-3  #: rise time [s]
-PAPER_FALL = 9.5e-3  #: fall time [s] (not stated by the paper; MODEL.md's convention)
+PAPER_FALL = 9.5e-3  #: fall time [s] (not stated by the paper; docs/MODEL.md's convention)
 PAPER_T_END = 10e-3  #: simulated time [s]
 PAPER_N_ELEMENTS = 4  #: FEM elements of the DPS
 PAPER_DT = 1e-8  #: RK4 step [s] of the reference values
@@ -45,7 +45,7 @@ TRANSIENT_WINDOW = (4e-3, 10e-3)
 
 PAPER_NOTE = (
     "Note: the paper's text alone does not reproduce its absolute values under any reading tried "
-    "(fall times 0.5-9.5 ms, three choices of the normal force; see MODEL.md). "
+    "(fall times 0.5-9.5 ms, three choices of the normal force; see docs/MODEL.md). "
     "The DPS-LPS gap has the paper's sign and size (ours {gap:+.0f} nm, paper {paper_gap:+.0f} nm). "
     "Almost all of the gap comes from the mass-proportional Rayleigh damping alpha_c*Mp "
     "(a drag of about alpha_c*mPE/2 on the centre of mass), not from the inertia of the PE."
@@ -81,7 +81,7 @@ def run_paper_case(dt: float = PAPER_DT, save_every: int = 100) -> PaperCase:
 
 
 def comparison_table(lps: SimulationResult, dps: SimulationResult) -> str:
-    """A text table of x1(10 ms): ours vs the paper vs MODEL.md's reference, the DPS − LPS gap,
+    """A text table of x1(10 ms): ours vs the paper vs docs/MODEL.md's reference, the DPS − LPS gap,
     and a plain note on what does and does not agree."""
     ours_l = lps.final_position * 1e6
     ours_d = dps.final_position * 1e6
@@ -89,7 +89,7 @@ def comparison_table(lps: SimulationResult, dps: SimulationResult) -> str:
         ("LPS", ours_l, PAPER_LPS_UM, REFERENCE_LPS_UM),
         (f"DPS (n = {dps.n_elements})", ours_d, PAPER_DPS_UM, REFERENCE_DPS4_UM),
     ]
-    head = f"{'x1(10 ms) [um]':<16}{'ours':>10}{'paper':>10}{'MODEL.md':>10}{'ours-paper':>12}{'ours-ref':>10}"
+    head = f"{'x1(10 ms) [um]':<16}{'ours':>10}{'paper':>10}{'reference':>10}{'ours-paper':>12}{'ours-ref':>10}"
     lines = [
         f"Paper case: triangle 0 -> {PAPER_AMPLITUDE:g} V in {PAPER_RISE * 1e3:g} ms, back to 0 V at "
         f"{(PAPER_RISE + PAPER_FALL) * 1e3:g} ms; RK4, dt = {dps.dt:g} s",

@@ -1,4 +1,4 @@
-"""IDM parameters: the paper's Table 1 as defaults, names as in ``MODEL.md`` (SI units).
+"""IDM parameters: the paper's Table 1 as defaults, names as in ``docs/MODEL.md`` (SI units).
 
 Table 1 is declared once, in the Rust core (``rust/src/params.rs``); the fields of
 :class:`Params`, their defaults and :data:`PARAM_INFO` are built from that declaration

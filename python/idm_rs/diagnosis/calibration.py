@@ -36,7 +36,6 @@ class Calibration:
     search_best: float  #: the population search's best chi^2 over its horizon
     evaluations: int  #: models simulated by the search
     converged: bool  #: the independent polishes reached the same optimum
-    spread: dict[str, float]  #: largest difference between agreeing polishes, per parameter
     #: the search's best member (u of each free parameter): the optimum over the first cycle(s),
     #: before the polish over everything (where a missing effect may pull the nominal values)
     search_u: Optional[NDArray[np.float64]] = None
@@ -63,7 +62,7 @@ def search(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, 
     count = [0]
 
     def chi2_of(U: NDArray[np.float64]) -> NDArray[np.float64]:
-        U = np.atleast_2d(U.T).T if U.ndim == 1 else U
+        # vectorized: U is (parameters, members), one batch call for the whole generation
         specs = [apply(base, free, U[:, s]) for s in range(U.shape[1])]
         preds = obj.predict(specs, retries=0)
         count[0] += len(specs)
@@ -79,7 +78,7 @@ def search(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, 
     hi = np.array([b[1] for b in bounds])
     init = lo + (hi - lo) * _spread_points(popsize * n, n, rng)
     init[0] = np.clip(np.zeros(n), lo, hi)
-    res = differential_evolution(lambda U: chi2_of(U), bounds, vectorized=True, updating="deferred",
+    res = differential_evolution(chi2_of, bounds, vectorized=True, updating="deferred",
                                  init=init, maxiter=generations or GENERATIONS, tol=1e-3, mutation=(0.5, 1.0),
                                  recombination=0.7, seed=seed, polish=False)
     pop, energies = np.asarray(res.population), np.asarray(res.population_energies)
@@ -113,9 +112,8 @@ def calibrate(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], 
     polishes.sort(key=lambda r: r.chi2)
     top = polishes[0]
     agreeing = [p for p in polishes if p.chi2 - top.chi2 <= max(AGREE_CHI2, 1e-3 * top.chi2)]
-    spread = {f.name: max(abs(p.values[f.name] - top.values[f.name]) for p in agreeing) for f in free}
     # converged: the best optimum was reached from more than one start (or the single start
     # there is ends at the noise floor)
     noise_floor = top.chi2 <= 1.1**2 * top.n
     converged = len(agreeing) >= 2 or noise_floor
-    return Calibration(top, polishes, best, evaluations, converged, spread, picks[0])
+    return Calibration(top, polishes, best, evaluations, converged, picks[0])

@@ -282,7 +282,7 @@ def _refit(pb: _Problem, cal: _Calibration, first: list[_FirstFit], screened: di
             chis = [obj2.chi2(apply(f.base, s_, np.zeros(len(s_)))) for s_ in starts]
             start = starts[int(np.argmin(chis))]
             r = fit_progressive(pb.obj, f.base, start, horizons=(2, None), max_nfev=(12, 10), progress=pb.tick)
-            null = _at_null(pb, cal, eff, f.base, f.free)
+            null = _at_null(cal, eff, f.base)
             if null is not None and r.chi2 >= null.chi2:
                 # every candidate contains the null model: its fit never ends worse than it
                 out.append(_Refit(_candidate(pb, cal, eff, null, False, at_null=True), f.base,
@@ -315,7 +315,7 @@ def _candidate(pb: _Problem, cal: _Calibration, eff: Effect, r: FitResult, scree
         significance=significance, correlation=corr, at_null=at_null)
 
 
-def _at_null(pb: _Problem, cal: _Calibration, eff: Effect, base: ModelSpec, free: list[FreeParam]) -> Optional[FitResult]:
+def _at_null(cal: _Calibration, eff: Effect, base: ModelSpec) -> Optional[FitResult]:
     """The candidate's own model with its effect at the "no effect" value and the nominal subset
     at the calibration: the null model it contains (None when the effect changes the structure,
     which has no such point)."""
