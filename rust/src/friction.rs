@@ -90,6 +90,46 @@ impl Leuven {
         (gdot, fhdot)
     }
 
+    /// dS/dv [N s/m], the Stribeck curve's slope (0 at v = 0, where the curve is flat for
+    /// delta > 1; the one-sided slope is taken for delta <= 1).
+    #[inline(always)]
+    pub fn stribeck_slope(&self, v: f64) -> f64 {
+        if self.fs_minus_fc == 0.0 || v == 0.0 {
+            return 0.0;
+        }
+        let x = v.abs() * self.inv_vs;
+        let (e, de) = if self.delta_is_two {
+            (x * x, 2.0 * x)
+        } else {
+            (x.powf(self.delta), self.delta * x.powf(self.delta - 1.0))
+        };
+        let ds = -self.fs_minus_fc * (-e).exp() * de * self.inv_vs * sign0(v);
+        ds * (1.0 + self.eps * sign0(v))
+    }
+
+    /// The rates of [`Leuven::rates`] and their partial derivatives, for implicit integrators:
+    /// `[dg/dt, dFh/dt, d(dg/dt)/dv, d(dg/dt)/dFh, d(dFh/dt)/dv, d(dFh/dt)/dFh]` (units follow
+    /// from [m/s], [N/s] over [m/s], [N]). Exact away from the kinks at v = 0 and dg/dt = 0.
+    #[inline(always)]
+    pub fn rate_partials(&self, v: f64, fh: f64) -> [f64; 6] {
+        let (gdot, fhdot) = self.rates(v, fh);
+        let s = self.stribeck(v);
+        let ratio = fh / s;
+        // gdot = v - |v| sgn(Fh) |Fh/S|^n
+        let (pow_n, pow_n1) = if self.n_is_one {
+            (ratio.abs(), 1.0)
+        } else {
+            (ratio.abs().powf(self.n), self.n * ratio.abs().powf(self.n - 1.0))
+        };
+        let dg_dfh = -v.abs() * pow_n1 / s;
+        let dg_dv = 1.0 - sign0(v) * sign0(fh) * pow_n + v.abs() * pow_n1 * fh * self.stribeck_slope(v) / (s * s);
+        // dFh/dt = a gdot - b |gdot| Fh - c gdot |Fh|
+        let outer = self.a - self.b * sign0(gdot) * fh - self.c * fh.abs();
+        let dfh_dv = outer * dg_dv;
+        let dfh_dfh = outer * dg_dfh - self.b * gdot.abs() - self.c * gdot * sign0(fh);
+        [gdot, fhdot, dg_dv, dg_dfh, dfh_dv, dfh_dfh]
+    }
+
     /// Friction force Ff = Fh + sigma2 v + sigma1 dg/dt [N], acting against the main body.
     /// dg/dt is known last (it waits on the Stribeck exp and a division), so it is added last.
     #[inline(always)]
@@ -136,6 +176,27 @@ mod tests {
         let v = 2e-3;
         let (gdot, _) = f.rates(v, f.stribeck(v));
         assert!(gdot.abs() < 1e-15);
+    }
+
+    #[test]
+    fn rate_partials_match_finite_differences() {
+        let p = Params::paper();
+        for (eps, n, delta) in [(0.0, 1.0, 2.0), (0.1, 1.7, 0.8), (-0.05, 1.0, 1.3)] {
+            let mut q = p.clone();
+            q.fric_n = n;
+            q.stribeck_exponent = delta;
+            let f = Leuven::new(&q, q.normal_force, eps);
+            for (v, fh) in [(2e-3, 0.3), (-4e-4, -0.9), (1e-5, -0.2), (-3e-3, 1.1)] {
+                let d = f.rate_partials(v, fh);
+                let (hv, hf) = (1e-7 * v.abs(), 1e-7 * fh.abs());
+                let fd = |x: (f64, f64), y: (f64, f64), h: f64| ((x.0 - y.0) / (2.0 * h), (x.1 - y.1) / (2.0 * h));
+                let dv = fd(f.rates(v + hv, fh), f.rates(v - hv, fh), hv);
+                let df = fd(f.rates(v, fh + hf), f.rates(v, fh - hf), hf);
+                for (a, b) in [(d[2], dv.0), (d[4], dv.1), (d[3], df.0), (d[5], df.1)] {
+                    assert!((a - b).abs() <= 1e-6 * b.abs() + 1e-12, "{a} {b} at {v} {fh}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -9,6 +9,7 @@ pub mod dopri5;
 pub mod drive;
 pub mod effects;
 pub mod friction;
+pub mod jacobian;
 pub mod mechanics;
 pub mod model;
 pub mod params;

@@ -28,10 +28,10 @@ pub struct Mechanics {
     pub stiffness: DMatrix<f64>,
     /// the PE's own mass matrix Mp (zero for the LPS)
     pub pe_mass_matrix: DMatrix<f64>,
-    minv_k: Vec<f64>,
-    minv_c: Vec<f64>,
-    minv_main: Vec<f64>,
-    minv_weight: Vec<f64>,
+    pub(crate) minv_k: Vec<f64>,
+    pub(crate) minv_c: Vec<f64>,
+    pub(crate) minv_main: Vec<f64>,
+    pub(crate) minv_weight: Vec<f64>,
 }
 
 /// Element mass and stiffness of a two-node bar: rho A le / 6 [[2,1],[1,2]], E A / le [[1,-1],[-1,1]].

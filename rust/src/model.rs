@@ -122,17 +122,17 @@ pub struct Model {
     pub mech: Mechanics,
     pub friction: Leuven,
     pub layout: Layout,
-    hysteresis: Option<PiezoHysteresis>,
+    pub(crate) hysteresis: Option<PiezoHysteresis>,
     /// the input drives a rig's body instead of a piezo element
-    rig: Option<RigDrive>,
-    kp: f64,
-    d33: f64,
+    pub(crate) rig: Option<RigDrive>,
+    pub(crate) kp: f64,
+    pub(crate) d33: f64,
     /// constant external force on the main body (incline) [N]
-    f_incline: f64,
-    inv_tau_amp: f64,
-    inv_tau_creep: f64,
-    inv_tau_sensor: f64,
-    pe_mass_sums: Vec<f64>,
+    pub(crate) f_incline: f64,
+    pub(crate) inv_tau_amp: f64,
+    pub(crate) inv_tau_creep: f64,
+    pub(crate) inv_tau_sensor: f64,
+    pub(crate) pe_mass_sums: Vec<f64>,
 }
 
 impl Model {

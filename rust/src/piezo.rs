@@ -25,6 +25,16 @@ impl PiezoHysteresis {
     pub fn rate(&self, dv: f64, h: f64) -> f64 {
         self.ap_d33 * dv - self.bp * dv.abs() * h - self.cp * dv * h.abs()
     }
+
+    /// (d(dh/dt)/d(dV/dt) [m/V], d(dh/dt)/dh [1/s]) of [`PiezoHysteresis::rate`].
+    #[inline(always)]
+    pub fn rate_partials(&self, dv: f64, h: f64) -> (f64, f64) {
+        use crate::friction::sign0;
+        (
+            self.ap_d33 - self.bp * sign0(dv) * h - self.cp * h.abs(),
+            -self.bp * dv.abs() - self.cp * dv * sign0(h),
+        )
+    }
 }
 
 /// Fp = kp (d33 V + xc - h) [N]: pushes the main body forward and the weight back. `xc` [m] is

@@ -55,6 +55,16 @@ impl RigDrive {
         }
     }
 
+    /// d(input_force)/du at fixed du/dt [N per unit of input]: how fast the drive's force grows
+    /// along a linear input (its time derivative is this times the input's slope).
+    #[inline(always)]
+    pub fn force_per_input(&self) -> f64 {
+        match *self {
+            RigDrive::Position { stiffness, .. } => stiffness,
+            RigDrive::Force => 1.0,
+        }
+    }
+
     /// Refuse effects and switches that need the piezo element or the weight.
     pub fn check_effects(e: &Effects, piezo_hysteresis: bool) -> Result<(), String> {
         if piezo_hysteresis {
