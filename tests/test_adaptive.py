@@ -82,3 +82,30 @@ def test_non_positive_tolerance_or_first_step_is_refused(bad):
 def test_unknown_method_is_named():
     with pytest.raises(ValueError, match="'method'"):
         idm_rs.simulate(P, PAPER_WAVE, t_end=1e-3, model="lps", method="euler")  # type: ignore[arg-type]
+
+
+# --- rodas4 (linearly implicit Rosenbrock) and "auto" ---------------------------------------------
+
+
+def test_rodas4_paper_case_agrees_with_rk4_within_a_nanometre(rk4):
+    r = idm_rs.simulate(P, PAPER_WAVE, t_end=10e-3, model="lps", method="rodas4", rtol=1e-6, atol=1e-6)
+    assert abs(r.final_position - rk4.final_position) < 1e-9
+    assert r.method == "rodas4" and r.rtol == 1e-6
+    assert r.t[-1] == 10e-3
+
+
+def test_rodas4_keeps_the_presliding_force_within_its_bound():
+    """A light weight at high voltage: the linearised step can overshoot |Fh| <= Fs; such steps
+    are rejected, so every accepted state respects the bound (the exact solution does)."""
+    p = idm_rs.Params(m2=0.25 * P.m1)
+    r = idm_rs.simulate(p, idm_rs.Triangle(98.67, 0.5e-3, 9.5e-3), t_end=10e-3, model="lps", method="rodas4",
+                        rtol=1e-3, atol=1e-3, save_every=1)
+    fs = max(p.mu_s, p.mu_k) * p.effective_normal_force
+    assert np.abs(r.fh).max() <= fs * (1 + 1e-6)
+
+
+def test_auto_resolves_to_the_measured_setting(rk4):
+    r = idm_rs.simulate(P, PAPER_WAVE, t_end=10e-3, model="lps", method="auto")
+    method, rtol, atol = idm_rs.methods.AUTO
+    assert (r.method, r.rtol, r.atol) == (method, rtol, atol)
+    assert abs(r.final_position - rk4.final_position) < 1e-9

@@ -147,7 +147,7 @@ def test_derived_normal_force_is_recorded_in_attrs():
 # --- determinism --------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("method", ["rk4", "dopri5"])
+@pytest.mark.parametrize("method", ["rk4", "dopri5", "rodas4"])
 def test_results_bitwise_identical_across_thread_counts(method):
     # includes a point that diverges at this dt and is retried (m2/m1 = 2 at 120 V)
     grid = {"mass_ratio": [0.25, 0.8, 2.0], "voltage": [40.0, 90.0, 120.0]}
@@ -268,6 +268,29 @@ def test_dopri5_agrees_with_rk4():
     assert diff.max() < 1e-9, diff
     assert (dp.steps.values < rk4.steps.values).all()
     assert dp.attrs["method"] == "dopri5" and dp.attrs["rtol"] == 1e-7 and dp.attrs["atol"] == 1e-7
+
+
+@pytest.mark.parametrize("method", ["dopri5", "rodas4", "auto"])
+def test_adaptive_sweeps_need_no_dt(method):
+    """The issue's complaint: ``sweep(..., method="dopri5")`` without ``dt`` was a TypeError."""
+    grid = {"mass_ratio": [0.25, 2.0], "voltage": [40.0, 120.0]}
+    kw = dict(t_end=2e-3, model="lps", progress=False)
+    rk4 = idm_rs.sweep(P, WAVE, grid, dt=1e-8, **kw)
+    ds = idm_rs.sweep(P, WAVE, grid, method=method, **kw)
+    assert (ds.status.values == 1).all()
+    assert np.abs(ds.final_position.values - rk4.final_position.values).max() < 1e-9
+    assert (ds.steps.values < rk4.steps.values / 10).all()
+    resolved = idm_rs.methods.AUTO[0] if method == "auto" else method
+    assert ds.attrs["method"] == resolved and ds.attrs["method_asked"] == method
+    assert math.isnan(ds.attrs["dt_s"]) and ds.attrs["first_step_s"] == 1e-8
+
+
+def test_rodas4_sweep_point_equals_rodas4_simulate():
+    ds = idm_rs.sweep(P, WAVE, {"voltage": [70.0]}, t_end=2e-3, model="lps", method="rodas4", rtol=1e-6,
+                      atol=1e-6, progress=False)
+    r = idm_rs.simulate(P, idm_rs.Triangle(70.0, WAVE.rise, WAVE.fall), t_end=2e-3, model="lps", method="rodas4",
+                        rtol=1e-6, atol=1e-6, first_step=1e-8)
+    assert ds.final_position.values[0] == r.final_position
 
 
 # --- errors ---------------------------------------------------------------------------------------

@@ -11,6 +11,7 @@ typed Python API. Quick start::
 """
 
 from .engine import __version__
+from . import methods
 from .effects import Effects
 from .params import Params
 from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate
@@ -22,6 +23,7 @@ from .diagnosis import Diagnosis, diagnose
 
 __all__ = [
     "__version__",
+    "methods",
     "Diagnosis",
     "DivergenceError",
     "Effects",

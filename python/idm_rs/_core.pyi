@@ -25,8 +25,8 @@ class RunConfig:
     """How to run: the model's structure and the integration method, shared by ``simulate`` and
     the batch. Keyword-only; checked on construction (ValueError naming the parameter: a
     ``model`` other than "lps"/"dps"/"rig", ``n_elements`` < 1 for "dps", a ``method`` other than
-    "rk4"/"dopri5", a non-positive ``dt`` for RK4, non-positive ``rtol``/``atol`` or
-    ``first_step`` for dopri5). Frozen: the attributes are read-only."""
+    "rk4"/"dopri5"/"rodas4", a non-positive ``dt`` for RK4, non-positive ``rtol``/``atol`` or
+    ``first_step`` for the adaptive methods). Frozen: the attributes are read-only."""
 
     def __init__(
         self,
@@ -60,19 +60,20 @@ class RunConfig:
         """Whether the piezo hysteresis state h runs."""
     @property
     def method(self) -> str:
-        """"rk4" (fixed step) or "dopri5" (adaptive Dormand-Prince 5(4))."""
+        """"rk4" (fixed step), "dopri5" (adaptive Dormand-Prince 5(4)) or "rodas4" (adaptive
+        Rosenbrock 4(3), linearly implicit)."""
     @property
     def dt(self) -> float:
         """RK4 step [s]."""
     @property
     def rtol(self) -> float:
-        """dopri5 relative tolerance [-]."""
+        """Adaptive relative tolerance [-]."""
     @property
     def atol(self) -> float:
-        """dopri5 absolute tolerance, in units of each state's natural scale [-]."""
+        """Adaptive absolute tolerance, in units of each state's natural scale [-]."""
     @property
     def first_step(self) -> float:
-        """dopri5 first trial step [s] (``dt`` when not given)."""
+        """Adaptive methods' first trial step [s] (``dt`` when not given)."""
     @property
     def retries(self) -> int:
         """Batch: RK4 retries at dt/2, dt/4, ... of a diverging point."""

@@ -10,8 +10,9 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import engine
+from . import engine, methods
 from .effects import Effects
+from .methods import MethodName
 from .params import PARAM_INFO, Params
 from .state import State
 from .waveforms import Waveform
@@ -95,7 +96,7 @@ class SimulationResult:
     energy: Optional[EnergyBudget] = None
     #: the state at t_end; pass it as ``initial_state`` (with ``t_start=t_end``) to continue
     final_state: State = field(default_factory=lambda: State([], []), repr=False)
-    method: str = "rk4"  #: "rk4" or "dopri5"
+    method: str = "rk4"  #: "rk4", "dopri5" or "rodas4" (what "auto" resolved to)
     rtol: float = math.nan  #: adaptive tolerances (NaN for RK4)
     atol: float = math.nan
 
@@ -176,7 +177,7 @@ def simulate(
     piezo_hysteresis: bool = True,
     effects: Optional[Effects] = None,
     energy: bool = False,
-    method: Literal["rk4", "dopri5"] = "rk4",
+    method: MethodName = "rk4",
     rtol: float = 1e-7,
     atol: float = 1e-7,
     first_step: Optional[float] = None,
@@ -194,10 +195,13 @@ def simulate(
     ValueError says which breakpoint and suggests a ``dt``. A step too large for the structure is
     refused up front; one too large for the friction state during sliding raises
     :class:`DivergenceError` with the time and a smaller step to try.
-    ``method="dopri5"``: adaptive Dormand-Prince 5(4) with ``rtol`` and ``atol`` (``atol`` in
-    units of each state's natural scale: the free stroke d33·V for positions, Fs for forces) and
-    no ``dt``; ``first_step`` [s] is an optional first trial step (as ``solve_ivp``'s); it lands
-    exactly on every breakpoint. ``save_every`` counts accepted steps either way.
+    ``method="dopri5"`` (explicit Dormand-Prince 5(4)) or ``"rodas4"`` (linearly implicit
+    Rosenbrock 4(3), L-stable: far fewer steps where the friction state is stiff): adaptive, with
+    ``rtol`` and ``atol`` (``atol`` in units of each state's natural scale: the free stroke d33·V
+    for positions, Fs for forces) and no ``dt``; ``first_step`` [s] is an optional first trial
+    step (as ``solve_ivp``'s); they land exactly on every breakpoint. ``method="auto"``: the
+    adaptive setting measured to stay within 1 nm of RK4 (:data:`idm_rs.methods.AUTO`; rtol and
+    atol are then ignored). ``save_every`` counts accepted steps either way.
 
     ``initial_state`` (a :class:`State`, e.g. a previous result's ``final_state``, or any array
     of the model's state size) with ``t_start`` [s] continues or restarts a run (``t_start``
@@ -214,11 +218,11 @@ def simulate(
     for name, value in (("n_elements", n_elements), ("save_every", save_every)):
         if isinstance(value, bool) or int(value) != value or value < 1:
             raise ValueError(f"parameter '{name}' must be a positive integer, got {value!r}")
-    if method not in ("rk4", "dopri5"):
-        raise ValueError(f"parameter 'method' must be 'rk4' or 'dopri5', got {method!r}")
+    method, rtol, atol = methods.resolve(method, rtol, atol)
     if method == "rk4" and dt is None:
         dt = 1e-8
-    step = float(first_step if method == "dopri5" and first_step is not None else (dt if dt is not None else 1e-8))
+    adaptive = method in methods.ADAPTIVE
+    step = float(first_step if adaptive and first_step is not None else (dt if dt is not None else 1e-8))
     from .batch import Structure
 
     structure = Structure.of(model, int(n_elements), bool(piezo_hysteresis))
@@ -277,6 +281,6 @@ def simulate(
         energy=budget,
         final_state=State(out["final_state"], out["state_components"], float(out["t"][-1])),
         method=method,
-        rtol=float(rtol) if method == "dopri5" else math.nan,
-        atol=float(atol) if method == "dopri5" else math.nan,
+        rtol=float(rtol) if adaptive else math.nan,
+        atol=float(atol) if adaptive else math.nan,
     )

@@ -20,11 +20,12 @@ from typing import TYPE_CHECKING, Any, Literal, Mapping, Optional, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import engine
+from . import engine, methods
 from .batch import Structure, Tables, param_row
 from .batch import start as start_batch
 from .declarations import EFFECT_PARAMS, GRAVITY
 from .effects import Effects
+from .methods import MethodName
 from .params import PARAM_INFO, Params
 from .waveforms import Sampled, Sawtooth, Triangle, Waveform
 
@@ -81,6 +82,7 @@ class _Plan:
     rtol: float
     atol: float
     retries: int
+    first_step: float
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -179,7 +181,8 @@ def _check_grid(grid: Mapping[str, ArrayLike], waveform: Waveform) -> tuple[tupl
 
 def _start(plan: _Plan, start: int, stop: int, threads: int) -> Any:
     return start_batch(plan.tables(start, stop), plan.structure, t_end=plan.t_end, method=plan.method, dt=plan.dt,
-                       rtol=plan.rtol, atol=plan.atol, first_step=plan.dt, retries=plan.retries, threads=threads)
+                       rtol=plan.rtol, atol=plan.atol, first_step=plan.first_step, retries=plan.retries,
+                       threads=threads)
 
 
 def run_block(plan: _Plan, start: int, stop: int, threads: int = 1) -> dict[str, NDArray[Any]]:
@@ -205,13 +208,14 @@ def sweep(
     grid: Mapping[str, ArrayLike],
     *,
     t_end: float,
-    dt: float,
+    dt: Optional[float] = None,
     model: Literal["lps", "dps"] = "dps",
     n_elements: int = 4,
     metrics: Sequence[str] = tuple(METRICS),
-    method: Literal["rk4", "dopri5"] = "rk4",
+    method: MethodName = "rk4",
     rtol: float = 1e-7,
     atol: float = 1e-7,
+    first_step: Optional[float] = None,
     retries: int = 2,
     piezo_hysteresis: bool = True,
     effects: Optional[Effects] = None,
@@ -230,12 +234,16 @@ def sweep(
     The normal force is recomputed per point as (m1+m2+mPE)·g unless ``params.normal_force`` is
     set or swept.
 
-    ``method="rk4"``: fixed step ``dt`` [s], the reference; each point equals ``simulate()``
-    bit for bit. A point that diverges is retried at dt/2, dt/4 (``retries`` times) and then
-    flagged (``status`` 3 with ``diverged_at``), never returned as a silent NaN.
-    ``method="dopri5"``: adaptive Dormand-Prince 5(4) with ``rtol``/``atol`` (``atol`` in units of
-    each state's natural scale: the free stroke d33·V for positions, Fs for friction), ``dt`` the
-    first trial step.
+    ``method="rk4"``: fixed step ``dt`` [s] (default 1e-8), the reference; each point equals
+    ``simulate()`` bit for bit. A point that diverges is retried at dt/2, dt/4 (``retries``
+    times) and then flagged (``status`` 3 with ``diverged_at``), never returned as a silent NaN.
+    ``method="dopri5"`` (explicit Dormand-Prince 5(4)) or ``"rodas4"`` (linearly implicit
+    Rosenbrock 4(3) with the analytic Jacobian; several times fewer steps where friction is
+    stiff): adaptive with ``rtol``/``atol`` (``atol`` in units of each state's natural scale: the
+    free stroke d33·V for positions, Fs for friction) and no ``dt``; ``first_step`` [s] is an
+    optional first trial step (default 1e-8; a ``dt`` given with an adaptive method is taken as
+    its first step, as in earlier versions). ``method="auto"``: the fastest adaptive setting
+    measured to keep every benchmark point within 1 nm of RK4 (:data:`idm_rs.methods.AUTO`).
 
     Metrics (computed in the Rust loop): ``final_position`` [m], ``step_per_cycle`` [m] (sawtooth
     trains), ``peak_velocity`` [m/s], ``peak_friction`` [N], ``slip_fraction`` [-]; always with
@@ -256,12 +264,18 @@ def sweep(
         raise ValueError(f"unknown metric(s) {unknown}; known: {list(METRICS)}")
     if model not in ("lps", "dps"):
         raise ValueError(f"parameter 'model' must be 'lps' or 'dps', got {model!r}")
-    if method not in ("rk4", "dopri5"):
-        raise ValueError(f"parameter 'method' must be 'rk4' or 'dopri5', got {method!r}")
+    asked = methods.check(method)
+    method, rtol, atol = methods.resolve(method, rtol, atol)
+    adaptive = method in methods.ADAPTIVE
+    if adaptive and first_step is None and dt is not None:
+        first_step = dt  # the adaptive methods' first step was once given as dt: still honoured
+    if dt is None or adaptive:
+        dt = 1e-8
     names, values = _check_grid(grid, waveform)
     effects = effects or Effects()
+    first = float(first_step) if first_step is not None else 1e-8
     plan = _Plan(params, waveform, effects, names, values, float(t_end), float(dt), model, int(n_elements),
-                 bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries))
+                 bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries), first)
     _validate_axes(plan)
 
     n = plan.size
@@ -298,7 +312,7 @@ def sweep(
         "long_name": "point status", "flag_values": np.arange(5, dtype=np.uint8), "flag_meanings": STATUS_MEANINGS})
     data_vars["diverged_at"] = (names, out["diverged_at"].reshape(shape), {"units": "s", "long_name": "time of divergence"})
     data_vars["dt_used"] = (names, out["dt_used"].reshape(shape), {
-        "units": "s", "long_name": "step used (rk4) or smallest accepted step (dopri5)"})
+        "units": "s", "long_name": "step used (rk4) or smallest accepted step (adaptive)"})
     data_vars["steps"] = (names, out["steps"].reshape(shape), {"long_name": "integration steps taken"})
     ds = xr.Dataset(data_vars, coords=coords)
     ds.attrs.update({
@@ -306,10 +320,12 @@ def sweep(
         "model": model,
         "n_elements": int(n_elements) if model == "dps" else 1,
         "method": method,
-        "dt_s": float(dt),
+        "method_asked": asked,
+        "dt_s": float(dt) if not adaptive else math.nan,
+        "first_step_s": first if adaptive else math.nan,
         "t_end_s": float(t_end),
-        "rtol": float(rtol) if method == "dopri5" else math.nan,
-        "atol": float(atol) if method == "dopri5" else math.nan,
+        "rtol": float(rtol) if adaptive else math.nan,
+        "atol": float(atol) if adaptive else math.nan,
         "retries": int(retries),
         "piezo_hysteresis": int(piezo_hysteresis),
         "waveform": repr(waveform),
@@ -342,7 +358,8 @@ def _validate_axes(plan: _Plan) -> None:
     tables = plan.tables_at(flat)
     pnames, enames = engine.param_names(), engine.effect_names()
     wnames = engine.wave_fields(tables.wave_kind)
-    config = plan.structure.config(method=plan.method, dt=plan.dt, rtol=plan.rtol, atol=plan.atol)
+    config = plan.structure.config(method=plan.method, dt=plan.dt, rtol=plan.rtol, atol=plan.atol,
+                                   first_step=plan.first_step)
     for k in range(flat.size):
         p = {n: float(v) for n, v in zip(pnames, tables.params[k]) if not (n == "normal_force" and math.isnan(v))}
         eff = {n: float(v) for n, v in zip(enames, tables.effects[k]) if v != 0.0}

@@ -97,7 +97,7 @@ struct RunConfig {
     n_elements: usize,
     /// whether the piezo hysteresis state h runs
     piezo_hysteresis: bool,
-    /// "rk4" or "dopri5"
+    /// "rk4", "dopri5" or "rodas4"
     method: String,
     /// RK4 step [s]
     dt: f64,

@@ -13,6 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use crate::dopri5::{Dopri5, Dopri5Options};
 use crate::model::{with_state_size, Model};
 use crate::rk4::Rk4;
+use crate::rodas4::Rodas4;
 use crate::stepper::{Attempt, Rhs, State, Stepper};
 use crate::waveform::{Cursor, PiecewiseLinear};
 
@@ -31,6 +32,9 @@ pub enum Method {
     /// Adaptive Dormand-Prince 5(4); `atol` in units of each state's natural scale (see
     /// [`Model::state_scales`]), `first_step` [s] the first trial step.
     Dopri5 { rtol: f64, atol: f64, first_step: f64 },
+    /// Adaptive Rodas4 (linearly implicit, L-stable: steps set by accuracy in the stiff sliding
+    /// phases); tolerances and first step as for `Dopri5`.
+    Rodas4 { rtol: f64, atol: f64, first_step: f64 },
 }
 
 impl Method {
@@ -43,9 +47,14 @@ impl Method {
                 atol,
                 first_step,
             },
+            "rodas4" => Method::Rodas4 {
+                rtol,
+                atol,
+                first_step,
+            },
             other => {
                 return Err(format!(
-                    "parameter 'method' must be 'rk4' or 'dopri5', got '{other}'"
+                    "parameter 'method' must be 'rk4', 'dopri5' or 'rodas4', got '{other}'"
                 ))
             }
         };
@@ -62,6 +71,11 @@ impl Method {
                 }
             }
             Method::Dopri5 {
+                rtol,
+                atol,
+                first_step,
+            }
+            | Method::Rodas4 {
                 rtol,
                 atol,
                 first_step,
@@ -215,7 +229,7 @@ pub fn check_task(task: &Task, method: &Method) -> Result<(), SimError> {
         .map_err(SimError::Input)?;
     match *method {
         Method::Rk4 { dt } => plan_steps(task.model, task.wave, task.t_start, task.t_end, dt).map(|_| ()),
-        Method::Dopri5 { .. } => check_span(task.t_start, task.t_end),
+        Method::Dopri5 { .. } | Method::Rodas4 { .. } => check_span(task.t_start, task.t_end),
     }
 }
 
@@ -251,6 +265,8 @@ pub struct ModelRhs<'a, const N: usize, const EXTRAS: bool, const L: usize> {
     pub v0: [f64; L],
     pub slope: [f64; L],
     pub at_start: [(f64, f64); L],
+    /// |Fh| bound of each lane's domain [N] (with the stepper's slack)
+    pub bound: [f64; L],
 }
 
 impl<const N: usize, const EXTRAS: bool, const L: usize> Rhs for ModelRhs<'_, N, EXTRAS, L> {
@@ -265,6 +281,17 @@ impl<const N: usize, const EXTRAS: bool, const L: usize> Rhs for ModelRhs<'_, N,
         if tau == 0.0 {
             self.at_start[lane] = out;
         }
+    }
+
+    #[inline(always)]
+    fn admissible(&self, lane: usize, y: &[f64]) -> bool {
+        !self.models[lane].is_diverged(y, self.bound[lane])
+    }
+
+    #[inline(always)]
+    fn jacobian(&mut self, lane: usize, tau: f64, y: &[f64], jac: &mut [f64], dfdt: &mut [f64]) {
+        let (v0, s) = (self.v0[lane], self.slope[lane]);
+        self.models[lane].jacobian(v0 + s * tau, s, y, jac, dfdt);
     }
 }
 
@@ -288,16 +315,17 @@ where
 {
     let m = tasks.len();
     let lane = |i: usize| i.min(m - 1); // idle lanes point at a real model
+    let slack = stepper.bound_slack();
+    let bound: [f64; L] = std::array::from_fn(|i| {
+        tasks[lane(i)].model.presliding_bound() * (1.0 + slack) + 1e-12
+    });
     let mut rhs: ModelRhs<N, EXTRAS, L> = ModelRhs {
         models: std::array::from_fn(|i| tasks[lane(i)].model),
         v0: [0.0; L],
         slope: [0.0; L],
         at_start: [(0.0, 0.0); L],
+        bound,
     };
-    let slack = stepper.bound_slack();
-    let bound: [f64; L] = std::array::from_fn(|i| {
-        tasks[lane(i)].model.presliding_bound() * (1.0 + slack) + 1e-12
-    });
     let mut active = [false; L];
     let mut t = [0.0; L];
     let mut end = [0.0; L];
@@ -403,8 +431,8 @@ where
     )
 }
 
-/// Dormand-Prince options for a task: error scales from the model and the input's peak.
-fn dopri5_options(task: &Task, rtol: f64, atol: f64, first_step: f64) -> Dopri5Options {
+/// Adaptive options for a task: error scales from the model and the input's peak.
+fn adaptive_options(task: &Task, rtol: f64, atol: f64, first_step: f64) -> Dopri5Options {
     let v_max = task.wave.values().iter().fold(0.0f64, |a, v| a.max(v.abs()));
     Dopri5Options {
         rtol,
@@ -430,7 +458,7 @@ pub fn run_tasks<O: Observer, const L: usize>(
         return Some(out);
     }
     macro_rules! group {
-        ($s:ty, $n:literal, $extras:literal, $l:expr, $zero:expr, $chunk:expr, $first:expr) => {{
+        ($s:ty, $n:literal, $d:literal, $extras:literal, $l:expr, $zero:expr, $chunk:expr, $first:expr) => {{
             let chunk: &[Task] = $chunk;
             let mut ys: [$s; $l] = std::array::from_fn(|i| {
                 let mut y: $s = $zero;
@@ -448,9 +476,20 @@ pub fn run_tasks<O: Observer, const L: usize>(
                     first_step,
                 } => {
                     let opts = std::array::from_fn(|i| {
-                        dopri5_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step)
+                        adaptive_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step)
                     });
                     let mut st: Dopri5<$s, $l> = Dopri5::new(opts, $zero);
+                    drive_lanes::<$s, _, O, $n, $extras, $l>(chunk, $first, 0.0, &mut st, &mut ys, observer, cancel)?
+                }
+                Method::Rodas4 {
+                    rtol,
+                    atol,
+                    first_step,
+                } => {
+                    let opts = std::array::from_fn(|i| {
+                        adaptive_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step)
+                    });
+                    let mut st: Rodas4<$s, $l, $d> = Rodas4::new(opts, $zero);
                     drive_lanes::<$s, _, O, $n, $extras, $l>(chunk, $first, 0.0, &mut st, &mut ys, observer, cancel)?
                 }
             };
@@ -462,7 +501,7 @@ pub fn run_tasks<O: Observer, const L: usize>(
     macro_rules! fixed {
         ($n:literal, $d:literal) => {{
             for (c, chunk) in tasks.chunks(L).enumerate() {
-                group!([f64; $d], $n, false, L, [0.0; $d], chunk, c * L);
+                group!([f64; $d], $n, $d, false, L, [0.0; $d], chunk, c * L);
             }
         }};
     }
@@ -470,7 +509,7 @@ pub fn run_tasks<O: Observer, const L: usize>(
     let dim = tasks[0].model.layout.dim;
     with_state_size!(plain, tasks[0].model.layout.dof, fixed, {
         for (c, task) in tasks.iter().enumerate() {
-            group!(Vec<f64>, 0, true, 1, vec![0.0; dim], std::slice::from_ref(task), c);
+            group!(Vec<f64>, 0, 0, true, 1, vec![0.0; dim], std::slice::from_ref(task), c);
         }
     });
     Some(out)

@@ -16,6 +16,7 @@ pub mod params;
 pub mod piezo;
 pub mod rig;
 pub mod rk4;
+pub mod rodas4;
 pub mod simulate;
 pub mod stepper;
 pub mod waveform;

@@ -219,6 +219,48 @@ mod tests {
     }
 
     #[test]
+    fn rodas4_agrees_with_rk4_to_a_nanometre_in_far_fewer_steps() {
+        let lag = Effects {
+            tau_amp: 1e-5,
+            tau_sensor: 2e-5,
+            k_ground: 500.0,
+            ..Default::default()
+        };
+        let ro = Method::Rodas4 {
+            rtol: 1e-6,
+            atol: 1e-6,
+            first_step: 1e-8,
+        };
+        for (structure, effects) in [
+            (Structure::Lps, Effects::default()),
+            (Structure::Dps(4), Effects::default()),
+            (Structure::Lps, lag),
+        ] {
+            let (m, w) = paper(structure, effects);
+            let rk4 = simulate(&m, &w, 0.0, 10e-3, &m.rest_state(), &Method::Rk4 { dt: 1e-8 }, 1000).unwrap();
+            let d = simulate(&m, &w, 0.0, 10e-3, &m.rest_state(), &ro, 1).unwrap();
+            assert!((d.final_state[0] - rk4.final_state[0]).abs() < 1e-9, "{structure:?}");
+            assert!(d.t.len() < 1_000_000 / 100, "{} steps", d.t.len());
+        }
+    }
+
+    #[test]
+    fn rodas4_takes_steps_set_by_accuracy_where_friction_is_stiff() {
+        // a light weight at a high voltage: long sliding phases where the presliding state is
+        // stiff; the explicit method is held at its stability limit there, Rodas4 is not
+        let mut p = Params::paper();
+        p.m2 = 0.25 * p.m1;
+        p.normal_force = p.default_normal_force();
+        let m = Model::new(p, Effects::default(), Structure::Lps, true, false).unwrap();
+        let w = PiecewiseLinear::triangle(98.0, 0.5e-3, 9.5e-3, 0.0).unwrap();
+        let steps = |method: Method| simulate(&m, &w, 0.0, 10e-3, &m.rest_state(), &method, 1).unwrap().t.len() - 1;
+        let (tol, h) = (1e-6, 1e-8);
+        let ro = steps(Method::Rodas4 { rtol: tol, atol: tol, first_step: h });
+        let dp = steps(Method::Dopri5 { rtol: tol, atol: tol, first_step: h });
+        assert!(3 * ro < dp, "rodas4 {ro} steps, dopri5 {dp}");
+    }
+
+    #[test]
     fn bad_initial_states_and_spans_are_refused_by_name() {
         let (m, w) = paper(Structure::Lps, Effects::default());
         let rk4 = Method::Rk4 { dt: 1e-8 };

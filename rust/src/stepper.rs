@@ -14,6 +14,37 @@ impl<S: AsRef<[f64]> + AsMut<[f64]> + Clone> State for S {}
 /// implementations can be `#[inline(always)]`; closures implement it too.
 pub trait Rhs {
     fn eval(&mut self, lane: usize, tau: f64, y: &[f64], dy: &mut [f64]);
+
+    /// Whether `y` lies in the system's domain (for the model: |Fh| within its bound). Adaptive
+    /// implicit steps reject a step that leaves it. Default: everywhere.
+    fn admissible(&self, _lane: usize, _y: &[f64]) -> bool {
+        true
+    }
+
+    /// The Jacobian df/dy (row-major, `y.len()` squared) and df/dt at offset `tau`, for
+    /// implicit integrators. By default central differences (for tests and toy systems with
+    /// states and times of order one; the model overrides this with its analytic Jacobian).
+    fn jacobian(&mut self, lane: usize, tau: f64, y: &[f64], jac: &mut [f64], dfdt: &mut [f64]) {
+        let d = y.len();
+        let (mut yp, mut fp, mut fm) = (y.to_vec(), vec![0.0; d], vec![0.0; d]);
+        for c in 0..d {
+            let h = 1e-7 * y[c].abs().max(1e-7);
+            yp[c] = y[c] + h;
+            self.eval(lane, tau, &yp, &mut fp);
+            yp[c] = y[c] - h;
+            self.eval(lane, tau, &yp, &mut fm);
+            yp[c] = y[c];
+            for r in 0..d {
+                jac[r * d + c] = (fp[r] - fm[r]) / (2.0 * h);
+            }
+        }
+        let h = 1e-6 * (1.0 + tau.abs());
+        self.eval(lane, tau + h, y, &mut fp);
+        self.eval(lane, tau - h, y, &mut fm);
+        for r in 0..d {
+            dfdt[r] = (fp[r] - fm[r]) / (2.0 * h);
+        }
+    }
 }
 
 impl<F: FnMut(usize, f64, &[f64], &mut [f64])> Rhs for F {

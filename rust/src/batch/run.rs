@@ -48,7 +48,7 @@ fn prepare<'a>(cfg: &BatchConfig, index: usize, spec: &'a PointSpec) -> Result<R
     check_task(&task, &cfg.method).map_err(|e| e.to_string())?;
     let steps = match cfg.method {
         Method::Rk4 { dt } => ((t_end - t_start) / dt).round() as usize,
-        Method::Dopri5 { .. } => 0,
+        Method::Dopri5 { .. } | Method::Rodas4 { .. } => 0,
     };
     Ok(Ready {
         index,
@@ -89,7 +89,9 @@ fn run_group(
                     let (duration, dt_used) = match *method {
                         // the planned duration, as a whole number of steps
                         Method::Rk4 { dt } => (steps as f64 * dt, dt),
-                        Method::Dopri5 { .. } => (tasks[i].t_end - tasks[i].t_start, min_step),
+                        Method::Dopri5 { .. } | Method::Rodas4 { .. } => {
+                            (tasks[i].t_end - tasks[i].t_start, min_step)
+                        }
                     };
                     Ok(PointOutput {
                         metrics: obs.finish(i, &y, duration, group[i].spec.cycles, dt_used, steps),
@@ -111,7 +113,7 @@ fn retry(cfg: &BatchConfig, ready: &Ready, first_failure: f64, cancel: &AtomicBo
     let mut failed_at = first_failure;
     let first_step = match method {
         Method::Rk4 { dt } => dt,
-        Method::Dopri5 { first_step, .. } => first_step,
+        Method::Dopri5 { first_step, .. } | Method::Rodas4 { first_step, .. } => first_step,
     };
     let mut dt_tried = first_step;
     if let Method::Rk4 { dt } = cfg.method {
