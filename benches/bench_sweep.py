@@ -17,8 +17,8 @@ error against the reference, and idm-rs's parallel efficiency (time on 1 thread 
 Each timing is end to end (setup, the batch, the xarray Dataset); a run under 15 s is repeated
 (``--repeats``, best kept). numba's kernel is compiled (or loaded from its cache) before timing.
 
-    python benches/bench_sweep.py [--threads 2] [--repeats 3] [--json PATH]
-    python benches/bench_sweep.py --million [--size 1000] [--method dopri5 --tol 1e-7] [--json PATH]
+    python benches/bench_sweep.py [--threads 2] [--repeats 3] [--models lps,dps] [--json PATH]
+    python benches/bench_sweep.py --million [--size 1000] [--method auto] [--json PATH]
 
 ``--million`` runs only the large LPS sweep (``--size`` x ``--size`` points of m2/m1 x V over
 the same ranges; 1000 x 1000 by default) with the chosen idm-rs method, and records its wall
@@ -53,8 +53,9 @@ RISE, FALL = 0.5e-3, 9.5e-3  # s
 REF_DT = 1e-8  # s
 RK4_DT = 5e-8  # s
 DIVERGE_DT = 1e-7  # s
-TOLS = (1e-6, 1e-7)  # dopri5 rtol = atol
-CACHE = HERE / ".cache" / "ref_1e-8.npz"
+#: idm-rs adaptive settings timed on the 256-point grid: (method, rtol = atol)
+ADAPTIVE_CASES = (("dopri5", 1e-6), ("dopri5", 3e-7), ("rodas4", 1e-5), ("rodas4", 3e-6), ("auto", None))
+CACHE_DIR = HERE / ".cache"
 TARGET_ERR = 1e-9  # m
 LSODA_SAMPLE = ((0, 15), (3, 12), (8, 8), (15, 0))  # (mass_ratio index, voltage index)
 
@@ -68,12 +69,14 @@ def load_average() -> tuple[float, float, float]:
 
 
 def run_idm_rs(g, *, method: str, dt: float, tol: float = 1e-7, threads: int, retries: int = 2,
-               progress: bool = False):
-    """One idm-rs sweep of grid ``g``; returns (wall time [s], Dataset)."""
+               progress: bool = False, model: str = "lps"):
+    """One idm-rs sweep of grid ``g`` (``model`` "lps" or "dps" with n = 4); returns (wall time [s],
+    Dataset). ``dt`` is RK4's step; the adaptive methods start at 1e-8 s."""
     t0 = time.perf_counter()
+    step = dict(dt=dt) if method == "rk4" else dict(first_step=1e-8)
     ds = idm_rs.sweep(
-        idm_rs.Params(), idm_rs.Triangle(80.0, RISE, FALL), g, t_end=T_END, dt=dt, model="lps",
-        method=method, rtol=tol, atol=tol, retries=retries, threads=threads, progress=progress,
+        idm_rs.Params(), idm_rs.Triangle(80.0, RISE, FALL), g, t_end=T_END, model=model, n_elements=4,
+        method=method, rtol=tol, atol=tol, retries=retries, threads=threads, progress=progress, **step,
     )
     return time.perf_counter() - t0, ds
 
@@ -104,23 +107,24 @@ def grid_points(g):
     return points, bps
 
 
-def reference(g, threads: int) -> np.ndarray:
-    """x1(10 ms) [m] of every point, idm-rs RK4 at dt = 1e-8 s (cached)."""
+def reference(g, threads: int, model: str = "lps") -> np.ndarray:
+    """x1(10 ms) [m] of every point, idm-rs RK4 at dt = 1e-8 s (cached per model)."""
     key = np.concatenate([g["mass_ratio"], g["voltage"], [T_END, REF_DT]])
-    if CACHE.exists():
-        with np.load(CACHE) as z:
+    cache = CACHE_DIR / ("ref_1e-8.npz" if model == "lps" else f"ref_{model}4_1e-8.npz")
+    if cache.exists():
+        with np.load(cache) as z:
             if z["key"].shape == key.shape and np.array_equal(z["key"], key) and str(z["version"]) == idm_rs.__version__:
-                print(f"reference: {CACHE} (idm-rs RK4, dt = {REF_DT:g} s)")
+                print(f"reference: {cache} (idm-rs RK4, dt = {REF_DT:g} s)")
                 return z["final_position"]
     print(f"reference: computing idm-rs RK4 at dt = {REF_DT:g} s on {g['mass_ratio'].size * g['voltage'].size} points "
-          f"(once; cached to {CACHE})", flush=True)
-    wall, ds = run_idm_rs(g, method="rk4", dt=REF_DT, threads=threads, retries=3, progress=True)
+          f"(once; cached to {cache})", flush=True)
+    wall, ds = run_idm_rs(g, method="rk4", dt=REF_DT, threads=threads, retries=3, progress=True, model=model)
     status = ds["status"].values
     if not np.all((status == 1) | (status == 2)):
         raise RuntimeError(f"reference: {int(np.sum(status == 3))} points diverged even at dt = {REF_DT:g} s")
     x = ds["final_position"].values.ravel()
-    CACHE.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(CACHE, key=key, final_position=x, status=status.ravel(), dt_used=ds["dt_used"].values.ravel(),
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(cache, key=key, final_position=x, status=status.ravel(), dt_used=ds["dt_used"].values.ravel(),
              version=idm_rs.__version__, wall_time_s=wall)
     print(f"reference: {wall:.1f} s, statuses {np.bincount(status.ravel(), minlength=4).tolist()}")
     return x
@@ -184,7 +188,9 @@ def _numba_ivp_rhs():
 # --- the benchmark -------------------------------------------------------------------------------
 
 
-def bench_256(a) -> dict:
+def bench_256(a, model: str = "lps") -> dict:
+    """The 256-point grid with ``model`` ("lps", or "dps" with n = 4); the LSODA sample and the
+    divergence count only for the LPS."""
     import numba
 
     import numba_baseline as nb
@@ -192,7 +198,7 @@ def bench_256(a) -> dict:
     numba.set_num_threads(a.threads)
     g = grid(16)
     n = g["mass_ratio"].size * g["voltage"].size
-    ref = reference(g, a.threads)
+    ref = reference(g, a.threads, model)
     points, bps = grid_points(g)
     rows = []
 
@@ -206,7 +212,7 @@ def bench_256(a) -> dict:
     def numba_run(dt):
         def fn():
             t0 = time.perf_counter()
-            x = nb.sweep_x1(points, bps, "lps", t_end=T_END, dt=dt)
+            x = nb.sweep_x1(points, bps, model, t_end=T_END, dt=dt)
             return time.perf_counter() - t0, x
         return fn
 
@@ -218,12 +224,19 @@ def bench_256(a) -> dict:
                      diverged=int(np.sum(~np.isfinite(x_nb)))))
 
     idm_cases = [("idm-rs rk4", "rk4", RK4_DT, 1e-7, f"dt = {RK4_DT:g} s")]
-    idm_cases += [("idm-rs dopri5", "dopri5", RK4_DT, tol, f"rtol = atol = {tol:g}") for tol in TOLS]
+    for method, tol in ADAPTIVE_CASES:
+        if method == "auto":
+            m, t, _ = idm_rs.methods.AUTO
+            idm_cases.append(("idm-rs auto", "auto", RK4_DT, t, f"= {m} {t:g}"))
+        else:
+            idm_cases.append((f"idm-rs {method}", method, RK4_DT, tol, f"rtol = atol = {tol:g}"))
     for label, method, dt, tol, setting in idm_cases:
         print(f"{label} ({setting}), {a.threads} threads ...", flush=True)
-        wall, ds, walls = best_time(lambda: run_idm_rs(g, method=method, dt=dt, tol=tol, threads=a.threads), a.repeats)
+        wall, ds, walls = best_time(
+            lambda: run_idm_rs(g, method=method, dt=dt, tol=tol, threads=a.threads, model=model), a.repeats)
         print(f"{label} ({setting}), 1 thread ...", flush=True)
-        wall1, ds1, walls1 = best_time(lambda: run_idm_rs(g, method=method, dt=dt, tol=tol, threads=1), a.repeats)
+        wall1, ds1, walls1 = best_time(
+            lambda: run_idm_rs(g, method=method, dt=dt, tol=tol, threads=1, model=model), a.repeats)
         same = all(ds[v].values.tobytes() == ds1[v].values.tobytes() for v in ds.data_vars)
         st = ds["status"].values.ravel()
         rows.append(dict(
@@ -233,7 +246,12 @@ def bench_256(a) -> dict:
             parallel_efficiency=wall1 / wall / a.threads, bitwise_same_1_vs_n_threads=same,
             statuses=np.bincount(st, minlength=5).tolist(),
             mean_steps=float(ds["steps"].values.mean()),
+            points_over_1nm=int(np.sum(np.abs(ds["final_position"].values.ravel() - ref) > TARGET_ERR)),
         ))
+    if model != "lps":
+        for r in rows:
+            r["vs_numba"] = r["points_per_s"] / numba_rate
+        return dict(model=model, rows=rows, divergence=None, numba_points_per_s=numba_rate)
 
     # scipy LSODA on a sample
     sample = [i * g["voltage"].size + j for i, j in LSODA_SAMPLE]
@@ -274,21 +292,25 @@ def bench_256(a) -> dict:
         idm_rs_retries2_max_err_m=err(ds2["final_position"].values),
         diverged_points=[[float(g["mass_ratio"][k // 16]), float(g["voltage"][k % 16])] for k in np.flatnonzero(st0 == 3)],
     )
-    return dict(rows=rows, divergence=divergence, numba_points_per_s=numba_rate)
+    return dict(model=model, rows=rows, divergence=divergence, numba_points_per_s=numba_rate)
 
 
 def print_256(res: dict, threads: int) -> None:
     rows = res["rows"]
+    name = "LPS" if res["model"] == "lps" else "DPS (n = 4)"
     print()
-    print(f"256-point LPS sweep (m2/m1 x V, 16 x 16), paper case 10 ms, {threads} threads; error vs idm-rs RK4 dt = 1e-8 s")
-    head = (f"{'method':<26}{'setting':<22}{'wall [s]':>9}{'points/s':>10}{'vs numba':>10}"
-            f"{'max|dx1| [m]':>14}{'par. eff.':>10}")
+    print(f"256-point {name} sweep (m2/m1 x V, 16 x 16), paper case 10 ms, {threads} threads; "
+          "error vs idm-rs RK4 dt = 1e-8 s")
+    head = (f"{'method':<26}{'setting':<22}{'wall [s]':>9}{'points/s':>10}{'vs numba':>10}{'steps/pt':>10}"
+            f"{'max|dx1| [m]':>14}{'> 1 nm':>8}{'par. eff.':>10}")
     print(head)
     print("-" * len(head))
     for r in rows:
         eff = f"{r['parallel_efficiency'] * 100:.0f} %" if "parallel_efficiency" in r else "-"
+        steps = f"{r['mean_steps']:.0f}" if "mean_steps" in r else "-"
+        over = str(r["points_over_1nm"]) if "points_over_1nm" in r else "-"
         print(f"{r['method']:<26}{r['setting']:<22}{r['wall_s']:>9.2f}{r['points_per_s']:>10.1f}{r['vs_numba']:>10.2f}"
-              f"{r['max_err_m']:>14.2e}{eff:>10}")
+              f"{steps:>10}{r['max_err_m']:>14.2e}{over:>8}{eff:>10}")
     for r in rows:
         if "LSODA" in r["method"]:
             print(f"  LSODA: {r['s_per_point']:.3f} s per point, one thread (mean over {r['points']} points "
@@ -299,6 +321,8 @@ def print_256(res: dict, threads: int) -> None:
                   f"{r['mean_steps']:.0f}; statuses {r['statuses']}; 1 vs {threads} threads bitwise equal: "
                   f"{r['bitwise_same_1_vs_n_threads']}")
     d = res["divergence"]
+    if d is None:
+        return
     print(f"RK4 at dt = {d['dt_s']:g} s on {d['points']} points:")
     print(f"  numba: NaN/inf on {d['numba_diverged']}; NaN/inf or > 1 nm off the reference on "
           f"{d['numba_diverged_or_off_by_1nm']} (largest finite error {d['numba_max_err_finite_m']:.2e} m)")
@@ -312,12 +336,14 @@ def bench_million(a) -> dict:
     g = grid(a.size)
     n = a.size * a.size
     print(f"{n} points ({a.size} x {a.size}), idm-rs {a.method}"
-          + (f" rtol = atol = {a.tol:g}" if a.method == "dopri5" else f" dt = {a.dt:g} s") + f", {a.threads} threads",
+          + (f" dt = {a.dt:g} s" if a.method == "rk4" else f" rtol = atol = {a.tol:g}" if a.method != "auto"
+             else f" = {idm_rs.methods.AUTO}") + f", {a.threads} threads",
           flush=True)
     wall, ds = run_idm_rs(g, method=a.method, dt=a.dt, tol=a.tol, threads=a.threads, progress=not a.no_progress)
     maxrss_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB on Linux
     st = ds["status"].values.ravel()
-    out = dict(points=n, size=a.size, method=a.method, tol=a.tol if a.method == "dopri5" else None,
+    out = dict(points=n, size=a.size, method=a.method, resolved=ds.attrs["method"],
+               tol=ds.attrs["rtol"] if a.method != "rk4" else None,
                dt_s=a.dt, threads=a.threads, wall_s=wall, points_per_s=n / wall,
                peak_rss_mib=maxrss_kib / 1024, statuses=np.bincount(st, minlength=5).tolist(),
                complete=int(ds.attrs["complete"]), mean_steps=float(ds["steps"].values.mean()))
@@ -340,9 +366,10 @@ def main(argv=None) -> int:
     ap.add_argument("--json", metavar="PATH", help="also write the numbers to this JSON file")
     ap.add_argument("--million", action="store_true", help="run only the large sweep (see --size)")
     ap.add_argument("--size", type=int, default=1000, help="--million: grid of SIZE x SIZE points (default 1000)")
-    ap.add_argument("--method", choices=("rk4", "dopri5"), default="dopri5", help="--million: idm-rs method")
-    ap.add_argument("--tol", type=float, default=1e-7, help="--million: dopri5 rtol = atol (default 1e-7)")
-    ap.add_argument("--dt", type=float, default=RK4_DT, help="--million: rk4 step, dopri5 first step [s]")
+    ap.add_argument("--models", default="lps,dps", help="256-point grid: lps, dps or both (default: lps,dps)")
+    ap.add_argument("--method", choices=idm_rs.methods.METHODS, default="auto", help="--million: idm-rs method")
+    ap.add_argument("--tol", type=float, default=1e-7, help="--million: adaptive rtol = atol (default 1e-7)")
+    ap.add_argument("--dt", type=float, default=RK4_DT, help="--million: rk4 step [s]")
     ap.add_argument("--save", metavar="FILE.nc", help="--million: save the sweep as netCDF")
     ap.add_argument("--no-progress", action="store_true", help="--million: no progress bar")
     a = ap.parse_args(argv)
@@ -351,9 +378,12 @@ def main(argv=None) -> int:
     print(f"load average before: {load_before[0]:.2f} {load_before[1]:.2f} {load_before[2]:.2f} "
           f"({os.cpu_count()} CPUs)")
     t0 = time.perf_counter()
-    res = bench_million(a) if a.million else bench_256(a)
-    if not a.million:
-        print_256(res, a.threads)
+    if a.million:
+        res = bench_million(a)
+    else:
+        res = {m: bench_256(a, m) for m in a.models.split(",")}
+        for r in res.values():
+            print_256(r, a.threads)
     load_after = load_average()
     print(f"load average after: {load_after[0]:.2f} {load_after[1]:.2f} {load_after[2]:.2f}; "
           f"benchmark took {time.perf_counter() - t0:.0f} s")

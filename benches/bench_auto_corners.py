@@ -1,0 +1,59 @@
+"""Where ``method="auto"``'s setting comes from: the error of each adaptive candidate against RK4
+at dt = 1e-8 s in the four corners of the benchmark grid (m2/m1 in 0.25-2 x V in 40-120 V), where
+the dynamics are hardest (a light weight at high voltage slides longest; a heavy one at low
+voltage barely moves). Each corner is a 12 x 12 grid; paper case, 10 ms.
+
+    python benches/bench_auto_corners.py [--models lps,dps] [--json PATH]
+
+Prints, per model, corner and candidate: the largest |x1 - x1_RK4| [m], the number of points
+beyond 1 nm, and the median steps per point. (Together with the 16 x 16 grid of
+``bench_sweep.py``, this is the measurement ``idm_rs.methods.AUTO`` follows.)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+import idm_rs
+
+CORNERS = {
+    "light weight, high voltage": ((0.25, 0.40), (105.0, 120.0)),
+    "heavy weight, low voltage": ((1.8, 2.0), (40.0, 55.0)),
+    "light weight, low voltage": ((0.25, 0.40), (40.0, 55.0)),
+    "heavy weight, high voltage": ((1.8, 2.0), (105.0, 120.0)),
+}
+CANDIDATES = (("dopri5", 1e-6), ("dopri5", 3e-7), ("dopri5", 1e-7), ("rodas4", 1e-5), ("rodas4", 3e-6))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--models", default="lps,dps")
+    ap.add_argument("--size", type=int, default=12, help="points per corner axis (default 12)")
+    ap.add_argument("--json", metavar="PATH")
+    a = ap.parse_args(argv)
+    p, w = idm_rs.Params(), idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
+    out = []
+    for model in a.models.split(","):
+        kw = dict(t_end=10e-3, model=model, n_elements=4, progress=False, threads=2)
+        for name, ((m0, m1), (v0, v1)) in CORNERS.items():
+            g = {"mass_ratio": np.linspace(m0, m1, a.size), "voltage": np.linspace(v0, v1, a.size)}
+            ref = idm_rs.sweep(p, w, g, dt=1e-8, **kw)["final_position"].values
+            for method, tol in CANDIDATES:
+                ds = idm_rs.sweep(p, w, g, method=method, rtol=tol, atol=tol, **kw)
+                e = np.abs(ds["final_position"].values - ref)
+                row = dict(model=model, corner=name, method=method, tol=tol, max_err_m=float(e.max()),
+                           points_over_1nm=int((e > 1e-9).sum()), median_steps=float(np.median(ds.steps.values)))
+                out.append(row)
+                print(f"{model} | {name} | {method} {tol:g}: max |dx1| {e.max():.2e} m, > 1 nm: "
+                      f"{row['points_over_1nm']}, median steps {row['median_steps']:.0f}", flush=True)
+    if a.json:
+        Path(a.json).write_text(json.dumps(out, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
