@@ -43,6 +43,7 @@ class RunConfig:
         threads: int = 1,
         record_every: int = 0,
         final_states: bool = False,
+        skip_cycles: int = 1,
         rig_drive: str = "position",
         rig_stiffness: float = 0.0,
         rig_damping: float = 0.0,
@@ -87,6 +88,9 @@ class RunConfig:
     def final_states(self) -> bool:
         """Batch: return each point's final state."""
     @property
+    def skip_cycles(self) -> int:
+        """Batch: start-up cycles of a sawtooth train left out of the steady-state metrics."""
+    @property
     def rig_drive(self) -> str:
         """Model "rig": "position" (a spring to a moving end, the input in m) or "force" (the
         input is the force on the body [N])."""
@@ -112,9 +116,12 @@ class BatchRun:
     def result(self) -> dict[str, Any]:
         """Join and return the outputs, one entry per point (NaN / status 0 for points not run):
         ``final_position`` [m], ``step_per_cycle`` [m], ``peak_velocity`` [m/s],
-        ``peak_friction`` [N], ``slip_fraction`` [-], ``diverged_at`` [s], ``dt_used`` [s]
-        (float64 arrays); ``steps`` (uint64); ``status`` (uint8: 0 not run, 1 ok, 2 retried at a
-        smaller dt, 3 diverged, 4 invalid point); ``traces`` (a list of float64 arrays, the
+        ``peak_friction`` [N], ``slip_fraction`` [-], the steady-state metrics of sawtooth trains
+        (``mean_velocity`` [m/s], ``step_mean``, ``step_std``, ``backslip`` [m],
+        ``backslip_ratio`` [-], ``direction`` (+1, -1, 0 stalled); NaN for other inputs),
+        ``diverged_at`` [s], ``dt_used`` [s] (float64 arrays); ``steps`` (uint64); ``status`` (uint8: 0 not run, 1 ok, 2 retried at a
+        smaller dt, 3 diverged, 4 invalid point); ``reasons`` (a list of str: why each point's
+        status is not ok, empty where it is); ``traces`` (a list of float64 arrays, the
         sensor reading [m]) when readings were recorded; ``final_states`` (a list of arrays, one per
         point, empty where it did not finish) when the config asked for them. A second call
         raises RuntimeError."""

@@ -158,13 +158,14 @@ class Tables:
 
 def start(tables: Tables, structure: Structure, *, t_end: float, method: str = "rk4", dt: float = 1e-8,
           rtol: float = 1e-7, atol: float = 1e-7, first_step: Optional[float] = None, retries: int = 2,
-          threads: Optional[int] = None, record_every: int = 0, final_states: bool = False) -> Any:
+          threads: Optional[int] = None, record_every: int = 0, final_states: bool = False,
+          skip_cycles: int = 1) -> Any:
     """Start the batch on a background thread; returns an ``engine.BatchRun`` (``progress()``,
     ``wait(timeout)``, ``cancel()``, ``result()``). Settings as in :func:`run`."""
     config = structure.config(method=method, dt=float(dt), rtol=float(rtol), atol=float(atol),
                               first_step=None if first_step is None else float(first_step), retries=int(retries),
                               threads=int(threads or os.cpu_count() or 1), record_every=int(record_every),
-                              final_states=bool(final_states))
+                              final_states=bool(final_states), skip_cycles=int(skip_cycles))
     t_ends = tables.t_ends
     if t_ends is not None:
         t_ends = np.where(np.isnan(t_ends), float(t_end), t_ends)
@@ -176,14 +177,17 @@ def start(tables: Tables, structure: Structure, *, t_end: float, method: str = "
 def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: float, **how: Any) -> dict[str, Any]:
     """Run a batch to the end and return its outputs: metric arrays (``final_position`` [m],
     ``step_per_cycle`` [m], ``peak_velocity`` [m/s], ``peak_friction`` [N], ``slip_fraction``,
-    ``status``, ``diverged_at`` [s], ``dt_used`` [s], ``steps``), ``traces`` (sensor readings
+    the steady-state metrics of sawtooth trains ``mean_velocity`` [m/s], ``step_mean``,
+    ``step_std``, ``backslip`` [m], ``backslip_ratio``, ``direction``, then ``status``,
+    ``diverged_at`` [s], ``dt_used`` [s], ``steps``), ``traces`` (sensor readings
     [m] every ``record_every`` RK4 steps from the start, one array per point) and
     ``final_states`` when asked: (points x state), NaN rows where a point did not finish, or a
     list of arrays when points differ in their state layout (different effect states).
 
-    ``how``: ``method`` ("rk4" or "dopri5"), ``dt`` [s] (RK4 step), ``rtol``/``atol`` and
-    ``first_step`` [s] (dopri5), ``retries`` (RK4 retries at dt/2, dt/4 of a diverging point),
-    ``threads``, ``record_every``, ``final_states``."""
+    ``how``: ``method`` ("rk4", "dopri5" or "rodas4"), ``dt`` [s] (RK4 step), ``rtol``/``atol``
+    and ``first_step`` [s] (adaptive), ``retries`` (RK4 retries at dt/2, dt/4 of a diverging
+    point), ``threads``, ``record_every``, ``final_states``, ``skip_cycles`` (start-up cycles
+    left out of the steady-state metrics, default 1)."""
     tables = points if isinstance(points, Tables) else Tables.from_points(points)
     handle = start(tables, structure, t_end=t_end, **how)
     try:

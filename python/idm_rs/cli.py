@@ -10,6 +10,7 @@ diverges) print one ``error: ...`` line to stderr and exit with status 2.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -19,10 +20,11 @@ import numpy as np
 
 from . import __version__
 from .methods import METHODS
+from .effects import Effects
 from .params import Params
 from .simulation import DivergenceError, SimulationResult, simulate
 from .sweep import METRICS
-from .waveforms import Sawtooth, Triangle, Waveform
+from .waveforms import Sampled, Sawtooth, Triangle, Waveform
 
 if TYPE_CHECKING:
     import xarray
@@ -103,6 +105,41 @@ def build_parser() -> argparse.ArgumentParser:
                     help="save the trajectory: FILE.csv (columns " + ", ".join(CSV_COLUMNS) + "; SI units) "
                          "or FILE.nc (netCDF, every variable)")
     sp.add_argument("--plot", default=None, metavar="FILE.png", help="plot voltage, x1, x2 and friction")
+
+    ch = sub.add_parser(
+        "characterize",
+        help="the actuator's characteristic curves: velocity vs frequency, step and back-slip vs voltage, "
+             "velocity vs load and the stall force",
+        description=(
+            "Drive the design with sawtooth trains and write the standard characteristics into DIR: "
+            "velocity_vs_frequency.png (one curve per voltage), step_backslip_vs_voltage.png, "
+            "velocity_vs_load.png (stall force marked) and characteristics.nc (every number, with units). "
+            "Steady state = the cycles after --skip-cycles start-up cycles. Defaults suit the paper's device."
+        ),
+    )
+    ch.add_argument("--out", default="idm-rs-characteristics", metavar="DIR", help="output folder (default: %(default)s)")
+    ch.add_argument("--model", choices=("lps", "dps"), default="dps", help="lumped or FEM model (default: dps)")
+    ch.add_argument("--n-elements", type=_positive_int, default=4, metavar="N", help="FEM elements of the DPS (default: 4)")
+    ch.add_argument("--frequencies", default=None, metavar="SPEC",
+                    help="drive frequencies [Hz]: A:B:N (log-spaced) or F1,F2,... (default: 12 from 20 Hz to 0.9/(2 rise), "
+                         "at most 1.5 kHz)")
+    ch.add_argument("--voltages", default="40,60,80,100,120", metavar="V1,V2,...",
+                    help="amplitudes of the velocity curves [V] (default: %(default)s)")
+    ch.add_argument("--step-voltages", default="20:120:11", metavar="SPEC",
+                    help="amplitudes of the step/back-slip curve [V]: A:B:N (linear) or V1,V2,... (default: %(default)s)")
+    ch.add_argument("--frequency", type=_positive_float, default=100.0, metavar="HZ",
+                    help="design frequency of the step and load curves (default: 100)")
+    ch.add_argument("--voltage", type=float, default=80.0, metavar="V", help="design amplitude of the load curve (default: 80)")
+    ch.add_argument("--rise", type=_positive_float, default=0.5e-3, metavar="S", help="fast-edge time [s] (default: 5e-4)")
+    ch.add_argument("--cycles", type=_positive_int, default=6, metavar="N", help="periods per run (default: 6)")
+    ch.add_argument("--skip-cycles", type=int, default=2, metavar="K", help="start-up cycles left out (default: 2)")
+    ch.add_argument("--loads", type=_positive_int, default=9, metavar="N",
+                    help="points of the coarse load curve, 0 to 1.5 mu_s Fn (default: 9)")
+    ch.add_argument("--method", choices=METHODS, default="auto", help="integration method (default: auto)")
+    ch.add_argument("--param", action="extend", nargs="+", default=[], metavar="NAME=VALUE",
+                    help="override a parameter (SI units), e.g. --param m2=0.4")
+    ch.add_argument("--threads", type=_positive_int, default=None, metavar="N", help="worker threads (default: all cores)")
+    ch.add_argument("--no-progress", action="store_true", help="no progress bars")
 
     sw = sub.add_parser(
         "sweep",
@@ -187,17 +224,23 @@ def _add_case_arguments(sp: argparse.ArgumentParser) -> None:
                     help="input voltage (default: triangle, the paper's single wave)")
     sp.add_argument("--amplitude", type=float, default=80.0, metavar="V", help="peak voltage [V] (default: 80)")
     sp.add_argument("--rise", type=_positive_float, default=0.5e-3, metavar="S", help="rise time [s] (default: 5e-4)")
-    sp.add_argument("--fall", type=_positive_float, default=9.5e-3, metavar="S",
+    sp.add_argument("--fall", type=_positive_float, default=None, metavar="S",
                     help="triangle: fall time [s] (default: 9.5e-3)")
-    sp.add_argument("--frequency", type=_positive_float, default=100.0, metavar="HZ",
+    sp.add_argument("--frequency", type=_positive_float, default=None, metavar="HZ",
                     help="sawtooth: frequency [Hz] (default: 100)")
-    sp.add_argument("--cycles", type=_positive_int, default=3, metavar="N", help="sawtooth: periods (default: 3)")
-    sp.add_argument("--direction", choices=("forward", "backward"), default="forward",
+    sp.add_argument("--cycles", type=_positive_int, default=None, metavar="N", help="sawtooth: periods (default: 3)")
+    sp.add_argument("--direction", choices=("forward", "backward"), default=None,
                     help="sawtooth: step direction (default: forward)")
     sp.add_argument("--delay", type=float, default=0.0, metavar="S", help="0 V before the wave [s] (default: 0)")
+    sp.add_argument("--voltage-csv", default=None, metavar="FILE",
+                    help="drive with a measured voltage instead: a CSV of time [s] and voltage [V] columns "
+                         "(a header line is skipped), piecewise linear between samples")
     sp.add_argument("--param", action="extend", nargs="+", default=[], metavar="NAME=VALUE",
                     help="override a parameter of Table 1 (SI units), e.g. --param m2=0.4 mu_k=0.45; "
                          "normal_force=auto restores (m1+m2+mPE) g")
+    sp.add_argument("--effect", action="extend", nargs="+", default=[], metavar="NAME=VALUE",
+                    help="switch on an effect parameter at a fixed value (SI units), e.g. --effect theta_rad=0.01; "
+                         "names: " + ", ".join(f.name for f in dataclasses.fields(Effects)))
     sp.add_argument("--no-hysteresis", action="store_true", help="turn off the piezo (Bouc-Wen) hysteresis")
 
 
@@ -227,12 +270,57 @@ def params_from_overrides(items: Sequence[str]) -> Params:
 
 
 def waveform_from_args(a: argparse.Namespace) -> Waveform:
+    """The input the options describe; an option that does not apply to it is refused."""
+    sawtooth_only = {"--frequency": a.frequency, "--cycles": a.cycles, "--direction": a.direction}
+    if a.voltage_csv is not None:
+        given = [k for k, v in {**sawtooth_only, "--fall": a.fall}.items() if v is not None]
+        if given or a.waveform != "triangle":
+            raise CliError(f"--voltage-csv gives the whole input; drop {', '.join(given) or '--waveform'}")
+        return sampled_from_csv(Path(a.voltage_csv))
     if a.waveform == "triangle":
-        return Triangle(amplitude=a.amplitude, rise=a.rise, fall=a.fall, delay=a.delay)
+        given = [k for k, v in sawtooth_only.items() if v is not None]
+        if given:
+            raise CliError(f"{', '.join(given)} {'applies' if len(given) == 1 else 'apply'} to "
+                           "--waveform sawtooth, not to the triangle")
+        return Triangle(amplitude=a.amplitude, rise=a.rise, fall=9.5e-3 if a.fall is None else a.fall,
+                        delay=a.delay)
+    if a.fall is not None:
+        raise CliError("--fall applies to the triangle; a sawtooth falls over the rest of its period")
     return Sawtooth(
-        amplitude=a.amplitude, frequency=a.frequency, cycles=a.cycles, rise=a.rise,
-        direction=a.direction, delay=a.delay,
+        amplitude=a.amplitude, frequency=100.0 if a.frequency is None else a.frequency,
+        cycles=3 if a.cycles is None else a.cycles, rise=a.rise,
+        direction=a.direction or "forward", delay=a.delay,
     )
+
+
+def sampled_from_csv(path: Path) -> Sampled:
+    """A :class:`Sampled` input from a CSV of time [s] and voltage [V] (first two columns; a
+    header line is skipped)."""
+    try:
+        data = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
+    except ValueError:
+        data = np.loadtxt(path, delimiter=",", ndmin=2, comments="#", skiprows=1)
+    if data.shape[1] < 2:
+        raise CliError(f"--voltage-csv {path}: needs two columns, time [s] and voltage [V]")
+    return Sampled(data[:, 0], data[:, 1])
+
+
+def effects_from_overrides(items: Sequence[str]) -> Effects:
+    """``["theta_rad=0.01"]`` → ``Effects(theta_rad=0.01)``; unknown names are refused."""
+    values = {}
+    known = {f.name for f in dataclasses.fields(Effects)}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name, text = name.strip(), text.strip()
+        if not sep or not name or not text:
+            raise CliError(f"--effect expects NAME=VALUE, got {item!r}")
+        if name not in known:
+            raise CliError(f"unknown effect parameter '{name}'; known: {', '.join(sorted(known))}")
+        try:
+            values[name] = float(text)
+        except ValueError:
+            raise CliError(f"effect parameter '{name}': cannot read {text!r} as a number") from None
+    return Effects(**values)
 
 
 def _snap(t: float, dt: float) -> float:
@@ -287,7 +375,29 @@ def plot_result(result: SimulationResult, path: Path) -> None:
     ax.legend(lines, [ln.get_label() for ln in lines], fontsize=8.5, loc="best")
     label = "LPS" if result.model == "lps" else f"DPS (n = {result.n_elements})"
     ax.set_title(f"{label}: x1(t_end) = {result.final_position * 1e6:.4f} µm")
-    axf.plot(t, result.friction, color="C3", lw=0.8)
+    w = result.waveform
+    if isinstance(w, Sawtooth) and w.cycles >= 4:
+        # a train's friction switches sign many times per cycle: drawn raw it is a solid band.
+        # Per cycle: the range (shaded) and the mean; the last full cycle in full in an inset.
+        k = np.floor((result.t - w.delay) / w.period).astype(int)
+        inside = (k >= 0) & (k < w.cycles)
+        cycles = np.unique(k[inside])
+        lo = np.array([result.friction[k == c].min() for c in cycles])
+        hi = np.array([result.friction[k == c].max() for c in cycles])
+        mean = np.array([result.friction[k == c].mean() for c in cycles])
+        edges = (w.delay + np.append(cycles, cycles[-1] + 1) * w.period) * 1e3
+        axf.fill_between(edges, np.append(lo, lo[-1]), np.append(hi, hi[-1]), step="post", color="C3", alpha=0.25,
+                         lw=0, label="range per cycle")
+        axf.step(edges, np.append(mean, mean[-1]), where="post", color="C3", lw=1.2, label="mean per cycle")
+        axf.legend(fontsize=8, loc="upper right")
+        last = cycles[-1]
+        ins = axf.inset_axes((0.02, 0.08, 0.3, 0.5))
+        sel = k == last
+        ins.plot((result.t[sel] - (w.delay + last * w.period)) * 1e3, result.friction[sel], color="C3", lw=0.7)
+        ins.set_title(f"cycle {last + 1}", fontsize=7)
+        ins.tick_params(labelsize=6)
+    else:
+        axf.plot(t, result.friction, color="C3", lw=0.8)
     axf.set_ylabel("friction force Ff [N]")
     axf.set_xlabel("time t [ms]")
     axf.set_xlim(t[0], t[-1])
@@ -377,6 +487,9 @@ def write_sweep_netcdf(ds: "xarray.Dataset", path: Path, engine: Optional[str] =
                 target = np.int8 if var.dtype.itemsize == 1 else np.float64
                 ds[name] = var.astype(target)
                 ds[name].attrs = dict(var.attrs)
+            elif var.dtype.kind in ("U", "O"):  # netCDF3 has fixed-width bytes only
+                ds[name] = var.astype(str).astype("S")
+                ds[name].attrs = dict(var.attrs)
             for key, value in list(ds[name].attrs.items()):
                 if isinstance(value, np.ndarray) and (value.dtype.kind == "u" or value.dtype == np.int64):
                     ds[name].attrs[key] = value.astype(np.int8 if value.dtype.itemsize == 1 else np.float64)
@@ -404,8 +517,9 @@ def _display_scale(units: str) -> tuple[float, str]:
 
 
 def _axis_label(da: "xarray.DataArray", name: str) -> str:
+    """``name [units]``; a dimensionless quantity shows ``[-]``."""
     units = da.attrs.get("units", "")
-    return f"{name} [{units}]" if units and units != "1" else name
+    return f"{name} [{'-' if units == '1' else units}]" if units else name
 
 
 def plot_sweep(ds: "xarray.Dataset", metric: str, path: Path) -> None:
@@ -437,8 +551,17 @@ def plot_sweep(ds: "xarray.Dataset", metric: str, path: Path) -> None:
         ydim, xdim = dims
         x, y = ds[xdim].values, ds[ydim].values
         xe, ye = _cell_edges(x), _cell_edges(y)
-        cmap = plt.get_cmap("viridis").with_extremes(bad="0.75")
-        mesh = ax.pcolormesh(xe, ye, np.ma.masked_invalid(values), cmap=cmap, shading="flat")
+        finite = values[np.isfinite(values)]
+        signed = finite.size > 0 and finite.min() < 0 < finite.max()
+        # a signed quantity (a displacement that can go either way) on a diverging map centred on 0
+        if signed:
+            from matplotlib.colors import TwoSlopeNorm
+
+            cmap = plt.get_cmap("RdBu_r").with_extremes(bad="0.75")
+            norm = TwoSlopeNorm(vcenter=0.0, vmin=float(finite.min()), vmax=float(finite.max()))
+        else:
+            cmap, norm = plt.get_cmap("viridis").with_extremes(bad="0.75"), None
+        mesh = ax.pcolormesh(xe, ye, np.ma.masked_invalid(values), cmap=cmap, norm=norm, shading="flat")
         cb = fig.colorbar(mesh, ax=ax)
         cb.set_label(f"{long_name} [{units}]" if units and units != "1" else long_name)
         rects = [Rectangle((xe[j], ye[i]), xe[j + 1] - xe[j], ye[i + 1] - ye[i]) for i, j in zip(*np.nonzero(diverged))]
@@ -469,10 +592,21 @@ def plot_sweep(ds: "xarray.Dataset", metric: str, path: Path) -> None:
     model = "LPS" if a.get("model") == "lps" else f"DPS (n = {a.get('n_elements')})"
     step = f"dt = {a.get('dt_s'):g} s" if a.get("method") == "rk4" else f"rtol = {a.get('rtol'):g}"
     ax.set_title(f"{long_name}\n{model}, {a.get('method')} ({step}), t_end = {a.get('t_end_s'):g} s, "
-                 f"{a.get('waveform')}", fontsize=9.5)
+                 f"{_waveform_title(str(a.get('waveform')), dims)}", fontsize=9.5)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=130)
     plt.close(fig)
+
+
+def _waveform_title(text: str, swept: Sequence[str]) -> str:
+    """The waveform's repr with the fields a sweep varies shown as swept (``voltage`` is the
+    ``amplitude``), not at the base value that no point of the plot has."""
+    import re
+
+    for name in swept:
+        field = "amplitude" if name == "voltage" else name
+        text = re.sub(rf"\b{field}=[^,)]+", f"{field}=swept", text)
+    return text
 
 
 STATUS_NAMES = ("not run", "ok", "ok at a smaller dt", "diverged", "invalid")
@@ -517,7 +651,7 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     result = simulate(
         params, waveform, t_end=t_end, dt=a.dt, model=a.model, n_elements=a.n_elements,
-        save_every=a.save_every, piezo_hysteresis=not a.no_hysteresis,
+        save_every=a.save_every, piezo_hysteresis=not a.no_hysteresis, effects=effects_from_overrides(a.effect),
     )
     elapsed = time.perf_counter() - t0
     label = "LPS" if a.model == "lps" else f"DPS (n = {a.n_elements})"
@@ -567,7 +701,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
             ds = sweep(
                 params, waveform, grid, t_end=t_end, dt=a.dt, model=a.model,
                 n_elements=a.n_elements, method=a.method, rtol=a.rtol, atol=a.atol, first_step=a.first_step,
-                retries=a.retries,
+                retries=a.retries, effects=effects_from_overrides(a.effect),
                 piezo_hysteresis=not a.no_hysteresis, progress=not a.no_progress, client=client,
                 threads=a.threads,
             )
@@ -619,6 +753,41 @@ def cmd_reproduce(a: argparse.Namespace) -> int:
     return 0
 
 
+def _values(spec: str, name: str, log: bool = False) -> np.ndarray:
+    """``A:B:N`` (linear, or log-spaced with ``log``) or ``V1,V2,...`` as floats."""
+    try:
+        if ":" in spec:
+            a, b, n = spec.split(":")
+            return (np.geomspace if log else np.linspace)(float(a), float(b), int(n))
+        return np.array([float(x) for x in spec.split(",") if x.strip()])
+    except ValueError:
+        raise CliError(f"--{name}: cannot read {spec!r} (use A:B:N or V1,V2,...)") from None
+
+
+def cmd_characterize(a: argparse.Namespace) -> int:
+    from .actuator import characterize, plot_characteristics
+
+    params = params_from_overrides(a.param)
+    t0 = time.perf_counter()
+    ds = characterize(
+        params, model=a.model, n_elements=a.n_elements,
+        frequencies=None if a.frequencies is None else _values(a.frequencies, "frequencies", log=True),
+        voltages=_values(a.voltages, "voltages"), step_voltages=_values(a.step_voltages, "step-voltages"),
+        frequency=a.frequency, voltage=a.voltage, rise=a.rise, cycles=a.cycles, skip_cycles=a.skip_cycles,
+        loads=a.loads, method=a.method, threads=a.threads, progress=not a.no_progress,
+    )
+    out = Path(a.out)
+    paths = plot_characteristics(ds, out)
+    write_sweep_netcdf(ds, out / "characteristics.nc")
+    at = ds.attrs
+    print(f"design point {at['design_frequency_Hz']:g} Hz, {at['design_voltage_V']:g} V ({at['model'].upper()}, "
+          f"rise {at['rise_s']:g} s, {at['method']}): mean velocity {at['velocity_at_design_m_per_s'] * 1e3:.4g} mm/s, "
+          f"stall force {at['stall_force_N']:.4g} N")
+    print(f"wrote {out / 'characteristics.nc'} and " + ", ".join(p.name for p in paths) + f" in {out} "
+          f"({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
 def cmd_diagnose(a: argparse.Namespace) -> int:
     import json
 
@@ -653,7 +822,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return EXIT_ERROR
     try:
         command = {"reproduce": cmd_reproduce, "simulate": cmd_simulate, "sweep": cmd_sweep,
-                   "diagnose": cmd_diagnose}[a.command]
+                   "characterize": cmd_characterize, "diagnose": cmd_diagnose}[a.command]
         return command(a)
     except (ValueError, DivergenceError, OSError) as exc:
         print(f"error: {_one_line(exc)}", file=sys.stderr)

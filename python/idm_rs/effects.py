@@ -13,6 +13,8 @@ import dataclasses
 import math
 from dataclasses import fields
 
+import numpy as np
+
 from .declarations import EFFECTS, ParamDecl
 
 _DOC = """Effect parameters (SI); all 0 is the paper's model.
@@ -27,7 +29,10 @@ class _EffectsBehaviour:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            v = float(getattr(self, f.name))
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)):
+                raise TypeError(f"effect parameter '{f.name}' must be a number, got {v!r}")
+            v = float(v)
             if not math.isfinite(v):
                 raise ValueError(f"effect parameter '{f.name}' must be finite, got {v}")
             object.__setattr__(self, f.name, v)

@@ -8,8 +8,11 @@ Table 1 is declared once, in the Rust core (``rust/src/params.rs``); the fields 
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import fields
 from typing import Any, Mapping, Optional
+
+import numpy as np
 
 from . import engine
 from .declarations import GRAVITY, TABLE1, ParamDecl
@@ -37,13 +40,19 @@ class _ParamsBehaviour:
             v = getattr(self, f.name)
             if v is None and f.name == "normal_force":
                 continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)):
+            if isinstance(v, (bool, np.bool_)):
+                raise TypeError(f"parameter '{f.name}' must be a number, got the boolean {v!r}")
+            if not isinstance(v, (int, float)):
                 try:
                     v = float(v)  # numpy scalars
                 except (TypeError, ValueError):
                     raise TypeError(f"parameter '{f.name}' must be a number, got {v!r}") from None
             object.__setattr__(self, f.name, float(v))
         engine.resolve_params(self._given())  # raises ValueError naming the parameter
+        if self.mu_s < self.mu_k:
+            warnings.warn(f"mu_s = {self.mu_s:g} is below mu_k = {self.mu_k:g}: the Stribeck curve then rises with "
+                          "speed (no breakaway peak); the presliding bound uses max(mu_s, mu_k)", RuntimeWarning,
+                          stacklevel=4)
 
     def _given(self) -> dict[str, float]:
         d = {f.name: getattr(self, f.name) for f in fields(self)}

@@ -63,6 +63,10 @@ _NAME_PATTERN = re.compile(
 )
 
 
+#: parameters a recording's nominal may leave out (their default applies)
+OPTIONAL_PARAMS = ("load_force",)
+
+
 class RecordingError(ValueError):
     """A recording that does not follow ``idm-recording/1``.
 
@@ -294,13 +298,14 @@ def _parse_nominal(nom: Any, meta: Path) -> Nominal:
             f"known: {', '.join(known)}",
             column="nominal.params",
         )
-    missing = [k for k in known if k not in raw]
+    # the operating load is not part of a device's nominal description: absent means none
+    missing = [k for k in known if k not in raw and k not in OPTIONAL_PARAMS]
     if missing:
         raise RecordingError(
             meta, f"missing parameter{'s' if len(missing) > 1 else ''} {', '.join(repr(m) for m in missing)}",
             column="nominal.params",
         )
-    values = {k: _number(raw, k, meta, "nominal.params") for k in known}
+    values = {k: _number(raw, k, meta, "nominal.params") for k in known if k in raw}
     try:
         params = Params(**values)
     except (TypeError, ValueError) as exc:

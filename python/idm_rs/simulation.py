@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, Optional, Union
 
 import math
+import warnings
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -17,7 +18,11 @@ from .params import PARAM_INFO, Params
 from .state import State
 from .waveforms import Waveform
 
+#: above this many RK4 steps simulate() warns that the run will be long
+LONG_RUN_STEPS = 1e8
+
 if TYPE_CHECKING:
+    from .actuator import SteadyState
     import xarray
 
     from .batch import Rig
@@ -99,6 +104,8 @@ class SimulationResult:
     method: str = "rk4"  #: "rk4", "dopri5" or "rodas4" (what "auto" resolved to)
     rtol: float = math.nan  #: adaptive tolerances (NaN for RK4)
     atol: float = math.nan
+    #: False when Ctrl-C stopped the run: the arrays end where it stopped (``final_state`` empty)
+    complete: bool = True
 
     @property
     def main_body(self) -> NDArray[np.float64]:
@@ -114,6 +121,23 @@ class SimulationResult:
     def main_body_velocity(self) -> NDArray[np.float64]:
         """v1 [m/s]."""
         return self.velocities[:, 0]
+
+    def steady_state(self, skip_cycles: int = 1) -> "SteadyState":
+        """Steady-state actuator metrics of this run's sawtooth train (mean velocity, step and
+        back-slip per cycle, direction; see :mod:`idm_rs.actuator`), over its full cycles after
+        the first ``skip_cycles``. Computed by the batch engine from the same settings (the
+        saved samples may skip the extremes), so they equal a sweep's metrics for this point;
+        a run continued from a state (``t_start`` > 0) is refused."""
+        from .actuator import steady_state
+
+        if self.t[0] != 0.0:
+            raise ValueError("steady_state() re-runs the train from rest; this run started at "
+                             f"t = {self.t[0]:g} s from a given state")
+        how: dict[str, float] = (
+            {"dt": self.dt} if self.method == "rk4" else {"rtol": self.rtol, "atol": self.atol, "first_step": self.dt})
+        return steady_state(self.params, self.waveform, model=self.model, n_elements=self.n_elements,  # type: ignore[arg-type]
+                            effects=self.effects, skip_cycles=skip_cycles, method=self.method,  # type: ignore[arg-type]
+                            piezo_hysteresis=self.piezo_hysteresis, t_end=float(self.t[-1]), **how)
 
     def to_xarray(self) -> "xarray.Dataset":
         """The trajectory as an xarray Dataset with units, and every setting in ``attrs``."""
@@ -232,6 +256,11 @@ def simulate(
         t_start = initial_state.t if isinstance(initial_state, State) else 0.0
     bt, bv = waveform.breakpoints()
     y0 = None if initial_state is None else np.ascontiguousarray(initial_state, dtype=float).ravel()
+    if method == "rk4" and (t_end - t_start) / step > LONG_RUN_STEPS:
+        n = (t_end - t_start) / step
+        warnings.warn(f"{n:.2g} RK4 steps (t_end = {t_end:g} s at dt = {step:g} s) take minutes or more; Ctrl-C "
+                      "stops the run and keeps the trajectory so far (or use method='auto')", RuntimeWarning,
+                      stacklevel=2)
     out = engine.simulate(
         params._given(),
         effects.active(),
@@ -244,6 +273,10 @@ def simulate(
         bool(energy),
         y0,
     )
+    complete = bool(out["complete"])
+    if not complete:
+        warnings.warn(f"simulate interrupted at t = {out['t'][-1]:g} s: the result holds the trajectory up to there "
+                      "(result.complete is False; no final_state)", RuntimeWarning, stacklevel=2)
     budget = None
     if energy:
         acc = out["accounting"]
@@ -270,7 +303,7 @@ def simulate(
         voltage=out["voltage"],
         piezo_force=out["piezo_force"],
         reading=out["reading"],
-        final_position=float(out["final_state"][0]),
+        final_position=float(out["final_state"][0]) if complete else float(out["nodes"][-1, 0]),
         params=params,
         waveform=waveform,
         model=structure.model,
@@ -279,8 +312,9 @@ def simulate(
         piezo_hysteresis=bool(piezo_hysteresis),
         effects=effects,
         energy=budget,
-        final_state=State(out["final_state"], out["state_components"], float(out["t"][-1])),
+        final_state=State(out["final_state"], out["state_components"] if complete else [], float(out["t"][-1])),
         method=method,
         rtol=float(rtol) if adaptive else math.nan,
         atol=float(atol) if adaptive else math.nan,
+        complete=complete,
     )

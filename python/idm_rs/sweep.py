@@ -39,6 +39,13 @@ METRICS: dict[str, tuple[str, str]] = {
     "peak_velocity": ("m/s", "largest |v1|"),
     "peak_friction": ("N", "largest |Ff|"),
     "slip_fraction": ("1", "share of time the main body slides (|v1| > 0.1 stribeck_velocity)"),
+    # steady state of a sawtooth train, over the cycles after `skip_cycles` (NaN for other inputs)
+    "mean_velocity": ("m/s", "steady-state mean velocity of the main body, mean step x frequency"),
+    "step_mean": ("m", "mean main body step per drive cycle (steady state)"),
+    "step_std": ("m", "standard deviation of the step over the steady-state cycles"),
+    "backslip": ("m", "mean back-slip per cycle: travel against the net direction"),
+    "backslip_ratio": ("1", "back-slip over the travel along the net direction"),
+    "direction": ("1", "net motion: +1 forward, -1 backward, 0 stalled (|step| < 1e-3 d33 V)"),
 }
 
 #: derived axes: name -> (units, long name)
@@ -83,6 +90,7 @@ class _Plan:
     atol: float
     retries: int
     first_step: float
+    skip_cycles: int = 1
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -155,7 +163,11 @@ def _check_grid(grid: Mapping[str, ArrayLike], waveform: Waveform) -> tuple[tupl
     for name, vals in grid.items():
         if name not in known:
             raise ValueError(f"unknown sweep axis '{name}'; known: {sorted(known)}")
-        v = np.asarray(vals, dtype=float).ravel()
+        v = np.asarray(vals, dtype=float)
+        if v.ndim > 1:
+            raise ValueError(f"sweep axis '{name}' must be 1-D, got an array of shape {v.shape}; "
+                             "give each dimension as its own axis")
+        v = v.ravel()
         if v.size == 0:
             raise ValueError(f"sweep axis '{name}' is empty")
         if not np.all(np.isfinite(v)):
@@ -182,7 +194,7 @@ def _check_grid(grid: Mapping[str, ArrayLike], waveform: Waveform) -> tuple[tupl
 def _start(plan: _Plan, start: int, stop: int, threads: int) -> Any:
     return start_batch(plan.tables(start, stop), plan.structure, t_end=plan.t_end, method=plan.method, dt=plan.dt,
                        rtol=plan.rtol, atol=plan.atol, first_step=plan.first_step, retries=plan.retries,
-                       threads=threads)
+                       threads=threads, skip_cycles=plan.skip_cycles)
 
 
 def run_block(plan: _Plan, start: int, stop: int, threads: int = 1) -> dict[str, NDArray[Any]]:
@@ -216,6 +228,7 @@ def sweep(
     rtol: float = 1e-7,
     atol: float = 1e-7,
     first_step: Optional[float] = None,
+    skip_cycles: int = 1,
     retries: int = 2,
     piezo_hysteresis: bool = True,
     effects: Optional[Effects] = None,
@@ -246,8 +259,13 @@ def sweep(
     measured to keep every benchmark point within 1 nm of RK4 (:data:`idm_rs.methods.AUTO`).
 
     Metrics (computed in the Rust loop): ``final_position`` [m], ``step_per_cycle`` [m] (sawtooth
-    trains), ``peak_velocity`` [m/s], ``peak_friction`` [N], ``slip_fraction`` [-]; always with
-    ``status``, ``diverged_at`` [s], ``dt_used`` [s], ``steps``.
+    trains), ``peak_velocity`` [m/s], ``peak_friction`` [N], ``slip_fraction`` [-], and for
+    sawtooth trains the steady state over the cycles after the first ``skip_cycles``:
+    ``mean_velocity`` [m/s], ``step_mean`` and ``step_std`` [m] per cycle, ``backslip`` [m] per
+    cycle (travel against the net direction) and ``backslip_ratio`` (over the travel along it),
+    ``direction`` (+1, -1, 0 stalled); always with ``status``, ``diverged_at``
+    [s], ``dt_used`` [s], ``steps``. Sweep ``frequency`` x ``voltage`` for the velocity map,
+    ``load_force`` for the load curve.
 
     Ctrl-C stops within about a second and returns the finished points (others NaN,
     ``attrs["complete"] == 0``). ``client`` (a ``dask.distributed.Client``) runs blocks of at
@@ -274,12 +292,16 @@ def sweep(
     names, values = _check_grid(grid, waveform)
     effects = effects or Effects()
     first = float(first_step) if first_step is not None else 1e-8
+    if isinstance(skip_cycles, bool) or int(skip_cycles) != skip_cycles or skip_cycles < 0:
+        raise ValueError(f"parameter 'skip_cycles' must be a non-negative integer, got {skip_cycles!r}")
+    skips = int(skip_cycles)
     plan = _Plan(params, waveform, effects, names, values, float(t_end), float(dt), model, int(n_elements),
-                 bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries), first)
+                 bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries), first, skips)
     _validate_axes(plan)
 
     n = plan.size
     out = {k: np.full(n, np.nan if t is np.float64 else 0, dtype=t) for k, t in _OUTPUTS.items()}
+    out["reason"] = np.full(n, "not run", dtype=object)
     threads = int(threads or os.cpu_count() or 1)
     t0 = time.perf_counter()
     complete = True
@@ -314,6 +336,8 @@ def sweep(
     data_vars["dt_used"] = (names, out["dt_used"].reshape(shape), {
         "units": "s", "long_name": "step used (rk4) or smallest accepted step (adaptive)"})
     data_vars["steps"] = (names, out["steps"].reshape(shape), {"long_name": "integration steps taken"})
+    data_vars["reason"] = (names, out["reason"].reshape(shape), {
+        "long_name": "why the status is not ok (empty where it is)"})
     ds = xr.Dataset(data_vars, coords=coords)
     ds.attrs.update({
         "idm_rs_version": __version__,
@@ -327,6 +351,7 @@ def sweep(
         "rtol": float(rtol) if adaptive else math.nan,
         "atol": float(atol) if adaptive else math.nan,
         "retries": int(retries),
+        "skip_cycles": skips,
         "piezo_hysteresis": int(piezo_hysteresis),
         "waveform": repr(waveform),
         "normal_force_rule": "as set" if params.normal_force is not None else f"(m1+m2+mPE)*{GRAVITY:g} per point",
@@ -409,9 +434,9 @@ def _run_local(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_si
     return True
 
 
-def _store(out: dict[str, NDArray[Any]], res: Mapping[str, NDArray[Any]], start: int, stop: int) -> None:
+def _store(out: dict[str, NDArray[Any]], res: Mapping[str, Any], start: int, stop: int) -> None:
     for k in out:
-        out[k][start:stop] = res[k]
+        out[k][start:stop] = res["reasons"] if k == "reason" else res[k]
 
 
 def _run_dask(plan: _Plan, out: dict[str, NDArray[Any]], client: Any, block: int, bar: Any) -> bool:

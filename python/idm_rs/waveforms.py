@@ -134,8 +134,12 @@ class Sampled:
     voltage: NDArray[np.float64] = field(repr=False)
 
     def __init__(self, t: ArrayLike, voltage: ArrayLike) -> None:
-        tt = np.ascontiguousarray(t, dtype=float).ravel()
-        vv = np.ascontiguousarray(voltage, dtype=float).ravel()
+        tt = np.ascontiguousarray(t, dtype=float)
+        vv = np.ascontiguousarray(voltage, dtype=float)
+        for name, a in (("t", tt), ("voltage", vv)):
+            if a.ndim > 1:
+                raise ValueError(f"Sampled: '{name}' must be 1-D, got an array of shape {a.shape}")
+        tt, vv = tt.ravel(), vv.ravel()
         if tt.shape != vv.shape:
             raise ValueError(f"Sampled: {tt.size} times but {vv.size} voltages")
         if tt.size == 0:

@@ -6,6 +6,8 @@
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::create_exception;
@@ -20,7 +22,7 @@ use crate::mechanics::Structure;
 use crate::model::{Model, N_ACCOUNTING};
 use crate::params::{Params, PARAM_NAMES};
 use crate::rig::RigDrive;
-use crate::simulate::simulate as simulate_core;
+use crate::simulate::simulate_until;
 use crate::waveform::PiecewiseLinear;
 
 create_exception!(
@@ -114,6 +116,8 @@ struct RunConfig {
     record_every: usize,
     /// batch: return each point's final state
     final_states: bool,
+    /// batch: start-up cycles of a sawtooth train left out of the steady-state metrics
+    skip_cycles: usize,
     /// model "rig": "position" (spring to a moving end) or "force" (the input is the force)
     rig_drive: String,
     /// model "rig", position drive: spring [N/m] and damper [N s/m] to the moving end
@@ -164,7 +168,7 @@ impl RunConfig {
 #[pymethods]
 impl RunConfig {
     #[new]
-    #[pyo3(signature = (*, model="dps".to_string(), n_elements=4, piezo_hysteresis=true, method="rk4".to_string(), dt=1e-8, rtol=1e-7, atol=1e-7, first_step=None, retries=2, threads=1, record_every=0, final_states=false, rig_drive="position".to_string(), rig_stiffness=0.0, rig_damping=0.0))]
+    #[pyo3(signature = (*, model="dps".to_string(), n_elements=4, piezo_hysteresis=true, method="rk4".to_string(), dt=1e-8, rtol=1e-7, atol=1e-7, first_step=None, retries=2, threads=1, record_every=0, final_states=false, skip_cycles=1, rig_drive="position".to_string(), rig_stiffness=0.0, rig_damping=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         model: String,
@@ -179,6 +183,7 @@ impl RunConfig {
         threads: usize,
         record_every: usize,
         final_states: bool,
+        skip_cycles: usize,
         rig_drive: String,
         rig_stiffness: f64,
         rig_damping: f64,
@@ -196,6 +201,7 @@ impl RunConfig {
             threads: threads.max(1),
             record_every,
             final_states,
+            skip_cycles,
             rig_drive,
             rig_stiffness,
             rig_damping,
@@ -311,8 +317,33 @@ fn simulate<'py>(
         Some(a) => slice1(a).into_owned(),
         None => m.rest_state(),
     };
-    let traj = detached(py, || simulate_core(&m, &wave, t_start, t_end, &y0, &method, save_every))?
-        .map_err(|e| sim_error(py, e))?;
+    // the run goes on a worker thread; this one looks for Ctrl-C (Python's signal handlers run
+    // only here) and asks the run to stop, keeping the trajectory saved so far
+    let cancel = AtomicBool::new(false);
+    let (traj, complete) = std::thread::scope(|scope| -> PyResult<_> {
+        let worker = scope.spawn(|| {
+            catch_unwind(AssertUnwindSafe(|| {
+                simulate_until(&m, &wave, t_start, t_end, &y0, &method, save_every, &cancel)
+            }))
+        });
+        while !py.detach(|| {
+            let deadline = Instant::now() + Duration::from_millis(50);
+            while !worker.is_finished() && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            worker.is_finished()
+        }) {
+            if py.check_signals().is_err() {
+                cancel.store(true, Ordering::Relaxed);
+            }
+        }
+        worker
+            .join()
+            .ok()
+            .and_then(|r| r.ok())
+            .ok_or_else(|| PyRuntimeError::new_err("internal error in idm-rs core (please report)"))
+    })?
+    .map_err(|e| sim_error(py, e))?;
 
     let nt = traj.t.len();
     let dof = traj.dof;
@@ -332,6 +363,7 @@ fn simulate<'py>(
     d.set_item("reading", traj.reading.into_pyarray(py))?;
     d.set_item("final_state", traj.final_state.into_pyarray(py))?;
     d.set_item("state_components", m.layout.components())?;
+    d.set_item("complete", complete)?;
     if energy {
         d.set_item("accounting", arr2(traj.accounting, N_ACCOUNTING)?)?;
         d.set_item("kinetic", traj.kinetic.into_pyarray(py))?;
@@ -393,6 +425,11 @@ impl BatchRun {
             }
             d.set_item("final_states", states)?;
         }
+        let reasons = PyList::empty(py);
+        for o in &outputs {
+            reasons.append(&o.reason)?;
+        }
+        d.set_item("reasons", reasons)?;
         let metrics: Vec<PointMetrics> = outputs.into_iter().map(|o| o.metrics).collect();
         let col = |f: fn(&PointMetrics) -> f64| metrics.iter().map(f).collect::<Vec<f64>>();
         d.set_item("final_position", col(|m| m.final_position).into_pyarray(py))?;
@@ -400,6 +437,12 @@ impl BatchRun {
         d.set_item("peak_velocity", col(|m| m.peak_velocity).into_pyarray(py))?;
         d.set_item("peak_friction", col(|m| m.peak_friction).into_pyarray(py))?;
         d.set_item("slip_fraction", col(|m| m.slip_fraction).into_pyarray(py))?;
+        d.set_item("mean_velocity", col(|m| m.steady.mean_velocity).into_pyarray(py))?;
+        d.set_item("step_mean", col(|m| m.steady.step_mean).into_pyarray(py))?;
+        d.set_item("step_std", col(|m| m.steady.step_std).into_pyarray(py))?;
+        d.set_item("backslip", col(|m| m.steady.backslip).into_pyarray(py))?;
+        d.set_item("backslip_ratio", col(|m| m.steady.backslip_ratio).into_pyarray(py))?;
+        d.set_item("direction", col(|m| m.steady.direction).into_pyarray(py))?;
         d.set_item("diverged_at", col(|m| m.diverged_at).into_pyarray(py))?;
         d.set_item("dt_used", col(|m| m.dt_used).into_pyarray(py))?;
         let steps: Vec<u64> = metrics.iter().map(|m| m.steps).collect();
@@ -442,6 +485,7 @@ fn start_batch(
         retries: config.retries,
         record_every: config.record_every,
         final_states: config.final_states,
+        skip_cycles: config.skip_cycles,
     };
     let (p, e, w) = (slice2(&params), slice2(&effects), slice2(&wave_fields));
     let (te, ts) = (t_ends.as_ref().map(slice1), t_starts.as_ref().map(slice1));

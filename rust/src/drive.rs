@@ -130,8 +130,9 @@ pub enum LaneEnd {
     /// Reached `t_end` after `steps` accepted steps, the smallest `min_step` [s] long.
     Finished { steps: u64, min_step: f64 },
     /// Diverged at time `t` [s] (the state there is the run's final state); `why` for adaptive
-    /// methods whose step collapsed.
-    Diverged { t: f64, why: Option<String> },
+    /// methods whose step collapsed; `v_last` [m/s] the main body's velocity at the last state
+    /// within bounds (for step hints).
+    Diverged { t: f64, why: Option<String>, v_last: f64 },
 }
 
 /// Sees a run's states as they are accepted.
@@ -172,19 +173,33 @@ pub fn plan_steps(
     }
     check_span(t_start, t_end)?;
     let whole = |x: f64| (x / dt - (x / dt).round()).abs() <= 1e-6;
+    let suggestion = || match fitting_step(wave, t_start, t_end, dt) {
+        Some(d) => format!("dt = {d:e} s divides the run and every breakpoint"),
+        None => "choose a dt that divides t_start, t_end and every breakpoint time".into(),
+    };
     if !whole(t_start) {
         return Err(SimError::Input(format!(
             "t_start = {t_start:e} s is not a whole number of steps dt = {dt:e} s; \
-             start on a multiple of dt"
+             start on a multiple of dt, or use {}",
+            suggestion()
+        )));
+    }
+    // a breakpoint off the step grid is named first: it is usually the cause (a rise time that
+    // is not a multiple of dt), even when t_end does not divide either
+    if let Some(ti) = wave.misaligned(dt, t_end) {
+        return Err(SimError::Input(format!(
+            "dt = {dt:e} s does not divide the waveform breakpoint at t = {ti:e} s (where the input \
+             changes slope, e.g. the end of a rise; breakpoints must fall on step boundaries); {}",
+            suggestion()
         )));
     }
     let steps = ((t_end - t_start) / dt).round();
     if (steps * dt - (t_end - t_start)).abs() > 1e-6 * dt || steps < 1.0 {
         return Err(SimError::Input(format!(
-            "dt = {dt:e} s does not divide t_end = {t_end:e} s into whole steps"
+            "dt = {dt:e} s does not divide t_end = {t_end:e} s into whole steps; {}",
+            suggestion()
         )));
     }
-    wave.check_alignment(dt, t_end).map_err(SimError::Input)?;
     // a first-order lag much faster than the step makes its state stiff: RK4 would diverge
     for (name, tau) in model.effects.lags() {
         if tau > 0.0 && tau * RK4_STABLE_OMEGA_DT < dt {
@@ -204,6 +219,34 @@ pub fn plan_steps(
         )));
     }
     Ok(steps as usize)
+}
+
+/// An RK4 step not above `dt` [s] that puts `t_start`, `t_end` and every breakpoint of `wave` in
+/// between on the step grid (steps count from t = 0): the largest round one (1, 2, 2.5, 4 or 5
+/// times a power of ten) within a factor 10 below `dt`, else the largest t_end / k; `None` if
+/// neither is found.
+pub fn fitting_step(wave: &PiecewiseLinear, t_start: f64, t_end: f64, dt: f64) -> Option<f64> {
+    if !(dt.is_finite() && dt > 0.0 && t_end.is_finite() && t_end > 0.0) {
+        return None;
+    }
+    let fits = |d: f64| {
+        let whole = |x: f64| ((x / d) - (x / d).round()).abs() <= 1e-6;
+        whole(t_start) && whole(t_end) && wave.misaligned(d, t_end).is_none()
+    };
+    let decade = dt.log10().floor();
+    let round = (0..3)
+        .flat_map(|k| [5.0, 4.0, 2.5, 2.0, 1.0].map(|m| m * 10f64.powf(decade - k as f64)))
+        .map(|d| format!("{d:.6e}").parse::<f64>().unwrap_or(d)) // exactly the printed value
+        .filter(|&d| d <= dt * (1.0 + 1e-12) && d >= dt / 10.0)
+        .find(|&d| fits(d));
+    if round.is_some() {
+        return round;
+    }
+    let first = (t_end / dt * (1.0 - 1e-12)).ceil().max(1.0);
+    if first > 1e13 {
+        return None;
+    }
+    (0..100_000u64).map(|i| t_end / (first + i as f64)).find(|&d| fits(d))
 }
 
 /// Refuse a time span that is not finite or not increasing.
@@ -233,28 +276,40 @@ pub fn check_task(task: &Task, method: &Method) -> Result<(), SimError> {
     }
 }
 
-/// The message of a divergence at time `t` [s] in state `y` with RK4 step `dt` [s]: where the
-/// state left its bounds and a step to try (from the friction state's stiffness there).
-pub fn divergence_message(model: &Model, dt: f64, t: f64, y: &[f64]) -> String {
+/// The message of a divergence at time `t` [s] in state `y` with RK4 step `dt` [s], `v_last`
+/// [m/s] the main body's velocity at the last state that was still within bounds: where the state
+/// left its bounds and a step to try. The step comes from the stability estimate of the friction
+/// state at `v_last` (the diverged state's own velocity is meaningless), never below dt / 64,
+/// and is fitted to the run's breakpoints and span when `wave` is given.
+pub fn divergence_message(
+    model: &Model,
+    dt: f64,
+    t: f64,
+    y: &[f64],
+    v_last: f64,
+    fit: Option<(&PiecewiseLinear, f64, f64)>,
+) -> String {
     let l = model.layout;
-    let v = y[l.dof];
-    let stiff = if v.is_finite() {
-        model.friction.sliding_stiffness(v)
+    let stiff = model.friction.sliding_stiffness(v_last);
+    let w = model.mech.highest_frequency().max(stiff);
+    let stable = if w.is_finite() && w > 0.0 {
+        RK4_STABLE_OMEGA_DT / w
     } else {
         f64::NAN
     };
-    let hint = if stiff.is_finite() && stiff > 0.0 {
-        (RK4_STABLE_OMEGA_DT / stiff).min(dt / 2.0)
-    } else {
-        dt / 4.0
-    };
+    // RK4 failed at dt: the hint is below it, and a blown-up estimate is not trusted below dt/64
+    let raw = if stable.is_finite() { stable.clamp(dt / 64.0, dt / 2.0) } else { dt / 4.0 };
+    let hint = fit
+        .and_then(|(wave, t0, t1)| fitting_step(wave, t0, t1, raw))
+        .unwrap_or(raw);
     format!(
-        "integration diverged at t = {t:.6e} s (Fh = {:.4e} N, bound {:.4e} N; v1 = {:.4e} m/s): \
-         dt = {dt:e} s is too large for the friction state's stiffness during sliding; \
-         try dt <= {hint:.2e} s",
+        "integration diverged at t = {t:.6e} s (Fh = {:.4e} N, bound {:.4e} N; v1 = {:.4e} m/s the step \
+         before): dt = {dt:e} s is too large for the friction state's stiffness during sliding \
+         (stability estimate there: dt <= {stable:.2e} s); try dt = {hint:e} s, or method 'rodas4' \
+         (implicit, no such limit)",
         y[l.fh],
         model.presliding_bound(),
-        v
+        v_last
     )
 }
 
@@ -335,6 +390,7 @@ where
     let mut k_end = [0usize; L];
     let mut steps = [0u64; L];
     let mut min_step = [f64::INFINITY; L];
+    let mut v_last = [0.0; L];
     let mut out: Vec<Option<LaneEnd>> = vec![None; m];
     for i in 0..m {
         let task = &tasks[i];
@@ -346,6 +402,7 @@ where
             k_end[i] = k[i] + ((task.t_end - task.t_start) / dt).round() as usize;
         }
         stepper.restart(i);
+        v_last[i] = ys[i].as_ref()[task.model.layout.dof];
         observer.start(first + i, task.t_start, ys[i].as_ref());
     }
     let mut attempts = 0usize;
@@ -391,6 +448,7 @@ where
                     out[i] = Some(LaneEnd::Diverged {
                         t: t[i],
                         why: Some(why.clone()),
+                        v_last: v_last[i],
                     });
                     continue;
                 }
@@ -407,9 +465,14 @@ where
             let y = ys[i].as_ref();
             if tasks[i].model.is_diverged(y, bound[i]) {
                 active[i] = false;
-                out[i] = Some(LaneEnd::Diverged { t: t_new, why: None });
+                out[i] = Some(LaneEnd::Diverged {
+                    t: t_new,
+                    why: None,
+                    v_last: v_last[i],
+                });
                 continue;
             }
+            v_last[i] = y[tasks[i].model.layout.dof];
             steps[i] += 1;
             min_step[i] = min_step[i].min(span);
             let start = St::EVALUATES_START.then(|| rhs.at_start[i]);
@@ -433,7 +496,7 @@ where
 
 /// Adaptive options for a task: error scales from the model and the input's peak.
 fn adaptive_options(task: &Task, rtol: f64, atol: f64, first_step: f64) -> Dopri5Options {
-    let v_max = task.wave.values().iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let v_max = task.wave.peak();
     Dopri5Options {
         rtol,
         atol,

@@ -134,7 +134,7 @@ impl Model {
                 set(a + 2, n + j, s);
             }
             // external work and impulse
-            let f_main = self.f_incline - kg * q[0];
+            let f_main = self.f_constant - kg * q[0];
             set(a + 3, 0, -kg * v[0]);
             set(a + 3, n, f_main);
             set(a + 3, last, -2.0 * cw * v[n - 1]);

@@ -71,6 +71,15 @@ impl Mechanics {
                 if n == 0 {
                     return Err("parameter 'n_elements' must be at least 1".into());
                 }
+                if n > 1 && p.pe_density == 0.0 {
+                    // the bar's inner nodes would carry no mass: M is singular
+                    return Err(format!(
+                        "parameter 'pe_density' = 0 (a massless PE) leaves the {} inner nodes of the \
+                         {n}-element FEM bar without mass; use model 'lps' or n_elements = 1 for a \
+                         massless PE, or give pe_density > 0",
+                        n - 1
+                    ));
+                }
                 let (mp, kp) = assemble_bar(p, n);
                 let mut m = mp.clone();
                 m[(0, 0)] += p.m1;
@@ -246,6 +255,14 @@ mod tests {
         let w = (p.kp() * (1.0 / p.m1 + 1.0 / p.m2)).sqrt();
         assert!((m.highest_frequency() / w - 1.0).abs() < 1e-12);
         assert!((w / 1.3e4 - 1.0).abs() < 0.03); // MODEL.md: 1.3e4 rad/s
+    }
+
+    #[test]
+    fn a_massless_multi_element_bar_is_refused_with_the_fix() {
+        let mut p = Params::paper();
+        p.pe_density = 0.0;
+        let err = Mechanics::new(&p, Structure::Dps(4)).unwrap_err();
+        assert!(err.contains("'pe_density'") && err.contains("'lps'") && err.contains("n_elements = 1"), "{err}");
     }
 
     #[test]

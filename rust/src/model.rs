@@ -127,8 +127,8 @@ pub struct Model {
     pub(crate) rig: Option<RigDrive>,
     pub(crate) kp: f64,
     pub(crate) d33: f64,
-    /// constant external force on the main body (incline) [N]
-    pub(crate) f_incline: f64,
+    /// constant external force on the main body (incline + load) [N]
+    pub(crate) f_constant: f64,
     pub(crate) inv_tau_amp: f64,
     pub(crate) inv_tau_creep: f64,
     pub(crate) inv_tau_sensor: f64,
@@ -178,7 +178,7 @@ impl Model {
             rig,
             kp: params.kp(),
             d33: params.d33,
-            f_incline: effects.incline_force(total_mass),
+            f_constant: effects.incline_force(total_mass) + params.load_force,
             inv_tau_amp: inv(effects.tau_amp),
             inv_tau_creep: inv(effects.tau_creep),
             inv_tau_sensor: inv(effects.tau_sensor),
@@ -362,7 +362,7 @@ impl Model {
         dy[ig] = gdot;
         dy[ifh] = fhdot;
 
-        let f_ext_main = self.f_incline + ground_spring_force(self.effects.k_ground, q[0]);
+        let f_ext_main = self.f_constant + ground_spring_force(self.effects.k_ground, q[0]);
         let f_ext_weight = weight_drag(self.effects.c_weight, v[n - 1]);
         for i in 0..n {
             dy[i] = v[i];

@@ -86,6 +86,8 @@ table1! {
     mu_s: "mu_s", "1", "static friction coefficient", Domain::Positive, 0.6;
     sigma1: "sigma1 (r1)", "N s/m", "presliding damping", Domain::NonNegative, 100.0;
     sigma2: "sigma2 (r2)", "N s/m", "viscous friction", Domain::NonNegative, 0.4;
+    // not in the paper's Table 1: the operating load of an actuator (0 in the paper)
+    load_force: "F_load", "N", "constant external force on the main body along +x (a payload or preload; negative opposes forward motion)", Domain::Finite, 0.0;
     normal_force: "F_n", "N", "normal force on the guide; default (m1+m2+mPE) g", Domain::Positive, f64::NAN;
 }
 

@@ -101,6 +101,23 @@ pub fn simulate(
     method: &Method,
     save_every: usize,
 ) -> Result<Trajectory, SimError> {
+    let never = AtomicBool::new(false);
+    simulate_until(model, wave, t_start, t_end, y0, method, save_every, &never).map(|(traj, _)| traj)
+}
+
+/// [`simulate`] that stops soon after `cancel` is set, returning the trajectory saved so far
+/// (its `final_state` then empty) and `false` for "not complete".
+#[allow(clippy::too_many_arguments)]
+pub fn simulate_until(
+    model: &Model,
+    wave: &PiecewiseLinear,
+    t_start: f64,
+    t_end: f64,
+    y0: &[f64],
+    method: &Method,
+    save_every: usize,
+    cancel: &AtomicBool,
+) -> Result<(Trajectory, bool), SimError> {
     if save_every == 0 {
         return Err(SimError::Input(
             "parameter 'save_every' must be at least 1".into(),
@@ -124,15 +141,16 @@ pub fn simulate(
             ..Default::default()
         },
     };
-    let never = AtomicBool::new(false);
-    let (end, y) = run_tasks::<_, 1>(&[task], method, &mut saver, &never)
-        .expect("not cancelled")
-        .pop()
-        .expect("one task");
+    let Some(mut ends) = run_tasks::<_, 1>(&[task], method, &mut saver, cancel) else {
+        return Ok((saver.out, false));
+    };
+    let (end, y) = ends.pop().expect("one task");
     match end {
-        LaneEnd::Diverged { t, why } => {
+        LaneEnd::Diverged { t, why, v_last } => {
             let message = match (why, method) {
-                (None, Method::Rk4 { dt }) => divergence_message(model, *dt, t, &y),
+                (None, Method::Rk4 { dt }) => {
+                    divergence_message(model, *dt, t, &y, v_last, Some((wave, t_start, t_end)))
+                }
                 (why, _) => format!(
                     "integration diverged at t = {t:.6e} s: {}; tighten rtol/atol or use method 'rk4' with a small dt",
                     why.unwrap_or_else(|| "the state is no longer finite".into())
@@ -152,7 +170,7 @@ pub fn simulate(
             }
             let mut out = saver.out;
             out.final_state = y;
-            Ok(out)
+            Ok((out, true))
         }
     }
 }

@@ -100,6 +100,11 @@ impl PiecewiseLinear {
         &self.v
     }
 
+    /// Largest |value| of the input (its amplitude for the standard waves).
+    pub fn peak(&self) -> f64 {
+        self.values().iter().fold(0.0f64, |a, v| a.max(v.abs()))
+    }
+
     /// Index of the segment holding `t` (the last breakpoint at or before it), clamped.
     pub fn segment(&self, t: f64) -> usize {
         self.t.partition_point(|&ti| ti <= t).saturating_sub(1)
@@ -130,16 +135,7 @@ impl PiecewiseLinear {
     /// a kink (RK4 would lose its order). Refuses a `dt` that does not divide them and says
     /// which breakpoint and a `dt` that would.
     pub fn check_alignment(&self, dt: f64, t_end: f64) -> Result<(), String> {
-        let misaligned = |step: f64| {
-            self.t
-                .iter()
-                .copied()
-                .filter(|&ti| ti > 0.0 && ti < t_end)
-                .find(|&ti| {
-                    let r = ti / step;
-                    (r - r.round()).abs() > 1e-6
-                })
-        };
+        let misaligned = |step: f64| self.misaligned(step, t_end);
         if let Some(ti) = misaligned(dt) {
             let hint = (2..=1000)
                 .map(|k| dt / k as f64)
@@ -152,6 +148,20 @@ impl PiecewiseLinear {
             ));
         }
         Ok(())
+    }
+}
+
+impl PiecewiseLinear {
+    /// The first breakpoint inside (0, `t_end`) that is not a whole number of steps `dt` [s].
+    pub fn misaligned(&self, dt: f64, t_end: f64) -> Option<f64> {
+        self.t
+            .iter()
+            .copied()
+            .filter(|&ti| ti > 0.0 && ti < t_end)
+            .find(|&ti| {
+                let r = ti / dt;
+                (r - r.round()).abs() > 1e-6
+            })
     }
 }
 

@@ -148,16 +148,20 @@ class _Refit:
 
 
 class _Clock:
-    """Seconds per stage; a stage run twice (held-out) sums."""
+    """Seconds per stage; a stage run twice (held-out) sums. Tells the progress bar, if any,
+    that the stage is done."""
 
-    def __init__(self) -> None:
+    def __init__(self, progress: Optional["_Progress"] = None) -> None:
         self.timings: dict[str, float] = {}
         self._last = time.perf_counter()
+        self._progress = progress
 
     def lap(self, name: str) -> None:
         now = time.perf_counter()
         self.timings[name] = self.timings.get(name, 0.0) + now - self._last
         self._last = now
+        if self._progress is not None:
+            self._progress.stage_done(name)
 
 
 class _HeldOut:
@@ -420,7 +424,7 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     pb = _Problem(rec, noise, sim, Objective(rec, sim, noise.sigma), bar.update if bar is not None else None)
     nominal = _nominal(pb)
 
-    clock = _Clock()
+    clock = _Clock(bar)
     cal = _calibrate(pb, nominal)
     clock.lap("calibration")
     heldout = _HeldOut(pb)
@@ -498,9 +502,61 @@ def _verdict(ranking: list[Candidate], cal: _Calibration, noise: NoiseEstimate, 
             f"(RMS {ratio:.2f} x noise){note}", best.rms_after)
 
 
-def _bar(show: bool, name: str) -> Any:
-    if not show:
-        return None
-    from tqdm.auto import tqdm
+#: the diagnosis's stages: (name, share of a typical run's time [%], typical simulations), from
+#: the dev-set timings (benches/RESULTS.md); the progress bar advances by stage with an ETA
+STAGES: tuple[tuple[str, float, float], ...] = (
+    ("calibration", 40.0, 1500.0),
+    ("one-cycle fits", 8.0, 300.0),
+    ("screening", 4.0, 50.0),
+    ("refits", 36.0, 1500.0),
+    ("null refits", 6.0, 200.0),
+    ("polish", 4.0, 200.0),
+    ("held-out", 2.0, 10.0),
+)
 
-    return tqdm(desc=f"diagnosing {name}", unit="eval")
+
+class _Progress:
+    """A percent bar over the stages: each stage owns its share, simulations advance it within the
+    stage (approaching the share's end, as a stage's length is not known in advance), and the
+    bar's ETA follows; the stage and the simulation count are shown beside it."""
+
+    def __init__(self, name: str) -> None:
+        from tqdm.auto import tqdm
+
+        self.bar = tqdm(total=100.0, desc=f"diagnosing {name}", unit="%",
+                        bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
+        self.stage, self.start, self.in_stage, self.evals = 0, 0.0, 0.0, 0
+        self._show()
+
+    def _show(self) -> None:
+        name = STAGES[self.stage][0] if self.stage < len(STAGES) else "done"
+        self.bar.set_postfix_str(f"{name}, {self.evals} simulations", refresh=False)
+
+    def update(self, n: int = 1) -> None:
+        """``n`` more simulations."""
+        self.evals += int(n)
+        if self.stage < len(STAGES):
+            _, share, typical = STAGES[self.stage]
+            self.in_stage += n
+            target = self.start + share * (1.0 - 0.5 ** (self.in_stage / typical))
+            self.bar.update(max(0.0, target - self.bar.n))
+        self._show()
+
+    def stage_done(self, name: str) -> None:
+        while self.stage < len(STAGES):
+            stage, share, _ = STAGES[self.stage]
+            self.stage += 1
+            self.start += share
+            if stage == name:
+                break
+        self.in_stage = 0.0
+        self.bar.update(max(0.0, self.start - self.bar.n))
+        self._show()
+
+    def close(self) -> None:
+        self.bar.update(max(0.0, 100.0 - self.bar.n))
+        self.bar.close()
+
+
+def _bar(show: bool, name: str) -> Optional[_Progress]:
+    return _Progress(name) if show else None

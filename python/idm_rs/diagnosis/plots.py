@@ -35,10 +35,28 @@ def refit_candidate(d: Diagnosis) -> Optional[Candidate]:
     return next((c for c in d.ranking if c.effect == d.verdict and c.spec is not None), None)
 
 
-def _aligned(x: np.ndarray, pred: np.ndarray) -> tuple[np.ndarray, float]:
-    """(prediction shifted by its best offset, that offset) [m]."""
-    off = float(np.nanmean(x - pred)) if np.any(np.isfinite(pred)) else math.nan
+#: fewest samples of rest before the drive that pin the sensor offset on their own
+MIN_REST_SAMPLES = 5
+
+
+def _aligned(x: np.ndarray, pred: np.ndarray, rest: Optional[np.ndarray] = None) -> tuple[np.ndarray, float]:
+    """(prediction shifted by the sensor offset, that offset) [m]. The offset is measured where
+    the body is at rest before the drive (``rest``, a mask) when there are enough such samples:
+    there every model agrees, so a model that drifts later is not shifted to meet the data half
+    way (which would draw it off before the drive starts); otherwise over the whole record."""
+    if not np.any(np.isfinite(pred)):
+        return pred, math.nan
+    use = rest if rest is not None and int(np.count_nonzero(rest)) >= MIN_REST_SAMPLES else slice(None)
+    off = float(np.nanmean((x - pred)[use]))
     return pred + off, off
+
+
+def _rest_before_drive(voltage: np.ndarray) -> np.ndarray:
+    """Mask of the samples before the drive voltage first leaves 0."""
+    moving = np.flatnonzero(np.abs(voltage) > 0)
+    mask = np.zeros(voltage.shape, dtype=bool)
+    mask[: moving[0] if moving.size else voltage.size] = True
+    return mask
 
 
 def _save(fig: "Figure", path: Path) -> Path:
@@ -67,11 +85,12 @@ def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
         x = e.x
         p_nom, p_cal = preds[0][j], preds[1][j]
         p_ref = preds[2][j] if cand is not None else p_cal
-        ref_aligned, off_ref = _aligned(x, p_ref)
+        rest = _rest_before_drive(np.asarray(e.voltage))
+        ref_aligned, off_ref = _aligned(x, p_ref, rest)
         if not math.isfinite(off_ref):
             off_ref = float(np.mean(x))
-        nom_aligned, _ = _aligned(x, p_nom)
-        cal_aligned, _ = _aligned(x, p_cal)
+        nom_aligned, _ = _aligned(x, p_nom, rest)
+        cal_aligned, _ = _aligned(x, p_cal, rest)
         r_cal = (x - cal_aligned) * 1e9
         r_ref = (x - ref_aligned) * 1e9
 

@@ -199,7 +199,8 @@ def text_report(d: Diagnosis) -> str:
 
     # --- candidate ranking
     lines += ["", "Candidate effects (each refitted with the calibrated subset and the offsets, started from "
-                  "the null model it contains; ΔBIC > 0: better than the best null fit; σ: distance of the "
+                  "the null model it contains; ΔBIC > 0: better than the best null fit, \"not supported\": no "
+                  "better than the nominal model the effect contains; σ: distance of the "
                   "effect parameter from 'no effect' in 1σ — within 2σ the effect is indistinguishable from "
                   "its absence)"]
     rows = []
@@ -208,7 +209,8 @@ def text_report(d: Diagnosis) -> str:
         sig = getattr(c, "significance", {}) or {}
         z = min(sig.values()) if sig else math.nan
         rows.append([f"{mark}{i}", c.effect, format_params(c), _nm(c.rms_after), _ratio(c.rms_after, sigma),
-                     f"{c.delta_bic:.1f}", f"{z:.1f}" if _finite(z) else "–",
+                     f"{c.delta_bic:.1f}" if c.delta_bic >= 0 else "not supported",
+                     f"{z:.1f}" if _finite(z) else "–",
                      _nm(c.heldout_rms) if _finite(c.heldout_rms) else "–",
                      "at null" if getattr(c, "at_null", False) else ("screened" if c.screened_only else "refit")])
     lines += _table(["#", "effect", "fitted parameters (±1σ)", "RMS after", "/ noise", "ΔBIC", "σ", "held-out RMS",

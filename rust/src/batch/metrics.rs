@@ -4,6 +4,7 @@
 use crate::drive::Observer;
 use crate::model::Model;
 
+use super::steady::{CycleStats, Steady, Train};
 use super::Status;
 
 /// The main body counts as sliding when |v1| exceeds this share of the Stribeck velocity:
@@ -30,6 +31,8 @@ pub struct PointMetrics {
     pub dt_used: f64,
     /// steps taken (accepted, for adaptive methods)
     pub steps: u64,
+    /// steady-state metrics of a sawtooth train (NaN otherwise)
+    pub steady: Steady,
 }
 
 impl PointMetrics {
@@ -44,6 +47,7 @@ impl PointMetrics {
             diverged_at: f64::NAN,
             dt_used: f64::NAN,
             steps: 0,
+            steady: Steady::none(),
         }
     }
 
@@ -94,13 +98,28 @@ pub struct MetricsObserver<'a> {
     record_every: usize,
     until_record: Vec<usize>,
     pub traces: Vec<Vec<f64>>,
+    cycles: Vec<CycleStats>,
 }
 
 impl<'a> MetricsObserver<'a> {
-    /// For `models` (one per task), recording the reading every `record_every` steps (0: never).
-    pub fn new(models: Vec<&'a Model>, record_every: usize, steps_hint: &[usize]) -> Self {
+    /// For `models` (one per task), recording the reading every `record_every` steps (0: never);
+    /// `trains[i]` (with its free stroke d33 V [m]) is task i's sawtooth train, if any, whose
+    /// first `skip_cycles` cycles the steady-state metrics skip.
+    pub fn new(
+        models: Vec<&'a Model>,
+        record_every: usize,
+        steps_hint: &[usize],
+        trains: &[(Option<Train>, f64)],
+        skip_cycles: usize,
+    ) -> Self {
         let n = models.len();
         MetricsObserver {
+            cycles: (0..n)
+                .map(|i| {
+                    let (train, stroke) = trains.get(i).copied().unwrap_or((None, f64::NAN));
+                    CycleStats::new(train, skip_cycles, stroke)
+                })
+                .collect(),
             acc: models
                 .iter()
                 .map(|m| Accumulator {
@@ -123,15 +142,8 @@ impl<'a> MetricsObserver<'a> {
     }
 
     /// The metrics of task `i` that finished in state `y` after `duration` [s].
-    pub fn finish(
-        &self,
-        i: usize,
-        y: &[f64],
-        duration: f64,
-        cycles: usize,
-        dt_used: f64,
-        steps: u64,
-    ) -> PointMetrics {
+    pub fn finish(&self, i: usize, y: &[f64], duration: f64, dt_used: f64, steps: u64) -> PointMetrics {
+        let cycles = self.cycles[i].train().map_or(0, |t| t.cycles);
         let model = self.models[i];
         let mut acc = self.acc[i];
         acc.observe(y[model.layout.dof], model.friction_force(y), 0.0); // peaks only
@@ -149,6 +161,7 @@ impl<'a> MetricsObserver<'a> {
             diverged_at: f64::NAN,
             dt_used,
             steps,
+            steady: self.cycles[i].finish(),
         }
     }
 }
@@ -158,6 +171,7 @@ impl Observer for MetricsObserver<'_> {
         let model = self.models[i];
         self.v_prev[i] = y[model.layout.dof];
         self.ff_prev[i] = model.friction_force(y);
+        self.cycles[i].start(t, y[0]);
         if self.record_every > 0 {
             self.traces[i].push(model.reading(t, y));
         }
@@ -185,6 +199,7 @@ impl Observer for MetricsObserver<'_> {
         if start.is_none() {
             self.ff_prev[i] = model.friction_force(y);
         }
+        self.cycles[i].observe(t, y[0]);
         if self.record_every > 0 {
             self.until_record[i] -= 1;
             if self.until_record[i] == 0 {

@@ -10,11 +10,13 @@ mod metrics;
 mod points;
 mod run;
 mod runner;
+mod steady;
 
 pub use metrics::{PointMetrics, SLIP_VELOCITY_FACTOR};
 pub use run::{run_batch, CHUNK, LANES};
 pub use points::{PointTables, WaveFamily};
 pub use runner::BatchRunner;
+pub use steady::{Steady, Train, STALL_STEP_FRACTION};
 
 use crate::drive::Method;
 use crate::effects::Effects;
@@ -37,6 +39,8 @@ pub struct BatchConfig {
     pub record_every: usize,
     /// return each point's final state (to continue it, or to chain segments of a record)
     pub final_states: bool,
+    /// start-up cycles of a sawtooth train left out of the steady-state metrics
+    pub skip_cycles: usize,
 }
 
 impl BatchConfig {
@@ -51,13 +55,13 @@ impl BatchConfig {
     }
 }
 
-/// One point: its parameters, effects, input and the number of drive cycles (0 if not a train).
+/// One point: its parameters, effects, input and its drive cycles (if a sawtooth train).
 #[derive(Clone, Debug)]
 pub struct PointSpec {
     pub params: Params,
     pub effects: Effects,
     pub wave: PiecewiseLinear,
-    pub cycles: usize,
+    pub train: Option<Train>,
     /// this point's end time [s] if it differs from the batch's `t_end`
     pub t_end: Option<f64>,
     /// start time [s] (0: from the beginning of the input)
@@ -68,12 +72,12 @@ pub struct PointSpec {
 
 impl PointSpec {
     /// A point run from rest over [0, the batch's t_end].
-    pub fn new(params: Params, effects: Effects, wave: PiecewiseLinear, cycles: usize) -> Self {
+    pub fn new(params: Params, effects: Effects, wave: PiecewiseLinear, train: Option<Train>) -> Self {
         PointSpec {
             params,
             effects,
             wave,
-            cycles,
+            train,
             t_end: None,
             t_start: 0.0,
             y0: None,
@@ -91,6 +95,8 @@ pub struct PointOutput {
     pub metrics: PointMetrics,
     pub trace: Vec<f64>,
     pub final_state: Vec<f64>,
+    /// why the status is not `Ok` (empty when it is)
+    pub reason: String,
 }
 
 impl PointOutput {
@@ -99,6 +105,18 @@ impl PointOutput {
             metrics: PointMetrics::with_status(status),
             trace: Vec::new(),
             final_state: Vec::new(),
+            reason: match status {
+                Status::NotRun => "not run: the batch was cancelled first".into(),
+                _ => String::new(),
+            },
+        }
+    }
+
+    /// A point that could not be built or run, and why.
+    pub fn invalid(reason: String) -> Self {
+        PointOutput {
+            reason,
+            ..PointOutput::with_status(Status::Invalid)
         }
     }
 }
@@ -136,6 +154,7 @@ mod tests {
             retries: 2,
             record_every: 0,
             final_states: false,
+            skip_cycles: 0,
         }
     }
 
@@ -150,7 +169,7 @@ mod tests {
                     Effects::default(),
                     PiecewiseLinear::sawtooth(40.0 + 10.0 * i as f64, 1000.0, 2, 0.2e-3, true, 0.0)
                         .unwrap(),
-                    2,
+                    Some(Train::new(1000.0, 2, 0.0)),
                 )
             })
             .collect()

@@ -7,7 +7,7 @@ use crate::effects::{Effects, EFFECT_NAMES};
 use crate::params::{Params, PARAM_NAMES};
 use crate::waveform::PiecewiseLinear;
 
-use super::PointSpec;
+use super::{PointSpec, Train};
 
 /// The input of every point of a batch: one family, its fields per point.
 #[derive(Clone, Debug, PartialEq)]
@@ -43,12 +43,12 @@ impl WaveFamily {
         }
     }
 
-    /// The point's input and its number of drive cycles (0 unless a sawtooth train).
-    pub fn build(&self, row: &[f64]) -> Result<(PiecewiseLinear, usize), String> {
+    /// The point's input and its drive cycles (a sawtooth train's).
+    pub fn build(&self, row: &[f64]) -> Result<(PiecewiseLinear, Option<Train>), String> {
         match self {
             WaveFamily::Triangle => {
                 let [amplitude, rise, fall, delay] = row.try_into().map_err(|_| "row size")?;
-                Ok((PiecewiseLinear::triangle(amplitude, rise, fall, delay)?, 0))
+                Ok((PiecewiseLinear::triangle(amplitude, rise, fall, delay)?, None))
             }
             WaveFamily::Sawtooth => {
                 let [amplitude, frequency, cycles, rise, forward, delay] =
@@ -60,11 +60,11 @@ impl WaveFamily {
                 }
                 let c = cycles as usize;
                 let w = PiecewiseLinear::sawtooth(amplitude, frequency, c, rise, forward != 0.0, delay)?;
-                Ok((w, c))
+                Ok((w, Some(Train::new(frequency, c, delay))))
             }
             WaveFamily::Sampled { t, v } => {
                 let scale = row[0];
-                Ok((PiecewiseLinear::new(t.clone(), v.iter().map(|x| x * scale).collect())?, 0))
+                Ok((PiecewiseLinear::new(t.clone(), v.iter().map(|x| x * scale).collect())?, None))
             }
         }
     }
@@ -123,8 +123,8 @@ impl PointTables<'_> {
             .collect();
         let params = Params::from_pairs(&pairs)?;
         let effects = Effects::from_pairs(&epairs)?;
-        let (wave, cycles) = self.family.build(&self.waves[i * nw..(i + 1) * nw])?;
-        let mut spec = PointSpec::new(params, effects, wave, cycles);
+        let (wave, train) = self.family.build(&self.waves[i * nw..(i + 1) * nw])?;
+        let mut spec = PointSpec::new(params, effects, wave, train);
         spec.t_end = self.t_ends.map(|t| t[i]);
         spec.t_start = self.t_starts.map_or(0.0, |t| t[i]);
         spec.y0 = self.states.map(|(s, d)| s[i * d..(i + 1) * d].to_vec());
@@ -167,7 +167,7 @@ mod tests {
         };
         let pts = tables.points().unwrap();
         let first = pts[0].as_ref().unwrap();
-        assert_eq!(first.cycles, 2);
+        assert_eq!(first.train, Some(Train::new(100.0, 2, 0.0)));
         assert_eq!(first.params, Params::paper());
         assert!(pts[1].as_ref().unwrap_err().contains("'m2'"));
         let short = PointTables { waves: &w[..6], ..tables };

@@ -79,7 +79,17 @@ fn run_group(
         })
         .collect();
     let steps: Vec<usize> = group.iter().map(|r| r.steps).collect();
-    let mut obs = MetricsObserver::new(group.iter().map(|r| &r.model).collect(), record_every, &steps);
+    let trains: Vec<_> = group
+        .iter()
+        .map(|r| (r.spec.train, r.model.params.d33 * r.spec.wave.peak()))
+        .collect();
+    let mut obs = MetricsObserver::new(
+        group.iter().map(|r| &r.model).collect(),
+        record_every,
+        &steps,
+        &trains,
+        cfg.skip_cycles,
+    );
     let ends = run_tasks::<_, LANES>(&tasks, method, &mut obs, cancel)?;
     Some(
         ends.into_iter()
@@ -94,9 +104,10 @@ fn run_group(
                         }
                     };
                     Ok(PointOutput {
-                        metrics: obs.finish(i, &y, duration, group[i].spec.cycles, dt_used, steps),
+                        metrics: obs.finish(i, &y, duration, dt_used, steps),
                         trace: std::mem::take(&mut obs.traces[i]),
                         final_state: if cfg.final_states { y } else { Vec::new() },
+                        reason: String::new(),
                     })
                 }
                 LaneEnd::Finished { .. } => Err(tasks[i].t_end),
@@ -141,6 +152,9 @@ fn retry(cfg: &BatchConfig, ready: &Ready, first_failure: f64, cancel: &AtomicBo
                             status: Status::Retried,
                             ..o.metrics
                         },
+                        reason: format!(
+                            "diverged at t = {first_failure:.6e} s with dt = {first_step:e} s; finished at dt = {dt:e} s"
+                        ),
                         ..o
                     })
                 }
@@ -149,10 +163,15 @@ fn retry(cfg: &BatchConfig, ready: &Ready, first_failure: f64, cancel: &AtomicBo
             }
         }
     }
+    let how = match cfg.method {
+        Method::Rk4 { .. } => format!("at every step tried (down to dt = {dt_tried:e} s)"),
+        _ => "(the adaptive step collapsed or the state left its bounds)".to_string(),
+    };
     Some(PointOutput {
         metrics: PointMetrics::diverged(failed_at, dt_tried),
         trace: Vec::new(),
         final_state: Vec::new(),
+        reason: format!("diverged at t = {failed_at:.6e} s {how}"),
     })
 }
 
@@ -179,8 +198,8 @@ fn run_chunk(
     for (i, s) in specs.iter().enumerate() {
         match prepare(cfg, i, s) {
             Ok(r) => valid.push(r),
-            Err(_) => {
-                out[i] = Some(PointOutput::with_status(Status::Invalid));
+            Err(why) => {
+                out[i] = Some(PointOutput::invalid(why));
                 done.fetch_add(1, Ordering::Relaxed);
             }
         }

@@ -42,11 +42,11 @@ impl BatchRunner {
             for p in points {
                 match p {
                     Ok(s) => {
-                        slot.push(Some(specs.len()));
+                        slot.push(Ok(specs.len()));
                         specs.push(s);
                     }
-                    Err(_) => {
-                        slot.push(None);
+                    Err(why) => {
+                        slot.push(Err(why));
                         d2.fetch_add(1, Ordering::Relaxed);
                     }
                 }
@@ -58,12 +58,11 @@ impl BatchRunner {
                 Ok(r) => r.map_err(|e| e.to_string())?,
                 Err(_) => return Err("internal error in idm-rs batch (please report)".into()),
             };
-            let invalid = PointOutput::with_status(Status::Invalid);
             Ok(slot
                 .into_iter()
                 .map(|s| match s {
-                    Some(k) => std::mem::replace(&mut results[k], invalid.clone()),
-                    None => invalid.clone(),
+                    Ok(k) => std::mem::replace(&mut results[k], PointOutput::with_status(Status::NotRun)),
+                    Err(why) => PointOutput::invalid(why),
                 })
                 .collect())
         });

@@ -1,0 +1,305 @@
+"""Actuator characteristics: the curves a designer judges a stick-slip drive by.
+
+* :func:`steady_state` — over a sawtooth train, after ``skip_cycles`` start-up cycles: mean
+  velocity [m/s], step per cycle [m] (mean and spread), back-slip per cycle [m] and its ratio to
+  the cycle's reach, and whether the body moves forward, backward or stalls. The same numbers
+  are sweep metrics (``sweep(..., grid={"frequency": ..., "voltage": ...})`` gives the velocity
+  map) and :meth:`idm_rs.SimulationResult.steady_state`.
+* :func:`stall_force` — the external load on the main body (``Params.load_force``, opposing the
+  motion) at which the mean velocity falls to zero, by a bracketing root search.
+* :func:`characterize` — the standard set: velocity against frequency at several voltages, step
+  and back-slip against voltage, velocity against load with the stall force marked, as one
+  ``xarray.Dataset`` (:func:`plot_characteristics` draws it; ``idm-rs characterize`` does both).
+
+Definitions (per cycle k, x1 the main body's position, cycle boundaries the starts of the
+sawtooth periods, which every integrator lands on): step_k = x1(end) − x1(start); the travel
+forward and backward within the cycle are summed over the integrator's steps (so step = forward
+travel − backward travel, whatever order the motions come in); back-slip_k = the travel against
+the net direction, and the ratio is Σ back-slip / Σ travel along it. The motion counts as
+stalled when |mean step| < 1e-3 · d33 · V (a thousandth of the free stroke). A light weight at a
+fast edge can move a device *backward* under a "forward" sawtooth: the direction says so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, Optional, Sequence
+
+import numpy as np
+
+from .batch import Point, Structure, run
+from .effects import Effects
+from .methods import MethodName
+from .params import Params
+from .waveforms import Sawtooth
+
+if TYPE_CHECKING:
+    import xarray
+
+#: steady-state metric -> (units, meaning)
+STEADY_METRICS: dict[str, tuple[str, str]] = {
+    "mean_velocity": ("m/s", "mean velocity of the main body (mean step x frequency)"),
+    "step_mean": ("m", "mean step per cycle"),
+    "step_std": ("m", "standard deviation of the step over the cycles"),
+    "backslip": ("m", "mean back-slip per cycle: travel against the net direction"),
+    "backslip_ratio": ("1", "back-slip over the travel along the net direction"),
+    "direction": ("1", "+1 forward, -1 backward, 0 stalled"),
+}
+
+#: the stall force is bracketed to this share of the static friction force mu_s Fn
+STALL_XTOL_FRACTION = 1e-3
+
+
+@dataclass(frozen=True)
+class SteadyState:
+    """Steady-state metrics of one sawtooth train (NaN when no full cycle was averaged)."""
+
+    mean_velocity: float  #: [m/s]
+    step_mean: float  #: [m]
+    step_std: float  #: [m]
+    backslip: float  #: [m]
+    backslip_ratio: float  #: [-]
+    direction: float  #: +1, -1, 0 (stalled), NaN
+
+    @property
+    def motion(self) -> str:
+        """"forward", "backward", "stalled" or "unknown"."""
+        return {1.0: "forward", -1.0: "backward", 0.0: "stalled"}.get(self.direction, "unknown")
+
+
+def _check_train(waveform: Any, skip_cycles: int) -> Sawtooth:
+    if not isinstance(waveform, Sawtooth):
+        raise ValueError(f"steady-state metrics need a Sawtooth train, got {type(waveform).__name__}")
+    if isinstance(skip_cycles, bool) or int(skip_cycles) != skip_cycles or skip_cycles < 0:
+        raise ValueError(f"parameter 'skip_cycles' must be a non-negative integer, got {skip_cycles!r}")
+    if waveform.cycles <= skip_cycles:
+        raise ValueError(f"the train has {waveform.cycles} cycles and skip_cycles = {skip_cycles} skips them all; "
+                         "use more cycles or skip fewer")
+    return waveform
+
+
+def _run_trains(params: Sequence[Params], waves: Sequence[Sawtooth], *, model: str, n_elements: int,
+                effects: Optional[Effects], skip_cycles: int, method: MethodName, threads: Optional[int],
+                piezo_hysteresis: bool = True, t_end: Optional[float] = None, **how: Any) -> dict[str, Any]:
+    """One batch of trains (each point to its own train's end, or to ``t_end``)."""
+    from . import methods
+
+    method_name, rtol, atol = methods.resolve(method, how.pop("rtol", 1e-7), how.pop("atol", 1e-7))
+    effects = effects or Effects()
+    points = [Point(p, effects, w, t_end=t_end or w.duration) for p, w in zip(params, waves)]
+    longest = max(pt.t_end for pt in points)  # type: ignore[type-var]
+    return run(points, Structure(model, int(n_elements), bool(piezo_hysteresis)),  # type: ignore[arg-type]
+               t_end=longest, method=method_name, rtol=rtol, atol=atol, skip_cycles=int(skip_cycles),
+               threads=threads, **how)
+
+
+def _steady(out: dict[str, Any], i: int) -> SteadyState:
+    if int(out["status"][i]) not in (1, 2):
+        return SteadyState(*(math.nan,) * 6)
+    return SteadyState(*(float(out[k][i]) for k in STEADY_METRICS))
+
+
+def steady_state(params: Params, waveform: Sawtooth, *, model: Literal["lps", "dps"] = "dps", n_elements: int = 4,
+                 effects: Optional[Effects] = None, skip_cycles: int = 1, method: MethodName = "auto",
+                 threads: Optional[int] = None, piezo_hysteresis: bool = True, t_end: Optional[float] = None,
+                 **how: Any) -> SteadyState:
+    """Steady-state metrics of ``params`` driven by the sawtooth train ``waveform`` (to its end,
+    or to ``t_end`` [s]), averaged over its full cycles after the first ``skip_cycles``.
+    ``method`` (default ``"auto"``) and ``how`` (``dt`` for RK4, ``rtol``/``atol``/``first_step``
+    for adaptive methods) as in :func:`idm_rs.sweep`. A run that diverges gives NaN metrics."""
+    _check_train(waveform, skip_cycles)
+    out = _run_trains([params], [waveform], model=model, n_elements=n_elements, effects=effects,
+                      skip_cycles=skip_cycles, method=method, threads=threads, piezo_hysteresis=piezo_hysteresis,
+                      t_end=t_end, **how)
+    return _steady(out, 0)
+
+
+@dataclass(frozen=True)
+class StallForce:
+    """The load at which the actuator stalls, and the curve that located it."""
+
+    force: float  #: magnitude of the opposing load at zero mean velocity [N] (NaN if not bracketed)
+    loads: np.ndarray  #: opposing loads tried [N] (>= 0), ascending
+    velocities: np.ndarray  #: mean velocity at each load [m/s]
+    xtol: float  #: bracket width at the end [N]
+    direction: float  #: the unloaded motion's direction (+1 or -1)
+
+
+def stall_force(params: Params, waveform: Sawtooth, *, model: Literal["lps", "dps"] = "dps", n_elements: int = 4,
+                effects: Optional[Effects] = None, skip_cycles: int = 2, method: MethodName = "auto",
+                loads: int = 9, xtol: Optional[float] = None, threads: Optional[int] = None,
+                **how: Any) -> StallForce:
+    """The opposing load on the main body at which the mean velocity reaches zero.
+
+    The load acts against the unloaded motion (``load_force`` = −F for a forward drive). A coarse
+    curve of ``loads`` points from 0 to 1.5 μs·Fn (beyond the static friction force, where the
+    body cannot hold the load at all) runs as one parallel batch; the first sign change of the
+    mean velocity is then narrowed by :func:`scipy.optimize.brentq` to ``xtol`` [N] (default
+    ``STALL_XTOL_FRACTION`` · μs·Fn), each evaluation one steady-state run. NaN when the unloaded
+    drive stalls or the curve never changes sign."""
+    from scipy.optimize import brentq
+
+    _check_train(waveform, skip_cycles)
+    if int(loads) < 3:
+        raise ValueError(f"parameter 'loads' must be at least 3, got {loads!r}")
+    fs = max(params.mu_s, params.mu_k) * params.effective_normal_force
+    xtol = float(xtol) if xtol is not None else STALL_XTOL_FRACTION * fs
+    kw = dict(model=model, n_elements=n_elements, effects=effects, skip_cycles=skip_cycles, method=method,
+              threads=threads, **how)
+    base = params.load_force
+
+    def velocities(forces: Sequence[float], sign: float) -> np.ndarray:
+        ps = [replace(params, load_force=base - sign * f) for f in forces]
+        out = _run_trains(ps, [waveform] * len(ps), **kw)
+        return np.array([_steady(out, i).mean_velocity for i in range(len(ps))])
+
+    v0 = velocities([0.0], 1.0)[0]
+    sign = float(np.sign(v0)) if np.isfinite(v0) else 0.0
+    grid = np.linspace(0.0, 1.5 * fs, int(loads))
+    if sign == 0.0:
+        return StallForce(math.nan, grid, np.full(grid.size, math.nan), xtol, 0.0)
+    v = velocities(grid, sign)
+    v[0] = v0
+    crossing = np.flatnonzero(np.sign(v[1:]) * sign <= 0)
+    if crossing.size == 0:
+        return StallForce(math.nan, grid, v, xtol, sign)
+    j = int(crossing[0])
+    a, b = float(grid[j]), float(grid[j + 1])
+    if v[j + 1] == 0.0:
+        return StallForce(b, grid, v, 0.0, sign)
+    force = brentq(lambda f: float(velocities([f], sign)[0]), a, b, xtol=xtol)
+    return StallForce(float(force), grid, v, xtol, sign)
+
+
+def characterize(params: Optional[Params] = None, *, model: Literal["lps", "dps"] = "dps", n_elements: int = 4,
+                 effects: Optional[Effects] = None, frequencies: Optional[Sequence[float]] = None,
+                 voltages: Sequence[float] = (40.0, 60.0, 80.0, 100.0, 120.0),
+                 step_voltages: Optional[Sequence[float]] = None, frequency: float = 100.0,
+                 voltage: float = 80.0, rise: float = 0.5e-3, cycles: int = 6, skip_cycles: int = 2,
+                 loads: int = 9, method: MethodName = "auto", threads: Optional[int] = None,
+                 progress: bool = True) -> "xarray.Dataset":
+    """The standard characteristics of a design as one Dataset.
+
+    * ``mean_velocity(voltage, frequency)`` and the other steady-state metrics over the
+      frequency × voltage grid (``frequencies`` default: 12 log-spaced from 20 Hz to the highest
+      frequency the ``rise`` allows with a 10 % margin, at most 1.5 kHz);
+    * ``step_mean(step_voltage)``, ``backslip(step_voltage)``, ``backslip_ratio(step_voltage)`` at
+      ``frequency`` (``step_voltages`` default: 11 from 20 to 120 V);
+    * ``load_velocity(load)`` at (``frequency``, ``voltage``) and ``stall_force`` (attribute and
+      variable) by :func:`stall_force`.
+
+    Every run is a sawtooth train of ``cycles`` periods with the fast edge ``rise`` [s]; the
+    first ``skip_cycles`` are start-up. Defaults suit the paper's device (Table 1)."""
+    import xarray as xr
+
+    from . import __version__
+    from .sweep import sweep
+
+    params = params or Params()
+    if frequencies is None:
+        f_max = min(1500.0, 0.9 / (2.0 * rise))
+        frequencies = np.geomspace(20.0, f_max, 12)
+    step_voltages = np.linspace(20.0, 120.0, 11) if step_voltages is None else step_voltages
+    train = Sawtooth(amplitude=voltage, frequency=frequency, cycles=cycles, rise=rise)
+    _check_train(train, skip_cycles)
+    common = dict(model=model, n_elements=n_elements, effects=effects, method=method, threads=threads,
+                  skip_cycles=skip_cycles, progress=progress)
+    vmap = sweep(params, train, {"voltage": np.asarray(voltages, float), "frequency": np.asarray(frequencies, float)},
+                 t_end=_longest(train, frequencies), **common)
+    steps = sweep(params, train, {"voltage": np.asarray(step_voltages, float)}, t_end=train.duration, **common)
+    stall = stall_force(params, train, model=model, n_elements=n_elements, effects=effects, skip_cycles=skip_cycles,
+                        method=method, loads=loads, threads=threads)
+    ds = xr.Dataset()
+    for name in STEADY_METRICS:
+        ds[name] = vmap[name]
+    for name in ("step_mean", "step_std", "backslip", "backslip_ratio", "direction"):
+        ds[f"{name}_vs_voltage"] = ("step_voltage", steps[name].values, steps[name].attrs)
+    ds = ds.assign_coords(step_voltage=("step_voltage", np.asarray(step_voltages, float),
+                                        {"units": "V", "long_name": f"drive amplitude (at {frequency:g} Hz)"}))
+    ds["load_velocity"] = ("load", stall.velocities, {"units": "m/s", "long_name": (
+        f"mean velocity against an opposing load (at {frequency:g} Hz, {voltage:g} V)")})
+    ds = ds.assign_coords(load=("load", stall.loads, {"units": "N", "long_name": "opposing load on the main body"}))
+    ds["stall_force"] = ((), stall.force, {"units": "N", "long_name": "opposing load at zero mean velocity",
+                                           "xtol_N": stall.xtol})
+    ds.attrs.update({
+        "idm_rs_version": __version__, "model": model, "n_elements": int(n_elements) if model == "dps" else 1,
+        "method": vmap.attrs["method"], "rise_s": rise, "cycles": cycles, "skip_cycles": skip_cycles,
+        "design_frequency_Hz": frequency, "design_voltage_V": voltage,
+        "velocity_at_design_m_per_s": float(ds["load_velocity"].values[0]),
+        "stall_force_N": stall.force,
+    })
+    for name, value in params.to_dict(resolved=False).items():
+        ds.attrs[f"param_{name}"] = value if value is not None else "derived"
+    return ds
+
+
+def _longest(train: Sawtooth, frequencies: Sequence[float]) -> float:
+    """A sweep over frequency runs each point to its own train's end: the batch's t_end is the
+    longest (the lowest frequency's)."""
+    return train.delay + train.cycles / float(min(frequencies))
+
+
+def plot_characteristics(ds: "xarray.Dataset", out_dir: Path) -> list[Path]:
+    """Three PNGs in ``out_dir``: velocity vs frequency per voltage, step and back-slip vs
+    voltage, velocity vs load with the stall force marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    a = ds.attrs
+    paths = []
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
+    for v in ds["voltage"].values:
+        ax.plot(ds["frequency"].values, ds["mean_velocity"].sel(voltage=v).values * 1e3, marker="o", ms=3,
+                label=f"{v:g} V")
+    ax.set_xscale("log")
+    ax.axhline(0.0, color="0.5", lw=0.8)
+    ax.set_xlabel("drive frequency [Hz]")
+    ax.set_ylabel("mean velocity [mm/s]")
+    ax.set_title(f"velocity vs frequency (rise {a['rise_s'] * 1e3:g} ms, {a['model'].upper()})", fontsize=10)
+    ax.legend(title="amplitude", fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    paths.append(out_dir / "velocity_vs_frequency.png")
+    fig.savefig(paths[-1], dpi=130)
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
+    v = ds["step_voltage"].values
+    ax.plot(v, ds["step_mean_vs_voltage"].values * 1e9, marker="o", label="step per cycle")
+    ax.fill_between(v, (ds["step_mean_vs_voltage"] - ds["step_std_vs_voltage"]).values * 1e9,
+                    (ds["step_mean_vs_voltage"] + ds["step_std_vs_voltage"]).values * 1e9, alpha=0.2)
+    ax.plot(v, ds["backslip_vs_voltage"].values * 1e9, marker="s", label="back-slip per cycle")
+    ax.set_xlabel("drive amplitude [V]")
+    ax.set_ylabel("per cycle [nm]")
+    ax2 = ax.twinx()
+    ax2.plot(v, ds["backslip_ratio_vs_voltage"].values, color="0.4", ls="--", label="back-slip ratio")
+    ax2.set_ylabel("back-slip / reach [-]")
+    ax.set_title(f"step and back-slip at {a['design_frequency_Hz']:g} Hz", fontsize=10)
+    lines = ax.get_legend_handles_labels()
+    lines2 = ax2.get_legend_handles_labels()
+    ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=8)
+    ax.grid(alpha=0.3)
+    paths.append(out_dir / "step_backslip_vs_voltage.png")
+    fig.savefig(paths[-1], dpi=130)
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), constrained_layout=True)
+    ax.plot(ds["load"].values, ds["load_velocity"].values * 1e3, marker="o")
+    ax.axhline(0.0, color="0.5", lw=0.8)
+    stall = float(ds["stall_force"])
+    if np.isfinite(stall):
+        ax.axvline(stall, color="C3", ls="--", label=f"stall force {stall:.3g} N")
+        ax.legend(fontsize=8)
+    ax.set_xlabel("opposing load on the main body [N]")
+    ax.set_ylabel("mean velocity [mm/s]")
+    ax.set_title(f"load curve at {a['design_frequency_Hz']:g} Hz, {a['design_voltage_V']:g} V", fontsize=10)
+    ax.grid(alpha=0.3)
+    paths.append(out_dir / "velocity_vs_load.png")
+    fig.savefig(paths[-1], dpi=130)
+    plt.close(fig)
+    return paths
