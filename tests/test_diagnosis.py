@@ -144,3 +144,31 @@ def test_cli_diagnose_end_to_end(tmp_path):
     data = json.loads(out.read_text())
     assert data["verdict"] == "spring_to_ground"
     assert (tmp_path / "plots" / "ranking.png").exists()
+
+
+def test_report_shows_unsupported_candidates_as_such(spring_diagnosis):
+    """A candidate no better than the nominal model it contains is "not supported", not a huge
+    negative ΔBIC."""
+    import copy
+
+    d = copy.copy(spring_diagnosis)
+    worse = copy.copy(d.ranking[-1])
+    worse.delta_bic = -93_000.0
+    d.ranking = list(d.ranking[:-1]) + [worse]
+    text = d.report()
+    assert "not supported" in text and "-93000" not in text
+
+
+def test_progress_advances_by_stage_to_the_end():
+    from idm_rs.diagnosis.diagnose import STAGES, _Progress
+
+    p = _Progress("test")
+    p.update(10_000)  # far beyond the stage's typical count: approaches, never passes, its share
+    assert STAGES[0][1] * 0.99 < p.bar.n <= STAGES[0][1]
+    p.stage_done("calibration")
+    assert p.bar.n == pytest.approx(STAGES[0][1])
+    p.stage_done("refits")  # a skipped stage's share is passed over
+    assert p.bar.n == pytest.approx(sum(s[1] for s in STAGES[:4]))
+    assert "null refits" in p.bar.postfix and "10000 simulations" in p.bar.postfix
+    p.close()
+    assert p.bar.n == pytest.approx(100.0)

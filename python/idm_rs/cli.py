@@ -147,7 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
         description=(
             "Run the outer product of the --grid axes through the parallel batch engine (no trajectories "
             "are stored: each point is reduced to final_position, step_per_cycle, peak_velocity, "
-            "peak_friction, slip_fraction and a status), print a summary, and save the labelled results "
+            "peak_friction, slip_fraction, the steady-state metrics of sawtooth trains (mean_velocity, step_mean, "
+            "step_std, backslip, backslip_ratio, direction) and a status with its reason), print a summary, "
+            "and save the labelled results "
             "(--out FILE.nc) and a heat map of one metric (--plot FILE.png). The normal force follows "
             "the swept masses, (m1+m2+mPE) g per point, unless set with --param normal_force=VALUE."
         ),

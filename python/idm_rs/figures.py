@@ -163,7 +163,9 @@ def fig6d(
     window: tuple[float, float] = TRANSIENT_WINDOW,
 ) -> Path:
     """Fig. 6d: friction force vs x1 in ``window`` [s] (4–10 ms): presliding hysteresis loops,
-    coloured by time; DPS left, LPS right."""
+    coloured by time; DPS left, LPS right. The saw-teeth at the loop tips are physics (the body
+    rings at the structure's higher modes where the slow motion reverses), not sampling: at the
+    0.5 µs drawn here the loops match the 0.1 µs trajectory to < 1e-4 of their range."""
     fig, axes = plt.subplots(1, 2, figsize=(10, 5), sharey=True, layout="constrained")
     lc = None
     for ax, r in zip(axes, (dps, lps)):
