@@ -144,3 +144,28 @@ def test_heat_map_title_shows_swept_fields_as_swept():
     text = "Triangle(amplitude=80.0, rise=0.0005, fall=0.0095, delay=0.0)"
     assert _waveform_title(text, ["mass_ratio", "voltage"]) == "Triangle(amplitude=swept, rise=0.0005, fall=0.0095, delay=0.0)"
     assert "rise=swept" in _waveform_title(text, ["rise"])
+
+
+def test_fit_plots_align_models_on_the_rest_before_the_drive():
+    """The nominal model was drawn ~1 µm off before the drive: aligned by its mean over the
+    whole record, a model that drifts away later was shifted half way to meet the data."""
+    from idm_rs.diagnosis.plots import _aligned, _rest_before_drive
+
+    t = np.linspace(0.0, 10e-3, 1001)
+    voltage = np.where(t < 1e-3, 0.0, 80.0)
+    data = 5e-6 + np.where(t < 1e-3, 0.0, 1e6 * (t - 1e-3) ** 2)  # sensor offset 5 µm, then motion
+    model = np.where(t < 1e-3, 0.0, 3e6 * (t - 1e-3) ** 2)  # moves 3x too far
+    aligned, off = _aligned(data, model, _rest_before_drive(voltage))
+    assert off == pytest.approx(5e-6)
+    assert np.abs(aligned - data)[t < 1e-3].max() < 1e-18
+    _, off_all = _aligned(data, model)  # without the rest: the old, misleading alignment
+    assert abs(off_all - 5e-6) > 1e-5
+
+
+def test_sawtooth_friction_panel_zooms_on_one_cycle(tmp_path):
+    from idm_rs.cli import plot_result
+
+    r = idm_rs.simulate(P, idm_rs.Sawtooth(cycles=5, frequency=1000.0, rise=1e-4), t_end=5e-3, model="lps",
+                        method="auto", save_every=1)
+    plot_result(r, tmp_path / "saw.png")
+    assert (tmp_path / "saw.png").stat().st_size > 20_000

@@ -359,13 +359,18 @@ def save_trajectory(result: SimulationResult, path: Path) -> None:
 
 
 def plot_result(result: SimulationResult, path: Path) -> None:
+    """Displacements and voltage over the run, and the friction force. A sawtooth train of 4 or
+    more cycles switches friction between ±Fs several times per cycle, which over the whole run
+    is a solid band: its friction panel zooms on the last full cycle instead (shaded above)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     t = result.t * 1e3
-    fig, (ax, axf) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True, layout="constrained")
+    w = result.waveform
+    zoom = isinstance(w, Sawtooth) and w.cycles >= 4
+    fig, (ax, axf) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=not zoom, layout="constrained")
     ax.plot(t, result.main_body * 1e6, color="C0", label="x1 (main body)")
     ax.plot(t, result.weight * 1e6, color="C2", ls="--", lw=1.0, label="x2 (weight)")
     ax.set_ylabel("displacement [µm]")
@@ -377,32 +382,21 @@ def plot_result(result: SimulationResult, path: Path) -> None:
     ax.legend(lines, [ln.get_label() for ln in lines], fontsize=8.5, loc="best")
     label = "LPS" if result.model == "lps" else f"DPS (n = {result.n_elements})"
     ax.set_title(f"{label}: x1(t_end) = {result.final_position * 1e6:.4f} µm")
-    w = result.waveform
-    if isinstance(w, Sawtooth) and w.cycles >= 4:
-        # a train's friction switches sign many times per cycle: drawn raw it is a solid band.
-        # Per cycle: the range (shaded) and the mean; the last full cycle in full in an inset.
-        k = np.floor((result.t - w.delay) / w.period).astype(int)
-        inside = (k >= 0) & (k < w.cycles)
-        cycles = np.unique(k[inside])
-        lo = np.array([result.friction[k == c].min() for c in cycles])
-        hi = np.array([result.friction[k == c].max() for c in cycles])
-        mean = np.array([result.friction[k == c].mean() for c in cycles])
-        edges = (w.delay + np.append(cycles, cycles[-1] + 1) * w.period) * 1e3
-        axf.fill_between(edges, np.append(lo, lo[-1]), np.append(hi, hi[-1]), step="post", color="C3", alpha=0.25,
-                         lw=0, label="range per cycle")
-        axf.step(edges, np.append(mean, mean[-1]), where="post", color="C3", lw=1.2, label="mean per cycle")
-        axf.legend(fontsize=8, loc="upper right")
-        last = cycles[-1]
-        ins = axf.inset_axes((0.02, 0.08, 0.3, 0.5))
-        sel = k == last
-        ins.plot((result.t[sel] - (w.delay + last * w.period)) * 1e3, result.friction[sel], color="C3", lw=0.7)
-        ins.set_title(f"cycle {last + 1}", fontsize=7)
-        ins.tick_params(labelsize=6)
+    if zoom:
+        assert isinstance(w, Sawtooth)
+        last = min(w.cycles, int((result.t[-1] - w.delay) / w.period + 1e-9)) - 1
+        t0 = w.delay + max(last, 0) * w.period
+        sel = (result.t >= t0 - 1e-12) & (result.t <= t0 + w.period + 1e-12)
+        ax.axvspan(t0 * 1e3, (t0 + w.period) * 1e3, color="C3", alpha=0.08, lw=0)
+        axf.plot((result.t[sel] - t0) * 1e3, result.friction[sel], color="C3", lw=0.8)
+        axf.set_xlabel(f"time in cycle {last + 1} of {w.cycles} [ms] (from t = {t0 * 1e3:g} ms; shaded above)")
+        ax.set_xlabel("time t [ms]")
+        ax.set_xlim(t[0], t[-1])
     else:
         axf.plot(t, result.friction, color="C3", lw=0.8)
+        axf.set_xlabel("time t [ms]")
+        axf.set_xlim(t[0], t[-1])
     axf.set_ylabel("friction force Ff [N]")
-    axf.set_xlabel("time t [ms]")
-    axf.set_xlim(t[0], t[-1])
     axf.grid(alpha=0.3)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=130)
@@ -657,9 +651,13 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     )
     elapsed = time.perf_counter() - t0
     label = "LPS" if a.model == "lps" else f"DPS (n = {a.n_elements})"
-    steps = round(t_end / a.dt)
+    t_last = float(result.t[-1])
+    steps = round(t_last / a.dt)
     print(f"{label}, {waveform!r}, t_end = {t_end:g} s, dt = {a.dt:g} s")
-    print(f"final position x1({t_end * 1e3:g} ms) = {result.final_position * 1e6:.6f} µm")
+    if not result.complete:
+        print(f"interrupted at t = {t_last:g} s: the trajectory up to there is kept")
+    print(f"{'final' if result.complete else 'last'} position x1({t_last * 1e3:g} ms) = "
+          f"{result.final_position * 1e6:.6f} µm")
     print(f"run time {elapsed:.3f} s ({steps} steps, {steps / max(elapsed, 1e-9) / 1e6:.1f} M steps/s)")
     if out is not None:
         save_trajectory(result, out)
