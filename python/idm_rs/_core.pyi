@@ -47,6 +47,10 @@ class RunConfig:
         rig_drive: str = "position",
         rig_stiffness: float = 0.0,
         rig_damping: float = 0.0,
+        rig_kp: float = 0.0,
+        rig_kv: float = 0.0,
+        rig_gain: float = 0.0,
+        rig_limit: float = ...,
     ) -> None:
         """``first_step`` None = ``dt``; ``threads`` below 1 counts as 1."""
 
@@ -92,14 +96,27 @@ class RunConfig:
         """Batch: start-up cycles of a sawtooth train left out of the steady-state metrics."""
     @property
     def rig_drive(self) -> str:
-        """Model "rig": "position" (a spring to a moving end, the input in m) or "force" (the
-        input is the force on the body [N])."""
+        """Model "rig": "position" (a spring to a moving end, the input in m), "force" (the
+        input is the force on the body [N]) or "closed_loop" (the input is the reference
+        position [m] of a P-P servo loop)."""
     @property
     def rig_stiffness(self) -> float:
         """Model "rig", position drive: spring to the moving end [N/m]."""
     @property
     def rig_damping(self) -> float:
         """Model "rig", position drive: damper in parallel with the spring [N s/m]."""
+    @property
+    def rig_kp(self) -> float:
+        """Model "rig", closed-loop drive: position gain [1/s]."""
+    @property
+    def rig_kv(self) -> float:
+        """Model "rig", closed-loop drive: velocity gain [V s/m]."""
+    @property
+    def rig_gain(self) -> float:
+        """Model "rig", closed-loop drive: actuator constant [N/V]."""
+    @property
+    def rig_limit(self) -> float:
+        """Model "rig", closed-loop drive: controller saturation [V] (inf: none)."""
 
 class BatchRun:
     """A batch running on a background thread with its own worker pool (``start_batch``)."""

@@ -35,11 +35,18 @@ class Rig:
     ``normal_force`` — set it: the default is the IDM's weight) on the same Leuven friction
     element, driven by the input u(t). ``drive="position"``: u [m] moves the far end of a
     spring ``stiffness`` [N/m] with a damper ``damping`` [N s/m] (a spring–slider);
-    ``drive="force"``: u [N] is the force on the body. Give it as ``model=Rig(...)``."""
+    ``drive="force"``: u [N] is the force on the body; ``drive="closed_loop"``: u [m] is the
+    reference of a servo whose force is ``gain * clip(kv * (kp * (u - x) - v), ±limit)`` [N]
+    (``kp`` [1/s], ``kv`` [V s/m], ``gain`` [N/V], ``limit`` [V]; the EMPS benchmark's drive).
+    Give it as ``model=Rig(...)``."""
 
-    drive: Literal["position", "force"] = "position"
+    drive: Literal["position", "force", "closed_loop"] = "position"
     stiffness: float = 0.0
     damping: float = 0.0
+    kp: float = 0.0
+    kv: float = 0.0
+    gain: float = 0.0
+    limit: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -65,7 +72,9 @@ class Structure:
         rig = self.rig or Rig()
         return engine.RunConfig(model=self.model, n_elements=int(self.n_elements),
                                 piezo_hysteresis=bool(self.piezo_hysteresis), rig_drive=rig.drive,
-                                rig_stiffness=float(rig.stiffness), rig_damping=float(rig.damping), **how)
+                                rig_stiffness=float(rig.stiffness), rig_damping=float(rig.damping),
+                                rig_kp=float(rig.kp), rig_kv=float(rig.kv), rig_gain=float(rig.gain),
+                                rig_limit=float(rig.limit), **how)
 
 
 ParamValues = Union[Params, Mapping[str, Optional[float]]]

@@ -141,6 +141,21 @@ def build_parser() -> argparse.ArgumentParser:
     ch.add_argument("--threads", type=_positive_int, default=None, metavar="N", help="worker threads (default: all cores)")
     ch.add_argument("--no-progress", action="store_true", help="no progress bars")
 
+    rf = sub.add_parser(
+        "rig-fit",
+        help="identify a friction rig from a measured data file (EMPS so far)",
+        description=(
+            "Identify the friction and rig parameters from one file of the measured data sets (see "
+            "docs/REALDATA.md): print them with their 1-sigma uncertainties, what the data cannot identify, "
+            "and the benchmark's simulation errors; --json writes rig, params, params_std (SI), rms, noise_rms "
+            "and not_identifiable; --plots writes measured vs simulated figures."
+        ),
+    )
+    rf.add_argument("path", metavar="PATH", help="a data file, e.g. ../shared/realdata/emps/DATA_EMPS.mat")
+    rf.add_argument("--json", default=None, metavar="OUT", help="write the result as JSON")
+    rf.add_argument("--plots", default=None, metavar="DIR", help="write figures into DIR")
+    rf.add_argument("--no-simulation", action="store_true", help="identify only (skip the closed-loop simulations)")
+
     sw = sub.add_parser(
         "sweep",
         help="sweep a grid of parameter values, save the metrics (netCDF) and a heat map",
@@ -788,6 +803,34 @@ def cmd_characterize(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_rig_fit(a: argparse.Namespace) -> int:
+    import json
+
+    from .realdata import load
+    from .rig_fit import plot_rig_fit, rig_fit
+
+    t0 = time.perf_counter()
+    fit = rig_fit(load(a.path), simulate=not a.no_simulation)
+    print(f"{fit.rig}: {fit.name}")
+    for k, v in fit.params.items():
+        ref = fit.reference.get(k)
+        print(f"  {k:<8} = {v:12.5g} ± {fit.params_std[k]:.2g}" + (f"   (benchmark reference {ref:g})" if ref else ""))
+    print(f"  residual RMS {fit.rms:.4g}, noise RMS {fit.noise_rms:.4g} (SI)")
+    print("  not identifiable from these data: " + (", ".join(fit.not_identifiable) or "-"))
+    for k, v in fit.metrics.items():
+        print(f"  {k}: {v:.4g}")
+    if a.json:
+        out = Path(a.json)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(fit.to_dict(), indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {out}")
+    if a.plots:
+        paths = plot_rig_fit(fit, a.plots)
+        print(f"wrote {', '.join(str(p) for p in paths)}")
+    print(f"({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
 def cmd_diagnose(a: argparse.Namespace) -> int:
     import json
 
@@ -822,7 +865,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return EXIT_ERROR
     try:
         command = {"reproduce": cmd_reproduce, "simulate": cmd_simulate, "sweep": cmd_sweep,
-                   "characterize": cmd_characterize, "diagnose": cmd_diagnose}[a.command]
+                   "characterize": cmd_characterize, "rig-fit": cmd_rig_fit, "diagnose": cmd_diagnose}[a.command]
         return command(a)
     except (ValueError, DivergenceError, OSError) as exc:
         print(f"error: {_one_line(exc)}", file=sys.stderr)

@@ -123,6 +123,12 @@ struct RunConfig {
     /// model "rig", position drive: spring [N/m] and damper [N s/m] to the moving end
     rig_stiffness: f64,
     rig_damping: f64,
+    /// model "rig", closed-loop drive: position gain [1/s], velocity gain [V s/m], actuator
+    /// constant [N/V] and the controller's saturation [V]
+    rig_kp: f64,
+    rig_kv: f64,
+    rig_gain: f64,
+    rig_limit: f64,
 }
 
 impl RunConfig {
@@ -141,9 +147,15 @@ impl RunConfig {
                         damping: self.rig_damping,
                     },
                     "force" => RigDrive::Force,
+                    "closed_loop" => RigDrive::ClosedLoop {
+                        kp: self.rig_kp,
+                        kv: self.rig_kv,
+                        gain: self.rig_gain,
+                        limit: self.rig_limit,
+                    },
                     other => {
                         return Err(value_error(format!(
-                            "parameter 'rig_drive' must be 'position' or 'force', got '{other}'"
+                            "parameter 'rig_drive' must be 'position', 'force' or 'closed_loop', got '{other}'"
                         )))
                     }
                 };
@@ -168,7 +180,7 @@ impl RunConfig {
 #[pymethods]
 impl RunConfig {
     #[new]
-    #[pyo3(signature = (*, model="dps".to_string(), n_elements=4, piezo_hysteresis=true, method="rk4".to_string(), dt=1e-8, rtol=1e-7, atol=1e-7, first_step=None, retries=2, threads=1, record_every=0, final_states=false, skip_cycles=1, rig_drive="position".to_string(), rig_stiffness=0.0, rig_damping=0.0))]
+    #[pyo3(signature = (*, model="dps".to_string(), n_elements=4, piezo_hysteresis=true, method="rk4".to_string(), dt=1e-8, rtol=1e-7, atol=1e-7, first_step=None, retries=2, threads=1, record_every=0, final_states=false, skip_cycles=1, rig_drive="position".to_string(), rig_stiffness=0.0, rig_damping=0.0, rig_kp=0.0, rig_kv=0.0, rig_gain=0.0, rig_limit=f64::INFINITY))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         model: String,
@@ -187,6 +199,10 @@ impl RunConfig {
         rig_drive: String,
         rig_stiffness: f64,
         rig_damping: f64,
+        rig_kp: f64,
+        rig_kv: f64,
+        rig_gain: f64,
+        rig_limit: f64,
     ) -> PyResult<Self> {
         let c = RunConfig {
             model,
@@ -205,6 +221,10 @@ impl RunConfig {
             rig_drive,
             rig_stiffness,
             rig_damping,
+            rig_kp,
+            rig_kv,
+            rig_gain,
+            rig_limit,
         };
         c.structure()?;
         c.method()?;

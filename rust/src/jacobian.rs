@@ -94,7 +94,12 @@ impl Model {
                     }
                     dfdt[r] = (m0 - ml) * fp_t;
                 }
-                Some(rig) => dfdt[r] = m0 * rig.force_per_input() * dv_cmd,
+                Some(rig) => {
+                    let (du, dx, dv) = rig.drive_partials(v_pe, q[0], v[0]);
+                    set(r, 0, m0 * dx);
+                    set(r, n, m0 * dv);
+                    dfdt[r] = m0 * du * dv_cmd;
+                }
             }
         }
 
@@ -115,8 +120,10 @@ impl Model {
                     dfdt[a] = fp_t * dv;
                 }
                 Some(rig) => {
-                    set(a, n, rig.input_force(v_pe, dv_pe));
-                    dfdt[a] = rig.force_per_input() * dv_cmd * v[0];
+                    let (du, dx, dv) = rig.drive_partials(v_pe, q[0], v[0]);
+                    set(a, n, rig.drive_force(v_pe, dv_pe, q[0], v[0]) + dv * v[0]);
+                    set(a, 0, dx * v[0]);
+                    dfdt[a] = du * dv_cmd * v[0];
                 }
             }
             // work of friction ff v1, and friction's impulse
@@ -261,6 +268,13 @@ mod tests {
                 p,
                 Effects { k_ground: 1e3, eps: 0.05, tau_sensor: 1e-4, ..Effects::default() },
                 Structure::Rig(RigDrive::Position { stiffness: 5e4, damping: 2.0 }),
+                false,
+                true,
+            ),
+            (
+                p,
+                Effects { eps: 0.05, ..Effects::default() },
+                Structure::Rig(RigDrive::ClosedLoop { kp: 160.0, kv: 240.0, gain: 35.0, limit: 1e3 }),
                 false,
                 true,
             ),

@@ -379,7 +379,7 @@ impl Model {
                 fp
             }
             Some(rig) => {
-                let fd = rig.input_force(v_pe, dv_pe);
+                let fd = rig.drive_force(v_pe, dv_pe, q[0], v[0]);
                 self.mech
                     .accelerations(q, v, (fd + f_ext_main) - ff, 0.0, &mut dy[n..2 * n]);
                 fd

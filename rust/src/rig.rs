@@ -1,7 +1,9 @@
 //! A friction test rig as a mechanism of the engine: one body (mass `m1`) on the same Leuven
-//! friction element as the IDM's main body, driven by the input u(t) — either through a spring
-//! and damper whose far end follows u as a position [m] (the spring–slider), or by u as a force
-//! [N] on the body (a force-driven stage). No piezo element; the effects that act on the body
+//! friction element as the IDM's main body, driven by the input u(t) — through a spring and
+//! damper whose far end follows u as a position [m] (the spring–slider), by u as a force [N] on
+//! the body (a force-driven stage), or by a position controller tracking u as the reference
+//! [m] (a servo drive such as the EMPS benchmark's: a P position loop inside a P velocity loop,
+//! its voltage saturated, times the motor's force constant). No piezo element; the effects that act on the body
 //! (incline, spring to ground, friction asymmetry, sensor lag, drift) apply as on the IDM.
 
 use nalgebra::DMatrix;
@@ -17,16 +19,28 @@ pub enum RigDrive {
     Position { stiffness: f64, damping: f64 },
     /// u(t) [N] is the force on the body.
     Force,
+    /// u(t) [m] is a reference position tracked by a cascaded loop: force
+    /// `gain sat_limit(kv (kp (u - x) - v))` [N]; `kp` [1/s] the position gain, `kv` [V s/m] the
+    /// velocity gain, `gain` [N/V] the actuator constant, `limit` [V] the controller's saturation.
+    ClosedLoop { kp: f64, kv: f64, gain: f64, limit: f64 },
 }
 
 impl RigDrive {
     /// Refuse a spring or damper that is negative or not finite (the message names it).
     pub fn validate(&self) -> Result<(), String> {
-        if let RigDrive::Position { stiffness, damping } = *self {
-            for (name, v) in [("rig_stiffness", stiffness), ("rig_damping", damping)] {
-                if !(v.is_finite() && v >= 0.0) {
-                    return Err(format!("parameter '{name}' must be finite and non-negative, got {v}"));
-                }
+        let non_negative: &[(&str, f64)] = match self {
+            RigDrive::Position { stiffness, damping } => &[("rig_stiffness", *stiffness), ("rig_damping", *damping)],
+            RigDrive::ClosedLoop { kp, kv, gain, .. } => &[("rig_kp", *kp), ("rig_kv", *kv), ("rig_gain", *gain)],
+            RigDrive::Force => &[],
+        };
+        for &(name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("parameter '{name}' must be finite and non-negative, got {v}"));
+            }
+        }
+        if let RigDrive::ClosedLoop { limit, .. } = *self {
+            if !(limit > 0.0) {
+                return Err(format!("parameter 'rig_limit' must be positive (inf for none), got {limit}"));
             }
         }
         Ok(())
@@ -36,7 +50,8 @@ impl RigDrive {
     pub fn matrices(&self, p: &Params) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
         let (k, c) = match *self {
             RigDrive::Position { stiffness, damping } => (stiffness, damping),
-            RigDrive::Force => (0.0, 0.0),
+            // the loop's force is not linear (it saturates): it is the drive force
+            RigDrive::Force | RigDrive::ClosedLoop { .. } => (0.0, 0.0),
         };
         (
             DMatrix::from_element(1, 1, p.m1),
@@ -45,23 +60,32 @@ impl RigDrive {
         )
     }
 
-    /// The drive's force on the body [N] beyond the spring's restoring part (which the
-    /// stiffness matrix carries): k u + c du/dt for a position drive, u for a force drive.
+    /// The drive's force on the body [N] at input `u` rising at `du`, body at `x` [m] moving at
+    /// `v` [m/s], beyond the spring's restoring part (which the stiffness matrix carries):
+    /// k u + c du/dt for a position drive, u for a force drive, the loop's output for a servo.
     #[inline(always)]
-    pub fn input_force(&self, u: f64, du: f64) -> f64 {
+    pub fn drive_force(&self, u: f64, du: f64, x: f64, v: f64) -> f64 {
         match *self {
             RigDrive::Position { stiffness, damping } => stiffness * u + damping * du,
             RigDrive::Force => u,
+            RigDrive::ClosedLoop { kp, kv, gain, limit } => gain * (kv * (kp * (u - x) - v)).clamp(-limit, limit),
         }
     }
 
-    /// d(input_force)/du at fixed du/dt [N per unit of input]: how fast the drive's force grows
-    /// along a linear input (its time derivative is this times the input's slope).
+    /// (dF/du, dF/dx, dF/dv) of [`RigDrive::drive_force`] at fixed du/dt (the time derivative
+    /// along a linear input is dF/du times its slope); 0 where the loop saturates.
     #[inline(always)]
-    pub fn force_per_input(&self) -> f64 {
+    pub fn drive_partials(&self, u: f64, x: f64, v: f64) -> (f64, f64, f64) {
         match *self {
-            RigDrive::Position { stiffness, .. } => stiffness,
-            RigDrive::Force => 1.0,
+            RigDrive::Position { stiffness, .. } => (stiffness, 0.0, 0.0),
+            RigDrive::Force => (1.0, 0.0, 0.0),
+            RigDrive::ClosedLoop { kp, kv, gain, limit } => {
+                if (kv * (kp * (u - x) - v)).abs() < limit {
+                    (gain * kv * kp, -gain * kv * kp, -gain * kv)
+                } else {
+                    (0.0, 0.0, 0.0)
+                }
+            }
         }
     }
 
@@ -171,6 +195,27 @@ mod tests {
         // above Fs: it accelerates away
         let (x, v) = hold(1.2);
         assert!(x > 1e-5 && v > 1e-3, "x = {x}, v = {v}");
+    }
+
+    #[test]
+    fn a_servo_tracks_its_reference_with_the_loops_static_error() {
+        // a stiff loop holding a position against Coulomb friction: in steady state the loop's
+        // force balances the friction, kv kp gain (u - x) = Ff, so the body lags the reference by
+        // about Ff / (gain kv kp), the static error of a P-P loop
+        let (kp, kv, gain) = (160.0, 240.0, 35.0);
+        let drive = RigDrive::ClosedLoop { kp, kv, gain, limit: 10.0 };
+        let wave = PiecewiseLinear::new(vec![0.0, 0.05, 1.0], vec![0.0, 1e-3, 1e-3]).unwrap();
+        let m = Model::new(rig_params(), Effects::default(), Structure::Rig(drive), false, false).unwrap();
+        let method = Method::Rodas4 { rtol: 1e-8, atol: 1e-8, first_step: 1e-6 };
+        let r = simulate(&m, &wave, 0.0, 0.3, &m.rest_state(), &method, 1).unwrap();
+        let x = r.final_state[0];
+        let ff = m.friction_force(&r.final_state);
+        assert!((x - 1e-3).abs() < 2e-5, "x = {x}");
+        let loop_force = gain * kv * kp * (1e-3 - x) - gain * kv * r.final_state[m.layout.dof];
+        assert!((loop_force - ff).abs() < 1e-3 * ff.abs().max(1e-3), "{loop_force} vs {ff}");
+        // and saturates: a far reference drives at most gain * limit
+        assert_eq!(drive.drive_force(1.0, 0.0, 0.0, 0.0), gain * 10.0);
+        assert!(RigDrive::ClosedLoop { kp, kv, gain, limit: 0.0 }.validate().unwrap_err().contains("'rig_limit'"));
     }
 
     #[test]

@@ -1,0 +1,97 @@
+"""Measured friction data: the loaders, EMPS identification against the benchmark's published
+reference model, and identification of simulated rig data with known parameters (no data
+needed). The data sets are not part of the project: tests that need them skip without them."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import idm_rs
+from idm_rs.batch import Rig
+from idm_rs.realdata import RealDataError, RigData, load
+from idm_rs.rig_fit import EMPS_REFERENCE, idim_ls, rig_fit
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+needs_data = pytest.mark.skipif(not REAL.exists(), reason="the measured data sets (../shared/realdata) are absent")
+
+
+@needs_data
+def test_emps_loads_in_si_units():
+    d = load(REAL / "emps" / "DATA_EMPS.mat")
+    assert d.rig == "emps" and d.t.size == 24841 and d.t[0] == 0.0
+    assert d.sample_rate_Hz == pytest.approx(1000.0, rel=1e-3)
+    assert 0.2 < d.response.max() < 0.3  # metres
+    assert d.meta["gtau_N_per_V"] == pytest.approx(35.15, rel=1e-3)
+    assert np.abs(d.force).max() < 10 * d.meta["gtau_N_per_V"]
+    pulses = load(REAL / "emps" / "DATA_EMPS_PULSES.mat")
+    assert "pulses_N" in pulses.meta
+
+
+@needs_data
+def test_spring_slider_and_frame_load_in_si_units():
+    s = load(REAL / "ensl_paper_stickslip" / "k168Nm_v42.mat")
+    assert s.rig == "spring_slider" and s.meta["stiffness_N_per_m"] == 168.0
+    assert s.meta["drive_speed_m_per_s"] == pytest.approx(42e-6)
+    assert s.sample_rate_Hz == pytest.approx(2000.0, rel=1e-3)
+    assert 0.0 < np.median(s.response) < 1.0  # N: about mu m g for a 30.7 g slider
+    f = load(REAL / "marino_frame_friction" / "s_b_350g_y.mat")  # either file of the pair
+    assert f.rig == "frame" and f.name == "s_b_350g" and f.meta["disc_mass_kg"] == pytest.approx(0.35)
+    assert f.sample_rate_Hz == pytest.approx(250.0, rel=1e-3)
+    assert np.abs(f.drive).max() < 0.05  # metres, not millimetres
+
+
+def test_unknown_files_are_refused_by_name(tmp_path):
+    with pytest.raises(RealDataError, match="no such file"):
+        load(tmp_path / "DATA_EMPS.mat")
+    bad = tmp_path / "other.mat"
+    bad.write_bytes(b"")
+    with pytest.raises(RealDataError, match="not a known data set"):
+        load(bad)
+
+
+@needs_data
+def test_emps_identification_matches_the_benchmark_reference(tmp_path, capsys):
+    from idm_rs.cli import main
+
+    out = tmp_path / "emps.json"
+    assert main(["rig-fit", str(REAL / "emps" / "DATA_EMPS.mat"), "--json", str(out), "--plots", str(tmp_path)]) == 0
+    fit = json.loads(out.read_text())
+    assert fit["rig"] == "emps" and set(fit["params"]) >= {"m", "fc", "fv", "offset"}
+    for k, ref in EMPS_REFERENCE.items():
+        assert abs(fit["params"][k] - ref) < 3 * fit["params_std"][k] + 1e-3 * abs(ref), k
+    assert fit["rms"] > fit["noise_rms"] > 0
+    assert 0 < fit["metrics"]["force_relative_error_pct"] < 8.0
+    assert (tmp_path / "rig_fit_DATA_EMPS.png").exists()
+
+
+def test_identification_recovers_known_parameters_from_simulated_servo_data():
+    """A servo rig simulated by the engine (closed loop, Coulomb + viscous friction, an offset
+    force), measured at 1 kHz with 1 µm encoder noise: the inverse-model fit recovers them."""
+    truth = {"m": 80.0, "fc": 15.0, "fv": 150.0, "offset": -2.0}
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 8.0, 1e-3)
+    ref = 0.1 * (1 - np.cos(2 * np.pi * t / 4.0)) + 0.01 * np.sin(2 * np.pi * 1.3 * t)
+    p = idm_rs.Params(m1=truth["m"], normal_force=1.0, mu_k=truth["fc"], mu_s=truth["fc"], sigma2=truth["fv"],
+                      sigma1=0.0, fric_alpha=1e8, fric_beta=1e8 / (100 * truth["fc"]), fric_gamma=0.0,
+                      load_force=-truth["offset"])
+    rig = Rig("closed_loop", kp=160.0, kv=240.0, gain=35.0, limit=10.0)
+    r = idm_rs.simulate(p, idm_rs.Sampled(t, ref), t_end=float(t[-1]), model=rig, piezo_hysteresis=False,
+                        method="rodas4", rtol=1e-8, atol=1e-8, save_every=1, first_step=1e-5)
+    q = np.interp(t, r.t, r.main_body)
+    v = np.interp(t, r.t, r.main_body_velocity)
+    force = 35.0 * np.clip(240.0 * (160.0 * (ref - q) - v), -10, 10)
+    meta = {"kp_per_s": 160.0, "kv_V_s_per_m": 240.0, "gtau_N_per_V": 35.0, "saturation_V": 10.0}
+    data = RigData("emps", "synthetic", t, ref, q + 1e-6 * rng.standard_normal(t.size), force, meta)
+    values, std, *_ = idim_ls(data)
+    for k, v_true in truth.items():
+        assert values[k] == pytest.approx(v_true, rel=0.05, abs=0.3), k
+
+
+@needs_data
+def test_rig_fit_of_the_other_sets_says_it_is_not_there_yet():
+    with pytest.raises(RealDataError, match="not implemented yet"):
+        rig_fit(load(REAL / "ensl_paper_stickslip" / "k168Nm_v42.mat"))
