@@ -185,6 +185,92 @@ def validate_emps(fit: RigFit, validation: RigData, *, simulate: bool = True) ->
         fit.metrics["validation_force_relative_error_pct"] = relative_error(validation.force, f_sim)
 
 
+#: spring-slider: median-filter width against the impulsive noise [samples], slip events are
+#: drops of at least this share of the force's 1-99 % range, at least this far apart [s]
+SLIDER_MEDIAN, SLIDER_PROMINENCE, SLIDER_MIN_GAP = 7, 0.1, 0.05
+#: the simulated stick-slip: presliding stiffness [N/m] and number of periods simulated. In the
+#: Leuven element a stuck body creeps at k V / (a (1 - Fh/S)); it breaks away when that reaches
+#: the Stribeck velocity, at Fh = S (1 - k V / (a vs)): a stiff contact (a vs >> k V) makes the
+#: breakaway force the static level Fs the record shows
+SLIDER_PRESLIDING_STIFFNESS, SLIDER_PERIODS = 1e7, 8
+
+
+def _slips(t: NDArray[np.float64], force: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Indices of the force's peaks (slip onsets) and troughs (slip ends)."""
+    from scipy.signal import find_peaks
+
+    span = float(np.percentile(force, 99) - np.percentile(force, 1))
+    gap = max(1, int(SLIDER_MIN_GAP / float(np.median(np.diff(t)))))
+    peaks, _ = find_peaks(force, prominence=SLIDER_PROMINENCE * span, distance=gap)
+    troughs, _ = find_peaks(-force, prominence=SLIDER_PROMINENCE * span, distance=gap)
+    return peaks, troughs
+
+
+def fit_spring_slider(data: RigData, *, simulate: bool = True) -> RigFit:
+    """Static and kinetic friction of the spring–slider from its stick-slip: the spring force at
+    each slip onset is the static friction force Fs; during a slip against constant kinetic
+    friction the force swings symmetrically about Fc, so Fc = (peak + trough) / 2. Impulsive
+    noise is removed by a running median first. Then the engine's rig mechanism (a spring pulled
+    at the drive speed, the Leuven element with those levels) is simulated over
+    ``SLIDER_PERIODS`` periods and its peaks, troughs and period compared with the record's.
+    A run without stick-slip (steady sliding) gives the sliding friction level only."""
+    from scipy.signal import medfilt
+
+    import idm_rs
+    from idm_rs.batch import Rig
+
+    meta = data.meta
+    n_force, k, speed = meta["normal_force_N"], meta["stiffness_N_per_m"], meta["drive_speed_m_per_s"]
+    force = medfilt(data.response, SLIDER_MEDIAN)
+    noise = float(1.4826 * np.median(np.abs(data.response - force)))  # robust spread of the spikes-free noise
+    peaks, troughs = _slips(data.t, force)
+    if peaks.size < 3 or troughs.size < 3:
+        level = float(np.median(force))
+        spread = float(np.std(force))
+        return RigFit("spring_slider", data.name, {"mu_sliding": level / n_force},
+                      {"mu_sliding": spread / n_force / math.sqrt(force.size)}, spread, noise,
+                      ["mu_s (no stick-slip: no breakaway to read)", "mu_k vs stribeck_velocity and sigma2 (one speed)",
+                       "fric_alpha", "sigma1"],
+                      metrics={"slip_events": float(peaks.size)})
+    fs_i, fm_i = force[peaks], force[troughs]
+    fs, fm = float(fs_i.mean()), float(fm_i.mean())
+    fc = 0.5 * (fs + fm)
+    fs_sd, fm_sd = float(fs_i.std(ddof=1) / math.sqrt(fs_i.size)), float(fm_i.std(ddof=1) / math.sqrt(fm_i.size))
+    period = float(np.median(np.diff(data.t[peaks])))
+    params = {"mu_s": fs / n_force, "mu_k": fc / n_force, "fs": fs, "fc": fc}
+    std = {"mu_s": fs_sd / n_force, "mu_k": 0.5 * math.hypot(fs_sd, fm_sd) / n_force, "fs": fs_sd,
+           "fc": 0.5 * math.hypot(fs_sd, fm_sd)}
+    metrics = {"slip_events": float(peaks.size), "period_s": period,
+               "peak_spread_N": float(fs_i.std(ddof=1)), "trough_spread_N": float(fm_i.std(ddof=1))}
+    fit = RigFit("spring_slider", data.name, params, std, float(np.std(fs_i)), noise,
+                 ["stribeck_velocity (the slips are too fast for 2 kHz force samples)", "sigma2",
+                  "fric_alpha", "sigma1"], metrics=metrics)
+    if simulate:
+        t_end = min(float(data.t[-1]), SLIDER_PERIODS * period)
+        a = SLIDER_PRESLIDING_STIFFNESS
+        p = idm_rs.Params(m1=meta["mass_kg"], normal_force=n_force, mu_s=params["mu_s"], mu_k=params["mu_k"],
+                          stribeck_velocity=1e-4, sigma2=0.0, sigma1=0.0, fric_alpha=a, fric_beta=a / (100 * fs),
+                          fric_gamma=0.0)
+        # the record starts mid-stick: the spring already holds the first sample's force
+        state = np.zeros(5)  # the rig's state: x, v, g, Fh, h
+        state[0], state[3] = -force[0] / k, np.clip(force[0], -0.999 * fs, 0.999 * fs)
+        drive = idm_rs.Sampled([0.0, t_end], [0.0, speed * t_end])
+        r = idm_rs.simulate(p, drive, t_end=t_end, model=Rig("position", stiffness=k), piezo_hysteresis=False,
+                            method="rodas4", rtol=1e-7, atol=1e-7, save_every=1, first_step=1e-6,
+                            initial_state=state)
+        sel = data.t <= t_end
+        f_sim = k * (speed * data.t[sel] - np.interp(data.t[sel], r.t, r.main_body))
+        sp, st = _slips(data.t[sel], f_sim)
+        metrics.update({
+            "simulated_period_s": float(np.median(np.diff(data.t[sel][sp]))) if sp.size > 1 else math.nan,
+            "simulated_peak_N": float(f_sim[sp].mean()) if sp.size else math.nan,
+            "simulated_trough_N": float(f_sim[st].mean()) if st.size else math.nan,
+            "force_rms_residual_N": float(np.sqrt(np.mean((force[sel] - f_sim) ** 2))),
+        })
+        fit.arrays = {"t": data.t[sel], "force": force[sel], "force_sim": f_sim}
+    return fit
+
+
 def rig_fit(data: RigData, *, simulate: bool = True) -> RigFit:
     """Identify the rig that recorded ``data``. For the EMPS estimation run, the validation run
     (``DATA_EMPS_PULSES.mat`` beside it) is evaluated too when present."""
@@ -196,6 +282,8 @@ def rig_fit(data: RigData, *, simulate: bool = True) -> RigFit:
 
             validate_emps(fit, load_emps(other), simulate=simulate)
         return fit
+    if data.rig == "spring_slider":
+        return fit_spring_slider(data, simulate=simulate)
     raise RealDataError(f"rig-fit of the {data.rig} data set is not implemented yet (EMPS is)")
 
 
@@ -213,6 +301,24 @@ def plot_rig_fit(fit: RigFit, directory: Any) -> list[Any]:
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     a = fit.arrays
+    if "q" not in a:  # a force record (spring-slider)
+        fig, (ax, axr) = plt.subplots(2, 1, figsize=(10, 6), sharex=True, constrained_layout=True)
+        ax.plot(a["t"], a["force"], color="0.3", lw=1.5, alpha=0.5, label="measured (median-filtered)")
+        ax.plot(a["t"], a["force_sim"], color="C3", lw=0.9, label="simulated (rig mechanism, fitted mu_s, mu_k)")
+        ax.set_ylabel("spring force [N]")
+        ax.legend(fontsize=8)
+        axr.plot(a["t"], a["force"] - a["force_sim"], color="C3", lw=0.7)
+        axr.set_ylabel("residual [N]")
+        axr.set_xlabel("time t [s]")
+        for x in (ax, axr):
+            x.grid(alpha=0.3)
+        m = fit.metrics
+        ax.set_title(f"{fit.name}: mu_s = {fit.params['mu_s']:.4f}, mu_k = {fit.params['mu_k']:.4f}; period measured "
+                     f"{m['period_s']:.3g} s, simulated {m.get('simulated_period_s', math.nan):.3g} s", fontsize=9)
+        path = out / f"rig_fit_{fit.name}.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        return [path]
     fig, axes = plt.subplots(4, 1, figsize=(10, 9), sharex=True, constrained_layout=True)
     axes[0].plot(a["t"], a["q"] * 1e3, color="0.3", lw=2, alpha=0.5, label="measured")
     axes[0].plot(a["t"], a["q_sim"] * 1e3, color="C3", lw=0.9, label="simulated (closed loop)")
