@@ -92,9 +92,40 @@ def test_identification_recovers_known_parameters_from_simulated_servo_data():
 
 
 @needs_data
-def test_rig_fit_of_the_frame_says_it_is_not_there_yet():
-    with pytest.raises(RealDataError, match="not implemented yet"):
-        rig_fit(load(REAL / "marino_frame_friction" / "s_b_250g_x.mat"))
+def test_frame_friction_scales_with_the_normal_load():
+    """The four discs load the contact with 250-550 g: the identified Fc/k grows with the load
+    while the frame's own mode (f0) stays, and Fc/(k N) is one contact property (within 10 %)."""
+    fits = [rig_fit(load(REAL / "marino_frame_friction" / f"s_b_{w}g_x.mat"), simulate=False) for w in (250, 350, 450, 550)]
+    fc_k = [f.params["fc_over_k_m"] for f in fits]
+    assert all(np.diff(fc_k) > 0)
+    f0 = [f.params["f0_Hz"] for f in fits]
+    assert max(f0) / min(f0) < 1.05
+    mu = [f.params["mu_over_k_m_per_N"] for f in fits]
+    assert max(mu) / min(mu) < 1.15
+    assert "k" in fits[0].not_identifiable and "m" in fits[0].not_identifiable
+
+
+def test_frame_identification_recovers_a_simulated_frame():
+    """A base-excited frame simulated by the engine (f0 = 3 Hz, 3 % damping, Fc/k = 0.8 mm,
+    1 Hz base motion of 1.8 mm), sampled at 250 Hz: the identification returns them."""
+    from idm_rs.rig_fit import fit_frame
+
+    m, f0, zeta, fc_k = 1.0, 3.0, 0.03, 0.8e-3
+    k = m * (2 * np.pi * f0) ** 2
+    c, fc = 2 * zeta * np.sqrt(k * m), fc_k * k
+    a = 1e3 * k
+    p = idm_rs.Params(m1=m, normal_force=1.0, mu_s=fc, mu_k=fc, stribeck_velocity=1e-4, sigma2=0.0, sigma1=0.0,
+                      fric_alpha=a, fric_beta=a / (100 * fc), fric_gamma=0.0)
+    t = np.arange(0.0, 10.0, 4e-3)
+    y = 1.8e-3 * np.sin(2 * np.pi * 1.0 * t)
+    r = idm_rs.simulate(p, idm_rs.Sampled(t, y), t_end=float(t[-1]), model=Rig("position", stiffness=k, damping=c),
+                        piezo_hysteresis=False, method="rodas4", rtol=1e-8, atol=1e-8, save_every=1, first_step=1e-5)
+    x = np.interp(t, r.t, r.main_body)
+    data = RigData("frame", "synthetic", t, y, x, None, {"disc_mass_kg": 0.1, "disc_weight_N": 0.981})
+    fit = fit_frame(data, simulate=False)
+    assert fit.params["f0_Hz"] == pytest.approx(f0, rel=0.03)
+    assert fit.params["fc_over_k_m"] == pytest.approx(fc_k, rel=0.05)
+    assert fit.params["zeta"] == pytest.approx(zeta, abs=0.02)
 
 
 def test_spring_slider_features_recover_known_static_and_kinetic_friction():

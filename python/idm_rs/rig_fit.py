@@ -271,6 +271,71 @@ def fit_spring_slider(data: RigData, *, simulate: bool = True) -> RigFit:
     return fit
 
 
+#: frame: low-pass of the kinematics [Hz] (the drive is 1 Hz, the frame's mode ~3 Hz); samples
+#: counted as sliding: |dx/dt| above this share of its 95th percentile (while stuck, the
+#: friction force is anywhere in [-Fs, Fs] and says nothing about Fc)
+FRAME_FILTER_HZ, FRAME_SLIDING_SHARE, FRAME_BORDER = 20.0, 0.2, 25
+#: the simulated frame's mass [kg]: only ratios to the stiffness are identified, so any mass
+#: with the identified m/k, c/k and Fc/k gives the same motion
+FRAME_SIM_MASS = 1.0
+
+
+def fit_frame(data: RigData, *, simulate: bool = True) -> RigFit:
+    """The base-excited frame: m x'' = k (y - x) + c (y' - x') - Ff. Only the top plate's and the
+    base's displacements are measured (no force), so the equation divided by k is identified:
+    y - x = (m/k) x'' + (c/k) x' + (Fc/k) sgn x' + offset, regressed on the sliding samples
+    (``FRAME_SLIDING_SHARE``) of the low-passed kinematics. Reported: the natural frequency
+    f0 = 1 / (2 pi sqrt(m/k)) [Hz], the damping ratio, Fc/k [m] (the spring deflection at which
+    the contact slides) and Fc / (k N) [m/N] with N the disc's weight. The mass, the stiffness
+    and the friction coefficient are not identifiable on their own. The identified frame is then
+    simulated with the engine's rig mechanism driven by the measured base motion."""
+    from scipy.signal import butter, filtfilt
+
+    t = data.t
+    fs_hz = data.sample_rate_Hz
+    b, a = butter(4, FRAME_FILTER_HZ / (fs_hz / 2.0))
+    x, y = filtfilt(b, a, data.response), filtfilt(b, a, data.drive)
+    dx = np.gradient(x, t)
+    ddx = np.gradient(dx, t)
+    slide = np.abs(dx) > FRAME_SLIDING_SHARE * np.percentile(np.abs(dx), 95)
+    slide[:FRAME_BORDER] = slide[-FRAME_BORDER:] = False
+    X = np.column_stack([ddx, dx, np.sign(dx), np.ones_like(x)])[slide]
+    beta, e, cov = _lstsq(X, (y - x)[slide])
+    sd = np.sqrt(np.diag(cov))
+    m_k, c_k, fc_k, off = map(float, beta)
+    weight = data.meta["disc_weight_N"]
+    f0 = 1.0 / (2.0 * math.pi * math.sqrt(m_k))
+    zeta = c_k / (2.0 * math.sqrt(m_k))
+    params = {"f0_Hz": f0, "zeta": zeta, "fc_over_k_m": fc_k, "mu_over_k_m_per_N": fc_k / weight, "offset_m": off}
+    std = {"f0_Hz": 0.5 * f0 * float(sd[0]) / m_k, "zeta": float(sd[1]) / (2.0 * math.sqrt(m_k)),
+           "fc_over_k_m": float(sd[2]), "mu_over_k_m_per_N": float(sd[2]) / weight, "offset_m": float(sd[3])}
+    noise = float(1.4826 * np.median(np.abs(data.response - x)))
+    fit = RigFit("frame", data.name, params, std, float(np.sqrt(np.mean(e ** 2))), noise,
+                 ["m", "k", "mu_k (only mu_k N / k: no force is measured)", "mu_s - mu_k", "stribeck_velocity",
+                  "fric_alpha", "sigma1"],
+                 metrics={"sliding_share": float(slide.mean()),
+                          "inverse_model_relative_error_pct": float(100 * np.linalg.norm(e) /
+                                                                    np.linalg.norm((y - x)[slide]))})
+    if simulate:
+        import idm_rs
+        from idm_rs.batch import Rig
+
+        k = FRAME_SIM_MASS / m_k
+        fc = max(fc_k * k, 1e-9)
+        alpha = 1e3 * k
+        p = idm_rs.Params(m1=FRAME_SIM_MASS, normal_force=1.0, mu_s=fc, mu_k=fc, stribeck_velocity=1e-4,
+                          sigma2=0.0, sigma1=0.0, fric_alpha=alpha, fric_beta=alpha / (100 * fc), fric_gamma=0.0,
+                          load_force=-off * k)
+        rig = Rig("position", stiffness=k, damping=max(c_k, 0.0) * k)
+        r = idm_rs.simulate(p, idm_rs.Sampled(t, y), t_end=float(t[-1]), model=rig, piezo_hysteresis=False,
+                            method="rodas4", rtol=1e-7, atol=1e-7, save_every=1, first_step=1e-5,
+                            initial_state=np.array([x[0], 0.0, 0.0, 0.0, 0.0]))
+        x_sim = np.interp(t, r.t, r.main_body)
+        fit.metrics["position_relative_error_pct"] = float(100 * np.linalg.norm(x - x_sim) / np.linalg.norm(x))
+        fit.arrays = {"t": t, "q": data.response, "q_sim": x_sim, "drive": data.drive}
+    return fit
+
+
 def rig_fit(data: RigData, *, simulate: bool = True) -> RigFit:
     """Identify the rig that recorded ``data``. For the EMPS estimation run, the validation run
     (``DATA_EMPS_PULSES.mat`` beside it) is evaluated too when present."""
@@ -284,6 +349,8 @@ def rig_fit(data: RigData, *, simulate: bool = True) -> RigFit:
         return fit
     if data.rig == "spring_slider":
         return fit_spring_slider(data, simulate=simulate)
+    if data.rig == "frame":
+        return fit_frame(data, simulate=simulate)
     raise RealDataError(f"rig-fit of the {data.rig} data set is not implemented yet (EMPS is)")
 
 
@@ -315,6 +382,26 @@ def plot_rig_fit(fit: RigFit, directory: Any) -> list[Any]:
         m = fit.metrics
         ax.set_title(f"{fit.name}: mu_s = {fit.params['mu_s']:.4f}, mu_k = {fit.params['mu_k']:.4f}; period measured "
                      f"{m['period_s']:.3g} s, simulated {m.get('simulated_period_s', math.nan):.3g} s", fontsize=9)
+        path = out / f"rig_fit_{fit.name}.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        return [path]
+    if "force" not in a:  # a displacement record (frame)
+        fig, (ax, axr) = plt.subplots(2, 1, figsize=(10, 6), sharex=True, constrained_layout=True)
+        ax.plot(a["t"], a["drive"] * 1e3, color="0.6", lw=0.8, label="base (drive)")
+        ax.plot(a["t"], a["q"] * 1e3, color="0.3", lw=1.5, alpha=0.6, label="top plate, measured")
+        ax.plot(a["t"], a["q_sim"] * 1e3, color="C3", lw=0.9, label="top plate, simulated")
+        ax.set_ylabel("displacement [mm]")
+        ax.legend(fontsize=8)
+        axr.plot(a["t"], (a["q"] - a["q_sim"]) * 1e3, color="C3", lw=0.7)
+        axr.set_ylabel("residual [mm]")
+        axr.set_xlabel("time t [s]")
+        for x in (ax, axr):
+            x.grid(alpha=0.3)
+        p = fit.params
+        ax.set_title(f"{fit.name}: f0 = {p['f0_Hz']:.3g} Hz, zeta = {p['zeta']:.3g}, Fc/k = {p['fc_over_k_m'] * 1e3:.3g} mm;"
+                     f" simulated position error {fit.metrics.get('position_relative_error_pct', math.nan):.3g} %",
+                     fontsize=9)
         path = out / f"rig_fit_{fit.name}.png"
         fig.savefig(path, dpi=120)
         plt.close(fig)
