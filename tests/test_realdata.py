@@ -159,3 +159,44 @@ def test_spring_slider_record_gives_plausible_paper_on_paper_friction():
     assert fit.metrics["slip_events"] > 100
     assert 0.25 < fit.params["mu_k"] < fit.params["mu_s"] < 0.45
     assert "stribeck_velocity" in " ".join(fit.not_identifiable)
+
+
+# --- diagnosis on rig data -----------------------------------------------------------------------
+
+
+def _servo_regression(ripple: float, seed: int = 0):
+    """Inverse-model rows of a servo stroke (a, v, q) with Coulomb + viscous friction, an offset,
+    white force noise of 1 N and, if ``ripple`` [N], a cogging force of 20 mm wavelength."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 20.0, 5e-3)
+    q = 0.12 * (1 - np.cos(2 * np.pi * t / 5.0)) + 0.004 * np.sin(2 * np.pi * 0.9 * t)
+    v = np.gradient(q, t)
+    a = np.gradient(v, t)
+    force = 90 * a + 200 * v + 20 * np.sign(v) - 3 + ripple * np.sin(2 * np.pi * q / 0.02 + 0.4)
+    return t, q, v, a, force + rng.standard_normal(t.size)
+
+
+@pytest.mark.parametrize("ripple, verdict", [(0.0, "none"), (1.5, "cogging")])
+def test_rig_diagnosis_names_a_ripple_and_stays_quiet_without_one(ripple, verdict):
+    from idm_rs.rig_diagnosis import _linear_rig
+
+    t, q, v, a, force = _servo_regression(ripple)
+    X0 = np.column_stack([a, v, np.sign(v), np.ones_like(v)])
+    d = _linear_rig("emps", "synthetic", X0, force, q, v, 1.0, t)
+    assert d.verdict == verdict, d.report()
+    if verdict == "cogging":
+        best = d.ranking[0]
+        lam = float(best.setting.split("=")[1].split()[0])
+        assert lam == pytest.approx(20.0, rel=0.01)  # mm
+        assert d.rms_after == pytest.approx(1.0, rel=0.05)  # back to the noise
+
+
+@needs_data
+def test_cli_diagnoses_a_rig_data_file(tmp_path, capsys):
+    from idm_rs.cli import main
+
+    out = tmp_path / "d.json"
+    assert main(["diagnose", str(REAL / "emps" / "DATA_EMPS.mat"), "--json", str(out)]) == 0
+    d = json.loads(out.read_text())
+    assert d["rig"] == "emps" and d["verdict"] and d["ranking"]
+    assert "Where the residual lives" in capsys.readouterr().out

@@ -222,10 +222,11 @@ def _add_diagnose_parser(sub: "argparse._SubParsersAction") -> None:
             "Compare the recordings of CASE_DIR (format idm-recording/1: meta.json and one CSV per "
             "experiment) with their nominal model: calibrate the plausibly-off parameters, locate the "
             "residual, try every catalogue effect, and print the verdict (a catalogue id, 'none' or "
-            "'unexplained') with the evidence."
+            "'unexplained') with the evidence. Given a measured rig data file instead (see docs/REALDATA.md), "
+            "diagnose the rig's identified friction model against the rig-effect catalogue."
         ),
     )
-    dp.add_argument("case_dir", metavar="CASE_DIR", help="the case directory")
+    dp.add_argument("case_dir", metavar="CASE_DIR", help="the case directory, or a rig data file (.mat)")
     dp.add_argument("--json", default=None, metavar="OUT",
                     help="write the diagnosis as JSON (verdict, ranking, RMS figures [m], locations, ...)")
     dp.add_argument("--plots", default=None, metavar="DIR",
@@ -837,6 +838,18 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
     from .diagnosis import diagnose
     from .diagnosis.report import json_safe
 
+    if Path(a.case_dir).is_file():  # a measured rig data file: the rig diagnosis
+        from .realdata import load
+        from .rig_diagnosis import diagnose_rig
+
+        rd = diagnose_rig(load(a.case_dir))
+        print(rd.report())
+        if a.json:
+            out = Path(a.json)
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(json.dumps(json_safe(rd.to_dict()), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+            print(f"wrote {out}")
+        return 0
     d = diagnose(a.case_dir, progress=not a.no_progress, threads=a.threads)
     print(d.report())
     if a.json:
