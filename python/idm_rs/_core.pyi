@@ -50,7 +50,7 @@ class RunConfig:
         rig_kp: float = 0.0,
         rig_kv: float = 0.0,
         rig_gain: float = 0.0,
-        rig_limit: float = ...,
+        rig_limit: float = 0.0,
     ) -> None:
         """``first_step`` None = ``dt``; ``threads`` below 1 counts as 1."""
 
@@ -116,7 +116,7 @@ class RunConfig:
         """Model "rig", closed-loop drive: actuator constant [N/V]."""
     @property
     def rig_limit(self) -> float:
-        """Model "rig", closed-loop drive: controller saturation [V] (inf: none)."""
+        """Model "rig", closed-loop drive: controller saturation [V] (0: none)."""
 
 class BatchRun:
     """A batch running on a background thread with its own worker pool (``start_batch``)."""

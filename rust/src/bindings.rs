@@ -124,7 +124,7 @@ struct RunConfig {
     rig_stiffness: f64,
     rig_damping: f64,
     /// model "rig", closed-loop drive: position gain [1/s], velocity gain [V s/m], actuator
-    /// constant [N/V] and the controller's saturation [V]
+    /// constant [N/V] and the controller's saturation [V] (0: none)
     rig_kp: f64,
     rig_kv: f64,
     rig_gain: f64,
@@ -151,7 +151,8 @@ impl RunConfig {
                         kp: self.rig_kp,
                         kv: self.rig_kv,
                         gain: self.rig_gain,
-                        limit: self.rig_limit,
+                        // 0: no saturation (the stub's literal default)
+                        limit: if self.rig_limit == 0.0 { f64::INFINITY } else { self.rig_limit },
                     },
                     other => {
                         return Err(value_error(format!(
@@ -180,7 +181,7 @@ impl RunConfig {
 #[pymethods]
 impl RunConfig {
     #[new]
-    #[pyo3(signature = (*, model="dps".to_string(), n_elements=4, piezo_hysteresis=true, method="rk4".to_string(), dt=1e-8, rtol=1e-7, atol=1e-7, first_step=None, retries=2, threads=1, record_every=0, final_states=false, skip_cycles=1, rig_drive="position".to_string(), rig_stiffness=0.0, rig_damping=0.0, rig_kp=0.0, rig_kv=0.0, rig_gain=0.0, rig_limit=f64::INFINITY))]
+    #[pyo3(signature = (*, model="dps".to_string(), n_elements=4, piezo_hysteresis=true, method="rk4".to_string(), dt=1e-8, rtol=1e-7, atol=1e-7, first_step=None, retries=2, threads=1, record_every=0, final_states=false, skip_cycles=1, rig_drive="position".to_string(), rig_stiffness=0.0, rig_damping=0.0, rig_kp=0.0, rig_kv=0.0, rig_gain=0.0, rig_limit=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         model: String,
