@@ -227,6 +227,14 @@ def wave_fields(kind: str) -> list[str]:
 def highest_frequency(params: dict[str, float], config: RunConfig) -> float:
     """Highest structural natural frequency [rad/s] of the model of ``config``'s structure."""
 
+def kernel_constants(config: RunConfig, params: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The GPU kernel's constants per point: ``params`` (P, len(param_names())), NaN
+    normal_force = derived; returns (P, kernel_constant_count()[0]). Refuses, naming the point,
+    a model the kernel cannot run (effects on, a rig, more than MAX_DOF nodes)."""
+
+def kernel_constant_count() -> tuple[int, int, int]:
+    """(constants per point, scalars before the matrices, MAX_DOF) of the kernel's layout."""
+
 def resolve_params(params: dict[str, float]) -> dict[str, float]:
     """Table 1 overridden by ``params``, with the derived normal force [N] filled in (SI)."""
 

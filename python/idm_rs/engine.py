@@ -24,6 +24,8 @@ param_names = _core.param_names
 effect_names = _core.effect_names
 wave_fields = _core.wave_fields
 highest_frequency = _core.highest_frequency
+kernel_constants = _core.kernel_constants
+kernel_constant_count = _core.kernel_constant_count
 # declarations of the model (Table 1, the effect catalogue); typed views in `declarations.py`
 param_declarations = _core.param_declarations
 effect_declarations = _core.effect_declarations
@@ -39,6 +41,8 @@ __all__ = [
     "effect_declarations",
     "effect_names",
     "highest_frequency",
+    "kernel_constants",
+    "kernel_constant_count",
     "param_declarations",
     "param_names",
     "resolve_params",

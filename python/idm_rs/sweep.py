@@ -236,6 +236,7 @@ def sweep(
     client: Any = None,
     threads: Optional[int] = None,
     block_size: int = 65_536,
+    backend: Literal["cpu", "cuda", "kernel-cpu"] = "cpu",
 ) -> "xarray.Dataset":
     """Sweep the outer product of ``grid`` and return the metrics as an ``xarray.Dataset``.
 
@@ -267,6 +268,12 @@ def sweep(
     [s], ``dt_used`` [s], ``steps``. Sweep ``frequency`` x ``voltage`` for the velocity map,
     ``load_force`` for the load curve.
 
+    ``backend="cuda"`` runs RK4 points one per GPU thread (CuPy; ``pip install 'idm-rs[cuda]'``)
+    with the paper's model (no effects; LPS or DPS up to 5 elements); points that diverge are
+    retried on the CPU at dt/2, dt/4. ``"kernel-cpu"`` runs that same kernel source compiled for
+    the CPU (slow; it is how the tests verify the GPU physics without a GPU). The steady-state
+    train metrics are NaN on the kernel backends.
+
     Ctrl-C stops within about a second and returns the finished points (others NaN,
     ``attrs["complete"] == 0``). ``client`` (a ``dask.distributed.Client``) runs blocks of at
     least 10⁴ points as Dask tasks, each capped at the worker's thread count.
@@ -289,6 +296,17 @@ def sweep(
         first_step = dt  # the adaptive methods' first step was once given as dt: still honoured
     if dt is None or adaptive:
         dt = 1e-8
+    if backend not in ("cpu", "cuda", "kernel-cpu"):
+        raise ValueError(f"parameter 'backend' must be 'cpu', 'cuda' or 'kernel-cpu', got {backend!r}")
+    if backend != "cpu":
+        if method != "rk4":
+            raise ValueError(f"backend={backend!r} runs fixed-step RK4 only (the adaptive kernel is not built); "
+                             "use method='rk4' with a dt, or backend='cpu'")
+        if effects is not None and effects.active():
+            raise ValueError(f"backend={backend!r} runs the paper's model only; effects on: "
+                             f"{', '.join(effects.active())} (use backend='cpu')")
+        if client is not None:
+            raise ValueError(f"backend={backend!r} runs on this machine's device; drop 'client'")
     names, values = _check_grid(grid, waveform)
     effects = effects or Effects()
     first = float(first_step) if first_step is not None else 1e-8
@@ -308,7 +326,9 @@ def sweep(
     bar = None
     try:
         bar = _progress_bar(n, progress)
-        if client is not None:
+        if backend != "cpu":
+            complete = _run_kernel(plan, out, threads, block_size, bar, backend)
+        elif client is not None:
             complete = _run_dask(plan, out, client, max(block_size, DASK_MIN_BLOCK), bar)
         else:
             complete = _run_local(plan, out, threads, block_size, bar)
@@ -359,7 +379,9 @@ def sweep(
         "points": n,
         "points_finished": int(np.count_nonzero(out["status"])),
         "wall_time_s": wall,
-        "executor": "dask" if client is not None else f"local rayon, {threads} threads",
+        "executor": ("dask" if client is not None else f"local rayon, {threads} threads") if backend == "cpu"
+        else f"{backend} kernel",
+        "backend": backend,
     })
     for name, value in params.to_dict(resolved=False).items():
         ds.attrs[f"param_{name}"] = value
@@ -428,6 +450,49 @@ def _run_local(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_si
                 _store(out, run.result(), start, stop)
             except RuntimeError:
                 pass  # the block's result was already taken
+        warnings.warn(f"sweep interrupted: {int(np.count_nonzero(out['status']))} of {n} points finished; "
+                      "the rest are NaN (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
+        return False
+    return True
+
+
+def _run_kernel(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_size: int, bar: Any,
+                backend: str) -> bool:
+    """The GPU kernel (or its CPU build) block by block; diverged points are retried on the CPU
+    engine at dt/2, dt/4 (``plan.retries``). Ctrl-C between blocks keeps the finished ones."""
+    from .gpu import prepare, run_cpu, run_cuda
+
+    run = run_cuda if backend == "cuda" else run_cpu
+    config = plan.structure.config(method="rk4", dt=plan.dt)
+    cycles = getattr(plan.waveform, "cycles", None)
+    n = plan.size
+    try:
+        for start in range(0, n, block_size):
+            stop = min(n, start + block_size)
+            tables = plan.tables(start, stop)
+            wnames = engine.wave_fields(tables.wave_kind)
+            bps = [plan.waveform.with_fields(dict(zip(wnames, row))).breakpoints() for row in tables.wave_fields]
+            res = run(prepare(config, tables.params, bps, plan.t_end, plan.dt))
+            sl = slice(start, stop)
+            for k in ("final_position", "peak_velocity", "peak_friction", "slip_fraction", "status", "diverged_at"):
+                out[k][sl] = res[k]
+            ok = res["status"] == 1
+            out["dt_used"][sl] = np.where(ok, plan.dt, np.nan)
+            out["steps"][sl] = np.where(ok, int(round(plan.t_end / plan.dt)), 0)
+            out["reason"][sl] = np.where(ok, "", "diverged on the GPU kernel")
+            if cycles is not None and "cycles" not in plan.names:
+                out["step_per_cycle"][sl] = res["final_position"] / cycles
+            bad = np.flatnonzero(~ok) + start
+            if bad.size and plan.retries > 0:
+                handle = start_batch(plan.tables_at(bad), plan.structure, t_end=plan.t_end, method="rk4", dt=plan.dt,
+                                     retries=plan.retries, threads=threads, skip_cycles=plan.skip_cycles)
+                handle.wait(1e9)
+                again = handle.result()
+                for k in out:
+                    out[k][bad] = again["reasons"] if k == "reason" else again[k]
+            if bar is not None:
+                bar.update(stop - start)
+    except KeyboardInterrupt:
         warnings.warn(f"sweep interrupted: {int(np.count_nonzero(out['status']))} of {n} points finished; "
                       "the rest are NaN (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
         return False

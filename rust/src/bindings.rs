@@ -264,6 +264,39 @@ fn wave_fields(kind: &str) -> PyResult<Vec<&'static str>> {
     Ok(fam.fields().to_vec())
 }
 
+/// The GPU kernel's constants of every point: `params` (P, len(param_names())) in
+/// `param_names()` order, NaN normal_force = derived; returns (P, kernel_constant_count()).
+/// Refuses (naming the row) a point the kernel cannot run.
+#[pyfunction]
+fn kernel_constants<'py>(
+    py: Python<'py>,
+    config: &RunConfig,
+    params: PyReadonlyArray2<'_, f64>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let rows = params.shape()[0];
+    let table = slice2(&params);
+    let np = PARAM_NAMES.len();
+    let mut out = Vec::with_capacity(rows * crate::kernel::N_CONSTANTS);
+    for r in 0..rows {
+        let pairs: Vec<(&str, f64)> = PARAM_NAMES
+            .iter()
+            .copied()
+            .zip(table[r * np..(r + 1) * np].iter().copied())
+            .filter(|(name, v)| !(*name == "normal_force" && v.is_nan()))
+            .collect();
+        let p = Params::from_pairs(&pairs).map_err(|e| value_error(format!("point {r}: {e}")))?;
+        let m = config.model(p, Effects::default(), false)?;
+        out.extend(crate::kernel::kernel_constants(&m).map_err(|e| value_error(format!("point {r}: {e}")))?);
+    }
+    Ok(out.into_pyarray(py).reshape([rows, crate::kernel::N_CONSTANTS])?.into_any())
+}
+
+/// Number of constants per point of the GPU kernel (its layout is `rust/src/kernel.rs`).
+#[pyfunction]
+fn kernel_constant_count() -> (usize, usize, usize) {
+    (crate::kernel::N_CONSTANTS, crate::kernel::N_SCALARS, crate::kernel::MAX_DOF)
+}
+
 /// Highest structural natural frequency [rad/s] of the model.
 #[pyfunction]
 fn highest_frequency(params: HashMap<String, f64>, config: &RunConfig) -> PyResult<f64> {
@@ -542,6 +575,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(param_names, m)?)?;
     m.add_function(wrap_pyfunction!(effect_names, m)?)?;
     m.add_function(wrap_pyfunction!(highest_frequency, m)?)?;
+    m.add_function(wrap_pyfunction!(kernel_constants, m)?)?;
+    m.add_function(wrap_pyfunction!(kernel_constant_count, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     declarations::register(m)?;
     Ok(())

@@ -137,6 +137,24 @@ impl Leuven {
         (fh + self.sigma2 * v) + self.sigma1 * gdot
     }
 
+    /// The constants in the order the GPU kernel reads them (`kernel.rs`): Fc, Fs - Fc, 1/vs,
+    /// delta, n, a, b, c, sigma1, sigma2, eps [SI].
+    pub fn constants(&self) -> [f64; 11] {
+        [
+            self.fc,
+            self.fs_minus_fc,
+            self.inv_vs,
+            self.delta,
+            self.n,
+            self.a,
+            self.b,
+            self.c,
+            self.sigma1,
+            self.sigma2,
+            self.eps,
+        ]
+    }
+
     /// Rough stiffness |d(dFh/dt)/dFh| during sliding at speed |v| [1/s], for step-size hints.
     pub fn sliding_stiffness(&self, v: f64) -> f64 {
         let s = self.stribeck(v).max(1e-300);

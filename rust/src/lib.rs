@@ -10,6 +10,7 @@ pub mod drive;
 pub mod effects;
 pub mod friction;
 pub mod jacobian;
+pub mod kernel;
 pub mod mechanics;
 pub mod model;
 pub mod params;

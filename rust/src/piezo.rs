@@ -26,6 +26,11 @@ impl PiezoHysteresis {
         self.ap_d33 * dv - self.bp * dv.abs() * h - self.cp * dv * h.abs()
     }
 
+    /// (ap d33 [m/V], bp [1/V], cp [1/V]), as the GPU kernel reads them.
+    pub fn constants(&self) -> [f64; 3] {
+        [self.ap_d33, self.bp, self.cp]
+    }
+
     /// (d(dh/dt)/d(dV/dt) [m/V], d(dh/dt)/dh [1/s]) of [`PiezoHysteresis::rate`].
     #[inline(always)]
     pub fn rate_partials(&self, dv: f64, h: f64) -> (f64, f64) {

@@ -1,0 +1,109 @@
+"""The GPU sweep kernel's physics, verified on the CPU: the same source (python/idm_rs/gpu/
+idm_kernel.cu) compiled by the system C compiler against the Rust engine on random points, and
+the sweep's launch path run through that build. The GPU itself is tested only where CuPy finds
+one (skipped otherwise)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import idm_rs
+from idm_rs.batch import Point, Structure, param_row, run
+from idm_rs.gpu import GpuUnavailable, prepare, run_cpu, run_cuda
+
+try:
+    run_cpu(prepare(Structure("lps", 1).config(method="rk4", dt=1e-7), np.array([param_row(idm_rs.Params())]),
+                    [idm_rs.Triangle().breakpoints()], 1e-6, 1e-7))
+    HAVE_CC = True
+except GpuUnavailable:
+    HAVE_CC = False
+needs_cc = pytest.mark.skipif(not HAVE_CC, reason="no C compiler to build the kernel for the CPU")
+
+P = idm_rs.Params()
+W = idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
+
+
+@needs_cc
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    model=st.sampled_from([("lps", 1), ("dps", 1), ("dps", 3), ("dps", 5)]),
+    hysteresis=st.booleans(),
+    m2=st.floats(0.1, 0.8),
+    mu_k=st.floats(0.3, 0.55),
+    sigma1=st.floats(0.0, 200.0),
+    volts=st.floats(-120.0, 120.0),
+    rise_steps=st.integers(5, 40),
+)
+def test_kernel_physics_matches_the_engine(model, hysteresis, m2, mu_k, sigma1, volts, rise_steps):
+    dt = 2e-8
+    p = P.replace(m2=m2, mu_k=mu_k, mu_s=max(P.mu_s, mu_k), sigma1=sigma1)
+    w = idm_rs.Triangle(volts, rise_steps * 1e-6, 0.4e-3)
+    st_ = Structure(model[0], model[1], hysteresis)
+    ref = run([Point(p, waveform=w)], st_, t_end=0.6e-3, method="rk4", dt=dt, retries=0)
+    out = run_cpu(prepare(st_.config(method="rk4", dt=dt), np.array([param_row(p)]), [w.breakpoints()], 0.6e-3, dt))
+    assert out["status"][0] == ref["status"][0]
+    if ref["status"][0] == 1:
+        assert abs(out["final_position"][0] - ref["final_position"][0]) <= 1e-12
+        for k in ("peak_velocity", "peak_friction"):
+            assert out[k][0] == pytest.approx(ref[k][0], rel=1e-9, abs=1e-15), k
+        assert out["slip_fraction"][0] == pytest.approx(ref["slip_fraction"][0], abs=1e-9)
+
+
+@needs_cc
+def test_kernel_sweep_equals_the_cpu_sweep_including_a_retried_point():
+    g = {"mass_ratio": [0.25, 1.0, 2.0], "voltage": [40.0, 120.0]}
+    kw = dict(t_end=2e-3, dt=1e-7, model="lps", progress=False, retries=2)
+    a = idm_rs.sweep(P, W, g, **kw)
+    b = idm_rs.sweep(P, W, g, backend="kernel-cpu", **kw)
+    assert (a.status.values == 2).any(), "expected a point the kernel sees diverge"
+    np.testing.assert_array_equal(a.status.values, b.status.values)
+    np.testing.assert_allclose(b.final_position.values, a.final_position.values, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(b.peak_friction.values, a.peak_friction.values, rtol=1e-9)
+    assert b.attrs["backend"] == "kernel-cpu"
+
+
+@pytest.mark.parametrize("kw, needle", [
+    (dict(method="dopri5"), "RK4 only"),
+    (dict(effects=idm_rs.Effects(k_ground=1e3)), "k_ground"),
+])
+def test_kernel_backends_refuse_what_they_do_not_run(kw, needle):
+    with pytest.raises(ValueError, match=needle):
+        idm_rs.sweep(P, W, {"voltage": [80.0]}, t_end=1e-4, model="lps", progress=False, backend="kernel-cpu", **kw)
+
+
+def test_kernel_constants_refuse_models_the_kernel_cannot_run():
+    from idm_rs import engine
+
+    with pytest.raises(ValueError, match="at most 6 nodes"):
+        engine.kernel_constants(Structure("dps", 8).config(method="rk4", dt=1e-8), np.array([param_row(P)]))
+
+
+def test_cuda_backend_without_a_gpu_says_how_to_get_one():
+    try:
+        import cupy  # noqa: F401
+
+        pytest.skip("CuPy is installed here")
+    except ImportError:
+        pass
+    with pytest.raises(GpuUnavailable, match=r"idm-rs\[cuda\]"):
+        idm_rs.sweep(P, W, {"voltage": [80.0]}, t_end=1e-4, dt=1e-8, model="lps", progress=False, backend="cuda")
+
+
+def _gpu() -> bool:
+    try:
+        import cupy as cp
+
+        return cp.cuda.runtime.getDeviceCount() > 0
+    except Exception:
+        return False
+
+
+@pytest.mark.skipif(not _gpu(), reason="no CUDA device (CuPy)")
+def test_gpu_equals_the_cpu_build():
+    rows = [param_row(P.replace(m2=m)) for m in np.linspace(0.1, 0.6, 64)]
+    b = prepare(Structure("lps", 1).config(method="rk4", dt=5e-8), np.array(rows), [W.breakpoints()] * 64, 2e-3, 5e-8)
+    g, c = run_cuda(b), run_cpu(b)
+    np.testing.assert_allclose(g["final_position"], c["final_position"], rtol=0, atol=1e-12)
