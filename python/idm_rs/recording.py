@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .params import Params
-from .waveforms import Sawtooth, voltage_at
+from .waveforms import Sampled, Sawtooth, voltage_at
 
 __all__ = [
     "FORMAT_ID",
@@ -112,7 +112,7 @@ class Experiment:
     path: Path  #: full path of the CSV file
     amplitude_V: float
     frequency_Hz: float
-    direction: str  #: "forward" or "backward"
+    direction: str  #: "forward" or "backward" ("sampled" for a sampled drive)
     cycles: int
     rest_s: float  #: 0 V before the first cycle [s]
     edge_s: float  #: duration of the fast edge [s]
@@ -121,8 +121,17 @@ class Experiment:
     x: NDArray[np.float64] = field(repr=False)
 
     @property
-    def waveform(self) -> Sawtooth:
-        """The drive as an ``idm_rs.Sawtooth`` (delay = rest_s, rise = edge_s)."""
+    def is_sampled(self) -> bool:
+        """True for a drive recorded sample by sample (``waveform: "sampled"``): the CSV's
+        voltage column is the input, piecewise linear between samples."""
+        return self.direction == "sampled"
+
+    @property
+    def waveform(self) -> Union[Sawtooth, Sampled]:
+        """The drive: an ``idm_rs.Sawtooth`` (delay = rest_s, rise = edge_s), or for a sampled
+        drive the recorded voltage as an ``idm_rs.Sampled``."""
+        if self.is_sampled:
+            return Sampled(self.t, self.voltage)
         return Sawtooth(
             amplitude=self.amplitude_V,
             frequency=self.frequency_Hz,
@@ -189,6 +198,12 @@ class Recording:
     def load(cls, path: PathLike) -> "Recording":
         """Read and validate a case directory (raises :class:`RecordingError`)."""
         return load_case(path)
+
+    @property
+    def noise_rms_m(self) -> Optional[float]:
+        """The sensor noise RMS [m] given in meta.json (``sensor.noise_rms_m``), if any."""
+        v = self.meta.get("sensor", {}).get("noise_rms_m")
+        return None if v is None else float(v)
 
     @property
     def sample_step(self) -> float:
@@ -318,13 +333,15 @@ _EXPERIMENT_KEYS = ("file", "waveform", "amplitude_V", "frequency_Hz", "directio
 
 def _parse_experiment_meta(e: Any, i: int, meta: Path) -> dict[str, Any]:
     where = f"experiments[{i}]"
+    if isinstance(e, dict) and e.get("waveform") == "sampled":
+        return _parse_sampled_meta(e, i, meta)
     _require(e, _EXPERIMENT_KEYS, meta, where)
     name = e["file"]
     if not isinstance(name, str) or not name or Path(name).name != name or name in (".", ".."):
         raise RecordingError(meta, f"must be a plain file name in the case directory, got {name!r}",
                              column=f"{where}.file")
     if e["waveform"] != "sawtooth":
-        raise RecordingError(meta, f"unsupported waveform {e['waveform']!r} (only \"sawtooth\")",
+        raise RecordingError(meta, f"unsupported waveform {e['waveform']!r} (\"sawtooth\" or \"sampled\")",
                              column=f"{where}.waveform")
     if e["direction"] not in ("forward", "backward"):
         raise RecordingError(meta, f"must be \"forward\" or \"backward\", got {e['direction']!r}",
@@ -356,6 +373,22 @@ def _parse_experiment_meta(e: Any, i: int, meta: Path) -> dict[str, Any]:
                     f"the name says {value!r}", column=f"{where}.{key}",
                 )
     return out
+
+
+def _parse_sampled_meta(e: dict, i: int, meta: Path) -> dict[str, Any]:
+    """A sampled drive: the CSV's voltage column is the input. Keys: ``file``, ``waveform``
+    and, optionally, ``rest_s`` (how long the device rests before the drive starts [s];
+    default: until the voltage first leaves 0). The amplitude and the record's duration come
+    from the file."""
+    where = f"experiments[{i}]"
+    _require(e, ["file", "waveform"], meta, where)
+    name = e["file"]
+    if not isinstance(name, str) or not name or Path(name).name != name or name in (".", ".."):
+        raise RecordingError(meta, f"must be a plain file name in the case directory, got {name!r}",
+                             column=f"{where}.file")
+    rest = _number(e, "rest_s", meta, where, non_negative=True) if "rest_s" in e else math.nan
+    return {"file": name, "amplitude_V": math.nan, "frequency_Hz": math.nan, "direction": "sampled", "cycles": 1,
+            "rest_s": rest, "edge_s": math.nan}
 
 
 # --------------------------------------------------------------------------------------------
@@ -479,8 +512,9 @@ def _check_experiment(
             csv, f"non-uniform time: t = {float(t[k])!r} s but sample {k} should be at {k * step:.10g} s "
             f"(step {step:.6g} s = 1/sensor.sample_rate_Hz)", line=k + 2, column="t",
         )
+    sampled = e["direction"] == "sampled"
     duration = e["rest_s"] + e["cycles"] / e["frequency_Hz"]
-    if abs(t[-1] - duration) > 0.5 * step:
+    if not sampled and abs(t[-1] - duration) > 0.5 * step:
         raise RecordingError(
             csv, f"last sample at t = {float(t[-1])!r} s, but {meta.name} ({where}) describes rest_s + cycles / "
             f"frequency_Hz = {e['rest_s']:g} + {e['cycles']} / {e['frequency_Hz']:g} = {duration:.10g} s: "
@@ -493,6 +527,11 @@ def _check_experiment(
             csv, f"x = {float(x[k]):.10g} looks like it is not in metres (|x| > {MAX_ABS_X_M:g} m; displacements of "
             f"an IDM recording are µm-scale: was it written in µm or nm?)", line=k + 2, column="x",
         )
+    if sampled:
+        if not np.all(np.isfinite(v)):
+            k = int(np.flatnonzero(~np.isfinite(v))[0])
+            raise RecordingError(csv, "voltage must be finite (it is the drive)", line=k + 2, column="voltage")
+        return
     amp = e["amplitude_V"]
     peak_k = int(np.argmax(np.abs(v)))
     peak = float(v[peak_k])
@@ -533,6 +572,19 @@ def _check_experiment(
 # --------------------------------------------------------------------------------------------
 # the case
 # --------------------------------------------------------------------------------------------
+def _sampled_from_table(e: dict[str, Any], table: NDArray[np.float64]) -> dict[str, Any]:
+    """A sampled experiment's amplitude (peak |V|), rest (until V first leaves 0, unless given)
+    and one "cycle" spanning the drive to the last sample (so duration = the record's end)."""
+    t, v = table[:, 0], table[:, 1]
+    moving = np.flatnonzero(np.abs(v) > 0)
+    rest = e["rest_s"]
+    if not math.isfinite(rest):
+        rest = float(t[moving[0]]) if moving.size else 0.0
+    span = float(t[-1]) - rest
+    return {**e, "amplitude_V": float(np.max(np.abs(v))), "rest_s": rest,
+            "frequency_Hz": 1.0 / span if span > 0 else math.inf}
+
+
 def load_case(path: PathLike) -> Recording:
     """Read and validate the case directory ``path`` (``meta.json`` + CSV files).
 
@@ -547,6 +599,8 @@ def load_case(path: PathLike) -> Recording:
     _require(sensor, ["sample_rate_Hz", "resolution_m"], meta_path, "sensor")
     sample_rate = _number(sensor, "sample_rate_Hz", meta_path, "sensor", positive=True)
     resolution = _number(sensor, "resolution_m", meta_path, "sensor", non_negative=True)
+    if "noise_rms_m" in sensor:  # optional: the sensor's noise, when the user knows it
+        _number(sensor, "noise_rms_m", meta_path, "sensor", positive=True)
 
     exps_meta = data["experiments"]
     if not isinstance(exps_meta, list) or not exps_meta:
@@ -568,6 +622,8 @@ def load_case(path: PathLike) -> Recording:
             raise RecordingError(csv, f"missing: listed in {META} (experiments[{i}].file) but not in {case}")
         table = _read_csv(csv)
         _check_experiment(table, csv, meta_path, f"experiments[{i}]", e, sample_rate, resolution)
+        if e["direction"] == "sampled":
+            e = _sampled_from_table(e, table)
         experiments.append(
             Experiment(
                 path=csv,

@@ -24,7 +24,7 @@ from .effects import Effects
 from .params import Params
 from .recording import FORMAT_ID, HEADER, META
 from .simulation import simulate
-from .waveforms import Sawtooth, voltage_at
+from .waveforms import Sampled, Sawtooth, voltage_at
 
 __all__ = ["DEFAULT_EXPERIMENTS", "make_case"]
 
@@ -68,6 +68,7 @@ def make_case(
     rest_s: float = 0.002,
     edge_s: float = 0.0005,
     sample_rate_Hz: float = 1e5,
+    write_noise_rms: bool = False,
 ) -> Path:
     """Simulate the true device and write a case directory; returns ``Path(directory)``.
 
@@ -77,7 +78,10 @@ def make_case(
     ``true_piezo_hysteresis`` (each defaulting to the nominal one) with ``effects``.
 
     ``experiments``: dicts with ``amplitude_V``, ``frequency_Hz``, ``direction``, ``cycles`` and
-    optionally ``rest_s``, ``edge_s`` and ``file`` (default :data:`DEFAULT_EXPERIMENTS`).
+    optionally ``rest_s``, ``edge_s`` and ``file`` (default :data:`DEFAULT_EXPERIMENTS`); or,
+    for a drive recorded sample by sample, ``{"sampled": idm_rs.Sampled(t, V)}`` (its times on
+    the sample grid, from 0; optionally ``file``), written as ``waveform: "sampled"``.
+    ``write_noise_rms`` puts the noise RMS in meta.json (``sensor.noise_rms_m``).
     Each file's ``x`` is the simulated ``reading`` (sampled at ``sample_rate_Hz``, integrated at
     step ``dt``) + an offset (``offsets[i]``, or uniform in ±2 µm) + white Gaussian noise of RMS
     ``noise_rms`` [m], rounded to multiples of ``resolution`` [m] (``None`` or 0: no rounding).
@@ -118,9 +122,16 @@ def make_case(
     out.mkdir(parents=True, exist_ok=True)
     meta_exps = []
     for i, e in enumerate(exps):
-        unknown = set(e) - {"amplitude_V", "frequency_Hz", "direction", "cycles", "rest_s", "edge_s", "file"}
+        allowed = {"sampled", "file"} if "sampled" in e else {"amplitude_V", "frequency_Hz", "direction", "cycles",
+                                                                "rest_s", "edge_s", "file"}
+        unknown = set(e) - allowed
         if unknown:
             raise ValueError(f"experiments[{i}]: unknown key(s) {sorted(unknown)}")
+        if "sampled" in e:
+            meta_exps.append(_sampled_experiment(out, i, e, true_params, true_model, true_n_elements,
+                                                 true_piezo_hysteresis, effects, offs[i], noise_rms, resolution,
+                                                 rng, dt, save_every, sample_rate_Hz))
+            continue
         rest = float(e.get("rest_s", rest_s))
         edge = float(e.get("edge_s", edge_s))
         wave = Sawtooth(
@@ -191,5 +202,31 @@ def make_case(
         "experiments": meta_exps,
         "sensor": {"sample_rate_Hz": float(sample_rate_Hz), "resolution_m": resolution},
     }
+    if write_noise_rms:
+        meta["sensor"]["noise_rms_m"] = float(noise_rms)
     (out / META).write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
     return out
+
+
+def _sampled_experiment(out: Path, i: int, e: Mapping[str, Any], params: Params, model: str, n_elements: int,
+                        hysteresis: bool, effects: Optional[Effects], offset: float, noise_rms: float,
+                        resolution: float, rng: np.random.Generator, dt: float, save_every: int,
+                        sample_rate_Hz: float) -> dict[str, Any]:
+    """One experiment driven by a recorded voltage (a Sampled), written as ``waveform: "sampled"``."""
+    wave = e["sampled"]
+    if not isinstance(wave, Sampled):
+        raise TypeError(f"experiments[{i}]['sampled'] must be an idm_rs.Sampled")
+    n = int(round(wave.duration * sample_rate_Hz)) + 1
+    t = np.arange(n) / sample_rate_Hz
+    sim = simulate(params, wave, t_end=t[-1], dt=dt, model=model, n_elements=n_elements,  # type: ignore[arg-type]
+                   save_every=save_every, piezo_hysteresis=hysteresis, effects=effects)
+    x = sim.reading + offset
+    if noise_rms > 0:
+        x = x + rng.normal(0.0, noise_rms, size=n)
+    if resolution > 0:
+        x = np.round(x / resolution) * resolution
+    v = np.interp(t, wave.t, wave.voltage)
+    name = e.get("file") or f"exp{i + 1}_sampled.csv"
+    np.savetxt(out / name, np.column_stack([t, v, x]), fmt="%.10g", delimiter=",", header=",".join(HEADER),
+               comments="")
+    return {"file": name, "waveform": "sampled"}

@@ -47,7 +47,10 @@ class CaseSimulator:
         if abs(self.record_every * dt - step) > 1e-9 * step:
             raise ValueError(f"fit step {dt} s does not divide the sample step {step} s")
         names = engine.wave_fields(Sawtooth.batch_kind)
+        # sawtooth experiments share one batch; a sampled drive is its own batch (the engine's
+        # sampled family shares one set of samples across its points)
         self._wave_rows = [
+            None if e.is_sampled else
             [Sawtooth(e.amplitude_V, e.frequency_Hz, e.cycles, e.edge_s, e.direction, e.rest_s).batch_fields()[c]
              for c in names]
             for e in recording.experiments
@@ -79,9 +82,15 @@ class CaseSimulator:
             rows_p, rows_e, rows_w, t_ends = [], [], [], []
             prows = [param_row(specs[i].params) for i in idx]
             erows = [[float(specs[i].effects.get(n, 0.0)) for n in enames] for i in idx]
+            sawtooth = [j for j in range(n_exp) if self._wave_rows[j] is not None]
+            for j in range(n_exp):
+                if self._wave_rows[j] is None:
+                    self._predict_sampled(j, structure, idx, prows, erows, horizons[j], retries, out)
+            if not sawtooth:
+                continue
             # experiment-major: neighbouring points share a duration, so the engine's lanes of
             # points (which advance together) all stay busy to the end
-            for j in range(n_exp):
+            for j in sawtooth:
                 for a in range(len(idx)):
                     rows_p.append(prows[a])
                     rows_e.append(erows[a])
@@ -94,9 +103,33 @@ class CaseSimulator:
             self.evaluations += len(t_ends)
             traces = res.get("traces", [np.zeros(0)] * len(t_ends))
             for a, i in enumerate(idx):
-                for j in range(n_exp):
-                    tr = np.asarray(traces[j * len(idx) + a])
+                for k, j in enumerate(sawtooth):
+                    tr = np.asarray(traces[k * len(idx) + a])
                     if tr.size != horizons[j][1]:  # diverged or invalid point
                         tr = np.full(horizons[j][1], np.nan)
-                    out[i].append(tr)
+                    self._sawtooth_slot(out[i], j)
+                    out[i][j] = tr
         return out
+
+    @staticmethod
+    def _sawtooth_slot(row: list, j: int) -> None:
+        while len(row) <= j:
+            row.append(None)
+
+    def _predict_sampled(self, j: int, structure: Structure, idx: list[int], prows: list, erows: list,
+                         horizon: tuple[float, int], retries: int, out: list[list]) -> None:
+        """Experiment j (a sampled drive) for the specs `idx`: one batch with its samples."""
+        e = self.recording.experiments[j]
+        tables = Tables(np.asarray(prows), np.asarray(erows), "sampled", np.ones((len(idx), 1)),
+                        sampled=(np.ascontiguousarray(e.t), np.ascontiguousarray(e.voltage)),
+                        t_ends=np.full(len(idx), horizon[0]))
+        res = run_batch(tables, structure, t_end=horizon[0], method="rk4", dt=self.dt, retries=retries,
+                        threads=self.threads, record_every=self.record_every)
+        self.evaluations += len(idx)
+        traces = res.get("traces", [np.zeros(0)] * len(idx))
+        for a, i in enumerate(idx):
+            tr = np.asarray(traces[a])
+            if tr.size != horizon[1]:
+                tr = np.full(horizon[1], np.nan)
+            self._sawtooth_slot(out[i], j)
+            out[i][j] = tr

@@ -45,8 +45,13 @@ def phase_masks(e: Experiment) -> dict[str, NDArray[np.bool_]]:
     """Masks of the motion phases. The rapid phase is the fast edge plus as long again after it
     (the slip and the ringing that follow); the rest of each period is the slow edge."""
     t = e.t
-    period = 1.0 / e.frequency_Hz
     rest = t < e.rest_s - 1e-12
+    if e.is_sampled:
+        # no cycles: the input's fast changes (|dV/dt| above a fifth of its largest) and the rest
+        rate = np.abs(np.gradient(e.voltage, t))
+        fast = ~rest & (rate > 0.2 * rate.max()) if rate.max() > 0 else np.zeros_like(rest)
+        return {"rest": rest, "rapid edge / slip": fast, "slow edge / stick": ~rest & ~fast}
+    period = 1.0 / e.frequency_Hz
     fast_start = 0.0 if e.direction == "forward" else period - e.edge_s
     since = t - e.rest_s - fast_start  # time since the first fast edge began
     k = np.floor(since / period + 1e-9)

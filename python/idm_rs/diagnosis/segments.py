@@ -17,7 +17,10 @@ from ..recording import Experiment
 
 def segment_starts(e: Experiment, sample_rate_Hz: float, n_samples: int) -> list[int]:
     """Sample indices where the segments of experiment `e` start (the first is 0), within its
-    first `n_samples` samples: one before every fast edge but the first."""
+    first `n_samples` samples: one before every fast edge but the first. A sampled drive has no
+    cycles to cut at: one segment."""
+    if e.is_sampled:
+        return [0]
     period = 1.0 / e.frequency_Hz
     # the fast edge of cycle k: at its start (forward) or its end (backward)
     edge_at = 0.0 if e.direction == "forward" else period - e.edge_s

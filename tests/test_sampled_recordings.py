@@ -1,0 +1,72 @@
+"""IDM recordings whose drive is recorded sample by sample (``waveform: "sampled"``): the format,
+the noise floor without a rest segment, and the diagnosis on such cases (a healthy device with a
+mis-set coefficient is "none"; a spring to ground is named)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import idm_rs
+from idm_rs.diagnosis.noise import estimate_noise
+from idm_rs.recording import RecordingError
+from idm_rs.synthetic import make_case
+
+P = idm_rs.Params()
+
+
+def _drive(rest: float = 0.002) -> idm_rs.Sampled:
+    """Fast rises of varied size and curved slow falls: no sawtooth describes it."""
+    t = np.arange(0, 0.024 + 1e-12, 1e-5)
+    v = np.zeros_like(t)
+    for s, a in zip((rest, rest + 0.0055, rest + 0.011, rest + 0.0165), (80, 60, 90, 70)):
+        rise, fall = (t >= s) & (t < s + 4e-4), (t >= s + 4e-4) & (t < s + 5e-3)
+        v[rise] = a * (t[rise] - s) / 4e-4
+        v[fall] = a * (1 - (t[fall] - s - 4e-4) / 4.6e-3) ** 1.5
+    return idm_rs.Sampled(t, v)
+
+
+def test_a_sampled_drive_loads_with_its_voltage_as_the_input(tmp_path):
+    w = _drive()
+    d = make_case(tmp_path / "c", nominal_params=P, model="lps", experiments=[{"sampled": w}], write_noise_rms=True)
+    meta = json.loads((d / "meta.json").read_text())
+    assert meta["experiments"][0] == {"file": "exp1_sampled.csv", "waveform": "sampled"}
+    rec = idm_rs.load_case(d)
+    e = rec.experiments[0]
+    assert e.is_sampled and e.amplitude_V == 90.0 and e.rest_s == pytest.approx(0.00201)
+    assert isinstance(e.waveform, idm_rs.Sampled) and e.duration == pytest.approx(0.024)
+    assert rec.noise_rms_m == 1.5e-9 and estimate_noise(rec).sigma == 1.5e-9
+
+
+def test_noise_without_rest_comes_from_the_high_frequency_content(tmp_path):
+    w = _drive(rest=0.0)
+    w = idm_rs.Sampled(w.t, w.voltage + 5.0)  # never at 0 V: no rest at all
+    d = make_case(tmp_path / "c", nominal_params=P, model="lps", experiments=[{"sampled": w}], noise_rms=2e-9)
+    noise = estimate_noise(idm_rs.load_case(d))
+    assert noise.n_rest == 0
+    assert noise.sigma == pytest.approx(2e-9, rel=0.1)
+
+
+def test_a_bad_sampled_voltage_is_named(tmp_path):
+    d = make_case(tmp_path / "c", nominal_params=P, model="lps", experiments=[{"sampled": _drive()}])
+    csv = d / "exp1_sampled.csv"
+    lines = csv.read_text().splitlines()
+    cells = lines[5].split(",")
+    lines[5] = ",".join([cells[0], "nan", cells[2]])
+    csv.write_text("\n".join(lines) + "\n")
+    with pytest.raises(RecordingError, match="voltage"):
+        idm_rs.load_case(d)
+
+
+@pytest.mark.parametrize("kind, verdict", [("misset", "none"), ("spring", "spring_to_ground")])
+def test_diagnosis_on_sampled_drives(tmp_path, kind, verdict):
+    w = _drive()
+    effects = idm_rs.Effects(k_ground=2e4) if kind == "spring" else None
+    nominal = P.replace(mu_k=0.54) if kind == "misset" else P
+    d = make_case(tmp_path / kind, nominal_params=nominal, true_params=P, model="lps", effects=effects,
+                  experiments=[{"sampled": w}, {"sampled": idm_rs.Sampled(w.t, 0.8 * w.voltage)}])
+    dg = idm_rs.diagnose(d, progress=False)
+    assert dg.verdict == verdict, dg.report()
+    assert dg.rms_after <= 1.1 * dg.noise.sigma
