@@ -151,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
             "and not_identifiable; --plots writes measured vs simulated figures."
         ),
     )
-    rf.add_argument("path", metavar="PATH", help="a data file, e.g. ../shared/realdata/emps/DATA_EMPS.mat")
+    rf.add_argument("path", metavar="PATH", help="a data file of one of the measured sets (docs/REALDATA.md says where to get them), e.g. DATA_EMPS.mat")
     rf.add_argument("--json", default=None, metavar="OUT", help="write the result as JSON")
     rf.add_argument("--plots", default=None, metavar="DIR", help="write figures into DIR")
     rf.add_argument("--no-simulation", action="store_true", help="identify only (skip the closed-loop simulations)")
