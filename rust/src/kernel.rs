@@ -9,8 +9,9 @@ use crate::model::Model;
 /// Largest node count the kernel holds (DPS with 5 elements).
 pub const MAX_DOF: usize = 6;
 /// Scalars before the matrices: dof, kp, d33, 11 friction constants, hysteresis on, its 3
-/// constants, the |Fh| bound.
-pub const N_SCALARS: usize = 19;
+/// constants, the |Fh| bound, and the LPS frequency sqrt(kp (1/m1 + 1/m2)) [rad/s] that scales
+/// velocities in the adaptive method's error norm (`Model::state_scales`).
+pub const N_SCALARS: usize = 20;
 /// Total constants per point: the scalars, M^-1 K and M^-1 C (MAX_DOF^2 each, row-major,
 /// zero-padded), and the two force columns of M^-1 (MAX_DOF each).
 pub const N_CONSTANTS: usize = N_SCALARS + 2 * MAX_DOF * MAX_DOF + 2 * MAX_DOF;
@@ -37,6 +38,8 @@ pub fn kernel_constants(model: &Model) -> Result<Vec<f64>, String> {
         c[15..18].copy_from_slice(&h.constants());
     }
     c[18] = model.presliding_bound();
+    let p = &model.params;
+    c[19] = (p.kp() * (1.0 / p.m1 + 1.0 / p.m2)).sqrt();
     let (mk, mc) = (N_SCALARS, N_SCALARS + MAX_DOF * MAX_DOF);
     let (m0, ml) = (N_SCALARS + 2 * MAX_DOF * MAX_DOF, N_SCALARS + 2 * MAX_DOF * MAX_DOF + MAX_DOF);
     for i in 0..n {

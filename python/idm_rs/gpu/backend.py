@@ -31,7 +31,8 @@ class GpuUnavailable(RuntimeError):
 
 @dataclass
 class KernelBatch:
-    """The kernel's inputs for P points (C-contiguous)."""
+    """The kernel's inputs for P points (C-contiguous). ``method`` "rk4" uses ``dt`` and
+    ``steps``; "dopri5" uses ``t_end``, ``rtol``, ``atol`` and ``first_step``."""
 
     consts: NDArray[np.float64]  #: (P, N_CONSTANTS)
     bt: NDArray[np.float64]  #: (P, max_nb) breakpoint times [s], padded with the last
@@ -39,6 +40,11 @@ class KernelBatch:
     nb: NDArray[np.int32]  #: (P,) breakpoints per point
     steps: NDArray[np.int64]  #: (P,) RK4 steps
     dt: float
+    method: str = "rk4"
+    t_end: float = 0.0
+    rtol: float = 1e-7
+    atol: float = 1e-7
+    first_step: float = 1e-8
 
     @property
     def points(self) -> int:
@@ -46,9 +52,12 @@ class KernelBatch:
 
 
 def prepare(config: Any, params_table: NDArray[np.float64], breakpoints: list[tuple[NDArray[np.float64],
-            NDArray[np.float64]]], t_end: float, dt: float) -> KernelBatch:
+            NDArray[np.float64]]], t_end: float, dt: float, *, method: str = "rk4", rtol: float = 1e-7,
+            atol: float = 1e-7, first_step: float = 1e-8) -> KernelBatch:
     """The kernel's inputs: constants from the engine (which refuses what the kernel cannot
-    run), breakpoints padded to a common length, and the step count t_end / dt."""
+    run), breakpoints padded to a common length, and the step count t_end / dt (RK4) or the
+    tolerances (``method="dopri5"``)."""
+    _check_layout()
     consts = np.ascontiguousarray(engine.kernel_constants(config, np.ascontiguousarray(params_table, dtype=float)))
     p = consts.shape[0]
     max_nb = max(len(b[0]) for b in breakpoints)
@@ -61,13 +70,29 @@ def prepare(config: Any, params_table: NDArray[np.float64], breakpoints: list[tu
         bt[i, k:], bv[i, k:] = t[-1], v[-1]
         nb[i] = k
     steps = np.full(p, int(round(t_end / dt)), dtype=np.int64)
-    return KernelBatch(consts, bt, bv, nb, steps, float(dt))
+    return KernelBatch(consts, bt, bv, nb, steps, float(dt), method, float(t_end), float(rtol), float(atol),
+                       float(first_step))
+
+
+def _check_layout() -> None:
+    """The kernel source and the engine must agree on the constants' layout (else the kernel
+    would read past each point's row)."""
+    import re
+
+    m = re.search(r"#define IDM_N_SCALARS (\d+)", SOURCE.read_text())
+    n_const, n_scalars, max_dof = engine.kernel_constant_count()
+    if m is None or int(m.group(1)) != n_scalars:
+        raise GpuUnavailable(f"kernel source ({SOURCE}) and engine disagree on the constants' layout "
+                             f"({m.group(1) if m else '?'} vs {n_scalars} scalars): reinstall idm-rs")
 
 
 def _outputs(raw: NDArray[np.float64]) -> dict[str, NDArray[Any]]:
     out = {name: raw[:, i].copy() for i, name in enumerate(OUTPUTS)}
     out["status"] = out["status"].astype(np.uint8)
     out["diverged_at"] = np.where(out["status"] == 3, out["diverged_at"], np.nan)
+    if raw.shape[1] > len(OUTPUTS):  # the adaptive kernel: accepted steps, smallest step
+        out["steps"] = raw[:, 6].astype(np.uint64)
+        out["dt_used"] = raw[:, 7].copy()
     return out
 
 
@@ -93,6 +118,10 @@ def _cpu_library() -> ctypes.CDLL:
     dll.idm_rk4_sweep.argtypes = [dp, dp, dp, ctypes.POINTER(ctypes.c_int), ctypes.c_int, ctypes.c_double,
                                   ctypes.POINTER(ctypes.c_long), ctypes.c_int, dp]
     dll.idm_rk4_sweep.restype = None
+    d = ctypes.c_double
+    dll.idm_dopri5_sweep.argtypes = [dp, dp, dp, ctypes.POINTER(ctypes.c_int), ctypes.c_int, d, d, d, d,
+                                     ctypes.c_int, dp]
+    dll.idm_dopri5_sweep.restype = None
     return dll
 
 
@@ -100,12 +129,16 @@ def run_cpu(batch: KernelBatch) -> dict[str, NDArray[Any]]:
     """The kernel compiled for the CPU (one point after another): the reference the tests hold
     the GPU source to."""
     dll = _cpu_library()
-    out = np.zeros((batch.points, len(OUTPUTS)))
     dp = ctypes.POINTER(ctypes.c_double)
     ptr = lambda a, t=dp: a.ctypes.data_as(t)  # noqa: E731
-    dll.idm_rk4_sweep(ptr(batch.consts), ptr(batch.bt), ptr(batch.bv), ptr(batch.nb, ctypes.POINTER(ctypes.c_int)),
-                      int(batch.bt.shape[1]), batch.dt, ptr(batch.steps, ctypes.POINTER(ctypes.c_long)),
-                      batch.points, ptr(out))
+    common = (ptr(batch.consts), ptr(batch.bt), ptr(batch.bv), ptr(batch.nb, ctypes.POINTER(ctypes.c_int)),
+              int(batch.bt.shape[1]))
+    if batch.method == "dopri5":
+        out = np.zeros((batch.points, len(OUTPUTS) + 2))
+        dll.idm_dopri5_sweep(*common, batch.t_end, batch.rtol, batch.atol, batch.first_step, batch.points, ptr(out))
+    else:
+        out = np.zeros((batch.points, len(OUTPUTS)))
+        dll.idm_rk4_sweep(*common, batch.dt, ptr(batch.steps, ctypes.POINTER(ctypes.c_long)), batch.points, ptr(out))
     return _outputs(out)
 
 
@@ -129,10 +162,16 @@ def run_cuda(batch: KernelBatch) -> dict[str, NDArray[Any]]:
         raise GpuUnavailable(f"backend='cuda': no usable CUDA device ({exc})") from None
     if _MODULE is None:
         _MODULE = cp.RawModule(code=SOURCE.read_text(), options=("--std=c++14",))
-    fn = _MODULE.get_function("idm_rk4_sweep")
     d = {name: cp.asarray(getattr(batch, name)) for name in ("consts", "bt", "bv", "nb", "steps")}
-    out = cp.zeros((batch.points, len(OUTPUTS)), dtype=cp.float64)
     grid = ((batch.points + BLOCK - 1) // BLOCK,)
-    fn(grid, (BLOCK,), (d["consts"], d["bt"], d["bv"], d["nb"], np.int32(batch.bt.shape[1]), np.float64(batch.dt),
-                        d["steps"], np.int32(batch.points), out))
+    common = (d["consts"], d["bt"], d["bv"], d["nb"], np.int32(batch.bt.shape[1]))
+    if batch.method == "dopri5":
+        out = cp.zeros((batch.points, len(OUTPUTS) + 2), dtype=cp.float64)
+        _MODULE.get_function("idm_dopri5_sweep")(grid, (BLOCK,), common + (
+            np.float64(batch.t_end), np.float64(batch.rtol), np.float64(batch.atol), np.float64(batch.first_step),
+            np.int32(batch.points), out))
+    else:
+        out = cp.zeros((batch.points, len(OUTPUTS)), dtype=cp.float64)
+        _MODULE.get_function("idm_rk4_sweep")(grid, (BLOCK,), common + (
+            np.float64(batch.dt), d["steps"], np.int32(batch.points), out))
     return _outputs(cp.asnumpy(out))
