@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from .realdata import RigData
 from .rig_fit import (EMPS_BORDER, EMPS_DECIMATE, FRAME_BORDER, FRAME_FILTER_HZ, FRAME_SLIDING_SHARE,
-                      _differentiate, _slips)
+                      _differentiate, _lstsq, _slips)
 
 #: a candidate must lower BIC by this much (the IDM diagnosis's threshold)
 BIC_THRESHOLD = 10.0
@@ -101,14 +101,6 @@ class RigDiagnosis:
                 "locations": self.locations,
                 "ranking": [{"effect": c.effect, "delta_bic": c.delta_bic, "rms_after": c.rms_after, "values": c.values,
                              "std": c.std, "setting": c.setting, "significant": c.significant} for c in self.ranking]}
-
-
-def _lstsq(X: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64],
-                                                                     NDArray[np.float64]]:
-    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
-    e = y - X @ beta
-    cov = np.var(e, ddof=X.shape[1]) * np.linalg.pinv(X.T @ X)
-    return beta, e, cov
 
 
 def _bic(e: NDArray[np.float64], k: int) -> float:

@@ -77,7 +77,8 @@ def _lstsq(X: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[np.f
                                                                      NDArray[np.float64]]:
     beta, *_ = np.linalg.lstsq(X, y, rcond=None)
     e = y - X @ beta
-    cov = np.var(e, ddof=X.shape[1]) * np.linalg.inv(X.T @ X)
+    # pinv: a candidate's columns may be nearly collinear with the base model's (rig_diagnosis)
+    cov = np.var(e, ddof=X.shape[1]) * np.linalg.pinv(X.T @ X)
     return beta, e, cov
 
 
