@@ -7,6 +7,7 @@
 
 use crate::declare::{check_domains, Domain, EffectDecl, EffectKind, ParamDecl};
 use crate::params::{table1, GRAVITY};
+use crate::scalar::Scalar;
 
 /// Declares the catalogue once. `other` effects change the structure or Table 1 values and
 /// list their parameters as [`ParamDecl`]s; each parameter of a `terms` effect becomes a field
@@ -29,12 +30,13 @@ macro_rules! effects {
             } )*
         }
     ) => {
-        /// Effect parameters (SI). All zero: the paper's model.
+        /// Effect parameters (SI). All zero: the paper's model. Generic over the number type
+        /// like [`crate::params::Params`] (see [`Effects::lift`]).
         #[derive(Clone, Copy, Debug, Default, PartialEq)]
-        pub struct Effects {
+        pub struct Effects<T = f64> {
             $($(
                 #[doc = concat!(stringify!($tid), ": ", $meaning, " [", $unit, "]")]
-                pub $field: f64,
+                pub $field: T,
             )*)*
         }
 
@@ -68,6 +70,11 @@ macro_rules! effects {
         ];
 
         impl Effects {
+            /// Every value as a `T` made by `lift(name, value)` (see `Params::lift`).
+            pub fn lift<T>(&self, lift: impl Fn(&str, f64) -> T) -> Effects<T> {
+                Effects { $($($field: lift(stringify!($field), self.$field),)*)* }
+            }
+
             /// Every value, in the order of [`EFFECT_NAMES`].
             pub fn values(&self) -> [f64; N_EFFECT_PARAMS] {
                 [$($(self.$field,)*)*]
@@ -221,10 +228,6 @@ impl Effects {
         Ok(())
     }
 
-    /// Gravity along the tilted guide on the main body [N], for the device's total mass [kg].
-    pub fn incline_force(&self, total_mass: f64) -> f64 {
-        -total_mass * GRAVITY * self.theta_rad.sin()
-    }
 
     /// The first-order lags that are on, by parameter name, with their time constants [s]: a
     /// lag much faster than a fixed step makes its state stiff.
@@ -236,27 +239,35 @@ impl Effects {
         ]
     }
 
+}
+
+impl<T: Scalar> Effects<T> {
+    /// Gravity along the tilted guide on the main body [N], for the device's total mass [kg].
+    pub fn incline_force(&self, total_mass: T) -> T {
+        -total_mass * GRAVITY * self.theta_rad.sin()
+    }
+
     /// Factor on the normal force from the tilt.
-    pub fn normal_scale(&self) -> f64 {
+    pub fn normal_scale(&self) -> T {
         self.theta_rad.cos()
     }
 }
 
 /// Ground spring force on the main body [N].
 #[inline(always)]
-pub fn ground_spring_force(k_ground: f64, x1: f64) -> f64 {
+pub fn ground_spring_force<T: Scalar>(k_ground: T, x1: T) -> T {
     -k_ground * x1
 }
 
 /// Viscous drag on the weight [N].
 #[inline(always)]
-pub fn weight_drag(c_weight: f64, v2: f64) -> f64 {
+pub fn weight_drag<T: Scalar>(c_weight: T, v2: T) -> T {
     -c_weight * v2
 }
 
 /// First-order lag dy/dt = (u - y)/tau, used by the amplifier, the creep and the sensor.
 #[inline(always)]
-pub fn first_order_rate(u: f64, y: f64, inv_tau: f64) -> f64 {
+pub fn first_order_rate<T: Scalar>(u: T, y: T, inv_tau: T) -> T {
     (u - y) * inv_tau
 }
 

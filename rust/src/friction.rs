@@ -2,45 +2,40 @@
 //! Bouc-Wen presliding force Fh driven by the asperity deformation g.
 
 use crate::params::Params;
+use crate::scalar::Scalar;
+pub use crate::scalar::sign0;
 
-/// Sign that is 0 at 0 (f64::signum gives +1 there).
-#[inline(always)]
-pub fn sign0(x: f64) -> f64 {
-    if x > 0.0 {
-        1.0
-    } else if x < 0.0 {
-        -1.0
-    } else {
-        0.0
-    }
-}
-
-/// Leuven friction constants, precomputed once per run.
+/// Leuven friction constants, precomputed once per run (`T` = f64, or a dual number when
+/// derivatives with respect to them are asked for).
 #[derive(Clone, Copy, Debug)]
-pub struct Leuven {
-    fc: f64,
-    fs_minus_fc: f64,
-    inv_vs: f64,
-    delta: f64,
-    n: f64,
-    a: f64,
-    b: f64,
-    c: f64,
-    sigma1: f64,
-    sigma2: f64,
+pub struct Leuven<T = f64> {
+    fc: T,
+    fs_minus_fc: T,
+    inv_vs: T,
+    delta: T,
+    n: T,
+    a: T,
+    b: T,
+    c: T,
+    sigma1: T,
+    sigma2: T,
     /// Direction asymmetry: Fc, Fs scaled by (1 + eps sgn v) (0 for the paper's model).
-    eps: f64,
+    eps: T,
+    /// no Stribeck peak and no derivative through one: the exp is skipped
+    no_peak: bool,
+    symmetric: bool,
     delta_is_two: bool,
     n_is_one: bool,
 }
 
-impl Leuven {
+impl<T: Scalar> Leuven<T> {
     /// `normal_force` is passed explicitly so that effects (an incline) can change it.
-    pub fn new(p: &Params, normal_force: f64, eps: f64) -> Self {
+    pub fn new(p: &Params<T>, normal_force: T, eps: T) -> Self {
+        let fs_minus_fc = (p.mu_s - p.mu_k) * normal_force;
         Leuven {
             fc: p.mu_k * normal_force,
-            fs_minus_fc: (p.mu_s - p.mu_k) * normal_force,
-            inv_vs: 1.0 / p.stribeck_velocity,
+            fs_minus_fc,
+            inv_vs: T::one() / p.stribeck_velocity,
             delta: p.stribeck_exponent,
             n: p.fric_n,
             a: p.fric_alpha,
@@ -49,15 +44,17 @@ impl Leuven {
             sigma1: p.sigma1,
             sigma2: p.sigma2,
             eps,
-            delta_is_two: p.stribeck_exponent == 2.0,
-            n_is_one: p.fric_n == 1.0,
+            no_peak: fs_minus_fc.is_exactly(0.0),
+            symmetric: eps.is_exactly(0.0),
+            delta_is_two: p.stribeck_exponent.is_exactly(2.0),
+            n_is_one: p.fric_n.is_exactly(1.0),
         }
     }
 
     /// Stribeck curve S(v) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta) [N], times (1 + eps sgn v).
     #[inline(always)]
-    pub fn stribeck(&self, v: f64) -> f64 {
-        let s = if self.fs_minus_fc == 0.0 {
+    pub fn stribeck(&self, v: T) -> T {
+        let s = if self.no_peak {
             self.fc // no Stribeck peak (mu_s = mu_k): skip the exp
         } else {
             let x = v.abs() * self.inv_vs;
@@ -65,26 +62,26 @@ impl Leuven {
             let e = if self.delta_is_two {
                 x * x
             } else {
-                x.powf(self.delta)
+                x.pow(self.delta)
             };
             self.fc + self.fs_minus_fc * (-e).exp()
         };
-        if self.eps == 0.0 {
+        if self.symmetric {
             s
         } else {
-            s * (1.0 + self.eps * sign0(v))
+            s * (self.eps * sign0(v) + 1.0)
         }
     }
 
     /// (dg/dt [m/s], dFh/dt [N/s]) at main-body velocity `v` [m/s] and presliding force `fh` [N].
     #[inline(always)]
-    pub fn rates(&self, v: f64, fh: f64) -> (f64, f64) {
+    pub fn rates(&self, v: T, fh: T) -> (T, T) {
         let ratio = fh / self.stribeck(v);
         // eq. 6 written with |v| so that v = 0 needs no 0/0; for n = 1, sgn(Fh)|Fh/S| = Fh/S
         let gdot = if self.n_is_one {
             v - v.abs() * ratio
         } else {
-            v - v.abs() * sign0(fh) * ratio.abs().powf(self.n)
+            v - v.abs() * sign0(fh) * ratio.abs().pow(self.n)
         };
         let fhdot = self.a * gdot - self.b * gdot.abs() * fh - self.c * gdot * fh.abs();
         (gdot, fhdot)
@@ -93,36 +90,36 @@ impl Leuven {
     /// dS/dv [N s/m], the Stribeck curve's slope (0 at v = 0, where the curve is flat for
     /// delta > 1; the one-sided slope is taken for delta <= 1).
     #[inline(always)]
-    pub fn stribeck_slope(&self, v: f64) -> f64 {
-        if self.fs_minus_fc == 0.0 || v == 0.0 {
-            return 0.0;
+    pub fn stribeck_slope(&self, v: T) -> T {
+        if self.no_peak || v.value() == 0.0 {
+            return T::zero();
         }
         let x = v.abs() * self.inv_vs;
         let (e, de) = if self.delta_is_two {
-            (x * x, 2.0 * x)
+            (x * x, x * 2.0)
         } else {
-            (x.powf(self.delta), self.delta * x.powf(self.delta - 1.0))
+            (x.pow(self.delta), self.delta * x.pow(self.delta - 1.0))
         };
         let ds = -self.fs_minus_fc * (-e).exp() * de * self.inv_vs * sign0(v);
-        ds * (1.0 + self.eps * sign0(v))
+        ds * (self.eps * sign0(v) + 1.0)
     }
 
     /// The rates of [`Leuven::rates`] and their partial derivatives, for implicit integrators:
     /// `[dg/dt, dFh/dt, d(dg/dt)/dv, d(dg/dt)/dFh, d(dFh/dt)/dv, d(dFh/dt)/dFh]` (units follow
     /// from [m/s], [N/s] over [m/s], [N]). Exact away from the kinks at v = 0 and dg/dt = 0.
     #[inline(always)]
-    pub fn rate_partials(&self, v: f64, fh: f64) -> [f64; 6] {
+    pub fn rate_partials(&self, v: T, fh: T) -> [T; 6] {
         let (gdot, fhdot) = self.rates(v, fh);
         let s = self.stribeck(v);
         let ratio = fh / s;
         // gdot = v - |v| sgn(Fh) |Fh/S|^n
         let (pow_n, pow_n1) = if self.n_is_one {
-            (ratio.abs(), 1.0)
+            (ratio.abs(), T::one())
         } else {
-            (ratio.abs().powf(self.n), self.n * ratio.abs().powf(self.n - 1.0))
+            (ratio.abs().pow(self.n), self.n * ratio.abs().pow(self.n - 1.0))
         };
         let dg_dfh = -v.abs() * pow_n1 / s;
-        let dg_dv = 1.0 - sign0(v) * sign0(fh) * pow_n + v.abs() * pow_n1 * fh * self.stribeck_slope(v) / (s * s);
+        let dg_dv = -pow_n * (sign0(v) * sign0(fh)) + 1.0 + v.abs() * pow_n1 * fh * self.stribeck_slope(v) / (s * s);
         // dFh/dt = a gdot - b |gdot| Fh - c gdot |Fh|
         let outer = self.a - self.b * sign0(gdot) * fh - self.c * fh.abs();
         let dfh_dv = outer * dg_dv;
@@ -133,10 +130,12 @@ impl Leuven {
     /// Friction force Ff = Fh + sigma2 v + sigma1 dg/dt [N], acting against the main body.
     /// dg/dt is known last (it waits on the Stribeck exp and a division), so it is added last.
     #[inline(always)]
-    pub fn force(&self, v: f64, fh: f64, gdot: f64) -> f64 {
+    pub fn force(&self, v: T, fh: T, gdot: T) -> T {
         (fh + self.sigma2 * v) + self.sigma1 * gdot
     }
+}
 
+impl Leuven {
     /// The constants in the order the GPU kernel reads them (`kernel.rs`): Fc, Fs - Fc, 1/vs,
     /// delta, n, a, b, c, sigma1, sigma2, eps [SI].
     pub fn constants(&self) -> [f64; 11] {

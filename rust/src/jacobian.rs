@@ -4,29 +4,30 @@
 //! matrix against central finite differences for every structure and effect.
 
 use crate::model::Model;
+use crate::scalar::Scalar;
 
-impl Model {
+impl<T: Scalar> Model<T> {
     /// Fill `jac` (dim x dim, row-major) with df/dy and `dfdt` (dim) with df/dt at state `y`,
     /// commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s] (constant over the step).
-    pub fn jacobian(&self, v_cmd: f64, dv_cmd: f64, y: &[f64], jac: &mut [f64], dfdt: &mut [f64]) {
+    pub fn jacobian(&self, v_cmd: f64, dv_cmd: f64, y: &[T], jac: &mut [T], dfdt: &mut [T]) {
         let l = &self.layout;
         let (n, dim) = (l.dof, l.dim);
         let (ig, ifh, ih) = (l.g, l.fh, l.h);
-        jac[..dim * dim].fill(0.0);
-        dfdt[..dim].fill(0.0);
-        let mut set = |r: usize, c: usize, x: f64| jac[r * dim + c] += x;
+        jac[..dim * dim].fill(T::zero());
+        dfdt[..dim].fill(T::zero());
+        let mut set = |r: usize, c: usize, x: T| jac[r * dim + c] += x;
         let (q, v) = (&y[..n], &y[n..2 * n]);
 
         // PE voltage: commanded, or behind the amplifier lag (dV/dt then depends on the state)
         let (v_pe, dv_pe) = match l.vpe {
-            Some(i) => (y[i], (v_cmd - y[i]) * self.inv_tau_amp),
-            None => (v_cmd, dv_cmd),
+            Some(i) => (y[i], (-y[i] + v_cmd) * self.inv_tau_amp),
+            None => (T::from(v_cmd), T::from(dv_cmd)),
         };
         // d(v_pe)/dt along the step when v_pe is the command itself
         let vpe_t = if l.vpe.is_some() { 0.0 } else { dv_cmd };
         if let Some(i) = l.vpe {
             set(i, i, -self.inv_tau_amp);
-            dfdt[i] = dv_cmd * self.inv_tau_amp;
+            dfdt[i] = self.inv_tau_amp * dv_cmd;
         }
         if let Some(hy) = self.hysteresis {
             let (d_ddv, d_dh) = hy.rate_partials(dv_pe, y[ih]);
@@ -36,7 +37,7 @@ impl Model {
                 dfdt[ih] = d_ddv * dv_cmd * self.inv_tau_amp;
             }
         }
-        let kappa_d33 = self.effects.kappa * self.d33;
+        let kappa_d33 = self.effect_values.kappa * self.d33;
         if let Some(i) = l.xc {
             set(i, i, -self.inv_tau_creep);
             match l.vpe {
@@ -46,7 +47,7 @@ impl Model {
         }
 
         // piezo force fp = kp (d33 v_pe + xc - h): its partials [N per unit] and rate [N/s]
-        let xc = l.xc.map_or(0.0, |i| y[i]);
+        let xc = l.xc.map_or(T::zero(), |i| y[i]);
         let fp = crate::piezo::piezo_force(self.kp, self.d33, v_pe, xc, y[ih]);
         let fp_d = [
             Some((ih, -self.kp)),
@@ -58,22 +59,22 @@ impl Model {
 
         // friction: g, Fh and Ff = Fh + sigma2 v1 + sigma1 dg/dt
         let [gdot, _, dg_dv, dg_dfh, dfh_dv, dfh_dfh] = self.friction.rate_partials(v[0], y[ifh]);
-        let (s1, s2) = (self.params.sigma1, self.params.sigma2);
+        let (s1, s2) = (self.values.sigma1, self.values.sigma2);
         set(ig, n, dg_dv);
         set(ig, ifh, dg_dfh);
         set(ifh, n, dfh_dv);
         set(ifh, ifh, dfh_dfh);
         let ff = self.friction.force(v[0], y[ifh], gdot);
-        let ff_d = [(n, s2 + s1 * dg_dv), (ifh, 1.0 + s1 * dg_dfh)];
+        let ff_d = [(n, s2 + s1 * dg_dv), (ifh, s1 * dg_dfh + 1.0)];
 
         // external forces: spring to ground on the main body, drag on the weight
-        let (kg, cw) = (self.effects.k_ground, self.effects.c_weight);
+        let (kg, cw) = (self.effect_values.k_ground, self.effect_values.c_weight);
         let last = n + n - 1;
 
         // mechanics: dv/dt = -M^-1 K q - M^-1 C v + m0 F_main + ml F_weight
         let mech = &self.mech;
         for i in 0..n {
-            set(i, n + i, 1.0);
+            set(i, n + i, T::one());
         }
         for i in 0..n {
             let r = n + i;
@@ -121,9 +122,9 @@ impl Model {
                 }
                 Some(rig) => {
                     let (du, dx, dv) = rig.drive_partials(v_pe, q[0], v[0]);
-                    set(a, n, rig.drive_force(v_pe, dv_pe, q[0], v[0]) + dv * v[0]);
-                    set(a, 0, dx * v[0]);
-                    dfdt[a] = du * dv_cmd * v[0];
+                    set(a, n, rig.drive_force(v_pe, dv_pe, q[0], v[0]) + v[0] * dv);
+                    set(a, 0, v[0] * dx);
+                    dfdt[a] = v[0] * (du * dv_cmd);
                 }
             }
             // work of friction ff v1, and friction's impulse
@@ -134,7 +135,7 @@ impl Model {
             set(a + 1, n, ff);
             // damping's dissipation v'Cv
             for j in 0..n {
-                let mut s = 0.0;
+                let mut s = T::zero();
                 for i in 0..n {
                     s += (mech.damping[(i, j)] + mech.damping[(j, i)]) * v[i];
                 }
@@ -144,9 +145,9 @@ impl Model {
             let f_main = self.f_constant - kg * q[0];
             set(a + 3, 0, -kg * v[0]);
             set(a + 3, n, f_main);
-            set(a + 3, last, -2.0 * cw * v[n - 1]);
+            set(a + 3, last, -(cw * 2.0) * v[n - 1]);
             for j in 0..n {
-                set(a + 5, n + j, self.params.rayleigh_alpha * self.pe_mass_sums[j]);
+                set(a + 5, n + j, self.values.rayleigh_alpha * self.pe_mass_sums[j]);
             }
             set(a + 6, 0, -kg);
             set(a + 6, last, -cw);

@@ -18,6 +18,7 @@ pub mod piezo;
 pub mod rig;
 pub mod rk4;
 pub mod rodas4;
+pub mod scalar;
 pub mod simulate;
 pub mod stepper;
 pub mod waveform;

@@ -5,7 +5,8 @@
 
 use crate::params::Params;
 use crate::rig::RigDrive;
-use nalgebra::DMatrix;
+use crate::scalar::Scalar;
+use nalgebra::{ComplexField, DMatrix};
 
 /// Which mechanism: the IDM's two structures, or a friction test rig.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -19,23 +20,25 @@ pub enum Structure {
 }
 
 /// Assembled matrices and the dense products the right-hand side uses (row-major).
+/// Generic over the number type (f64, or dual numbers carrying derivatives with respect to the
+/// parameters the matrices are built from).
 #[derive(Clone, Debug)]
-pub struct Mechanics {
+pub struct Mechanics<T: Scalar = f64> {
     /// number of nodes (degrees of freedom)
     pub dof: usize,
-    pub mass: DMatrix<f64>,
-    pub damping: DMatrix<f64>,
-    pub stiffness: DMatrix<f64>,
+    pub mass: DMatrix<T>,
+    pub damping: DMatrix<T>,
+    pub stiffness: DMatrix<T>,
     /// the PE's own mass matrix Mp (zero for the LPS)
-    pub pe_mass_matrix: DMatrix<f64>,
-    pub(crate) minv_k: Vec<f64>,
-    pub(crate) minv_c: Vec<f64>,
-    pub(crate) minv_main: Vec<f64>,
-    pub(crate) minv_weight: Vec<f64>,
+    pub pe_mass_matrix: DMatrix<T>,
+    pub(crate) minv_k: Vec<T>,
+    pub(crate) minv_c: Vec<T>,
+    pub(crate) minv_main: Vec<T>,
+    pub(crate) minv_weight: Vec<T>,
 }
 
 /// Element mass and stiffness of a two-node bar: rho A le / 6 [[2,1],[1,2]], E A / le [[1,-1],[-1,1]].
-fn assemble_bar(p: &Params, n_elements: usize) -> (DMatrix<f64>, DMatrix<f64>) {
+fn assemble_bar<T: Scalar + ComplexField>(p: &Params<T>, n_elements: usize) -> (DMatrix<T>, DMatrix<T>) {
     let dof = n_elements + 1;
     let le = p.pe_length / n_elements as f64;
     let me = p.pe_density * p.pe_area * le / 6.0;
@@ -44,8 +47,8 @@ fn assemble_bar(p: &Params, n_elements: usize) -> (DMatrix<f64>, DMatrix<f64>) {
     let mut kp = DMatrix::zeros(dof, dof);
     for e in 0..n_elements {
         let (i, j) = (e, e + 1);
-        mp[(i, i)] += 2.0 * me;
-        mp[(j, j)] += 2.0 * me;
+        mp[(i, i)] += me * 2.0;
+        mp[(j, j)] += me * 2.0;
         mp[(i, j)] += me;
         mp[(j, i)] += me;
         kp[(i, i)] += ke;
@@ -56,22 +59,23 @@ fn assemble_bar(p: &Params, n_elements: usize) -> (DMatrix<f64>, DMatrix<f64>) {
     (mp, kp)
 }
 
-impl Mechanics {
-    pub fn new(p: &Params, structure: Structure) -> Result<Self, String> {
+impl<T: Scalar + ComplexField> Mechanics<T> {
+    pub fn new(p: &Params<T>, structure: Structure) -> Result<Self, String> {
         match structure {
             Structure::Lps => {
                 // eq. 19: cp = beta_c kp, no PE mass, no mass-proportional damping
                 let kp = p.kp();
                 let k = DMatrix::from_row_slice(2, 2, &[kp, -kp, -kp, kp]);
                 let c = &k * p.rayleigh_beta;
-                let m = DMatrix::from_row_slice(2, 2, &[p.m1, 0.0, 0.0, p.m2]);
+                let zero = T::from(0.0);
+                let m = DMatrix::from_row_slice(2, 2, &[p.m1, zero, zero, p.m2]);
                 Self::from_matrices(m, c, k, DMatrix::zeros(2, 2))
             }
             Structure::Dps(n) => {
                 if n == 0 {
                     return Err("parameter 'n_elements' must be at least 1".into());
                 }
-                if n > 1 && p.pe_density == 0.0 {
+                if n > 1 && p.pe_density.value() == 0.0 {
                     // the bar's inner nodes would carry no mass: M is singular
                     return Err(format!(
                         "parameter 'pe_density' = 0 (a massless PE) leaves the {} inner nodes of the \
@@ -96,17 +100,17 @@ impl Mechanics {
     }
 
     fn from_matrices(
-        mass: DMatrix<f64>,
-        damping: DMatrix<f64>,
-        stiffness: DMatrix<f64>,
-        pe_mass_matrix: DMatrix<f64>,
+        mass: DMatrix<T>,
+        damping: DMatrix<T>,
+        stiffness: DMatrix<T>,
+        pe_mass_matrix: DMatrix<T>,
     ) -> Result<Self, String> {
         let dof = mass.nrows();
         let minv = mass
             .clone()
             .try_inverse()
             .ok_or_else(|| "mass matrix is singular".to_string())?;
-        let row_major = |a: &DMatrix<f64>| a.transpose().as_slice().to_vec();
+        let row_major = |a: &DMatrix<T>| a.transpose().as_slice().to_vec();
         Ok(Mechanics {
             dof,
             minv_k: row_major(&(&minv * &stiffness)),
@@ -120,9 +124,18 @@ impl Mechanics {
         })
     }
 
+    /// The PE's momentum weights: column sums of Mp (1'Mp v is its momentum [kg m/s]).
+    pub fn pe_mass_column_sums(&self) -> Vec<T> {
+        (0..self.dof)
+            .map(|j| self.pe_mass_matrix.column(j).sum())
+            .collect()
+    }
+}
+
+impl<T: Scalar> Mechanics<T> {
     /// acc = M^-1 (f_main e_0 + f_weight e_n - K q - C v) [m/s^2].
     #[inline(always)]
-    pub fn accelerations(&self, q: &[f64], v: &[f64], f_main: f64, f_weight: f64, acc: &mut [f64]) {
+    pub fn accelerations(&self, q: &[T], v: &[T], f_main: T, f_weight: T, acc: &mut [T]) {
         // Fixed sizes for the common cases let the compiler unroll and drop bounds checks.
         match self.dof {
             2 => self.accelerations_fixed::<2>(q, v, f_main, f_weight, acc),
@@ -137,23 +150,23 @@ impl Mechanics {
     #[inline(always)]
     fn accelerations_fixed<const N: usize>(
         &self,
-        q: &[f64],
-        v: &[f64],
-        f_main: f64,
-        f_weight: f64,
-        acc: &mut [f64],
+        q: &[T],
+        v: &[T],
+        f_main: T,
+        f_weight: T,
+        acc: &mut [T],
     ) {
-        let q: &[f64; N] = q.try_into().unwrap();
-        let v: &[f64; N] = v.try_into().unwrap();
-        let acc: &mut [f64; N] = acc.try_into().unwrap();
-        let mk: &[f64] = &self.minv_k[..N * N];
-        let mc: &[f64] = &self.minv_c[..N * N];
-        let m0: &[f64; N] = self.minv_main[..N].try_into().unwrap();
-        let ml: &[f64; N] = self.minv_weight[..N].try_into().unwrap();
+        let q: &[T; N] = q.try_into().unwrap();
+        let v: &[T; N] = v.try_into().unwrap();
+        let acc: &mut [T; N] = acc.try_into().unwrap();
+        let mk: &[T] = &self.minv_k[..N * N];
+        let mc: &[T] = &self.minv_c[..N * N];
+        let m0: &[T; N] = self.minv_main[..N].try_into().unwrap();
+        let ml: &[T; N] = self.minv_weight[..N].try_into().unwrap();
         // The structural part first, the forces last: f_main ends the step's critical
         // dependency chain (it waits on the friction), so nothing should queue behind it.
         for i in 0..N {
-            let mut a = 0.0;
+            let mut a = T::zero();
             for j in 0..N {
                 a -= mk[i * N + j] * q[j] + mc[i * N + j] * v[j];
             }
@@ -161,12 +174,12 @@ impl Mechanics {
         }
     }
 
-    fn accelerations_dyn(&self, q: &[f64], v: &[f64], f_main: f64, f_weight: f64, acc: &mut [f64]) {
+    fn accelerations_dyn(&self, q: &[T], v: &[T], f_main: T, f_weight: T, acc: &mut [T]) {
         let n = self.dof;
         for i in 0..n {
             let rk = &self.minv_k[i * n..(i + 1) * n];
             let rc = &self.minv_c[i * n..(i + 1) * n];
-            let mut a = 0.0;
+            let mut a = T::zero();
             for j in 0..n {
                 a -= rk[j] * q[j] + rc[j] * v[j];
             }
@@ -174,6 +187,13 @@ impl Mechanics {
         }
     }
 
+    /// v'Cv [W]: the power the structure's damping dissipates.
+    pub fn dissipation(&self, v: &[T]) -> T {
+        quad(&self.damping, v)
+    }
+}
+
+impl Mechanics {
     /// Highest natural frequency of the undamped structure [rad/s] (generalised eigenproblem
     /// K x = w^2 M x, solved through the Cholesky factor of M).
     pub fn highest_frequency(&self) -> f64 {
@@ -195,7 +215,7 @@ impl Mechanics {
         w2.max(0.0).sqrt()
     }
 
-    /// Quadratic forms for the energy budget: (1/2 v'Mv, 1/2 q'Kq, v'Cv).
+    /// Quadratic forms for the energy budget: 1/2 v'Mv, 1/2 q'Kq [J].
     pub fn kinetic(&self, v: &[f64]) -> f64 {
         0.5 * quad(&self.mass, v)
     }
@@ -204,16 +224,6 @@ impl Mechanics {
         0.5 * quad(&self.stiffness, q)
     }
 
-    pub fn dissipation(&self, v: &[f64]) -> f64 {
-        quad(&self.damping, v)
-    }
-
-    /// Column sums of Mp: 1'Mp v is the PE's momentum [kg m/s].
-    pub fn pe_mass_column_sums(&self) -> Vec<f64> {
-        (0..self.dof)
-            .map(|j| self.pe_mass_matrix.column(j).sum())
-            .collect()
-    }
 
     /// 1'M v [kg m/s].
     pub fn momentum(&self, v: &[f64]) -> f64 {
@@ -223,9 +233,9 @@ impl Mechanics {
     }
 }
 
-fn quad(a: &DMatrix<f64>, x: &[f64]) -> f64 {
+fn quad<T: Scalar>(a: &DMatrix<T>, x: &[T]) -> T {
     let n = x.len();
-    let mut s = 0.0;
+    let mut s = T::zero();
     for i in 0..n {
         for j in 0..n {
             s += x[i] * a[(i, j)] * x[j];

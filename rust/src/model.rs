@@ -1,12 +1,15 @@
 //! The IDM as one first-order system: structure + piezo force + friction + optional effects.
 //! Owns the state layout and the right-hand side; the integrator and the driver are elsewhere.
 
+use nalgebra::ComplexField;
+
 use crate::effects::{first_order_rate, ground_spring_force, weight_drag, Effects};
 use crate::friction::Leuven;
 use crate::mechanics::{Mechanics, Structure};
 use crate::params::Params;
 use crate::piezo::{piezo_force, PiezoHysteresis};
 use crate::rig::RigDrive;
+use crate::scalar::Scalar;
 
 /// Dispatch on the state size: `$fixed!(N, D)` for a plain state (see [`Model::is_plain`]) of
 /// a common node count N (D = 2N + 3 components), `$dynamic` otherwise. The fixed sizes let
@@ -113,26 +116,31 @@ impl Layout {
     }
 }
 
-/// Everything the right-hand side needs, precomputed once.
+/// Everything the right-hand side needs, precomputed once. `T` is the number the physics runs
+/// on: `f64` for plain runs, a dual number when derivatives with respect to parameters are
+/// asked for (see [`Model::build`]); `params` and `effects` keep the plain values either way.
 #[derive(Clone, Debug)]
-pub struct Model {
+pub struct Model<T: Scalar = f64> {
     pub params: Params,
     pub effects: Effects,
     pub structure: Structure,
-    pub mech: Mechanics,
-    pub friction: Leuven,
+    pub mech: Mechanics<T>,
+    pub friction: Leuven<T>,
     pub layout: Layout,
-    pub(crate) hysteresis: Option<PiezoHysteresis>,
+    /// Table 1 and the effect parameters as the physics reads them (as `T`)
+    pub(crate) values: Params<T>,
+    pub(crate) effect_values: Effects<T>,
+    pub(crate) hysteresis: Option<PiezoHysteresis<T>>,
     /// the input drives a rig's body instead of a piezo element
     pub(crate) rig: Option<RigDrive>,
-    pub(crate) kp: f64,
-    pub(crate) d33: f64,
+    pub(crate) kp: T,
+    pub(crate) d33: T,
     /// constant external force on the main body (incline + load) [N]
-    pub(crate) f_constant: f64,
-    pub(crate) inv_tau_amp: f64,
-    pub(crate) inv_tau_creep: f64,
-    pub(crate) inv_tau_sensor: f64,
-    pub(crate) pe_mass_sums: Vec<f64>,
+    pub(crate) f_constant: T,
+    pub(crate) inv_tau_amp: T,
+    pub(crate) inv_tau_creep: T,
+    pub(crate) inv_tau_sensor: T,
+    pub(crate) pe_mass_sums: Vec<T>,
 }
 
 impl Model {
@@ -143,11 +151,34 @@ impl Model {
         piezo_hysteresis: bool,
         accounting: bool,
     ) -> Result<Self, String> {
+        Model::build(params, effects, structure, piezo_hysteresis, accounting, |_, x| x, false)
+    }
+}
+
+impl<T: Scalar + ComplexField> Model<T> {
+    /// The model with every parameter read as `lift(name, value)` (Table 1 and effect names):
+    /// a dual number seeded for the parameters whose derivatives are asked for. With
+    /// `derived_normal_force` the normal force is (m1 + m2 + mPE) g of the lifted masses, so
+    /// its derivative follows theirs.
+    pub fn build(
+        params: Params,
+        effects: Effects,
+        structure: Structure,
+        piezo_hysteresis: bool,
+        accounting: bool,
+        lift: impl Fn(&str, f64) -> T,
+        derived_normal_force: bool,
+    ) -> Result<Self, String> {
         params.validate()?;
         effects.validate()?;
-        let mech = Mechanics::new(&params, structure)?;
+        let mut p = params.lift(&lift);
+        if derived_normal_force {
+            p.normal_force = p.default_normal_force();
+        }
+        let e = effects.lift(&lift);
+        let mech = Mechanics::new(&p, structure)?;
         let layout = Layout::new(mech.dof, &effects, accounting);
-        let inv = |tau: f64| if tau > 0.0 { 1.0 / tau } else { 0.0 };
+        let inv = |tau: T| if tau.value() > 0.0 { T::one() / tau } else { T::zero() };
         let rig = match structure {
             Structure::Rig(d) => {
                 RigDrive::check_effects(&effects, piezo_hysteresis)?;
@@ -158,31 +189,23 @@ impl Model {
         // The PE mass rests on the guide in both IDM structures (MODEL.md's normal force);
         // a rig is its one body.
         let total_mass = match rig {
-            Some(_) => params.m1,
-            None => params.m1 + params.m2 + params.pe_mass(),
+            Some(_) => p.m1,
+            None => p.m1 + p.m2 + p.pe_mass(),
         };
         Ok(Model {
-            friction: Leuven::new(
-                &params,
-                params.normal_force * effects.normal_scale(),
-                effects.eps,
-            ),
-            hysteresis: piezo_hysteresis.then(|| {
-                PiezoHysteresis::new(
-                    params.hyst_alpha,
-                    params.hyst_beta,
-                    params.hyst_gamma,
-                    params.d33,
-                )
-            }),
+            friction: Leuven::new(&p, p.normal_force * e.normal_scale(), e.eps),
+            hysteresis: piezo_hysteresis
+                .then(|| PiezoHysteresis::new(p.hyst_alpha, p.hyst_beta, p.hyst_gamma, p.d33)),
             rig,
-            kp: params.kp(),
-            d33: params.d33,
-            f_constant: effects.incline_force(total_mass) + params.load_force,
-            inv_tau_amp: inv(effects.tau_amp),
-            inv_tau_creep: inv(effects.tau_creep),
-            inv_tau_sensor: inv(effects.tau_sensor),
+            kp: p.kp(),
+            d33: p.d33,
+            f_constant: e.incline_force(total_mass) + p.load_force,
+            inv_tau_amp: inv(e.tau_amp),
+            inv_tau_creep: inv(e.tau_creep),
+            inv_tau_sensor: inv(e.tau_sensor),
             pe_mass_sums: mech.pe_mass_column_sums(),
+            values: p,
+            effect_values: e,
             params,
             effects,
             structure,
@@ -190,7 +213,9 @@ impl Model {
             layout,
         })
     }
+}
 
+impl<T: Scalar> Model<T> {
     /// Bound on |Fh| [N] (MODEL.md invariant), with the effective normal force and asymmetry.
     pub fn presliding_bound(&self) -> f64 {
         let p = &self.params;
@@ -237,17 +262,17 @@ impl Model {
     /// The divergence criterion: the state is no longer finite where it matters, or |Fh| left
     /// its bound [N] (which a correct solution never does; see MODEL.md's invariants).
     #[inline(always)]
-    pub fn is_diverged(&self, y: &[f64], fh_bound: f64) -> bool {
+    pub fn is_diverged(&self, y: &[T], fh_bound: f64) -> bool {
         let l = &self.layout;
-        !(y[l.fh].abs() <= fh_bound) || !y[l.dof].is_finite() || !y[0].is_finite()
+        !(y[l.fh].value().abs() <= fh_bound) || !y[l.dof].value().is_finite() || !y[0].value().is_finite()
     }
 
     /// PE voltage and its rate [V, V/s] given the commanded ones (the amplifier may lag).
     #[inline(always)]
-    fn pe_voltage(&self, v_cmd: f64, dv_cmd: f64, y: &[f64]) -> (f64, f64) {
+    fn pe_voltage(&self, v_cmd: f64, dv_cmd: f64, y: &[T]) -> (T, T) {
         match self.layout.vpe {
-            Some(i) => (y[i], first_order_rate(v_cmd, y[i], self.inv_tau_amp)),
-            None => (v_cmd, dv_cmd),
+            Some(i) => (y[i], first_order_rate(T::from(v_cmd), y[i], self.inv_tau_amp)),
+            None => (T::from(v_cmd), T::from(dv_cmd)),
         }
     }
 
@@ -283,15 +308,15 @@ impl Model {
 
     /// Piezo force Fp [N] in state `y` at commanded voltage `v_cmd`.
     #[inline(always)]
-    pub fn piezo_force(&self, v_cmd: f64, y: &[f64]) -> f64 {
+    pub fn piezo_force(&self, v_cmd: f64, y: &[T]) -> T {
         let (v, _) = self.pe_voltage(v_cmd, 0.0, y);
-        let xc = self.layout.xc.map_or(0.0, |i| y[i]);
+        let xc = self.layout.xc.map_or(T::zero(), |i| y[i]);
         piezo_force(self.kp, self.d33, v, xc, y[self.layout.h])
     }
 
     /// Friction force Ff [N] on the main body in state `y`.
     #[inline(always)]
-    pub fn friction_force(&self, y: &[f64]) -> f64 {
+    pub fn friction_force(&self, y: &[T]) -> T {
         let v1 = y[self.layout.dof];
         let fh = y[self.layout.fh];
         let (gdot, _) = self.friction.rates(v1, fh);
@@ -300,9 +325,9 @@ impl Model {
 
     /// What the sensor reads [m] at time `t` [s] in state `y`.
     #[inline(always)]
-    pub fn reading(&self, t: f64, y: &[f64]) -> f64 {
+    pub fn reading(&self, t: f64, y: &[T]) -> T {
         let x = self.layout.xs.map_or(y[0], |i| y[i]);
-        x + self.effects.drift_rate * t
+        x + self.effect_values.drift_rate * t
     }
 
     /// True when the state is just nodes, g, Fh and h (no lagged effects, no accounting): the
@@ -313,7 +338,7 @@ impl Model {
 
     /// dy/dt at commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s].
     #[inline(always)]
-    pub fn rhs(&self, v_cmd: f64, dv_cmd: f64, y: &[f64], dy: &mut [f64]) {
+    pub fn rhs(&self, v_cmd: f64, dv_cmd: f64, y: &[T], dy: &mut [T]) {
         self.rhs_impl::<0, true>(v_cmd, dv_cmd, y, dy);
     }
 
@@ -326,9 +351,9 @@ impl Model {
         &self,
         v_cmd: f64,
         dv_cmd: f64,
-        y: &[f64],
-        dy: &mut [f64],
-    ) -> (f64, f64) {
+        y: &[T],
+        dy: &mut [T],
+    ) -> (T, T) {
         let l = &self.layout;
         let n = if N > 0 { N } else { l.dof };
         let (ig, ifh, ih) = (2 * n, 2 * n + 1, 2 * n + 2);
@@ -336,18 +361,18 @@ impl Model {
         let (v_pe, dv_pe) = if EXTRAS {
             self.pe_voltage(v_cmd, dv_cmd, y)
         } else {
-            (v_cmd, dv_cmd)
+            (T::from(v_cmd), T::from(dv_cmd))
         };
         let h = y[ih];
-        dy[ih] = self.hysteresis.map_or(0.0, |hy| hy.rate(dv_pe, h));
-        let mut xc = 0.0;
+        dy[ih] = self.hysteresis.map_or(T::zero(), |hy| hy.rate(dv_pe, h));
+        let mut xc = T::zero();
         if EXTRAS {
             if let Some(i) = l.vpe {
                 dy[i] = dv_pe;
             }
             if let Some(i) = l.xc {
                 dy[i] = first_order_rate(
-                    self.effects.kappa * self.d33 * v_pe,
+                    self.effect_values.kappa * self.d33 * v_pe,
                     y[i],
                     self.inv_tau_creep,
                 );
@@ -362,8 +387,8 @@ impl Model {
         dy[ig] = gdot;
         dy[ifh] = fhdot;
 
-        let f_ext_main = self.f_constant + ground_spring_force(self.effects.k_ground, q[0]);
-        let f_ext_weight = weight_drag(self.effects.c_weight, v[n - 1]);
+        let f_ext_main = self.f_constant + ground_spring_force(self.effect_values.k_ground, q[0]);
+        let f_ext_weight = weight_drag(self.effect_values.c_weight, v[n - 1]);
         for i in 0..n {
             dy[i] = v[i];
         }
@@ -381,7 +406,7 @@ impl Model {
             Some(rig) => {
                 let fd = rig.drive_force(v_pe, dv_pe, q[0], v[0]);
                 self.mech
-                    .accelerations(q, v, (fd + f_ext_main) - ff, 0.0, &mut dy[n..2 * n]);
+                    .accelerations(q, v, (fd + f_ext_main) - ff, T::zero(), &mut dy[n..2 * n]);
                 fd
             }
         };
@@ -400,13 +425,13 @@ impl Model {
                 dy[a + 2] = self.mech.dissipation(v);
                 dy[a + 3] = f_ext_main * v[0] + f_ext_weight * v[n - 1];
                 dy[a + 4] = ff;
-                dy[a + 5] = self.params.rayleigh_alpha
+                dy[a + 5] = self.values.rayleigh_alpha
                     * self
                         .pe_mass_sums
                         .iter()
                         .zip(v)
-                        .map(|(m, vi)| m * vi)
-                        .sum::<f64>();
+                        .map(|(m, vi)| *m * *vi)
+                        .sum::<T>();
                 dy[a + 6] = f_ext_main + f_ext_weight;
             }
         }

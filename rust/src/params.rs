@@ -4,6 +4,7 @@
 //! whole device, (m1 + m2 + mPE) g, because the weight and the PE hang on the main body.
 
 use crate::declare::{check_domains, same_name, Domain, ParamDecl};
+use crate::scalar::Scalar;
 
 /// Standard gravity used for the default normal force [m/s^2].
 pub const GRAVITY: f64 = 9.81;
@@ -14,11 +15,13 @@ pub const GRAVITY: f64 = 9.81;
 macro_rules! table1 {
     ($( $field:ident: $symbol:literal, $unit:literal, $meaning:literal, $domain:expr, $value:expr; )*) => {
         /// IDM parameters (SI units). Field docs give the paper's symbol.
+        /// Generic over the number type so the physics can read them as dual numbers
+        /// (see [`Params::lift`]); `Params` alone is the plain `f64` table.
         #[derive(Clone, Copy, Debug, PartialEq)]
-        pub struct Params {
+        pub struct Params<T = f64> {
             $(
                 #[doc = concat!($symbol, ", ", $meaning, " [", $unit, "]")]
-                pub $field: f64,
+                pub $field: T,
             )*
         }
 
@@ -41,6 +44,12 @@ macro_rules! table1 {
         pub const PARAM_NAMES: [&str; N_PARAMS] = [$(stringify!($field),)*];
 
         impl Params {
+            /// Every value as a `T` made by `lift(name, value)`: a dual number seeded for the
+            /// parameters a derivative is asked for, a constant for the others.
+            pub fn lift<T>(&self, lift: impl Fn(&str, f64) -> T) -> Params<T> {
+                Params { $($field: lift(stringify!($field), self.$field),)* }
+            }
+
             /// Table 1's values as declared (the normal force still NaN: derived).
             const fn declared() -> Self {
                 Params { $($field: $value,)* }
@@ -103,27 +112,29 @@ pub const fn table1(name: &str) -> ParamDecl {
     panic!("not a Table 1 parameter")
 }
 
+impl<T: Scalar> Params<T> {
+    /// PE mass rho_p Ap l [kg].
+    pub fn pe_mass(&self) -> T {
+        self.pe_density * self.pe_area * self.pe_length
+    }
+
+    /// PE stiffness kp = Ep Ap / l [N/m].
+    pub fn kp(&self) -> T {
+        self.pe_youngs * self.pe_area / self.pe_length
+    }
+
+    /// (m1 + m2 + mPE) g [N]: the whole device rests on the guide through the main body.
+    pub fn default_normal_force(&self) -> T {
+        (self.m1 + self.m2 + self.pe_mass()) * GRAVITY
+    }
+}
+
 impl Params {
     /// Table 1 of the paper, with the default normal force.
     pub fn paper() -> Self {
         let mut p = Params::declared();
         p.normal_force = p.default_normal_force();
         p
-    }
-
-    /// PE mass rho_p Ap l [kg].
-    pub fn pe_mass(&self) -> f64 {
-        self.pe_density * self.pe_area * self.pe_length
-    }
-
-    /// PE stiffness kp = Ep Ap / l [N/m].
-    pub fn kp(&self) -> f64 {
-        self.pe_youngs * self.pe_area / self.pe_length
-    }
-
-    /// (m1 + m2 + mPE) g [N]: the whole device rests on the guide through the main body.
-    pub fn default_normal_force(&self) -> f64 {
-        (self.m1 + self.m2 + self.pe_mass()) * GRAVITY
     }
 
     /// Upper bound of |Fh| for a run that starts inside it: min(Fs, a/(b+c)) [N].

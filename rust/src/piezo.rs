@@ -1,18 +1,20 @@
 //! Piezo element force with Bouc-Wen hysteresis (MODEL.md eqs. 14, 15).
 
+use crate::scalar::{sign0, Scalar};
+
 /// Bouc-Wen piezo hysteresis constants.
 #[derive(Clone, Copy, Debug)]
-pub struct PiezoHysteresis {
+pub struct PiezoHysteresis<T = f64> {
     /// ap d33 [m/V]
-    ap_d33: f64,
+    ap_d33: T,
     /// bp [1/V]
-    bp: f64,
+    bp: T,
     /// cp [1/V]
-    cp: f64,
+    cp: T,
 }
 
-impl PiezoHysteresis {
-    pub fn new(ap: f64, bp: f64, cp: f64, d33: f64) -> Self {
+impl<T: Scalar> PiezoHysteresis<T> {
+    pub fn new(ap: T, bp: T, cp: T, d33: T) -> Self {
         PiezoHysteresis {
             ap_d33: ap * d33,
             bp,
@@ -22,19 +24,13 @@ impl PiezoHysteresis {
 
     /// dh/dt = ap d33 dV/dt - bp |dV/dt| h - cp dV/dt |h| [m/s], for dV/dt in V/s and h in m.
     #[inline(always)]
-    pub fn rate(&self, dv: f64, h: f64) -> f64 {
+    pub fn rate(&self, dv: T, h: T) -> T {
         self.ap_d33 * dv - self.bp * dv.abs() * h - self.cp * dv * h.abs()
-    }
-
-    /// (ap d33 [m/V], bp [1/V], cp [1/V]), as the GPU kernel reads them.
-    pub fn constants(&self) -> [f64; 3] {
-        [self.ap_d33, self.bp, self.cp]
     }
 
     /// (d(dh/dt)/d(dV/dt) [m/V], d(dh/dt)/dh [1/s]) of [`PiezoHysteresis::rate`].
     #[inline(always)]
-    pub fn rate_partials(&self, dv: f64, h: f64) -> (f64, f64) {
-        use crate::friction::sign0;
+    pub fn rate_partials(&self, dv: T, h: T) -> (T, T) {
         (
             self.ap_d33 - self.bp * sign0(dv) * h - self.cp * h.abs(),
             -self.bp * dv.abs() - self.cp * dv * sign0(h),
@@ -42,10 +38,17 @@ impl PiezoHysteresis {
     }
 }
 
+impl PiezoHysteresis {
+    /// (ap d33 [m/V], bp [1/V], cp [1/V]), as the GPU kernel reads them.
+    pub fn constants(&self) -> [f64; 3] {
+        [self.ap_d33, self.bp, self.cp]
+    }
+}
+
 /// Fp = kp (d33 V + xc - h) [N]: pushes the main body forward and the weight back. `xc` [m] is
 /// an extra free extension (creep; 0 in the paper's model).
 #[inline(always)]
-pub fn piezo_force(kp: f64, d33: f64, voltage: f64, xc: f64, h: f64) -> f64 {
+pub fn piezo_force<T: Scalar>(kp: T, d33: T, voltage: T, xc: T, h: T) -> T {
     kp * (d33 * voltage + xc - h)
 }
 

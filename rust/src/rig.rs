@@ -10,6 +10,7 @@ use nalgebra::DMatrix;
 
 use crate::effects::Effects;
 use crate::params::Params;
+use crate::scalar::Scalar;
 
 /// How the input drives the body.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,7 +48,7 @@ impl RigDrive {
     }
 
     /// Mass, damping and stiffness matrices (1 x 1) of the body on its spring.
-    pub fn matrices(&self, p: &Params) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+    pub fn matrices<T: Scalar>(&self, p: &Params<T>) -> (DMatrix<T>, DMatrix<T>, DMatrix<T>) {
         let (k, c) = match *self {
             RigDrive::Position { stiffness, damping } => (stiffness, damping),
             // the loop's force is not linear (it saturates): it is the drive force
@@ -55,8 +56,8 @@ impl RigDrive {
         };
         (
             DMatrix::from_element(1, 1, p.m1),
-            DMatrix::from_element(1, 1, c),
-            DMatrix::from_element(1, 1, k),
+            DMatrix::from_element(1, 1, T::from(c)),
+            DMatrix::from_element(1, 1, T::from(k)),
         )
     }
 
@@ -64,18 +65,30 @@ impl RigDrive {
     /// `v` [m/s], beyond the spring's restoring part (which the stiffness matrix carries):
     /// k u + c du/dt for a position drive, u for a force drive, the loop's output for a servo.
     #[inline(always)]
-    pub fn drive_force(&self, u: f64, du: f64, x: f64, v: f64) -> f64 {
+    pub fn drive_force<T: Scalar>(&self, u: T, du: T, x: T, v: T) -> T {
         match *self {
-            RigDrive::Position { stiffness, damping } => stiffness * u + damping * du,
+            RigDrive::Position { stiffness, damping } => u * stiffness + du * damping,
             RigDrive::Force => u,
-            RigDrive::ClosedLoop { kp, kv, gain, limit } => gain * (kv * (kp * (u - x) - v)).clamp(-limit, limit),
+            RigDrive::ClosedLoop { kp, kv, gain, limit } => {
+                let command = ((u - x) * kp - v) * kv;
+                // saturated on the value: past the limit the force is constant
+                let out = if command.value() < -limit {
+                    T::from(-limit)
+                } else if command.value() > limit {
+                    T::from(limit)
+                } else {
+                    command
+                };
+                out * gain
+            }
         }
     }
 
     /// (dF/du, dF/dx, dF/dv) of [`RigDrive::drive_force`] at fixed du/dt (the time derivative
     /// along a linear input is dF/du times its slope); 0 where the loop saturates.
     #[inline(always)]
-    pub fn drive_partials(&self, u: f64, x: f64, v: f64) -> (f64, f64, f64) {
+    pub fn drive_partials<T: Scalar>(&self, u: T, x: T, v: T) -> (f64, f64, f64) {
+        let (u, x, v) = (u.value(), x.value(), v.value());
         match *self {
             RigDrive::Position { stiffness, .. } => (stiffness, 0.0, 0.0),
             RigDrive::Force => (1.0, 0.0, 0.0),
