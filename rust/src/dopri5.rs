@@ -3,6 +3,7 @@
 //! segment end (the next input breakpoint or the end of the run) and it lands there exactly,
 //! never stepping across a kink of the input (the method's order would be lost there).
 
+use crate::scalar::Scalar;
 use crate::stepper::{Attempt, Rhs, State, Stepper};
 
 /// Tolerances and limits.
@@ -21,6 +22,23 @@ pub struct Dopri5Options {
     pub h_min: f64,
     /// largest step [s]
     pub h_max: f64,
+    /// Steps to take instead of choosing them [s], in order (empty: adaptive). A run repeated
+    /// with the steps another run accepted takes exactly those steps, accepting each: how
+    /// derivatives are carried through an adaptive run with its steps held.
+    pub held: Vec<f64>,
+}
+
+impl Dopri5Options {
+    /// The step lane `i` tries next: its own proposal, or the next held step (`None` when the
+    /// held steps ran out).
+    #[inline(always)]
+    pub(crate) fn next_step(&self, proposal: f64, taken: usize) -> Option<f64> {
+        if self.held.is_empty() {
+            Some(proposal)
+        } else {
+            self.held.get(taken).copied()
+        }
+    }
 }
 
 /// Counters of a run.
@@ -82,6 +100,9 @@ pub struct Dopri5<S, const L: usize = 1> {
     pub stats: [Dopri5Stats; L],
 }
 
+/// The message of a lane whose held steps ran out before its end.
+pub(crate) const HELD_EXHAUSTED: &str = "the held steps ended before the run did";
+
 impl<S: State, const L: usize> Dopri5<S, L> {
     /// Buffers shaped like `zero` (all zeros), one set of options per lane.
     pub fn new(opts: [Dopri5Options; L], zero: S) -> Self {
@@ -117,7 +138,7 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
     }
 
     #[inline(always)]
-    fn attempt<F: Rhs>(
+    fn attempt<F: Rhs<S::Elem>>(
         &mut self,
         f: &mut F,
         ys: &mut [S; L],
@@ -127,18 +148,24 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
     ) -> [Attempt; L] {
         let mut step = [0.0; L];
         let mut last = [false; L];
+        let was_active = *active;
+        let mut run = *active;
         for i in 0..L {
             if active[i] {
+                let Some(h) = self.opts[i].next_step(self.h[i], self.stats[i].accepted as usize) else {
+                    run[i] = false;
+                    continue;
+                };
                 if self.fresh[i] {
                     f.eval(i, 0.0, ys[i].as_ref(), self.k[i][0].as_mut());
                     self.stats[i].evaluations += 1;
                     self.fresh[i] = false;
                 }
-                let h = self.h[i];
                 last[i] = end[i] - (t[i] + h) < 1e-3 * h;
                 step[i] = if last[i] { end[i] - t[i] } else { h };
             }
         }
+        let active = &run;
         for (s, a) in [
             (1usize, &A2[..]),
             (2, &A3[..]),
@@ -161,12 +188,15 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
         }
         std::array::from_fn(|i| {
             if !active[i] {
-                return Attempt::Idle;
+                return match was_active[i] {
+                    true => Attempt::Failed(HELD_EXHAUSTED.into()), // its held steps ran out
+                    false => Attempt::Idle,
+                };
             }
             self.stats[i].evaluations += 6;
             let err = self.error_norm(i, ys[i].as_ref(), step[i]); // NaN when the state blew up
             let o = &self.opts[i];
-            if err <= 1.0 {
+            if err <= 1.0 || !o.held.is_empty() {
                 ys[i].as_mut().copy_from_slice(self.y_new[i].as_ref());
                 self.k[i].swap(0, 6); // first same as last
                 self.stats[i].accepted += 1;
@@ -203,16 +233,16 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
 impl<S: State, const L: usize> Dopri5<S, L> {
     /// Scaled RMS of the embedded error estimate of lane `i`'s last attempt [-].
     #[inline(always)]
-    fn error_norm(&self, i: usize, y: &[f64], step: f64) -> f64 {
+    fn error_norm(&self, i: usize, y: &[S::Elem], step: f64) -> f64 {
         let (ynv, o, k) = (self.y_new[i].as_ref(), &self.opts[i], &self.k[i]);
         let mut err2 = 0.0;
         for c in 0..y.len() {
             if o.scale[c].is_finite() {
                 let mut e = 0.0;
                 for (j, ej) in E.iter().enumerate() {
-                    e += ej * k[j].as_ref()[c];
+                    e += ej * k[j].as_ref()[c].value();
                 }
-                let tol = o.atol * o.scale[c] + o.rtol * y[c].abs().max(ynv[c].abs());
+                let tol = o.atol * o.scale[c] + o.rtol * y[c].value().abs().max(ynv[c].value().abs());
                 err2 += (step * e / tol).powi(2);
             }
         }
@@ -222,13 +252,13 @@ impl<S: State, const L: usize> Dopri5<S, L> {
 
 /// out = y + h sum_j a_j k_j
 #[inline(always)]
-fn combine<S: AsRef<[f64]>>(out: &mut [f64], y: &[f64], h: f64, a: &[f64], k: &[S; 7]) {
+fn combine<T: Scalar, S: AsRef<[T]>>(out: &mut [T], y: &[T], h: f64, a: &[f64], k: &[S; 7]) {
     for i in 0..out.len() {
-        let mut s = 0.0;
+        let mut s = T::zero();
         for (j, aj) in a.iter().enumerate() {
-            s += aj * k[j].as_ref()[i];
+            s += k[j].as_ref()[i] * *aj;
         }
-        out[i] = y[i] + h * s;
+        out[i] = y[i] + s * h;
     }
 }
 
@@ -244,6 +274,7 @@ mod tests {
             h_init: 1e-3,
             h_min: 1e-12,
             h_max: 1.0,
+            held: Vec::new(),
         }
     }
 

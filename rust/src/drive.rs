@@ -14,6 +14,7 @@ use crate::dopri5::{Dopri5, Dopri5Options};
 use crate::model::{with_state_size, Model};
 use crate::rk4::Rk4;
 use crate::rodas4::Rodas4;
+use crate::scalar::Scalar;
 use crate::stepper::{Attempt, Rhs, State, Stepper};
 use crate::waveform::{Cursor, PiecewiseLinear};
 
@@ -116,12 +117,12 @@ impl std::fmt::Display for SimError {
 
 /// One run: a model under an input from `t_start` to `t_end` [s], starting from `y0`.
 #[derive(Clone, Copy, Debug)]
-pub struct Task<'a> {
-    pub model: &'a Model,
+pub struct Task<'a, T: Scalar = f64> {
+    pub model: &'a Model<T>,
     pub wave: &'a PiecewiseLinear,
     pub t_start: f64,
     pub t_end: f64,
-    pub y0: &'a [f64],
+    pub y0: &'a [T],
 }
 
 /// How a run ended.
@@ -135,10 +136,11 @@ pub enum LaneEnd {
     Diverged { t: f64, why: Option<String>, v_last: f64 },
 }
 
-/// Sees a run's states as they are accepted.
-pub trait Observer {
+/// Sees a run's states as they are accepted (states of `f64`, or of dual numbers when
+/// derivatives are carried).
+pub trait Observer<T: Scalar = f64> {
     /// Task `task` starts at time `t` [s] in state `y`.
-    fn start(&mut self, task: usize, t: f64, y: &[f64]);
+    fn start(&mut self, task: usize, t: f64, y: &[T]);
     /// Task `task` accepted a step of `span` [s] ending at time `t` [s] in state `y`, with the
     /// commanded voltage `v_cmd` [V] there; `start` is the model's (Ff [N], dg/dt [m/s]) at the
     /// state the step started from when the integrator evaluated it (RK4's first stage);
@@ -149,9 +151,9 @@ pub trait Observer {
         task: usize,
         t: f64,
         span: f64,
-        y: &[f64],
+        y: &[T],
         v_cmd: f64,
-        start: Option<(f64, f64)>,
+        start: Option<(T, T)>,
         last: bool,
     );
 }
@@ -315,18 +317,18 @@ pub fn divergence_message(
 
 /// The model under a linear input over one step, per lane: V = v0 + slope tau. Keeps each
 /// lane's (Ff, dg/dt) from its evaluation at tau = 0, i.e. at the state the step starts from.
-pub struct ModelRhs<'a, const N: usize, const EXTRAS: bool, const L: usize> {
-    pub models: [&'a Model; L],
+pub struct ModelRhs<'a, T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> {
+    pub models: [&'a Model<T>; L],
     pub v0: [f64; L],
     pub slope: [f64; L],
-    pub at_start: [(f64, f64); L],
+    pub at_start: [(T, T); L],
     /// |Fh| bound of each lane's domain [N] (with the stepper's slack)
     pub bound: [f64; L],
 }
 
-impl<const N: usize, const EXTRAS: bool, const L: usize> Rhs for ModelRhs<'_, N, EXTRAS, L> {
+impl<T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> Rhs<T> for ModelRhs<'_, T, N, EXTRAS, L> {
     #[inline(always)]
-    fn eval(&mut self, lane: usize, tau: f64, y: &[f64], dy: &mut [f64]) {
+    fn eval(&mut self, lane: usize, tau: f64, y: &[T], dy: &mut [T]) {
         let out = self.models[lane].rhs_impl::<N, EXTRAS>(
             self.v0[lane] + self.slope[lane] * tau,
             self.slope[lane],
@@ -339,12 +341,12 @@ impl<const N: usize, const EXTRAS: bool, const L: usize> Rhs for ModelRhs<'_, N,
     }
 
     #[inline(always)]
-    fn admissible(&self, lane: usize, y: &[f64]) -> bool {
+    fn admissible(&self, lane: usize, y: &[T]) -> bool {
         !self.models[lane].is_diverged(y, self.bound[lane])
     }
 
     #[inline(always)]
-    fn jacobian(&mut self, lane: usize, tau: f64, y: &[f64], jac: &mut [f64], dfdt: &mut [f64]) {
+    fn jacobian(&mut self, lane: usize, tau: f64, y: &[T], jac: &mut [T], dfdt: &mut [T]) {
         let (v0, s) = (self.v0[lane], self.slope[lane]);
         self.models[lane].jacobian(v0 + s * tau, s, y, jac, dfdt);
     }
@@ -355,7 +357,7 @@ impl<const N: usize, const EXTRAS: bool, const L: usize> Rhs for ModelRhs<'_, N,
 /// the observer sees for lane 0; `dt` [s] the step of a fixed-step stepper. `None` if cancelled.
 #[allow(clippy::too_many_arguments)]
 fn drive_lanes<S, St, O, const N: usize, const EXTRAS: bool, const L: usize>(
-    tasks: &[Task],
+    tasks: &[Task<S::Elem>],
     first: usize,
     dt: f64,
     stepper: &mut St,
@@ -366,7 +368,7 @@ fn drive_lanes<S, St, O, const N: usize, const EXTRAS: bool, const L: usize>(
 where
     S: State,
     St: Stepper<S, L>,
-    O: Observer,
+    O: Observer<S::Elem>,
 {
     let m = tasks.len();
     let lane = |i: usize| i.min(m - 1); // idle lanes point at a real model
@@ -374,11 +376,12 @@ where
     let bound: [f64; L] = std::array::from_fn(|i| {
         tasks[lane(i)].model.presliding_bound() * (1.0 + slack) + 1e-12
     });
-    let mut rhs: ModelRhs<N, EXTRAS, L> = ModelRhs {
+    let zero = S::Elem::from(0.0);
+    let mut rhs: ModelRhs<S::Elem, N, EXTRAS, L> = ModelRhs {
         models: std::array::from_fn(|i| tasks[lane(i)].model),
         v0: [0.0; L],
         slope: [0.0; L],
-        at_start: [(0.0, 0.0); L],
+        at_start: [(zero, zero); L],
         bound,
     };
     let mut active = [false; L];
@@ -402,7 +405,7 @@ where
             k_end[i] = k[i] + ((task.t_end - task.t_start) / dt).round() as usize;
         }
         stepper.restart(i);
-        v_last[i] = ys[i].as_ref()[task.model.layout.dof];
+        v_last[i] = ys[i].as_ref()[task.model.layout.dof].value();
         observer.start(first + i, task.t_start, ys[i].as_ref());
     }
     let mut attempts = 0usize;
@@ -472,7 +475,7 @@ where
                 });
                 continue;
             }
-            v_last[i] = y[tasks[i].model.layout.dof];
+            v_last[i] = y[tasks[i].model.layout.dof].value();
             steps[i] += 1;
             min_step[i] = min_step[i].min(span);
             let start = St::EVALUATES_START.then(|| rhs.at_start[i]);
@@ -494,8 +497,9 @@ where
     )
 }
 
-/// Adaptive options for a task: error scales from the model and the input's peak.
-fn adaptive_options(task: &Task, rtol: f64, atol: f64, first_step: f64) -> Dopri5Options {
+/// Adaptive options for a task: error scales from the model and the input's peak; `held`
+/// steps to take instead of choosing them (see [`Dopri5Options::held`]).
+fn adaptive_options<T: Scalar>(task: &Task<T>, rtol: f64, atol: f64, first_step: f64, held: &[f64]) -> Dopri5Options {
     let v_max = task.wave.peak();
     Dopri5Options {
         rtol,
@@ -504,7 +508,54 @@ fn adaptive_options(task: &Task, rtol: f64, atol: f64, first_step: f64) -> Dopri
         h_init: first_step,
         h_min: ADAPTIVE_H_MIN,
         h_max: ((task.t_end - task.t_start) / 10.0).max(first_step),
+        held: held.to_vec(),
     }
+}
+
+/// Run one group of up to `L` tasks of one state layout with `method` (`N` nodes and `D`
+/// components fixed at compile time, or 0 for any), appending each task's end and final state
+/// to `out`; `None` if cancelled.
+#[allow(clippy::too_many_arguments)]
+fn run_group<S, O, const N: usize, const D: usize, const EXTRAS: bool, const L: usize>(
+    chunk: &[Task<S::Elem>],
+    first: usize,
+    method: &Method,
+    held: &[f64],
+    zero: S,
+    observer: &mut O,
+    cancel: &AtomicBool,
+    out: &mut Vec<(LaneEnd, Vec<S::Elem>)>,
+) -> Option<()>
+where
+    S: State,
+    O: Observer<S::Elem>,
+{
+    let task = |i: usize| &chunk[i.min(chunk.len() - 1)];
+    let mut ys: [S; L] = std::array::from_fn(|i| {
+        let mut y = zero.clone();
+        y.as_mut().copy_from_slice(task(i).y0);
+        y
+    });
+    let ends = match *method {
+        Method::Rk4 { dt } => {
+            let mut st: Rk4<S, L> = Rk4::new(dt, zero);
+            drive_lanes::<S, _, O, N, EXTRAS, L>(chunk, first, dt, &mut st, &mut ys, observer, cancel)?
+        }
+        Method::Dopri5 { rtol, atol, first_step } => {
+            let opts = std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
+            let mut st: Dopri5<S, L> = Dopri5::new(opts, zero);
+            drive_lanes::<S, _, O, N, EXTRAS, L>(chunk, first, 0.0, &mut st, &mut ys, observer, cancel)?
+        }
+        Method::Rodas4 { rtol, atol, first_step } => {
+            let opts = std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
+            let mut st: Rodas4<S, L, D> = Rodas4::new(opts, zero);
+            drive_lanes::<S, _, O, N, EXTRAS, L>(chunk, first, 0.0, &mut st, &mut ys, observer, cancel)?
+        }
+    };
+    for (e, y) in ends.into_iter().zip(ys.iter()) {
+        out.push((e, y.as_ref().to_vec()));
+    }
+    Some(())
 }
 
 /// Run `tasks` (one state layout) with `method`, `L` at a time when their state is plain and of
@@ -520,60 +571,34 @@ pub fn run_tasks<O: Observer, const L: usize>(
     if tasks.is_empty() {
         return Some(out);
     }
-    macro_rules! group {
-        ($s:ty, $n:literal, $d:literal, $extras:literal, $l:expr, $zero:expr, $chunk:expr, $first:expr) => {{
-            let chunk: &[Task] = $chunk;
-            let mut ys: [$s; $l] = std::array::from_fn(|i| {
-                let mut y: $s = $zero;
-                <$s as AsMut<[f64]>>::as_mut(&mut y).copy_from_slice(chunk[i.min(chunk.len() - 1)].y0);
-                y
-            });
-            let ends = match *method {
-                Method::Rk4 { dt } => {
-                    let mut st: Rk4<$s, $l> = Rk4::new(dt, $zero);
-                    drive_lanes::<$s, _, O, $n, $extras, $l>(chunk, $first, dt, &mut st, &mut ys, observer, cancel)?
-                }
-                Method::Dopri5 {
-                    rtol,
-                    atol,
-                    first_step,
-                } => {
-                    let opts = std::array::from_fn(|i| {
-                        adaptive_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step)
-                    });
-                    let mut st: Dopri5<$s, $l> = Dopri5::new(opts, $zero);
-                    drive_lanes::<$s, _, O, $n, $extras, $l>(chunk, $first, 0.0, &mut st, &mut ys, observer, cancel)?
-                }
-                Method::Rodas4 {
-                    rtol,
-                    atol,
-                    first_step,
-                } => {
-                    let opts = std::array::from_fn(|i| {
-                        adaptive_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step)
-                    });
-                    let mut st: Rodas4<$s, $l, $d> = Rodas4::new(opts, $zero);
-                    drive_lanes::<$s, _, O, $n, $extras, $l>(chunk, $first, 0.0, &mut st, &mut ys, observer, cancel)?
-                }
-            };
-            for (e, y) in ends.into_iter().zip(ys.iter()) {
-                out.push((e, <$s as AsRef<[f64]>>::as_ref(y).to_vec()));
-            }
-        }};
-    }
     macro_rules! fixed {
         ($n:literal, $d:literal) => {{
             for (c, chunk) in tasks.chunks(L).enumerate() {
-                group!([f64; $d], $n, $d, false, L, [0.0; $d], chunk, c * L);
+                run_group::<[f64; $d], O, $n, $d, false, L>(chunk, c * L, method, &[], [0.0; $d], observer, cancel, &mut out)?;
             }
         }};
     }
     let plain = tasks.iter().all(|t| t.model.is_plain());
-    let dim = tasks[0].model.layout.dim;
     with_state_size!(plain, tasks[0].model.layout.dof, fixed, {
-        for (c, task) in tasks.iter().enumerate() {
-            group!(Vec<f64>, 0, 0, true, 1, vec![0.0; dim], std::slice::from_ref(task), c);
-        }
+        return run_tasks_one_by_one(tasks, method, &[], observer, cancel);
     });
+    Some(out)
+}
+
+/// Run `tasks` one at a time on states of any size and any number type (dual numbers carry
+/// derivatives through the same integrators). `held`: for an adaptive method, the steps to
+/// take instead of choosing them (the steps another run accepted); empty for none.
+pub fn run_tasks_one_by_one<T: Scalar, O: Observer<T>>(
+    tasks: &[Task<T>],
+    method: &Method,
+    held: &[f64],
+    observer: &mut O,
+    cancel: &AtomicBool,
+) -> Option<Vec<(LaneEnd, Vec<T>)>> {
+    let mut out = Vec::with_capacity(tasks.len());
+    for (c, task) in tasks.iter().enumerate() {
+        let zero = vec![T::zero(); task.model.layout.dim];
+        run_group::<Vec<T>, O, 0, 0, true, 1>(std::slice::from_ref(task), c, method, held, zero, observer, cancel, &mut out)?;
+    }
     Some(out)
 }

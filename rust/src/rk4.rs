@@ -8,6 +8,7 @@
 //! exp and a division), and interleaving independent lanes fills the idle execution units. Each
 //! lane's arithmetic is exactly that of a one-lane step.
 
+use crate::scalar::Scalar;
 use crate::stepper::{Attempt, Rhs, State, Stepper};
 
 /// Step size and stage buffers for `L` lanes, allocated once per run.
@@ -38,7 +39,7 @@ impl<S: State, const L: usize> Rk4<S, L> {
 
     /// Advance every lane `i` with `active[i]` by one step `dt`.
     #[inline(always)]
-    pub fn step_lanes<F: Rhs>(&mut self, f: &mut F, dt: f64, ys: &mut [S; L], active: &[bool; L]) {
+    pub fn step_lanes<F: Rhs<S::Elem>>(&mut self, f: &mut F, dt: f64, ys: &mut [S; L], active: &[bool; L]) {
         let h2 = 0.5 * dt;
         for i in 0..L {
             if active[i] {
@@ -89,7 +90,7 @@ impl<S: State, const L: usize> Rk4<S, L> {
                     self.k4[i].as_ref(),
                 );
                 for j in 0..y.len() {
-                    y[j] += h6 * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j]);
+                    y[j] += (k1[j] + (k2[j] + k3[j]) * 2.0 + k4[j]) * h6;
                 }
             }
         }
@@ -99,7 +100,7 @@ impl<S: State, const L: usize> Rk4<S, L> {
 impl<S: State> Rk4<S, 1> {
     /// Advance `y` by one step (the one-lane case).
     #[inline(always)]
-    pub fn step<F: Rhs>(&mut self, f: &mut F, y: &mut S) {
+    pub fn step<F: Rhs<S::Elem>>(&mut self, f: &mut F, y: &mut S) {
         let ys: &mut [S; 1] = std::slice::from_mut(y).try_into().unwrap();
         self.step_lanes(f, self.dt, ys, &[true]);
     }
@@ -117,7 +118,7 @@ impl<S: State, const L: usize> Stepper<S, L> for Rk4<S, L> {
     fn restart(&mut self, _lane: usize) {}
 
     #[inline(always)]
-    fn attempt<F: Rhs>(
+    fn attempt<F: Rhs<S::Elem>>(
         &mut self,
         f: &mut F,
         ys: &mut [S; L],
@@ -141,9 +142,9 @@ impl<S: State, const L: usize> Stepper<S, L> for Rk4<S, L> {
 
 /// out = y + h k
 #[inline(always)]
-fn axpy(out: &mut [f64], y: &[f64], h: f64, k: &[f64]) {
+fn axpy<T: Scalar>(out: &mut [T], y: &[T], h: f64, k: &[T]) {
     for j in 0..out.len() {
-        out[j] = y[j] + h * k[j];
+        out[j] = y[j] + k[j] * h;
     }
 }
 

@@ -6,7 +6,8 @@
 //! ([`Rhs::jacobian`]; the model's is analytic). Like `dopri5` it lands on every input
 //! breakpoint and keeps one step size per lane.
 
-use crate::dopri5::{Dopri5Options as AdaptiveOptions, Dopri5Stats as AdaptiveStats};
+use crate::dopri5::{Dopri5Options as AdaptiveOptions, Dopri5Stats as AdaptiveStats, HELD_EXHAUSTED};
+use crate::scalar::Scalar;
 use crate::stepper::{Attempt, Rhs, State, Stepper};
 
 const GAMMA: f64 = 0.25;
@@ -54,14 +55,14 @@ const CC: [&[f64]; 6] = [
 ];
 
 /// Stages, Jacobians, factorisations and step sizes of `L` lanes.
-pub struct Rodas4<S, const L: usize = 1, const D: usize = 0> {
+pub struct Rodas4<S: State, const L: usize = 1, const D: usize = 0> {
     opts: [AdaptiveOptions; L],
     u: [[S; 6]; L],
     f: [S; L],
     y_stage: [S; L],
     dfdt: [S; L],
-    jac: [Vec<f64>; L],
-    lu: [Vec<f64>; L],
+    jac: [Vec<S::Elem>; L],
+    lu: [Vec<S::Elem>; L],
     pivot: [Vec<usize>; L],
     h: [f64; L],
     in_norm: [f64; L],
@@ -77,8 +78,8 @@ impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
             f: std::array::from_fn(|_| zero.clone()),
             y_stage: std::array::from_fn(|_| zero.clone()),
             dfdt: std::array::from_fn(|_| zero.clone()),
-            jac: std::array::from_fn(|_| vec![0.0; d * d]),
-            lu: std::array::from_fn(|_| vec![0.0; d * d]),
+            jac: std::array::from_fn(|_| vec![S::Elem::from(0.0); d * d]),
+            lu: std::array::from_fn(|_| vec![S::Elem::from(0.0); d * d]),
             pivot: std::array::from_fn(|_| vec![0; d]),
             h: std::array::from_fn(|i| opts[i].h_init.min(opts[i].h_max)),
             in_norm: std::array::from_fn(|i| {
@@ -104,7 +105,7 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
     fn restart(&mut self, _lane: usize) {}
 
     #[inline(always)]
-    fn attempt<F: Rhs>(
+    fn attempt<F: Rhs<S::Elem>>(
         &mut self,
         f: &mut F,
         ys: &mut [S; L],
@@ -115,11 +116,15 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
         let mut step = [0.0; L];
         let mut last = [false; L];
         let mut ok = *active;
+        let mut ran_out = [false; L];
         for i in 0..L {
             if !active[i] {
                 continue;
             }
-            let h = self.h[i];
+            let Some(h) = self.opts[i].next_step(self.h[i], self.stats[i].accepted as usize) else {
+                (ok[i], ran_out[i]) = (false, true);
+                continue;
+            };
             last[i] = end[i] - (t[i] + h) < 1e-3 * h;
             step[i] = if last[i] { end[i] - t[i] } else { h };
             f.jacobian(i, 0.0, ys[i].as_ref(), &mut self.jac[i], self.dfdt[i].as_mut());
@@ -127,12 +132,12 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
             let d = if D > 0 { D } else { ys[i].as_ref().len() };
             let inv = 1.0 / (GAMMA * step[i]);
             for (e, j) in self.lu[i].iter_mut().zip(&self.jac[i]) {
-                *e = -j;
+                *e = -*j;
             }
             for r in 0..d {
                 self.lu[i][r * d + r] += inv;
             }
-            ok[i] = lu_factor::<D>(&mut self.lu[i], &mut self.pivot[i], d);
+            ok[i] = lu_factor::<_, D>(&mut self.lu[i], &mut self.pivot[i], d);
         }
         for s in 0..6 {
             for i in 0..L {
@@ -147,7 +152,7 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
                     for c in 0..y.len() {
                         let mut acc = y[c];
                         for (j, a) in A[s].iter().enumerate() {
-                            acc += a * self.u[i][j].as_ref()[c];
+                            acc += self.u[i][j].as_ref()[c] * *a;
                         }
                         ys_[c] = acc;
                     }
@@ -166,18 +171,21 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
                 }
                 let hd = h * DT_WEIGHT[s];
                 for c in 0..rhs.len() {
-                    let mut acc = fs[c] + hd * ft[c];
+                    let mut acc = fs[c] + ft[c] * hd;
                     for (j, ccj) in cc[..s].iter().enumerate() {
-                        acc += ccj * u[j].as_ref()[c];
+                        acc += u[j].as_ref()[c] * *ccj;
                     }
                     rhs[c] = acc;
                 }
-                lu_solve::<D>(&self.lu[i], &self.pivot[i], rhs);
+                lu_solve::<_, D>(&self.lu[i], &self.pivot[i], rhs);
             }
         }
         std::array::from_fn(|i| {
             if !active[i] {
                 return Attempt::Idle;
+            }
+            if ran_out[i] {
+                return Attempt::Failed(HELD_EXHAUSTED.into());
             }
             self.stats[i].evaluations += 6;
             let err = if ok[i] {
@@ -193,7 +201,8 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
                 f64::NAN
             };
             let o = &self.opts[i];
-            if err <= 1.0 {
+            // held steps are taken whatever their error (unless the factorisation failed)
+            if err <= 1.0 || (!o.held.is_empty() && ok[i]) {
                 ys[i].as_mut().copy_from_slice(self.y_stage[i].as_ref());
                 self.stats[i].accepted += 1;
                 let grow = if err == 0.0 {
@@ -232,20 +241,20 @@ impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
     /// Put the new state y + sum a_5j u_j + u_5 + u_6 in `y_stage[i]` and return the scaled
     /// RMS of the embedded error estimate (the last increment) [-].
     #[inline(always)]
-    fn finish(&mut self, i: usize, y: &[f64]) -> f64 {
+    fn finish(&mut self, i: usize, y: &[S::Elem]) -> f64 {
         let o = &self.opts[i];
         let (u, out) = (&self.u[i], self.y_stage[i].as_mut());
         let mut err2 = 0.0;
         for c in 0..y.len() {
             let mut acc = y[c];
             for (j, a) in A[5].iter().enumerate() {
-                acc += a * u[j].as_ref()[c];
+                acc += u[j].as_ref()[c] * *a;
             }
             let e = u[5].as_ref()[c];
             out[c] = acc + e;
             if o.scale[c].is_finite() {
-                let tol = o.atol * o.scale[c] + o.rtol * y[c].abs().max(out[c].abs());
-                err2 += (e / tol).powi(2);
+                let tol = o.atol * o.scale[c] + o.rtol * y[c].value().abs().max(out[c].value().abs());
+                err2 += (e.value() / tol).powi(2);
             }
         }
         (err2 / self.in_norm[i]).sqrt()
@@ -258,14 +267,14 @@ impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
 /// buffer). `D` > 0 fixes the size at compile time (the loops unroll). False when the matrix
 /// is singular or not finite.
 #[inline(always)]
-fn lu_factor<const D: usize>(a: &mut [f64], pivot: &mut [usize], d: usize) -> bool {
+fn lu_factor<T: Scalar, const D: usize>(a: &mut [T], pivot: &mut [usize], d: usize) -> bool {
     let d = if D > 0 { D } else { d };
     let (a, pivot) = (&mut a[..d * d], &mut pivot[..d]);
     for k in 0..d {
         let mut p = k;
-        let mut best = a[k * d + k].abs();
+        let mut best = a[k * d + k].value().abs();
         for r in k + 1..d {
-            let x = a[r * d + k].abs();
+            let x = a[r * d + k].value().abs();
             if x > best {
                 best = x;
                 p = r;
@@ -280,15 +289,16 @@ fn lu_factor<const D: usize>(a: &mut [f64], pivot: &mut [usize], d: usize) -> bo
                 a.swap(k * d + c, p * d + c);
             }
         }
-        let inv = 1.0 / a[k * d + k];
+        let inv = T::one() / a[k * d + k];
         // the solves multiply by the pivot's reciprocal: a division is a long serial latency
         a[k * d + k] = inv;
         for r in k + 1..d {
             let m = a[r * d + k] * inv;
             a[r * d + k] = m;
-            if m != 0.0 {
+            if !m.is_exactly(0.0) {
                 for c in k + 1..d {
-                    a[r * d + c] -= m * a[k * d + c];
+                    let akc = a[k * d + c];
+                    a[r * d + c] -= m * akc;
                 }
             }
         }
@@ -298,7 +308,7 @@ fn lu_factor<const D: usize>(a: &mut [f64], pivot: &mut [usize], d: usize) -> bo
 
 /// Solve A x = b in place with the factors of [`lu_factor`].
 #[inline(always)]
-fn lu_solve<const D: usize>(lu: &[f64], pivot: &[usize], b: &mut [f64]) {
+fn lu_solve<T: Scalar, const D: usize>(lu: &[T], pivot: &[usize], b: &mut [T]) {
     let d = if D > 0 { D } else { b.len() };
     let (lu, pivot, b) = (&lu[..d * d], &pivot[..d], &mut b[..d]);
     for k in 0..d {
@@ -332,6 +342,7 @@ mod tests {
             h_init: 1e-4,
             h_min: 1e-14,
             h_max: 1.0,
+            held: Vec::new(),
         }
     }
 
@@ -363,16 +374,16 @@ mod tests {
     fn lu_solves_a_pivoting_system() {
         let mut a = vec![0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
         let mut p = vec![0; 3];
-        assert!(lu_factor::<0>(&mut a, &mut p, 3));
+        assert!(lu_factor::<f64, 0>(&mut a, &mut p, 3));
         let mut b = vec![5.0, 3.0, 6.0];
-        lu_solve::<3>(&a, &p, &mut b);
+        lu_solve::<f64, 3>(&a, &p, &mut b);
         let m = [0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
         for r in 0..3 {
             let s: f64 = (0..3).map(|c| m[r * 3 + c] * b[c]).sum();
             assert!((s - [5.0, 3.0, 6.0][r]).abs() < 1e-14);
         }
         let mut z = vec![1.0, 2.0, 2.0, 4.0];
-        assert!(!lu_factor::<2>(&mut z, &mut p[..2], 2));
+        assert!(!lu_factor::<f64, 2>(&mut z, &mut p[..2], 2));
     }
 
     #[test]

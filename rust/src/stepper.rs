@@ -5,30 +5,40 @@
 //! Adding an integrator means one file implementing [`Stepper`] and one arm of
 //! `drive::Method`.
 
-/// State storage: a `Vec<f64>` for any size, or a fixed `[f64; D]` that stays in registers.
-pub trait State: AsRef<[f64]> + AsMut<[f64]> + Clone {}
-impl<S: AsRef<[f64]> + AsMut<[f64]> + Clone> State for S {}
+use crate::scalar::Scalar;
+
+/// State storage: a `Vec` for any size, or a fixed array that stays in registers; its elements
+/// are `f64` for plain runs or dual numbers when derivatives are carried (see `scalar.rs`).
+pub trait State: AsRef<[Self::Elem]> + AsMut<[Self::Elem]> + Clone {
+    type Elem: Scalar;
+}
+impl<T: Scalar, const D: usize> State for [T; D] {
+    type Elem = T;
+}
+impl<T: Scalar> State for Vec<T> {
+    type Elem = T;
+}
 
 /// A right-hand side over one step: `dy = f(y)` for `lane` at offset `tau` [s] from the start
 /// of the step (the input is linear over a step). A trait rather than a bare closure so that
 /// implementations can be `#[inline(always)]`; closures implement it too.
-pub trait Rhs {
-    fn eval(&mut self, lane: usize, tau: f64, y: &[f64], dy: &mut [f64]);
+pub trait Rhs<T: Scalar = f64> {
+    fn eval(&mut self, lane: usize, tau: f64, y: &[T], dy: &mut [T]);
 
     /// Whether `y` lies in the system's domain (for the model: |Fh| within its bound). Adaptive
     /// implicit steps reject a step that leaves it. Default: everywhere.
-    fn admissible(&self, _lane: usize, _y: &[f64]) -> bool {
+    fn admissible(&self, _lane: usize, _y: &[T]) -> bool {
         true
     }
 
     /// The Jacobian df/dy (row-major, `y.len()` squared) and df/dt at offset `tau`, for
     /// implicit integrators. By default central differences (for tests and toy systems with
     /// states and times of order one; the model overrides this with its analytic Jacobian).
-    fn jacobian(&mut self, lane: usize, tau: f64, y: &[f64], jac: &mut [f64], dfdt: &mut [f64]) {
+    fn jacobian(&mut self, lane: usize, tau: f64, y: &[T], jac: &mut [T], dfdt: &mut [T]) {
         let d = y.len();
-        let (mut yp, mut fp, mut fm) = (y.to_vec(), vec![0.0; d], vec![0.0; d]);
+        let (mut yp, mut fp, mut fm) = (y.to_vec(), vec![T::zero(); d], vec![T::zero(); d]);
         for c in 0..d {
-            let h = 1e-7 * y[c].abs().max(1e-7);
+            let h = 1e-7 * y[c].value().abs().max(1e-7);
             yp[c] = y[c] + h;
             self.eval(lane, tau, &yp, &mut fp);
             yp[c] = y[c] - h;
@@ -47,7 +57,7 @@ pub trait Rhs {
     }
 }
 
-impl<F: FnMut(usize, f64, &[f64], &mut [f64])> Rhs for F {
+impl<F: FnMut(usize, f64, &[f64], &mut [f64])> Rhs<f64> for F {
     #[inline(always)]
     fn eval(&mut self, lane: usize, tau: f64, y: &[f64], dy: &mut [f64]) {
         self(lane, tau, y, dy)
@@ -86,7 +96,7 @@ pub trait Stepper<S: State, const L: usize> {
     fn restart(&mut self, lane: usize);
     /// Try one step on every lane with `active[i]`, from time `t[i]`, never past `end[i]`.
     /// Accepted steps overwrite `ys[i]`.
-    fn attempt<F: Rhs>(
+    fn attempt<F: Rhs<S::Elem>>(
         &mut self,
         f: &mut F,
         ys: &mut [S; L],
