@@ -22,10 +22,27 @@ pub struct Dopri5Options {
     pub h_min: f64,
     /// largest step [s]
     pub h_max: f64,
-    /// Steps to take instead of choosing them [s], in order (empty: adaptive). A run repeated
-    /// with the steps another run accepted takes exactly those steps, accepting each: how
-    /// derivatives are carried through an adaptive run with its steps held.
-    pub held: Vec<f64>,
+    /// Steps to take instead of choosing them (empty: adaptive): see [`Held`].
+    pub held: Held,
+}
+
+/// The steps another run accepted [s] and the states it reached with them (row-major, one
+/// state per step). A run given them takes exactly those steps, accepting each, and after
+/// each step sets its state's values to the other run's (keeping any derivative parts): how
+/// derivatives are carried along an adaptive run with its steps held. A replay alone would
+/// drift from the run it follows by rounding, and an explicit method in a stiff phase, whose
+/// steps sit at the stability limit, can amplify that drift until the error control (which a
+/// replay does not have) would have stepped in.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Held {
+    pub steps: Vec<f64>,
+    pub states: Vec<f64>,
+}
+
+impl Held {
+    pub fn is_empty(&self) -> bool {
+        self.steps.is_empty()
+    }
 }
 
 impl Dopri5Options {
@@ -36,7 +53,18 @@ impl Dopri5Options {
         if self.held.is_empty() {
             Some(proposal)
         } else {
-            self.held.get(taken).copied()
+            self.held.steps.get(taken).copied()
+        }
+    }
+
+    /// After held step `taken` (counted from 0), set the values of `y` to the held state.
+    #[inline(always)]
+    pub(crate) fn pin<T: Scalar>(&self, taken: usize, y: &mut [T]) {
+        let d = y.len();
+        if let Some(row) = self.held.states.get(taken * d..(taken + 1) * d) {
+            for (x, v) in y.iter_mut().zip(row) {
+                x.set_value(*v);
+            }
         }
     }
 }
@@ -199,6 +227,10 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
             if err <= 1.0 || !o.held.is_empty() {
                 ys[i].as_mut().copy_from_slice(self.y_new[i].as_ref());
                 self.k[i].swap(0, 6); // first same as last
+                if !o.held.is_empty() {
+                    o.pin(self.stats[i].accepted as usize, ys[i].as_mut());
+                    self.fresh[i] = true; // the last stage was evaluated before the pin
+                }
                 self.stats[i].accepted += 1;
                 let grow = if err == 0.0 {
                     5.0
@@ -274,7 +306,7 @@ mod tests {
             h_init: 1e-3,
             h_min: 1e-12,
             h_max: 1.0,
-            held: Vec::new(),
+            held: Held::default(),
         }
     }
 

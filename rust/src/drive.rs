@@ -10,7 +10,7 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::dopri5::{Dopri5, Dopri5Options};
+use crate::dopri5::{Dopri5, Dopri5Options, Held};
 use crate::model::{with_state_size, Model};
 use crate::rk4::Rk4;
 use crate::rodas4::Rodas4;
@@ -156,6 +156,10 @@ pub trait Observer<T: Scalar = f64> {
         start: Option<(T, T)>,
         last: bool,
     );
+
+    /// An adaptive method's accepted step [s] for task `task`, exactly as the method took it
+    /// (called before [`Observer::step`]; the span there is the difference of two times).
+    fn accepted_step(&mut self, _task: usize, _step: f64) {}
 }
 
 /// Number of RK4 steps of `dt` from `t_start` to `t_end`, refusing a `dt` that does not divide
@@ -480,6 +484,9 @@ where
             min_step[i] = min_step[i].min(span);
             let start = St::EVALUATES_START.then(|| rhs.at_start[i]);
             let v_cmd = rhs.v0[i] + rhs.slope[i] * step;
+            if !St::FIXED_STEP {
+                observer.accepted_step(first + i, step);
+            }
             observer.step(first + i, t_new, span, y, v_cmd, start, done);
             if done {
                 active[i] = false;
@@ -499,7 +506,7 @@ where
 
 /// Adaptive options for a task: error scales from the model and the input's peak; `held`
 /// steps to take instead of choosing them (see [`Dopri5Options::held`]).
-fn adaptive_options<T: Scalar>(task: &Task<T>, rtol: f64, atol: f64, first_step: f64, held: &[f64]) -> Dopri5Options {
+fn adaptive_options<T: Scalar>(task: &Task<T>, rtol: f64, atol: f64, first_step: f64, held: &Held) -> Dopri5Options {
     let v_max = task.wave.peak();
     Dopri5Options {
         rtol,
@@ -508,7 +515,7 @@ fn adaptive_options<T: Scalar>(task: &Task<T>, rtol: f64, atol: f64, first_step:
         h_init: first_step,
         h_min: ADAPTIVE_H_MIN,
         h_max: ((task.t_end - task.t_start) / 10.0).max(first_step),
-        held: held.to_vec(),
+        held: held.clone(),
     }
 }
 
@@ -520,7 +527,7 @@ fn run_group<S, O, const N: usize, const D: usize, const EXTRAS: bool, const L: 
     chunk: &[Task<S::Elem>],
     first: usize,
     method: &Method,
-    held: &[f64],
+    held: &Held,
     zero: S,
     observer: &mut O,
     cancel: &AtomicBool,
@@ -574,24 +581,25 @@ pub fn run_tasks<O: Observer, const L: usize>(
     macro_rules! fixed {
         ($n:literal, $d:literal) => {{
             for (c, chunk) in tasks.chunks(L).enumerate() {
-                run_group::<[f64; $d], O, $n, $d, false, L>(chunk, c * L, method, &[], [0.0; $d], observer, cancel, &mut out)?;
+                run_group::<[f64; $d], O, $n, $d, false, L>(chunk, c * L, method, &Held::default(), [0.0; $d], observer, cancel, &mut out)?;
             }
         }};
     }
     let plain = tasks.iter().all(|t| t.model.is_plain());
     with_state_size!(plain, tasks[0].model.layout.dof, fixed, {
-        return run_tasks_one_by_one(tasks, method, &[], observer, cancel);
+        return run_tasks_one_by_one(tasks, method, &Held::default(), observer, cancel);
     });
     Some(out)
 }
 
 /// Run `tasks` one at a time on states of any size and any number type (dual numbers carry
 /// derivatives through the same integrators). `held`: for an adaptive method, the steps to
-/// take instead of choosing them (the steps another run accepted); empty for none.
+/// take instead of choosing them (the steps another run accepted, see [`Held`]); empty for
+/// none.
 pub fn run_tasks_one_by_one<T: Scalar, O: Observer<T>>(
     tasks: &[Task<T>],
     method: &Method,
-    held: &[f64],
+    held: &Held,
     observer: &mut O,
     cancel: &AtomicBool,
 ) -> Option<Vec<(LaneEnd, Vec<T>)>> {

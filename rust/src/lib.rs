@@ -19,6 +19,7 @@ pub mod rig;
 pub mod rk4;
 pub mod rodas4;
 pub mod scalar;
+pub mod sensitivity;
 pub mod simulate;
 pub mod stepper;
 pub mod waveform;

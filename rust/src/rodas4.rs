@@ -7,6 +7,8 @@
 //! breakpoint and keeps one step size per lane.
 
 use crate::dopri5::{Dopri5Options as AdaptiveOptions, Dopri5Stats as AdaptiveStats, HELD_EXHAUSTED};
+#[cfg(test)]
+use crate::dopri5::Held;
 use crate::scalar::Scalar;
 use crate::stepper::{Attempt, Rhs, State, Stepper};
 
@@ -204,6 +206,9 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
             // held steps are taken whatever their error (unless the factorisation failed)
             if err <= 1.0 || (!o.held.is_empty() && ok[i]) {
                 ys[i].as_mut().copy_from_slice(self.y_stage[i].as_ref());
+                if !o.held.is_empty() {
+                    o.pin(self.stats[i].accepted as usize, ys[i].as_mut());
+                }
                 self.stats[i].accepted += 1;
                 let grow = if err == 0.0 {
                     6.0
@@ -342,7 +347,7 @@ mod tests {
             h_init: 1e-4,
             h_min: 1e-14,
             h_max: 1.0,
-            held: Vec::new(),
+            held: Held::default(),
         }
     }
 

@@ -14,6 +14,10 @@ pub trait Scalar: DualNum<Primitive = f64> + Copy + Send + Sync + 'static {
     /// The value (the derivative parts dropped).
     fn value(&self) -> f64;
 
+    /// Set the value, keeping the derivative parts (a derivative pass pinned to the states of
+    /// the plain run it follows).
+    fn set_value(&mut self, v: f64);
+
     /// True when the number is exactly `x` with no derivative part: a term that vanishes
     /// identically may then be skipped without losing a derivative.
     fn is_exactly(&self, x: f64) -> bool;
@@ -33,6 +37,11 @@ impl Scalar for f64 {
     }
 
     #[inline(always)]
+    fn set_value(&mut self, v: f64) {
+        *self = v;
+    }
+
+    #[inline(always)]
     fn is_exactly(&self, x: f64) -> bool {
         *self == x
     }
@@ -49,6 +58,11 @@ impl<const N: usize> Scalar for DualSVec64<N> {
     #[inline(always)]
     fn value(&self) -> f64 {
         self.re
+    }
+
+    #[inline(always)]
+    fn set_value(&mut self, v: f64) {
+        self.re = v;
     }
 
     #[inline(always)]

@@ -4,6 +4,7 @@
 
 use std::sync::atomic::AtomicBool;
 
+use crate::dopri5::Held;
 use crate::drive::{divergence_message, run_tasks, LaneEnd, Method, Observer, SimError, Task};
 use crate::model::Model;
 use crate::waveform::PiecewiseLinear;
@@ -37,6 +38,9 @@ pub struct Trajectory {
     pub momentum: Vec<f64>,
     /// the state at t_end
     pub final_state: Vec<f64>,
+    /// an adaptive run's accepted steps and the states they reached (empty for RK4): held by
+    /// a run that carries derivatives along this one (`sensitivity.rs`)
+    pub held: Held,
 }
 
 impl Trajectory {
@@ -69,6 +73,7 @@ struct Saver<'a> {
     wave: &'a PiecewiseLinear,
     save_every: usize,
     until_save: usize,
+    keep_steps: bool,
     out: Trajectory,
 }
 
@@ -78,7 +83,16 @@ impl Observer for Saver<'_> {
     }
 
     #[inline(always)]
+    fn accepted_step(&mut self, _task: usize, step: f64) {
+        if self.keep_steps {
+            self.out.held.steps.push(step);
+        }
+    }
+
     fn step(&mut self, _task: usize, t: f64, _span: f64, y: &[f64], v: f64, _s: Option<(f64, f64)>, last: bool) {
+        if self.keep_steps {
+            self.out.held.states.extend_from_slice(y);
+        }
         self.until_save -= 1; // a countdown, not k % save_every: no division in the step loop
         if self.until_save == 0 || last {
             self.out.record(self.model, t, y, v);
@@ -136,6 +150,7 @@ pub fn simulate_until(
         wave,
         save_every,
         until_save: save_every,
+        keep_steps: !matches!(method, Method::Rk4 { .. }),
         out: Trajectory {
             dof: model.layout.dof,
             ..Default::default()

@@ -1,0 +1,559 @@
+//! Parameter sensitivities from the engine: the exact derivative of a run's recorded readings
+//! (and of its final state) with respect to Table 1 parameters, effect parameters and
+//! components of the initial state, by forward-mode dual numbers carried through the same
+//! right-hand side and the same integrator as the plain run (`scalar.rs`). RK4 takes the same
+//! fixed steps; an adaptive method is run again with the steps the plain run accepted held
+//! (`Dopri5Options::held`), so what comes back is the derivative of that discrete solution,
+//! step sizes fixed — not a finite difference.
+//!
+//! At the kinks of the friction law (|v1| at v1 = 0, |dg/dt|, sgn Fh) and the saturation of a
+//! servo rig the derivative is that of the branch the run took (one-sided); a state sitting
+//! exactly on a kink for a finite time (the rest state before the drive starts) contributes
+//! nothing through it.
+
+use std::sync::atomic::AtomicBool;
+
+use num_dual::DualSVec64;
+
+use crate::dopri5::Held;
+use crate::drive::{run_tasks_one_by_one, LaneEnd, Method, Observer, SimError, Task};
+use crate::effects::EFFECT_NAMES;
+use crate::model::Model;
+use crate::params::PARAM_NAMES;
+use crate::scalar::{seeded, Scalar};
+use crate::waveform::PiecewiseLinear;
+
+/// Widest dual number one pass carries; more names take several passes.
+pub const MAX_PER_PASS: usize = 8;
+
+/// A value a derivative is taken with respect to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Seed {
+    /// a Table 1 parameter
+    Param(&'static str),
+    /// an effect parameter
+    Effect(&'static str),
+    /// a component of the initial state (its index in the layout)
+    State(usize),
+}
+
+impl Seed {
+    fn names(&self, name: &str) -> bool {
+        matches!(self, Seed::Param(n) | Seed::Effect(n) if *n == name)
+    }
+}
+
+/// The seeds for `names` (Table 1 names, effect names, state component names such as `q0`,
+/// `v0`, `fh`), refused with the reason when one cannot be differentiated: unknown, repeated,
+/// the normal force while it is derived from the masses, or a lag time constant of an effect
+/// that is off (the model has no state for it).
+pub fn parse_seeds(model: &Model, names: &[String], normal_force_derived: bool) -> Result<Vec<Seed>, String> {
+    let components = model.layout.components();
+    let mut seeds = Vec::with_capacity(names.len());
+    for (i, name) in names.iter().enumerate() {
+        if names[..i].contains(name) {
+            return Err(format!("sensitivity '{name}' is asked for twice"));
+        }
+        let seed = if let Some(n) = PARAM_NAMES.iter().find(|n| **n == name.as_str()) {
+            if *n == "normal_force" && normal_force_derived {
+                return Err("sensitivity 'normal_force': the normal force is derived from the masses here \
+                            ((m1 + m2 + mPE) g, and its derivative follows theirs); give normal_force a value \
+                            to take a derivative with respect to it"
+                    .into());
+            }
+            Seed::Param(n)
+        } else if let Some(n) = EFFECT_NAMES.iter().find(|n| **n == name.as_str()) {
+            let e = &model.effects;
+            let off = match *n {
+                "tau_amp" => e.tau_amp == 0.0,
+                "tau_creep" | "kappa" => e.tau_creep == 0.0,
+                "tau_sensor" => e.tau_sensor == 0.0,
+                _ => false,
+            };
+            if off {
+                return Err(format!(
+                    "sensitivity '{n}': its effect is off (a time constant of 0 removes the effect's state); \
+                     give the time constant a positive value to take a derivative"
+                ));
+            }
+            Seed::Effect(n)
+        } else if let Some(c) = components.iter().position(|(n, _)| n == name) {
+            Seed::State(c)
+        } else {
+            return Err(format!(
+                "unknown sensitivity '{name}': name a Table 1 parameter ({}), an effect parameter ({}) or a \
+                 component of the initial state ({})",
+                PARAM_NAMES.join(", "),
+                EFFECT_NAMES.join(", "),
+                components.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", ")
+            ));
+        };
+        seeds.push(seed);
+    }
+    Ok(seeds)
+}
+
+/// When readings are recorded: at the start, every `every` accepted steps, and at the last step
+/// when `also_last` (as `simulate` saves; the batch's recorded readings do not add the last).
+#[derive(Clone, Copy, Debug)]
+pub struct Schedule {
+    pub every: usize,
+    pub also_last: bool,
+}
+
+/// The derivatives of one run, for `names` seeds in order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Derivatives {
+    pub names: usize,
+    /// d reading / d seed at every recorded time, row-major [time][seed] [m per unit]
+    pub readings: Vec<f64>,
+    /// d final state / d seed, row-major [component][seed]
+    pub final_state: Vec<f64>,
+}
+
+/// The derivatives of `model`'s run (the plain run's settings: input, span, initial state,
+/// method) with respect to `seeds`. `held`: for an adaptive method, the steps the plain run
+/// accepted. `None` if cancelled.
+#[allow(clippy::too_many_arguments)]
+pub fn derivatives(
+    model: &Model,
+    wave: &PiecewiseLinear,
+    t_start: f64,
+    t_end: f64,
+    y0: &[f64],
+    method: &Method,
+    held: &Held,
+    schedule: Schedule,
+    seeds: &[Seed],
+    normal_force_derived: bool,
+    cancel: &AtomicBool,
+) -> Option<Result<Derivatives, SimError>> {
+    if !matches!(method, Method::Rk4 { .. }) && held.is_empty() {
+        return Some(Err(SimError::Input(
+            "sensitivities of an adaptive run need the steps the run accepted".into(),
+        )));
+    }
+    let n = seeds.len();
+    let dim = model.layout.dim;
+    let mut out = Derivatives {
+        names: n,
+        readings: Vec::new(),
+        final_state: vec![0.0; dim * n],
+    };
+    for (g, group) in seeds.chunks(MAX_PER_PASS).enumerate() {
+        let run = Pass { model, wave, t_start, t_end, y0, method, held, schedule, seeds: group, normal_force_derived };
+        let pass = match group.len() {
+            1 => run.go::<1>(cancel),
+            2 => run.go::<2>(cancel),
+            3 | 4 => run.go::<4>(cancel),
+            _ => run.go::<MAX_PER_PASS>(cancel),
+        }?;
+        let (readings, fin) = match pass {
+            Ok(x) => x,
+            Err(e) => return Some(Err(e)),
+        };
+        let k = group.len();
+        let first = g * MAX_PER_PASS;
+        let times = readings.len() / k;
+        if out.readings.is_empty() {
+            out.readings = vec![0.0; times * n];
+        }
+        for t in 0..times {
+            out.readings[t * n + first..t * n + first + k].copy_from_slice(&readings[t * k..(t + 1) * k]);
+        }
+        for c in 0..dim {
+            out.final_state[c * n + first..c * n + first + k].copy_from_slice(&fin[c * k..(c + 1) * k]);
+        }
+    }
+    Some(Ok(out))
+}
+
+/// One forward-mode pass over up to [`MAX_PER_PASS`] seeds.
+struct Pass<'a> {
+    model: &'a Model,
+    wave: &'a PiecewiseLinear,
+    t_start: f64,
+    t_end: f64,
+    y0: &'a [f64],
+    method: &'a Method,
+    held: &'a Held,
+    schedule: Schedule,
+    seeds: &'a [Seed],
+    normal_force_derived: bool,
+}
+
+/// Readings' and final state's derivatives of one pass, row-major [time or component][seed].
+type PassOutput = (Vec<f64>, Vec<f64>);
+
+impl Pass<'_> {
+    fn go<const N: usize>(&self, cancel: &AtomicBool) -> Option<Result<PassOutput, SimError>> {
+        let m = self.model;
+        let seeds = self.seeds;
+        let lift = |name: &str, v: f64| match seeds.iter().position(|s| s.names(name)) {
+            Some(j) => seeded::<N>(v, j),
+            None => DualSVec64::<N>::from(v),
+        };
+        let dual = match Model::build(
+            m.params,
+            m.effects,
+            m.structure,
+            m.hysteresis.is_some(),
+            m.layout.accounting.is_some(),
+            lift,
+            self.normal_force_derived,
+        ) {
+            Ok(d) => d,
+            Err(e) => return Some(Err(SimError::Input(e))),
+        };
+        let y0: Vec<DualSVec64<N>> = self
+            .y0
+            .iter()
+            .enumerate()
+            .map(|(c, &x)| match seeds.iter().position(|s| *s == Seed::State(c)) {
+                Some(j) => seeded::<N>(x, j),
+                None => DualSVec64::<N>::from(x),
+            })
+            .collect();
+        let task = Task { model: &dual, wave: self.wave, t_start: self.t_start, t_end: self.t_end, y0: &y0 };
+        let mut rec = Recorder { model: &dual, schedule: self.schedule, until: self.schedule.every, k: seeds.len(), out: Vec::new() };
+        let mut ends = run_tasks_one_by_one(&[task], self.method, self.held, &mut rec, cancel)?;
+        let (end, y) = ends.pop().expect("one task");
+        Some(match end {
+            LaneEnd::Finished { .. } => {
+                let k = seeds.len();
+                let mut fin = vec![0.0; y.len() * k];
+                let mut d = [0.0; N];
+                for (c, yc) in y.iter().enumerate() {
+                    yc.derivatives(&mut d);
+                    fin[c * k..(c + 1) * k].copy_from_slice(&d[..k]);
+                }
+                Ok((rec.out, fin))
+            }
+            LaneEnd::Diverged { t, why, .. } => Err(SimError::Diverged {
+                t,
+                message: format!(
+                    "the derivative pass left the plain run's path at t = {t:.6e} s ({}); use a smaller dt or tighter tolerances",
+                    why.unwrap_or_else(|| "its state left the model's bounds".into())
+                ),
+            }),
+        })
+    }
+}
+
+/// Records the first `k` derivatives of the reading on the schedule of the plain run's saver.
+struct Recorder<'a, const N: usize> {
+    model: &'a Model<DualSVec64<N>>,
+    schedule: Schedule,
+    until: usize,
+    k: usize,
+    out: Vec<f64>,
+}
+
+impl<const N: usize> Recorder<'_, N> {
+    fn record(&mut self, t: f64, y: &[DualSVec64<N>]) {
+        let mut d = [0.0; N];
+        self.model.reading(t, y).derivatives(&mut d);
+        self.out.extend_from_slice(&d[..self.k]);
+    }
+}
+
+impl<const N: usize> Observer<DualSVec64<N>> for Recorder<'_, N> {
+    fn start(&mut self, _task: usize, t: f64, y: &[DualSVec64<N>]) {
+        self.record(t, y);
+    }
+
+    fn step(
+        &mut self,
+        _task: usize,
+        t: f64,
+        _span: f64,
+        y: &[DualSVec64<N>],
+        _v: f64,
+        _s: Option<(DualSVec64<N>, DualSVec64<N>)>,
+        last: bool,
+    ) {
+        self.until -= 1;
+        if self.until == 0 || (last && self.schedule.also_last) {
+            self.record(t, y);
+            self.until = self.schedule.every;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::effects::Effects;
+    use crate::mechanics::Structure;
+    use crate::params::Params;
+    use crate::rig::RigDrive;
+    use crate::simulate::simulate;
+
+    const NEVER: AtomicBool = AtomicBool::new(false);
+
+    /// A device: parameters, effects, structure, input, span, RK4 step or adaptive method.
+    #[derive(Clone)]
+    struct Case {
+        p: Params,
+        e: Effects,
+        s: Structure,
+        hyst: bool,
+        wave: PiecewiseLinear,
+        t_end: f64,
+        method: Method,
+        every: usize,
+        derived_fn: bool,
+    }
+
+    fn paper(s: Structure, e: Effects) -> Case {
+        Case {
+            p: Params::paper(),
+            e,
+            s,
+            hyst: true,
+            wave: PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap(),
+            t_end: 1e-3,
+            method: Method::Rk4 { dt: 1e-8 },
+            every: 2000,
+            derived_fn: false,
+        }
+    }
+
+    impl Case {
+        fn with(&self, name: &str, v: f64) -> Case {
+            let mut c = self.clone();
+            if c.p.set(name, v).is_err() {
+                c.e.set(name, v).unwrap();
+            }
+            if c.derived_fn {
+                c.p.normal_force = c.p.default_normal_force();
+            }
+            c
+        }
+
+        fn model(&self) -> Model {
+            Model::new(self.p, self.e, self.s, self.hyst, false).unwrap()
+        }
+
+        /// Readings on the saver's schedule, and the steps and states an adaptive run held.
+        fn readings(&self, y0: &[f64]) -> (Vec<f64>, Held) {
+            let r = simulate(&self.model(), &self.wave, 0.0, self.t_end, y0, &self.method, self.every).unwrap();
+            (r.reading, r.held)
+        }
+
+        /// The engine's derivatives of the readings, [time][name].
+        fn engine(&self, names: &[&str]) -> Vec<f64> {
+            let m = self.model();
+            let rest = m.rest_state();
+            let (base, held) = self.readings(&rest);
+            let names_s: Vec<String> = names.iter().map(|s| s.to_string()).collect();
+            let seeds = parse_seeds(&m, &names_s, self.derived_fn).unwrap();
+            let schedule = Schedule { every: self.every, also_last: true };
+            let d = derivatives(&m, &self.wave, 0.0, self.t_end, &rest, &self.method, &held, schedule, &seeds, self.derived_fn, &NEVER)
+                .unwrap()
+                .unwrap();
+            assert_eq!(d.readings.len(), base.len() * names.len());
+            d.readings
+        }
+
+        /// Central differences of the readings with steps `h`, [time][name].
+        fn differences(&self, names: &[&str], h: &[f64]) -> Vec<f64> {
+            let m = self.model();
+            let rest = m.rest_state();
+            let names_s: Vec<String> = names.iter().map(|s| s.to_string()).collect();
+            let seeds = parse_seeds(&m, &names_s, self.derived_fn).unwrap();
+            let n = names.len();
+            let mut fd = Vec::new();
+            for (j, name) in names.iter().enumerate() {
+                let (plus, minus) = match seeds[j] {
+                    Seed::State(c) => {
+                        let (mut yp, mut ym) = (rest.clone(), rest.clone());
+                        yp[c] += h[j];
+                        ym[c] -= h[j];
+                        (self.readings(&yp).0, self.readings(&ym).0)
+                    }
+                    _ => {
+                        let v = m.params.get(name).or(m.effects.get(name)).unwrap();
+                        (self.with(name, v + h[j]).readings(&rest).0, self.with(name, v - h[j]).readings(&rest).0)
+                    }
+                };
+                if fd.is_empty() {
+                    fd = vec![0.0; plus.len() * n];
+                }
+                for t in 0..plus.len() {
+                    fd[t * n + j] = (plus[t] - minus[t]) / (2.0 * h[j]);
+                }
+            }
+            fd
+        }
+
+        /// Every name's derivative within `rel` of its central difference, relative to the
+        /// largest |derivative| of that name over the run.
+        ///
+        /// A central difference of a stick-slip run is off in two ways: the run's rounding
+        /// noise divided by the step (friction switching amplifies it), and, where a step of
+        /// the run straddles a kink of the friction law (v1 = 0 inside a stage), a bias
+        /// proportional to the step. So each name is tried at steps h, h/10, h/100 and passes
+        /// at the first where the engine agrees within `rel` of the scale plus four times the
+        /// differences' own spread (h against 2h). A dropped or wrong term is off by far more.
+        fn check(&self, names: &[&str], h: &[f64], rel: f64) {
+            let d = self.engine(names);
+            let n = names.len();
+            let nt = d.len() / n;
+            for (j, name) in names.iter().enumerate() {
+                let mut verdicts = Vec::new();
+                let passed = [1.0, 0.1, 0.01].iter().any(|f| {
+                    let fd = self.differences(&[name], &[h[j] * f]);
+                    let fd2 = self.differences(&[name], &[2.0 * h[j] * f]);
+                    let scale = fd.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+                    assert!(scale > 0.0, "{name}: the reading does not depend on it");
+                    let noise = fd.iter().zip(&fd2).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+                    let worst = (0..nt).map(|t| (d[t * n + j] - fd[t]).abs()).fold(0.0, f64::max);
+                    verdicts.push(format!("h x {f}: {:.2e} of the scale (spread {:.2e})", worst / scale, noise / scale));
+                    noise <= 1e-3 * scale && worst <= rel * scale + 4.0 * noise
+                });
+                eprintln!("{name}: {}", verdicts.join("; "));
+                assert!(passed, "{name}: engine and central differences disagree: {}", verdicts.join("; "));
+            }
+        }
+    }
+
+    fn rel_step(c: &Case, name: &str) -> f64 {
+        1e-6 * c.p.get(name).or(c.e.get(name)).unwrap().abs()
+    }
+
+    #[test]
+    fn lps_sensitivities_equal_central_differences() {
+        let c = paper(Structure::Lps, Effects::default());
+        let names = ["mu_k", "mu_s", "m2", "fric_alpha", "sigma1", "sigma2", "d33", "hyst_alpha", "fric_beta", "stribeck_velocity"];
+        // the reading hardly depends on sigma1 over this run: a larger step keeps its
+        // difference above the rounding noise
+        let h: Vec<f64> = names.iter().map(|n| rel_step(&c, n) * if *n == "sigma1" { 100.0 } else { 1.0 }).collect();
+        c.check(&names, &h, 1e-6);
+    }
+
+    #[test]
+    fn exponents_at_their_special_values_are_differentiated_through_the_power() {
+        // delta = 2 and n = 1 take shortcuts in the plain run; their derivatives need the power
+        let c = paper(Structure::Lps, Effects::default());
+        c.check(&["stribeck_exponent", "fric_n"], &[2e-6, 1e-6], 1e-6);
+    }
+
+    #[test]
+    fn dps_sensitivities_equal_central_differences_including_the_bar() {
+        let c = paper(Structure::Dps(4), Effects::default());
+        let names = ["m1", "pe_youngs", "pe_density", "rayleigh_alpha", "rayleigh_beta", "normal_force", "pe_length"];
+        let h: Vec<f64> = names.iter().map(|n| rel_step(&c, n)).collect();
+        c.check(&names, &h, 1e-6);
+    }
+
+    #[test]
+    fn derived_normal_force_follows_the_masses() {
+        let mut c = paper(Structure::Lps, Effects::default());
+        c.derived_fn = true;
+        c.check(&["m1", "m2"], &[1e-7, 1e-7], 1e-6);
+        let m = c.model();
+        let err = parse_seeds(&m, &["normal_force".into()], true).unwrap_err();
+        assert!(err.contains("derived"), "{err}");
+    }
+
+    #[test]
+    fn initial_state_sensitivities_equal_central_differences() {
+        let c = paper(Structure::Lps, Effects::default());
+        c.check(&["q0", "v0", "v1"], &[1e-12, 1e-9, 1e-9], 1e-6);
+    }
+
+    #[test]
+    fn every_effect_parameter_has_its_sensitivity() {
+        let e = Effects {
+            theta_rad: 0.05,
+            k_ground: 2e3,
+            tau_amp: 2e-5,
+            kappa: 0.05,
+            tau_creep: 3e-4,
+            c_weight: 1.0,
+            eps: 0.05,
+            tau_sensor: 1e-5,
+            drift_rate: 1e-4,
+        };
+        let c = paper(Structure::Lps, e);
+        let names = EFFECT_NAMES;
+        let h: Vec<f64> = names.iter().map(|n| rel_step(&c, n)).collect();
+        c.check(&names, &h, 1e-6);
+    }
+
+    #[test]
+    fn a_rig_has_its_sensitivities() {
+        let mut p = Params::paper();
+        p.m1 = 0.5;
+        p.normal_force = 4.9;
+        let c = Case {
+            p,
+            e: Effects::default(),
+            s: Structure::Rig(RigDrive::Position { stiffness: 2e4, damping: 5.0 }),
+            hyst: false,
+            wave: PiecewiseLinear::new(vec![0.0, 1.0], vec![0.0, 2e-2]).unwrap(),
+            t_end: 0.02,
+            method: Method::Rk4 { dt: 2e-8 },
+            every: 10_000,
+            derived_fn: false,
+        };
+        let names = ["m1", "mu_k", "mu_s", "sigma2", "normal_force"];
+        let h: Vec<f64> = names.iter().map(|n| rel_step(&c, n)).collect();
+        c.check(&names, &h, 1e-6);
+    }
+
+    #[test]
+    fn adaptive_runs_are_differentiated_with_their_steps_held() {
+        // the derivative of each adaptive run against RK4's (checked against differences
+        // above): two discretisations of one derivative, agreeing to their tolerance
+        let mut rk4 = paper(Structure::Lps, Effects::default());
+        rk4.method = Method::Rk4 { dt: 1e-9 };
+        rk4.every = 10_000;
+        rk4.t_end = 0.6e-3;
+        let names = ["mu_k", "m2", "fric_alpha", "hyst_alpha"];
+        let reference = rk4.engine(&names);
+        for method in [
+            Method::Dopri5 { rtol: 1e-9, atol: 1e-9, first_step: 1e-9 },
+            Method::Rodas4 { rtol: 1e-8, atol: 1e-8, first_step: 1e-9 },
+        ] {
+            let mut c = rk4.clone();
+            c.method = method;
+            c.every = 1;
+            // the adaptive run saves every step: compare at the end of the run
+            let d = c.engine(&names);
+            let last = &d[d.len() - names.len()..];
+            let r_last = &reference[reference.len() - names.len()..];
+            for (j, name) in names.iter().enumerate() {
+                let rel = (last[j] - r_last[j]).abs() / r_last[j].abs();
+                eprintln!("{method:?} {name}: {rel:.2e} from RK4's");
+                assert!(rel < 1e-3, "{method:?} {name}: {} vs RK4 {}", last[j], r_last[j]);
+            }
+            let m = c.model();
+            let (_, held) = c.readings(&m.rest_state());
+            assert_eq!(held.steps.len() * m.layout.dim, held.states.len());
+        }
+    }
+
+    #[test]
+    fn more_names_than_one_pass_carries_agree_with_fewer() {
+        let c = paper(Structure::Lps, Effects::default());
+        let many = ["mu_k", "mu_s", "m1", "m2", "fric_alpha", "sigma1", "sigma2", "d33", "hyst_alpha", "q0"];
+        let d_many = c.engine(&many);
+        let d_one = c.engine(&["hyst_alpha"]);
+        let n = many.len();
+        for t in 0..d_one.len() {
+            assert_eq!(d_many[t * n + 8], d_one[t], "sample {t}");
+        }
+    }
+
+    #[test]
+    fn bad_names_are_refused_with_the_reason() {
+        let m = paper(Structure::Lps, Effects::default()).model();
+        let err = |names: &[&str]| parse_seeds(&m, &names.iter().map(|s| s.to_string()).collect::<Vec<_>>(), false).unwrap_err();
+        assert!(err(&["wind"]).contains("unknown sensitivity 'wind'"));
+        assert!(err(&["mu_k", "mu_k"]).contains("twice"));
+        assert!(err(&["tau_amp"]).contains("off"));
+        assert!(err(&["kappa"]).contains("off"));
+    }
+}
