@@ -154,6 +154,7 @@ def simulate(
     save_every: int,
     energy: bool,
     initial_state: Optional[NDArray[np.float64]] = None,
+    sensitivities: Optional[list[str]] = None,
 ) -> dict[str, Any]:
     """Simulate one run over [``t_start``, ``t_end``] [s] under the piecewise-linear input
     (``wave_t`` [s], ``wave_v`` [V]), from rest or from ``initial_state`` (the model's state
@@ -167,6 +168,9 @@ def simulate(
     ``t_end``) and ``state_components`` (list of (name, unit)); with ``energy`` also
     ``accounting`` (time x 7: works [J] input, friction, damping, external; impulses [N s]
     friction, Rayleigh, external), ``kinetic`` [J], ``strain`` [J], ``momentum`` [kg m/s].
+    With ``sensitivities`` (names), also ``sensitivity_names``, ``sensitivities`` (time x
+    names: d reading / d name, exact for the discrete run) and ``final_state_sensitivities``
+    (state components x names).
 
     Raises ValueError for invalid settings (see ``check_run``) and DivergenceError when the
     integration leaves its bounds."""
@@ -182,6 +186,7 @@ def start_batch(
     t_ends: Optional[NDArray[np.float64]] = None,
     t_starts: Optional[NDArray[np.float64]] = None,
     initial_states: Optional[NDArray[np.float64]] = None,
+    sensitivities: Optional[list[str]] = None,
 ) -> BatchRun:
     """Start a batch on a background thread. One row per point: ``params`` (P, 23) in
     ``param_names()`` order (NaN ``normal_force`` = derived from the masses), ``effects``
@@ -190,7 +195,9 @@ def start_batch(
     samples (t [s], V [V])). Optional per point: ``t_ends`` and ``t_starts`` [s] (P,) and
     ``initial_states`` (P, state size). ``t_end`` [s] is the span of points without their own.
     A row that is not a valid point gets status 4 (the others run); tables of the wrong shape
-    raise ValueError."""
+    raise ValueError. ``sensitivities`` (names: Table 1 and effect parameters, initial-state
+    components) adds to the result ``sensitivities`` (one (names x samples) array per point:
+    d trace / d name) and ``sensitivity_names``; needs recorded readings (``record_every``)."""
 
 def check_run(
     params: dict[str, float],

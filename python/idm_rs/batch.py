@@ -168,7 +168,7 @@ class Tables:
 def start(tables: Tables, structure: Structure, *, t_end: float, method: str = "rk4", dt: float = 1e-8,
           rtol: float = 1e-7, atol: float = 1e-7, first_step: Optional[float] = None, retries: int = 2,
           threads: Optional[int] = None, record_every: int = 0, final_states: bool = False,
-          skip_cycles: int = 1) -> Any:
+          skip_cycles: int = 1, sensitivities: Optional[Sequence[str]] = None) -> Any:
     """Start the batch on a background thread; returns an ``engine.BatchRun`` (``progress()``,
     ``wait(timeout)``, ``cancel()``, ``result()``). Settings as in :func:`run`."""
     config = structure.config(method=method, dt=float(dt), rtol=float(rtol), atol=float(atol),
@@ -180,7 +180,7 @@ def start(tables: Tables, structure: Structure, *, t_end: float, method: str = "
         t_ends = np.where(np.isnan(t_ends), float(t_end), t_ends)
     return engine.start_batch(config, float(t_end), _c(tables.params), _c(tables.effects), tables.wave_kind,
                               _c(tables.wave_fields), tables.sampled, _c(t_ends), _c(tables.t_starts),
-                              _c(tables.initial_states))
+                              _c(tables.initial_states), sensitivity_names(sensitivities) or None)
 
 
 def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: float, **how: Any) -> dict[str, Any]:
@@ -196,7 +196,10 @@ def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: 
     ``how``: ``method`` ("rk4", "dopri5" or "rodas4"), ``dt`` [s] (RK4 step), ``rtol``/``atol``
     and ``first_step`` [s] (adaptive), ``retries`` (RK4 retries at dt/2, dt/4 of a diverging
     point), ``threads``, ``record_every``, ``final_states``, ``skip_cycles`` (start-up cycles
-    left out of the steady-state metrics, default 1)."""
+    left out of the steady-state metrics, default 1), ``sensitivities`` (names, as for
+    :func:`idm_rs.simulate`; needs ``record_every``): then ``sensitivities`` is an array
+    (points x names x samples) of d trace / d name (NaN where a point did not finish or its
+    derivatives could not be taken, with the reason in ``reasons``), and ``sensitivity_names``."""
     tables = points if isinstance(points, Tables) else Tables.from_points(points)
     handle = start(tables, structure, t_end=t_end, **how)
     try:
@@ -208,6 +211,31 @@ def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: 
     out = dict(handle.result())
     if "final_states" in out:
         out["final_states"] = _stack_states(out["final_states"])
+    if "sensitivities" in out:
+        out["sensitivities"] = _stack_sensitivities(out["sensitivities"], len(out["sensitivity_names"]))
+    return out
+
+
+def sensitivity_names(names: Optional[Sequence[str]]) -> list[str]:
+    """The names to differentiate with respect to, as a list (one string is one name)."""
+    if names is None:
+        return []
+    if isinstance(names, str):
+        return [names]
+    out = list(names)
+    bad = [n for n in out if not isinstance(n, str)]
+    if bad:
+        raise TypeError(f"sensitivities must be names (strings), got {bad[0]!r}")
+    return out
+
+
+def _stack_sensitivities(per_point: list[NDArray[np.float64]], n: int) -> NDArray[np.float64]:
+    """(points x names x samples), NaN where a point has none (it did not finish); points of
+    different record lengths are padded with NaN at the end."""
+    samples = max((a.shape[1] for a in per_point), default=0)
+    out = np.full((len(per_point), n, samples), np.nan)
+    for i, a in enumerate(per_point):
+        out[i, :, :a.shape[1]] = a
     return out
 
 

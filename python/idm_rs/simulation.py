@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, Optional, Union
+from typing import TYPE_CHECKING, Literal, Optional, Sequence, Union
 
 import math
 import warnings
@@ -106,6 +106,23 @@ class SimulationResult:
     atol: float = math.nan
     #: False when Ctrl-C stopped the run: the arrays end where it stopped (``final_state`` empty)
     complete: bool = True
+    #: the names whose derivatives were asked for (``simulate(..., sensitivities=...)``)
+    sensitivity_names: tuple[str, ...] = ()
+    #: d reading / d name, shape (time, name) [m per unit of the name]
+    sensitivities: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+    #: d final_state / d name, shape (state component, name)
+    final_state_sensitivities: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+
+    def sensitivity(self, name: str) -> NDArray[np.float64]:
+        """d ``reading`` / d ``name`` at every saved time [m per unit of ``name``]: the exact
+        derivative of this discrete run (RK4 with its steps; an adaptive method with the steps
+        it accepted held), computed by the engine in forward mode. ``name`` must be one of the
+        ``sensitivities`` the run was asked for."""
+        if name not in self.sensitivity_names:
+            asked = ", ".join(self.sensitivity_names) or "none"
+            raise ValueError(f"no sensitivity '{name}' in this result (asked for: {asked}); "
+                             f"pass sensitivities=[..., '{name}'] to simulate()")
+        return self.sensitivities[:, self.sensitivity_names.index(name)]
 
     @property
     def main_body(self) -> NDArray[np.float64]:
@@ -207,6 +224,7 @@ def simulate(
     first_step: Optional[float] = None,
     t_start: Optional[float] = None,
     initial_state: Optional[ArrayLike] = None,
+    sensitivities: Optional[Sequence[str]] = None,
 ) -> SimulationResult:
     """Simulate the IDM over [``t_start``, ``t_end``] s, from rest or from ``initial_state``.
 
@@ -235,6 +253,17 @@ def simulate(
     run bit for bit. ``energy=True`` integrates the energy and momentum budgets alongside
     (``result.energy``; they then start from the initial state's accounting components). The GIL
     is released while the Rust core runs.
+
+    ``sensitivities``: names to differentiate the readings with respect to — any Table 1
+    parameter (``"mu_k"``), any effect parameter (``"k_ground"``; a lag's time constant only
+    while its effect is on) or a component of the initial state (``"q0"``, ``"v0"``, ``"fh"``;
+    see :meth:`State.components`). ``result.sensitivity(name)`` is then d ``reading`` / d name at
+    every saved time, the exact derivative of this discrete run (forward-mode dual numbers
+    through the same right-hand side and integrator; an adaptive method's accepted steps are
+    held), not a finite difference; ``result.final_state_sensitivities`` the same for the final
+    state. With the normal force left to its default it follows the masses (d/d m1 includes
+    it). At the friction law's kinks (v1 = 0, dg/dt = 0) the derivative is the one-sided one of
+    the branch the run took. Cost: about 1.5-3 plain runs per name (docs/SENSITIVITIES.md).
     """
     if not isinstance(params, Params):
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
@@ -247,13 +276,14 @@ def simulate(
         dt = 1e-8
     adaptive = method in methods.ADAPTIVE
     step = float(first_step if adaptive and first_step is not None else (dt if dt is not None else 1e-8))
-    from .batch import Structure
+    from .batch import Structure, sensitivity_names
 
     structure = Structure.of(model, int(n_elements), bool(piezo_hysteresis))
     config = structure.config(
         method=method, dt=step, rtol=float(rtol), atol=float(atol), first_step=step)
     if t_start is None:
         t_start = initial_state.t if isinstance(initial_state, State) else 0.0
+    names = sensitivity_names(sensitivities)
     bt, bv = waveform.breakpoints()
     y0 = None if initial_state is None else np.ascontiguousarray(initial_state, dtype=float).ravel()
     if method == "rk4" and (t_end - t_start) / step > LONG_RUN_STEPS:
@@ -272,6 +302,7 @@ def simulate(
         int(save_every),
         bool(energy),
         y0,
+        names or None,
     )
     complete = bool(out["complete"])
     if not complete:
@@ -317,4 +348,8 @@ def simulate(
         rtol=float(rtol) if adaptive else math.nan,
         atol=float(atol) if adaptive else math.nan,
         complete=complete,
+        sensitivity_names=tuple(out.get("sensitivity_names", ())),
+        sensitivities=out.get("sensitivities", np.zeros((0, 0))),
+        final_state_sensitivities=out.get("final_state_sensitivities", np.zeros((0, 0))),
     )
+

@@ -22,7 +22,8 @@ use crate::mechanics::Structure;
 use crate::model::{Model, N_ACCOUNTING};
 use crate::params::{Params, PARAM_NAMES};
 use crate::rig::RigDrive;
-use crate::simulate::simulate_until;
+use crate::sensitivity::{derivatives, parse_seeds, Schedule};
+use crate::simulate::simulate_keeping;
 use crate::waveform::PiecewiseLinear;
 
 create_exception!(
@@ -346,9 +347,11 @@ fn check_run(
     check_task(&task, &config.method()?).map_err(|e| value_error(e.to_string()))
 }
 
-/// Simulate one run; returns a dict of numpy arrays (see `idm_rs.simulate`).
+/// Simulate one run; returns a dict of numpy arrays (see `idm_rs.simulate`). With
+/// `sensitivities` (names), also `sensitivities` (saved times x names): d reading / d name,
+/// and `final_state_sensitivities` (state components x names).
 #[pyfunction]
-#[pyo3(signature = (params, effects, wave_t, wave_v, t_start, t_end, config, save_every, energy, initial_state=None))]
+#[pyo3(signature = (params, effects, wave_t, wave_v, t_start, t_end, config, save_every, energy, initial_state=None, sensitivities=None))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
@@ -362,8 +365,12 @@ fn simulate<'py>(
     save_every: usize,
     energy: bool,
     initial_state: Option<PyReadonlyArray1<'_, f64>>,
+    sensitivities: Option<Vec<String>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let m = config.model(parse_params(&params)?, parse_effects(&effects)?, energy)?;
+    let names = sensitivities.unwrap_or_default();
+    let normal_force_derived = !params.contains_key("normal_force");
+    let seeds = parse_seeds(&m, &names, normal_force_derived).map_err(value_error)?;
     let method = config.method()?;
     let wave = PiecewiseLinear::new(slice1(&wave_t).into_owned(), slice1(&wave_v).into_owned())
         .map_err(value_error)?;
@@ -374,10 +381,20 @@ fn simulate<'py>(
     // the run goes on a worker thread; this one looks for Ctrl-C (Python's signal handlers run
     // only here) and asks the run to stop, keeping the trajectory saved so far
     let cancel = AtomicBool::new(false);
-    let (traj, complete) = std::thread::scope(|scope| -> PyResult<_> {
+    let (traj, complete, derived) = std::thread::scope(|scope| -> PyResult<_> {
         let worker = scope.spawn(|| {
             catch_unwind(AssertUnwindSafe(|| {
-                simulate_until(&m, &wave, t_start, t_end, &y0, &method, save_every, &cancel)
+                let keep = !seeds.is_empty();
+                let (traj, complete) = simulate_keeping(&m, &wave, t_start, t_end, &y0, &method, save_every, keep, &cancel)?;
+                if !(complete && keep) {
+                    return Ok((traj, complete, None));
+                }
+                let schedule = Schedule { every: save_every, also_last: true };
+                let d = derivatives(&m, &wave, t_start, t_end, &y0, &method, &traj.held, schedule, &seeds, normal_force_derived, &cancel);
+                match d {
+                    None => Ok((traj, false, None)), // cancelled: the trajectory stands
+                    Some(d) => Ok((traj, true, Some(d?))),
+                }
             }))
         });
         while !py.detach(|| {
@@ -418,6 +435,13 @@ fn simulate<'py>(
     d.set_item("final_state", traj.final_state.into_pyarray(py))?;
     d.set_item("state_components", m.layout.components())?;
     d.set_item("complete", complete)?;
+    if let Some(s) = derived {
+        let n = s.names;
+        d.set_item("sensitivity_names", names)?;
+        d.set_item("sensitivities", arr2(s.readings, n)?)?;
+        let dim = s.final_state.len() / n.max(1);
+        d.set_item("final_state_sensitivities", s.final_state.into_pyarray(py).reshape([dim, n])?)?;
+    }
     if energy {
         d.set_item("accounting", arr2(traj.accounting, N_ACCOUNTING)?)?;
         d.set_item("kinetic", traj.kinetic.into_pyarray(py))?;
@@ -432,6 +456,8 @@ fn simulate<'py>(
 struct BatchRun {
     runner: BatchRunner,
     final_states: bool,
+    /// names whose derivatives each point returns
+    sensitivities: Vec<String>,
 }
 
 #[pymethods]
@@ -479,6 +505,17 @@ impl BatchRun {
             }
             d.set_item("final_states", states)?;
         }
+        if !self.sensitivities.is_empty() {
+            // one (names x samples) array per point; empty where the point did not finish
+            let n = self.sensitivities.len();
+            let sens = PyList::empty(py);
+            for o in &outputs {
+                let samples = o.sensitivities.len() / n;
+                sens.append(PyArray1::from_slice(py, &o.sensitivities).reshape([n, samples])?)?;
+            }
+            d.set_item("sensitivities", sens)?;
+            d.set_item("sensitivity_names", self.sensitivities.clone())?;
+        }
         let reasons = PyList::empty(py);
         for o in &outputs {
             reasons.append(&o.reason)?;
@@ -512,7 +549,7 @@ impl BatchRun {
 /// `wave_fields(wave_kind)` order; optional per-point `t_ends`, `t_starts` [s] and
 /// `initial_states` (P, state size).
 #[pyfunction]
-#[pyo3(signature = (config, t_end, params, effects, wave_kind, wave_fields, sampled=None, t_ends=None, t_starts=None, initial_states=None))]
+#[pyo3(signature = (config, t_end, params, effects, wave_kind, wave_fields, sampled=None, t_ends=None, t_starts=None, initial_states=None, sensitivities=None))]
 #[allow(clippy::too_many_arguments)]
 fn start_batch(
     py: Python<'_>,
@@ -526,6 +563,7 @@ fn start_batch(
     t_ends: Option<PyReadonlyArray1<'_, f64>>,
     t_starts: Option<PyReadonlyArray1<'_, f64>>,
     initial_states: Option<PyReadonlyArray2<'_, f64>>,
+    sensitivities: Option<Vec<String>>,
 ) -> PyResult<BatchRun> {
     let samples = sampled
         .as_ref()
@@ -540,6 +578,7 @@ fn start_batch(
         record_every: config.record_every,
         final_states: config.final_states,
         skip_cycles: config.skip_cycles,
+        sensitivities: sensitivities.unwrap_or_default(),
     };
     let (p, e, w) = (slice2(&params), slice2(&effects), slice2(&wave_fields));
     let (te, ts) = (t_ends.as_ref().map(slice1), t_starts.as_ref().map(slice1));
@@ -554,10 +593,12 @@ fn start_batch(
         states: st.as_ref().map(|(s, d)| (&s[..], *d)),
     };
     let points = detached(py, || tables.points())?.map_err(value_error)?;
+    let cfg_names = cfg.sensitivities.clone();
     let runner = BatchRunner::start(cfg, points, config.threads).map_err(value_error)?;
     Ok(BatchRun {
         runner,
         final_states: config.final_states,
+        sensitivities: cfg_names,
     })
 }
 

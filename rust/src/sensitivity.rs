@@ -215,10 +215,21 @@ impl Pass<'_> {
             })
             .collect();
         let task = Task { model: &dual, wave: self.wave, t_start: self.t_start, t_end: self.t_end, y0: &y0 };
-        let mut rec = Recorder { model: &dual, schedule: self.schedule, until: self.schedule.every, k: seeds.len(), out: Vec::new() };
+        let mut rec = Recorder {
+            model: &dual,
+            schedule: self.schedule,
+            until: self.schedule.every,
+            k: seeds.len(),
+            out: Vec::new(),
+            blew_up: None,
+            v_peak: 0.0,
+        };
         let mut ends = run_tasks_one_by_one(&[task], self.method, self.held, &mut rec, cancel)?;
         let (end, y) = ends.pop().expect("one task");
         Some(match end {
+            LaneEnd::Finished { .. } if rec.blew_up.is_some() => {
+                Err(unbounded(m, rec.blew_up.unwrap_or_default(), rec.v_peak, self.method))
+            }
             LaneEnd::Finished { .. } => {
                 let k = seeds.len();
                 let mut fin = vec![0.0; y.len() * k];
@@ -240,19 +251,47 @@ impl Pass<'_> {
     }
 }
 
-/// Records the first `k` derivatives of the reading on the schedule of the plain run's saver.
+/// The error of a pass whose derivatives stopped being finite at `t` [s]: with RK4, a step
+/// beyond the stability limit of the friction state while sliding at up to `v_peak` [m/s].
+/// The run's values stay bounded there (the friction law saturates them) but chatter from step
+/// to step, and the derivative of that chatter grows without bound.
+fn unbounded(model: &Model, t: f64, v_peak: f64, method: &Method) -> SimError {
+    let hint = match method {
+        Method::Rk4 { dt } => {
+            let limit = crate::drive::RK4_STABLE_OMEGA_DT / model.friction.sliding_stiffness(v_peak);
+            format!(
+                "dt = {dt:e} s is beyond the stability limit of the friction state while sliding at up to {v_peak:.3e} m/s \
+                 (dt <= {limit:.2e} s): the run's values stay bounded by the friction law's saturation but chatter \
+                 from step to step, and their derivatives grow without bound; use a smaller dt"
+            )
+        }
+        _ => "use tighter tolerances".into(),
+    };
+    SimError::Diverged {
+        t,
+        message: format!("the derivatives are not finite from t = {t:.6e} s: {hint}"),
+    }
+}
+
+/// Records the first `k` derivatives of the reading on the schedule of the plain run's saver,
+/// the first time a derivative is not finite, and the peak |v1| [m/s].
 struct Recorder<'a, const N: usize> {
     model: &'a Model<DualSVec64<N>>,
     schedule: Schedule,
     until: usize,
     k: usize,
     out: Vec<f64>,
+    blew_up: Option<f64>,
+    v_peak: f64,
 }
 
 impl<const N: usize> Recorder<'_, N> {
     fn record(&mut self, t: f64, y: &[DualSVec64<N>]) {
         let mut d = [0.0; N];
         self.model.reading(t, y).derivatives(&mut d);
+        if self.blew_up.is_none() && d.iter().any(|x| !x.is_finite()) {
+            self.blew_up = Some(t);
+        }
         self.out.extend_from_slice(&d[..self.k]);
     }
 }
@@ -272,6 +311,7 @@ impl<const N: usize> Observer<DualSVec64<N>> for Recorder<'_, N> {
         _s: Option<(DualSVec64<N>, DualSVec64<N>)>,
         last: bool,
     ) {
+        self.v_peak = self.v_peak.max(y[self.model.layout.dof].value().abs());
         self.until -= 1;
         if self.until == 0 || (last && self.schedule.also_last) {
             self.record(t, y);
@@ -287,7 +327,7 @@ mod tests {
     use crate::mechanics::Structure;
     use crate::params::Params;
     use crate::rig::RigDrive;
-    use crate::simulate::simulate;
+    use crate::simulate::simulate_keeping;
 
     const NEVER: AtomicBool = AtomicBool::new(false);
 
@@ -337,7 +377,7 @@ mod tests {
 
         /// Readings on the saver's schedule, and the steps and states an adaptive run held.
         fn readings(&self, y0: &[f64]) -> (Vec<f64>, Held) {
-            let r = simulate(&self.model(), &self.wave, 0.0, self.t_end, y0, &self.method, self.every).unwrap();
+            let (r, _) = simulate_keeping(&self.model(), &self.wave, 0.0, self.t_end, y0, &self.method, self.every, true, &NEVER).unwrap();
             (r.reading, r.held)
         }
 

@@ -132,6 +132,23 @@ pub fn simulate_until(
     save_every: usize,
     cancel: &AtomicBool,
 ) -> Result<(Trajectory, bool), SimError> {
+    simulate_keeping(model, wave, t_start, t_end, y0, method, save_every, false, cancel)
+}
+
+/// [`simulate_until`] that also keeps, with `keep_held` and an adaptive method, the steps and
+/// states a derivative pass holds (`Trajectory::held`; one state per step).
+#[allow(clippy::too_many_arguments)]
+pub fn simulate_keeping(
+    model: &Model,
+    wave: &PiecewiseLinear,
+    t_start: f64,
+    t_end: f64,
+    y0: &[f64],
+    method: &Method,
+    save_every: usize,
+    keep_held: bool,
+    cancel: &AtomicBool,
+) -> Result<(Trajectory, bool), SimError> {
     if save_every == 0 {
         return Err(SimError::Input(
             "parameter 'save_every' must be at least 1".into(),
@@ -150,7 +167,7 @@ pub fn simulate_until(
         wave,
         save_every,
         until_save: save_every,
-        keep_steps: !matches!(method, Method::Rk4 { .. }),
+        keep_steps: keep_held && !matches!(method, Method::Rk4 { .. }),
         out: Trajectory {
             dof: model.layout.dof,
             ..Default::default()

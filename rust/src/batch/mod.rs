@@ -25,7 +25,7 @@ use crate::params::Params;
 use crate::waveform::PiecewiseLinear;
 
 /// What is common to every point of a batch.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct BatchConfig {
     pub structure: Structure,
     pub piezo_hysteresis: bool,
@@ -41,6 +41,9 @@ pub struct BatchConfig {
     pub final_states: bool,
     /// start-up cycles of a sawtooth train left out of the steady-state metrics
     pub skip_cycles: usize,
+    /// names whose derivatives of the recorded readings each point returns (Table 1 and
+    /// effect parameters, initial-state components; see `sensitivity.rs`); empty for none
+    pub sensitivities: Vec<String>,
 }
 
 impl BatchConfig {
@@ -50,6 +53,9 @@ impl BatchConfig {
         self.method.validate()?;
         if !matches!(self.method, Method::Rk4 { .. }) && self.record_every > 0 {
             return Err("recording readings needs method 'rk4'".into());
+        }
+        if !self.sensitivities.is_empty() && self.record_every == 0 {
+            return Err("sensitivities are derivatives of the recorded readings: set record_every (and method 'rk4')".into());
         }
         Ok(())
     }
@@ -68,6 +74,8 @@ pub struct PointSpec {
     pub t_start: f64,
     /// initial state (see `Layout::components`); `None`: at rest
     pub y0: Option<Vec<f64>>,
+    /// the normal force was derived from the masses (its derivative follows theirs)
+    pub normal_force_derived: bool,
 }
 
 impl PointSpec {
@@ -81,6 +89,7 @@ impl PointSpec {
             t_end: None,
             t_start: 0.0,
             y0: None,
+            normal_force_derived: false,
         }
     }
 
@@ -95,6 +104,9 @@ pub struct PointOutput {
     pub metrics: PointMetrics,
     pub trace: Vec<f64>,
     pub final_state: Vec<f64>,
+    /// d trace / d name for the batch's sensitivity names, row-major [name][sample] (empty
+    /// unless asked)
+    pub sensitivities: Vec<f64>,
     /// why the status is not `Ok` (empty when it is)
     pub reason: String,
 }
@@ -105,6 +117,7 @@ impl PointOutput {
             metrics: PointMetrics::with_status(status),
             trace: Vec::new(),
             final_state: Vec::new(),
+            sensitivities: Vec::new(),
             reason: match status {
                 Status::NotRun => "not run: the batch was cancelled first".into(),
                 _ => String::new(),
@@ -155,6 +168,7 @@ mod tests {
             record_every: 0,
             final_states: false,
             skip_cycles: 0,
+            sensitivities: Vec::new(),
         }
     }
 
@@ -319,5 +333,57 @@ mod tests {
             assert_eq!(o.trace, t.reading);
             assert_eq!(o.metrics.final_position, t.final_state[0]);
         }
+    }
+
+    #[test]
+    fn batch_sensitivities_equal_those_of_a_single_run() {
+        use crate::sensitivity::{derivatives, parse_seeds, Schedule};
+        // dt within the friction state's stability limit at the sliding speeds of these points
+        let rk4 = Method::Rk4 { dt: 5e-9 };
+        let mut c = cfg(rk4, Structure::Lps);
+        c.record_every = 200;
+        let names = ["mu_k", "m2", "k_ground", "q0"];
+        c.sensitivities = names.iter().map(|s| s.to_string()).collect();
+        let mut sp = specs(3);
+        sp[1].effects.k_ground = 500.0;
+        sp[2].normal_force_derived = true;
+        let r = run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        for (s, o) in sp.iter().zip(&r) {
+            let model = Model::new(s.params, s.effects, Structure::Lps, true, false).unwrap();
+            let seeds = parse_seeds(&model, &c.sensitivities, s.normal_force_derived).unwrap();
+            let schedule = Schedule { every: 200, also_last: false };
+            let d = derivatives(&model, &s.wave, 0.0, c.t_end, &model.rest_state(), &rk4, &Default::default(), schedule, &seeds, s.normal_force_derived, &AtomicBool::new(false))
+                .unwrap()
+                .unwrap();
+            let nt = o.trace.len();
+            assert_eq!(o.sensitivities.len(), names.len() * nt);
+            for j in 0..names.len() {
+                for t in 0..nt {
+                    assert_eq!(o.sensitivities[j * nt + t], d.readings[t * names.len() + j], "{} at {t}", names[j]);
+                }
+            }
+        }
+        // the derived normal force makes d/dm2 differ
+        assert_ne!(r[0].sensitivities[nt_of(&r[0]) * 2 - 1], r[2].sensitivities[nt_of(&r[2]) * 2 - 1]);
+        assert!(r.iter().all(|o| o.sensitivities.iter().all(|x| x.is_finite())));
+        // at RK4's stability limit for the friction state the values chatter but stay bounded;
+        // their derivatives do not, and the point says so (its readings stand)
+        let mut coarse = c.clone();
+        coarse.method = RK4;
+        coarse.record_every = 50;
+        let r = run_batch(&coarse, &sp[2..], &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        assert_eq!(r[0].metrics.status, Status::Ok);
+        assert!(r[0].reason.contains("stability limit of the friction state"), "{}", r[0].reason);
+        // a name that is not there makes the point invalid, with the reason
+        c.sensitivities = vec!["tau_amp".into()];
+        let r = run_batch(&c, &sp[..1], &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        assert_eq!(r[0].metrics.status, Status::Invalid);
+        assert!(r[0].reason.contains("'tau_amp'"), "{}", r[0].reason);
+        c.record_every = 0;
+        assert!(c.validate().unwrap_err().contains("record_every"));
+    }
+
+    fn nt_of(o: &PointOutput) -> usize {
+        o.trace.len()
     }
 }

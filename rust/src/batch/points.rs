@@ -128,6 +128,7 @@ impl PointTables<'_> {
         spec.t_end = self.t_ends.map(|t| t[i]);
         spec.t_start = self.t_starts.map_or(0.0, |t| t[i]);
         spec.y0 = self.states.map(|(s, d)| s[i * d..(i + 1) * d].to_vec());
+        spec.normal_force_derived = pairs.len() < PARAM_NAMES.len();
         Ok(spec)
     }
 

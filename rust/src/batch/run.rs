@@ -5,8 +5,10 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use rayon::prelude::*;
 
+use crate::dopri5::Held;
 use crate::drive::{check_task, run_tasks, LaneEnd, Method, SimError, Task};
 use crate::model::Model;
+use crate::sensitivity::{derivatives, parse_seeds, Schedule};
 
 use super::metrics::{MetricsObserver, PointMetrics};
 use super::{BatchConfig, PointOutput, PointSpec, Status};
@@ -107,6 +109,7 @@ fn run_group(
                         metrics: obs.finish(i, &y, duration, dt_used, steps),
                         trace: std::mem::take(&mut obs.traces[i]),
                         final_state: if cfg.final_states { y } else { Vec::new() },
+                        sensitivities: Vec::new(),
                         reason: String::new(),
                     })
                 }
@@ -171,8 +174,46 @@ fn retry(cfg: &BatchConfig, ready: &Ready, first_failure: f64, cancel: &AtomicBo
         metrics: PointMetrics::diverged(failed_at, dt_tried),
         trace: Vec::new(),
         final_state: Vec::new(),
+        sensitivities: Vec::new(),
         reason: format!("diverged at t = {failed_at:.6e} s {how}"),
     })
+}
+
+/// Add the derivatives of a finished point's recorded readings (at the RK4 step it finished
+/// with, a retry's included) with respect to the batch's sensitivity names; a point whose
+/// names cannot be differentiated becomes invalid with the reason. `None` if cancelled.
+fn add_sensitivities(cfg: &BatchConfig, ready: &Ready, mut out: PointOutput, cancel: &AtomicBool) -> Option<PointOutput> {
+    if cfg.sensitivities.is_empty() || !matches!(out.metrics.status, Status::Ok | Status::Retried) {
+        return Some(out);
+    }
+    let seeds = match parse_seeds(&ready.model, &cfg.sensitivities, ready.spec.normal_force_derived) {
+        Ok(s) => s,
+        Err(why) => return Some(PointOutput::invalid(why)),
+    };
+    let (Method::Rk4 { dt }, dt_used) = (cfg.method, out.metrics.dt_used) else {
+        return Some(out); // refused by BatchConfig::validate
+    };
+    // a retry halves the step and doubles the steps between recorded readings
+    let every = cfg.record_every * (dt / dt_used).round().max(1.0) as usize;
+    let schedule = Schedule { every, also_last: false };
+    let method = Method::Rk4 { dt: dt_used };
+    let (t_start, t_end) = (ready.spec.t_start, ready.spec.t_end(cfg));
+    let held = Held::default();
+    let d = derivatives(&ready.model, &ready.spec.wave, t_start, t_end, &ready.y0, &method, &held, schedule, &seeds, ready.spec.normal_force_derived, cancel)?;
+    match d {
+        Ok(d) => {
+            let (n, nt) = (d.names, d.readings.len() / d.names.max(1));
+            // [time][name] -> [name][time]
+            out.sensitivities = (0..n * nt).map(|k| d.readings[(k % nt) * n + k / nt]).collect();
+            Some(out)
+        }
+        Err(e) => {
+            // the readings stand; their derivatives do not, and the reason says why
+            out.sensitivities = vec![f64::NAN; seeds.len() * out.trace.len()];
+            out.reason = format!("sensitivities: {e}");
+            Some(out)
+        }
+    }
 }
 
 /// End of the lane group starting at `start`: up to LANES points sharing one state layout.
@@ -219,6 +260,7 @@ fn run_chunk(
                 Ok(x) => Some(x),
                 Err(t) => retry(cfg, r, t, cancel),
             };
+            let res = res.and_then(|o| add_sensitivities(cfg, r, o, cancel));
             if res.is_some() {
                 done.fetch_add(1, Ordering::Relaxed);
             }
