@@ -334,7 +334,7 @@ impl<T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> Rhs<T> for M
     #[inline(always)]
     fn eval(&mut self, lane: usize, tau: f64, y: &[T], dy: &mut [T]) {
         let out = self.models[lane].rhs_impl::<N, EXTRAS>(
-            self.v0[lane] + self.slope[lane] * tau,
+            T::from(self.v0[lane] + self.slope[lane] * tau),
             self.slope[lane],
             y,
             dy,

@@ -1,10 +1,14 @@
 //! The analytic Jacobian of the model's right-hand side, for implicit (Rosenbrock) integrators:
 //! J = df/dy (row-major, dim x dim) and the explicit time derivative df/dt along the step's
 //! linear input. Every term mirrors one term of `Model::rhs_impl`; a test checks the whole
-//! matrix against central finite differences for every structure and effect.
+//! matrix against the Jacobian derived from the right-hand side itself by dual numbers
+//! ([`Model::derived_jacobian`]) for every structure and effect. The hand-written one stays
+//! because it costs a fraction of the derived one per Rodas4 step (benches/RESULTS.md).
+
+use num_dual::DualSVec64;
 
 use crate::model::Model;
-use crate::scalar::Scalar;
+use crate::scalar::{seeded, Scalar};
 
 impl<T: Scalar> Model<T> {
     /// Fill `jac` (dim x dim, row-major) with df/dy and `dfdt` (dim) with df/dt at state `y`,
@@ -155,6 +159,53 @@ impl<T: Scalar> Model<T> {
     }
 }
 
+impl Model {
+    /// This model with its values as one-component dual numbers (no parameter seeded): the
+    /// model [`Model::derived_jacobian`] differentiates.
+    pub fn dual(&self) -> Model<DualSVec64<1>> {
+        Model::build(
+            self.params,
+            self.effects,
+            self.structure,
+            self.hysteresis.is_some(),
+            self.layout.accounting.is_some(),
+            |_, v| DualSVec64::<1>::from(v),
+            false,
+        )
+        .expect("a model that was built once builds again")
+    }
+}
+
+impl Model<DualSVec64<1>> {
+    /// df/dy and df/dt (as [`Model::jacobian`]) derived from the right-hand side itself by
+    /// forward-mode dual numbers: one pass per state component, seeded in that component, and
+    /// one seeded in the commanded voltage (df/dt = df/dV dV/dt along the step's linear input).
+    /// No hand-derived term: the reference the analytic Jacobian is tested against, and the
+    /// Jacobian an implicit method could use for any new term (at `dim + 1` evaluations of the
+    /// right-hand side on dual numbers; see benches/RESULTS.md for its cost).
+    pub fn derived_jacobian(&self, v_cmd: f64, dv_cmd: f64, y: &[f64], jac: &mut [f64], dfdt: &mut [f64]) {
+        let d = y.len();
+        let mut yd: Vec<DualSVec64<1>> = y.iter().map(|&x| DualSVec64::<1>::from(x)).collect();
+        let mut f = vec![DualSVec64::<1>::from(0.0); d];
+        let mut col = [0.0];
+        let v = DualSVec64::<1>::from(v_cmd);
+        for c in 0..d {
+            yd[c] = seeded::<1>(y[c], 0);
+            self.rhs_impl::<0, true>(v, dv_cmd, &yd, &mut f);
+            for r in 0..d {
+                f[r].derivatives(&mut col);
+                jac[r * d + c] = col[0];
+            }
+            yd[c] = DualSVec64::<1>::from(y[c]);
+        }
+        self.rhs_impl::<0, true>(seeded::<1>(v_cmd, 0), dv_cmd, &yd, &mut f);
+        for r in 0..d {
+            f[r].derivatives(&mut col);
+            dfdt[r] = col[0] * dv_cmd;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use crate::effects::Effects;
@@ -163,36 +214,12 @@ mod tests {
     use crate::params::Params;
     use crate::rig::RigDrive;
 
-    /// Central differences of the right-hand side in every state component and in time.
-    fn numeric(m: &Model, v: f64, dv: f64, y: &[f64]) -> (Vec<f64>, Vec<f64>) {
-        let d = y.len();
-        let (mut jac, mut ft) = (vec![0.0; d * d], vec![0.0; d]);
-        let (mut fp, mut fm) = (vec![0.0; d], vec![0.0; d]);
-        for c in 0..d {
-            let h = 1e-6 * y[c].abs().max(1e-12);
-            let (mut yp, mut ym) = (y.to_vec(), y.to_vec());
-            yp[c] += h;
-            ym[c] -= h;
-            m.rhs(v, dv, &yp, &mut fp);
-            m.rhs(v, dv, &ym, &mut fm);
-            for r in 0..d {
-                jac[r * d + c] = (fp[r] - fm[r]) / (2.0 * h);
-            }
-        }
-        let ht = 1e-9;
-        m.rhs(v + dv * ht, dv, y, &mut fp);
-        m.rhs(v - dv * ht, dv, y, &mut fm);
-        for r in 0..d {
-            ft[r] = (fp[r] - fm[r]) / (2.0 * ht);
-        }
-        (jac, ft)
-    }
-
     fn check(m: &Model, y: &[f64], v: f64, dv: f64) {
         let d = y.len();
         let (mut jac, mut ft) = (vec![0.0; d * d], vec![0.0; d]);
         m.jacobian(v, dv, y, &mut jac, &mut ft);
-        let (nj, nt) = numeric(m, v, dv, y);
+        let (mut nj, mut nt) = (vec![0.0; d * d], vec![0.0; d]);
+        m.dual().derived_jacobian(v, dv, y, &mut nj, &mut nt);
         let names = m.layout.components();
         for r in 0..d {
             // each row compared at the scale of its largest entry times the column's magnitude
@@ -203,8 +230,8 @@ mod tests {
             for c in 0..d {
                 let err = (jac[r * d + c] - nj[r * d + c]).abs() * y[c].abs().max(1e-12);
                 assert!(
-                    err <= 1e-5 * row_scale,
-                    "d f[{}] / d {}: analytic {:e}, numeric {:e}",
+                    err <= 1e-12 * row_scale,
+                    "d f[{}] / d {}: analytic {:e}, derived {:e}",
                     names[r].0,
                     names[c].0,
                     jac[r * d + c],
@@ -212,8 +239,8 @@ mod tests {
                 );
             }
             assert!(
-                (ft[r] - nt[r]).abs() <= 1e-6 * nt[r].abs() + 1e-6 * row_scale,
-                "d f[{}] / dt: analytic {:e}, numeric {:e}",
+                (ft[r] - nt[r]).abs() <= 1e-12 * nt[r].abs() + 1e-12 * row_scale,
+                "d f[{}] / dt: analytic {:e}, derived {:e}",
                 names[r].0,
                 ft[r],
                 nt[r]
@@ -244,7 +271,7 @@ mod tests {
     }
 
     #[test]
-    fn analytic_jacobian_matches_finite_differences() {
+    fn analytic_jacobian_equals_the_one_derived_from_the_right_hand_side() {
         let p = Params::paper();
         let all = Effects {
             tau_amp: 2e-5,

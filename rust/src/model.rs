@@ -269,10 +269,10 @@ impl<T: Scalar> Model<T> {
 
     /// PE voltage and its rate [V, V/s] given the commanded ones (the amplifier may lag).
     #[inline(always)]
-    fn pe_voltage(&self, v_cmd: f64, dv_cmd: f64, y: &[T]) -> (T, T) {
+    fn pe_voltage(&self, v_cmd: T, dv_cmd: f64, y: &[T]) -> (T, T) {
         match self.layout.vpe {
-            Some(i) => (y[i], first_order_rate(T::from(v_cmd), y[i], self.inv_tau_amp)),
-            None => (T::from(v_cmd), T::from(dv_cmd)),
+            Some(i) => (y[i], first_order_rate(v_cmd, y[i], self.inv_tau_amp)),
+            None => (v_cmd, T::from(dv_cmd)),
         }
     }
 
@@ -309,7 +309,7 @@ impl<T: Scalar> Model<T> {
     /// Piezo force Fp [N] in state `y` at commanded voltage `v_cmd`.
     #[inline(always)]
     pub fn piezo_force(&self, v_cmd: f64, y: &[T]) -> T {
-        let (v, _) = self.pe_voltage(v_cmd, 0.0, y);
+        let (v, _) = self.pe_voltage(T::from(v_cmd), 0.0, y);
         let xc = self.layout.xc.map_or(T::zero(), |i| y[i]);
         piezo_force(self.kp, self.d33, v, xc, y[self.layout.h])
     }
@@ -339,7 +339,7 @@ impl<T: Scalar> Model<T> {
     /// dy/dt at commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s].
     #[inline(always)]
     pub fn rhs(&self, v_cmd: f64, dv_cmd: f64, y: &[T], dy: &mut [T]) {
-        self.rhs_impl::<0, true>(v_cmd, dv_cmd, y, dy);
+        self.rhs_impl::<0, true>(T::from(v_cmd), dv_cmd, y, dy);
     }
 
     /// The right-hand side. `N` > 0 fixes the node count at compile time; `EXTRAS = false`
@@ -349,7 +349,7 @@ impl<T: Scalar> Model<T> {
     #[inline(always)]
     pub fn rhs_impl<const N: usize, const EXTRAS: bool>(
         &self,
-        v_cmd: f64,
+        v_cmd: T,
         dv_cmd: f64,
         y: &[T],
         dy: &mut [T],
@@ -361,7 +361,7 @@ impl<T: Scalar> Model<T> {
         let (v_pe, dv_pe) = if EXTRAS {
             self.pe_voltage(v_cmd, dv_cmd, y)
         } else {
-            (T::from(v_cmd), T::from(dv_cmd))
+            (v_cmd, T::from(dv_cmd))
         };
         let h = y[ih];
         dy[ih] = self.hysteresis.map_or(T::zero(), |hy| hy.rate(dv_pe, h));
