@@ -6,7 +6,7 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use idm_rs::dopri5::Dopri5Options;
+use idm_rs::stepper::AdaptiveOptions;
 use idm_rs::drive::{Method, ModelRhs};
 use idm_rs::effects::Effects;
 use idm_rs::mechanics::Structure;
@@ -65,7 +65,7 @@ fn main() {
         let analytic = ns_per(200_000, || m.jacobian(black_box(v), dv, black_box(&y), &mut jac, &mut ft));
         let derived = ns_per(20_000, || dual.derived_jacobian(black_box(v), dv, black_box(&y), &mut jac, &mut ft));
 
-        let opts = Dopri5Options {
+        let opts = AdaptiveOptions {
             rtol: 1e-6,
             atol: 1e-6,
             scale: m.state_scales(80.0),

@@ -4,78 +4,12 @@
 //! never stepping across a kink of the input (the method's order would be lost there).
 
 use crate::scalar::Scalar;
-use crate::stepper::{Attempt, Rhs, State, Stepper};
+use crate::stepper::{AdaptiveOptions, AdaptiveStats, Attempt, Controller, Rhs, State, Stepper, HELD_EXHAUSTED};
+#[cfg(test)]
+use crate::stepper::Held;
 
-/// Tolerances and limits.
-#[derive(Clone, Debug)]
-pub struct Dopri5Options {
-    /// relative tolerance [-]
-    pub rtol: f64,
-    /// absolute tolerance, in units of each component's `scale` [-]
-    pub atol: f64,
-    /// characteristic magnitude of each state component (its unit); `inf` leaves a component
-    /// out of the error norm
-    pub scale: Vec<f64>,
-    /// first trial step [s]
-    pub h_init: f64,
-    /// below this step the run is declared divergent [s]
-    pub h_min: f64,
-    /// largest step [s]
-    pub h_max: f64,
-    /// Steps to take instead of choosing them (empty: adaptive): see [`Held`].
-    pub held: Held,
-}
-
-/// The steps another run accepted [s] and the states it reached with them (row-major, one
-/// state per step). A run given them takes exactly those steps, accepting each, and after
-/// each step sets its state's values to the other run's (keeping any derivative parts): how
-/// derivatives are carried along an adaptive run with its steps held. A replay alone would
-/// drift from the run it follows by rounding, and an explicit method in a stiff phase, whose
-/// steps sit at the stability limit, can amplify that drift until the error control (which a
-/// replay does not have) would have stepped in.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Held {
-    pub steps: Vec<f64>,
-    pub states: Vec<f64>,
-}
-
-impl Held {
-    pub fn is_empty(&self) -> bool {
-        self.steps.is_empty()
-    }
-}
-
-impl Dopri5Options {
-    /// The step lane `i` tries next: its own proposal, or the next held step (`None` when the
-    /// held steps ran out).
-    #[inline(always)]
-    pub(crate) fn next_step(&self, proposal: f64, taken: usize) -> Option<f64> {
-        if self.held.is_empty() {
-            Some(proposal)
-        } else {
-            self.held.steps.get(taken).copied()
-        }
-    }
-
-    /// After held step `taken` (counted from 0), set the values of `y` to the held state.
-    #[inline(always)]
-    pub(crate) fn pin<T: Scalar>(&self, taken: usize, y: &mut [T]) {
-        let d = y.len();
-        if let Some(row) = self.held.states.get(taken * d..(taken + 1) * d) {
-            for (x, v) in y.iter_mut().zip(row) {
-                x.set_value(*v);
-            }
-        }
-    }
-}
-
-/// Counters of a run.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Dopri5Stats {
-    pub accepted: u64,
-    pub rejected: u64,
-    pub evaluations: u64,
-}
+/// Dormand-Prince's control: a 4th-order embedded estimate (q = 5), growth up to 5x.
+const CONTROL: Controller = Controller { exponent: 0.2, max_growth: 5.0 };
 
 const C: [f64; 7] = [0.0, 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0, 1.0, 1.0];
 const A2: [f64; 1] = [1.0 / 5.0];
@@ -116,7 +50,7 @@ const E: [f64; 7] = [
 
 /// Stages, step sizes and options of `L` lanes; each lane keeps its own step size.
 pub struct Dopri5<S, const L: usize = 1> {
-    opts: [Dopri5Options; L],
+    opts: [AdaptiveOptions; L],
     k: [[S; 7]; L],
     tmp: [S; L],
     y_new: [S; L],
@@ -125,15 +59,13 @@ pub struct Dopri5<S, const L: usize = 1> {
     fresh: [bool; L],
     /// number of components in each lane's error norm
     in_norm: [f64; L],
-    pub stats: [Dopri5Stats; L],
+    pub stats: [AdaptiveStats; L],
 }
 
-/// The message of a lane whose held steps ran out before its end.
-pub(crate) const HELD_EXHAUSTED: &str = "the held steps ended before the run did";
 
 impl<S: State, const L: usize> Dopri5<S, L> {
     /// Buffers shaped like `zero` (all zeros), one set of options per lane.
-    pub fn new(opts: [Dopri5Options; L], zero: S) -> Self {
+    pub fn new(opts: [AdaptiveOptions; L], zero: S) -> Self {
         let h = std::array::from_fn(|i| opts[i].h_init.min(opts[i].h_max));
         let in_norm = std::array::from_fn(|i| {
             opts[i].scale.iter().filter(|s| s.is_finite()).count().max(1) as f64
@@ -145,7 +77,7 @@ impl<S: State, const L: usize> Dopri5<S, L> {
             h,
             fresh: [true; L],
             in_norm,
-            stats: [Dopri5Stats::default(); L],
+            stats: [AdaptiveStats::default(); L],
             opts,
         }
     }
@@ -232,31 +164,16 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
                     self.fresh[i] = true; // the last stage was evaluated before the pin
                 }
                 self.stats[i].accepted += 1;
-                let grow = if err == 0.0 {
-                    5.0
-                } else {
-                    (0.9 * err.powf(-0.2)).clamp(0.2, 5.0)
-                };
-                if !last[i] || grow < 1.0 {
-                    self.h[i] = (step[i] * grow).min(o.h_max);
-                }
+                self.h[i] = CONTROL.after_accept(err, step[i], last[i], self.h[i], o);
                 Attempt::Accepted {
                     step: step[i],
                     last: last[i],
                 }
             } else {
                 self.stats[i].rejected += 1;
-                let shrink = if err.is_finite() {
-                    (0.9 * err.powf(-0.2)).clamp(0.1, 0.9)
-                } else {
-                    0.1
-                };
-                self.h[i] = step[i] * shrink;
-                if self.h[i] < o.h_min {
-                    Attempt::Failed(format!("step size fell below {:.1e} s", o.h_min))
-                } else {
-                    Attempt::Rejected
-                }
+                let (h, outcome) = CONTROL.after_reject(err, step[i], o);
+                self.h[i] = h;
+                outcome
             }
         })
     }
@@ -298,8 +215,8 @@ fn combine<T: Scalar, S: AsRef<[T]>>(out: &mut [T], y: &[T], h: f64, a: &[f64], 
 mod tests {
     use super::*;
 
-    fn opts(rtol: f64) -> Dopri5Options {
-        Dopri5Options {
+    fn opts(rtol: f64) -> AdaptiveOptions {
+        AdaptiveOptions {
             rtol,
             atol: rtol,
             scale: vec![1.0; 2],
@@ -311,7 +228,7 @@ mod tests {
     }
 
     /// Lanes integrated from 0 to `t1[i]` with the bare stepper.
-    fn run<F: Rhs, const L: usize>(f: &mut F, ys: &mut [[f64; 2]; L], t1: [f64; L], o: &Dopri5Options) {
+    fn run<F: Rhs, const L: usize>(f: &mut F, ys: &mut [[f64; 2]; L], t1: [f64; L], o: &AdaptiveOptions) {
         let mut st: Dopri5<[f64; 2], L> = Dopri5::new(std::array::from_fn(|_| o.clone()), [0.0; 2]);
         let mut t = [0.0; L];
         let mut active = [true; L];

@@ -10,7 +10,8 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::dopri5::{Dopri5, Dopri5Options, Held};
+use crate::dopri5::Dopri5;
+use crate::stepper::{AdaptiveOptions, Held};
 use crate::model::{with_state_size, Model};
 use crate::rk4::Rk4;
 use crate::rodas4::Rodas4;
@@ -61,6 +62,27 @@ impl Method {
         };
         m.validate()?;
         Ok(m)
+    }
+
+    /// The fixed step [s] of a fixed-step method (RK4); `None` for an adaptive one.
+    pub fn fixed_step(&self) -> Option<f64> {
+        match *self {
+            Method::Rk4 { dt } => Some(dt),
+            Method::Dopri5 { .. } | Method::Rodas4 { .. } => None,
+        }
+    }
+
+    /// Whether every step is the same, set beforehand (RK4).
+    pub fn is_fixed(&self) -> bool {
+        self.fixed_step().is_some()
+    }
+
+    /// The first step [s]: RK4's step, or an adaptive method's first trial step.
+    pub fn first_step(&self) -> f64 {
+        match *self {
+            Method::Rk4 { dt } => dt,
+            Method::Dopri5 { first_step, .. } | Method::Rodas4 { first_step, .. } => first_step,
+        }
     }
 
     /// Refuse tolerances or steps that are not positive and finite.
@@ -505,10 +527,10 @@ where
 }
 
 /// Adaptive options for a task: error scales from the model and the input's peak; `held`
-/// steps to take instead of choosing them (see [`Dopri5Options::held`]).
-fn adaptive_options<T: Scalar>(task: &Task<T>, rtol: f64, atol: f64, first_step: f64, held: &Held) -> Dopri5Options {
+/// steps to take instead of choosing them (see [`AdaptiveOptions::held`]).
+fn adaptive_options<T: Scalar>(task: &Task<T>, rtol: f64, atol: f64, first_step: f64, held: &Held) -> AdaptiveOptions {
     let v_max = task.wave.peak();
-    Dopri5Options {
+    AdaptiveOptions {
         rtol,
         atol,
         scale: task.model.state_scales(v_max),

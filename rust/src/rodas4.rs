@@ -6,15 +6,15 @@
 //! ([`Rhs::jacobian`]; the model's is analytic). Like `dopri5` it lands on every input
 //! breakpoint and keeps one step size per lane.
 
-use crate::dopri5::{Dopri5Options as AdaptiveOptions, Dopri5Stats as AdaptiveStats, HELD_EXHAUSTED};
-#[cfg(test)]
-use crate::dopri5::Held;
 use crate::scalar::Scalar;
-use crate::stepper::{Attempt, Rhs, State, Stepper};
+#[cfg(test)]
+use crate::stepper::Held;
+use crate::stepper::{AdaptiveOptions, AdaptiveStats, Attempt, Controller, Rhs, State, Stepper, HELD_EXHAUSTED, OUT_OF_DOMAIN};
+
+/// Rodas4's control: a 3rd-order embedded estimate (q = 4), growth up to 6x.
+const CONTROL: Controller = Controller { exponent: 0.25, max_growth: 6.0 };
 
 const GAMMA: f64 = 0.25;
-/// the error norm given to a step that ends outside the model's domain (rejected, halved)
-const OUT_OF_DOMAIN: f64 = f64::MAX;
 /// stage times (fractions of the step)
 const C: [f64; 6] = [0.0, 0.386, 0.21, 0.63, 1.0, 1.0];
 /// df/dt weights of each stage
@@ -210,33 +210,16 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
                     o.pin(self.stats[i].accepted as usize, ys[i].as_mut());
                 }
                 self.stats[i].accepted += 1;
-                let grow = if err == 0.0 {
-                    6.0
-                } else {
-                    (0.9 * err.powf(-0.25)).clamp(0.2, 6.0)
-                };
-                if !last[i] || grow < 1.0 {
-                    self.h[i] = (step[i] * grow).min(o.h_max);
-                }
+                self.h[i] = CONTROL.after_accept(err, step[i], last[i], self.h[i], o);
                 Attempt::Accepted {
                     step: step[i],
                     last: last[i],
                 }
             } else {
                 self.stats[i].rejected += 1;
-                let shrink = if err == OUT_OF_DOMAIN {
-                    0.5
-                } else if err.is_finite() {
-                    (0.9 * err.powf(-0.25)).clamp(0.1, 0.9)
-                } else {
-                    0.1
-                };
-                self.h[i] = step[i] * shrink;
-                if self.h[i] < o.h_min {
-                    Attempt::Failed(format!("step size fell below {:.1e} s", o.h_min))
-                } else {
-                    Attempt::Rejected
-                }
+                let (h, outcome) = CONTROL.after_reject(err, step[i], o);
+                self.h[i] = h;
+                outcome
             }
         })
     }

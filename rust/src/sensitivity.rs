@@ -3,7 +3,7 @@
 //! components of the initial state, by forward-mode dual numbers carried through the same
 //! right-hand side and the same integrator as the plain run (`scalar.rs`). RK4 takes the same
 //! fixed steps; an adaptive method is run again with the steps the plain run accepted held
-//! (`Dopri5Options::held`), so what comes back is the derivative of that discrete solution,
+//! (`AdaptiveOptions::held`), so what comes back is the derivative of that discrete solution,
 //! step sizes fixed — not a finite difference.
 //!
 //! At the kinks of the friction law (|v1| at v1 = 0, |dg/dt|, sgn Fh) and the saturation of a
@@ -15,7 +15,7 @@ use std::sync::atomic::AtomicBool;
 
 use num_dual::DualSVec64;
 
-use crate::dopri5::Held;
+use crate::stepper::Held;
 use crate::drive::{run_tasks_one_by_one, LaneEnd, Method, Observer, SimError, Task};
 use crate::effects::EFFECT_NAMES;
 use crate::model::Model;
@@ -128,7 +128,7 @@ pub fn derivatives(
     normal_force_derived: bool,
     cancel: &AtomicBool,
 ) -> Option<Result<Derivatives, SimError>> {
-    if !matches!(method, Method::Rk4 { .. }) && held.is_empty() {
+    if !method.is_fixed() && held.is_empty() {
         return Some(Err(SimError::Input(
             "sensitivities of an adaptive run need the steps the run accepted".into(),
         )));
@@ -256,8 +256,8 @@ impl Pass<'_> {
 /// The run's values stay bounded there (the friction law saturates them) but chatter from step
 /// to step, and the derivative of that chatter grows without bound.
 fn unbounded(model: &Model, t: f64, v_peak: f64, method: &Method) -> SimError {
-    let hint = match method {
-        Method::Rk4 { dt } => {
+    let hint = match method.fixed_step() {
+        Some(dt) => {
             let limit = crate::drive::RK4_STABLE_OMEGA_DT / model.friction.sliding_stiffness(v_peak);
             format!(
                 "dt = {dt:e} s is beyond the stability limit of the friction state while sliding at up to {v_peak:.3e} m/s \

@@ -4,7 +4,7 @@
 
 use std::sync::atomic::AtomicBool;
 
-use crate::dopri5::Held;
+use crate::stepper::Held;
 use crate::drive::{divergence_message, run_tasks, LaneEnd, Method, Observer, SimError, Task};
 use crate::model::Model;
 use crate::waveform::PiecewiseLinear;
@@ -167,7 +167,7 @@ pub fn simulate_keeping(
         wave,
         save_every,
         until_save: save_every,
-        keep_steps: keep_held && !matches!(method, Method::Rk4 { .. }),
+        keep_steps: keep_held && !method.is_fixed(),
         out: Trajectory {
             dof: model.layout.dof,
             ..Default::default()
@@ -179,9 +179,9 @@ pub fn simulate_keeping(
     let (end, y) = ends.pop().expect("one task");
     match end {
         LaneEnd::Diverged { t, why, v_last } => {
-            let message = match (why, method) {
-                (None, Method::Rk4 { dt }) => {
-                    divergence_message(model, *dt, t, &y, v_last, Some((wave, t_start, t_end)))
+            let message = match (why, method.fixed_step()) {
+                (None, Some(dt)) => {
+                    divergence_message(model, dt, t, &y, v_last, Some((wave, t_start, t_end)))
                 }
                 (why, _) => format!(
                     "integration diverged at t = {t:.6e} s: {}; tighten rtol/atol or use method 'rk4' with a small dt",

@@ -2,8 +2,10 @@
 //! "attempt a step on every lane" call. An integrator knows nothing of the physics or of the
 //! input waveform; the driver sets each lane's input for the step before the attempt.
 //!
-//! Adding an integrator means one file implementing [`Stepper`] and one arm of
-//! `drive::Method`.
+//! Adaptive methods share their options ([`AdaptiveOptions`], with held steps for derivative
+//! passes, [`Held`]) and their step-size control ([`Controller`]); each method computes only
+//! its candidate step and error estimate. Adding an integrator means one file implementing
+//! [`Stepper`] and one arm of `drive::Method`.
 
 use crate::scalar::Scalar;
 
@@ -61,6 +63,134 @@ impl<F: FnMut(usize, f64, &[f64], &mut [f64])> Rhs<f64> for F {
     #[inline(always)]
     fn eval(&mut self, lane: usize, tau: f64, y: &[f64], dy: &mut [f64]) {
         self(lane, tau, y, dy)
+    }
+}
+
+/// Tolerances and limits of an adaptive method (one set per lane).
+#[derive(Clone, Debug)]
+pub struct AdaptiveOptions {
+    /// relative tolerance [-]
+    pub rtol: f64,
+    /// absolute tolerance, in units of each component's `scale` [-]
+    pub atol: f64,
+    /// characteristic magnitude of each state component (its unit); `inf` leaves a component
+    /// out of the error norm
+    pub scale: Vec<f64>,
+    /// first trial step [s]
+    pub h_init: f64,
+    /// below this step the run is declared divergent [s]
+    pub h_min: f64,
+    /// largest step [s]
+    pub h_max: f64,
+    /// Steps to take instead of choosing them (empty: adaptive): see [`Held`].
+    pub held: Held,
+}
+
+/// The steps another run accepted [s] and the states it reached with them (row-major, one
+/// state per step). A run given them takes exactly those steps, accepting each, and after
+/// each step sets its state's values to the other run's (keeping any derivative parts): how
+/// derivatives are carried along an adaptive run with its steps held. A replay alone would
+/// drift from the run it follows by rounding, and an explicit method in a stiff phase, whose
+/// steps sit at the stability limit, can amplify that drift until the error control (which a
+/// replay does not have) would have stepped in.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Held {
+    pub steps: Vec<f64>,
+    pub states: Vec<f64>,
+}
+
+impl Held {
+    pub fn is_empty(&self) -> bool {
+        self.steps.is_empty()
+    }
+}
+
+impl AdaptiveOptions {
+    /// The step lane `i` tries next: its own proposal, or the next held step (`None` when the
+    /// held steps ran out).
+    #[inline(always)]
+    pub(crate) fn next_step(&self, proposal: f64, taken: usize) -> Option<f64> {
+        if self.held.is_empty() {
+            Some(proposal)
+        } else {
+            self.held.steps.get(taken).copied()
+        }
+    }
+
+    /// After held step `taken` (counted from 0), set the values of `y` to the held state.
+    #[inline(always)]
+    pub(crate) fn pin<T: Scalar>(&self, taken: usize, y: &mut [T]) {
+        let d = y.len();
+        if let Some(row) = self.held.states.get(taken * d..(taken + 1) * d) {
+            for (x, v) in y.iter_mut().zip(row) {
+                x.set_value(*v);
+            }
+        }
+    }
+}
+
+/// Counters of an adaptive run.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AdaptiveStats {
+    pub accepted: u64,
+    pub rejected: u64,
+    pub evaluations: u64,
+}
+
+
+/// The message of a lane whose held steps ran out before its end.
+pub(crate) const HELD_EXHAUSTED: &str = "the held steps ended before the run did";
+
+/// The error norm given to a step whose result the model rules out (|Fh| beyond its bound):
+/// rejected and halved, whatever the estimate said.
+pub const OUT_OF_DOMAIN: f64 = f64::MAX;
+
+/// The step-size control every adaptive method shares: an elementary controller on the
+/// scaled error norm `err` of a step (accepted at err <= 1), new step = step x 0.9 err^(-1/q)
+/// within [0.2, `max_growth`] after an acceptance and [0.1, 0.9] after a rejection, q the
+/// order of the embedded estimate plus one.
+#[derive(Clone, Copy, Debug)]
+pub struct Controller {
+    /// 1 / q
+    pub exponent: f64,
+    /// largest growth of the step after an acceptance
+    pub max_growth: f64,
+}
+
+impl Controller {
+    /// The next step [s] after accepting `step` with error `err`: grown unless the step was cut
+    /// short to land on a breakpoint (`last`) and would grow, never above `o.h_max`.
+    #[inline(always)]
+    pub fn after_accept(&self, err: f64, step: f64, last: bool, h: f64, o: &AdaptiveOptions) -> f64 {
+        let grow = if err == 0.0 {
+            self.max_growth
+        } else {
+            (0.9 * err.powf(-self.exponent)).clamp(0.2, self.max_growth)
+        };
+        if !last || grow < 1.0 {
+            (step * grow).min(o.h_max)
+        } else {
+            h
+        }
+    }
+
+    /// The step [s] to retry after rejecting `step` with error `err` (NaN when the state blew
+    /// up), and the attempt's outcome: rejected, or failed when the step fell below `o.h_min`.
+    #[inline(always)]
+    pub fn after_reject(&self, err: f64, step: f64, o: &AdaptiveOptions) -> (f64, Attempt) {
+        let shrink = if err == OUT_OF_DOMAIN {
+            0.5
+        } else if err.is_finite() {
+            (0.9 * err.powf(-self.exponent)).clamp(0.1, 0.9)
+        } else {
+            0.1
+        };
+        let h = step * shrink;
+        if h < o.h_min {
+            (h, Attempt::Failed(format!("step size fell below {:.1e} s", o.h_min)))
+        } else {
+            (h, Attempt::Rejected)
+        }
     }
 }
 

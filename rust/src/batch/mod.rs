@@ -51,7 +51,7 @@ impl BatchConfig {
     /// taken every so many fixed steps).
     pub fn validate(&self) -> Result<(), String> {
         self.method.validate()?;
-        if !matches!(self.method, Method::Rk4 { .. }) && self.record_every > 0 {
+        if !self.method.is_fixed() && self.record_every > 0 {
             return Err("recording readings needs method 'rk4'".into());
         }
         if !self.sensitivities.is_empty() && self.record_every == 0 {

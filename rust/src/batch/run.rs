@@ -5,7 +5,7 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use rayon::prelude::*;
 
-use crate::dopri5::Held;
+use crate::stepper::Held;
 use crate::drive::{check_task, run_tasks, LaneEnd, Method, SimError, Task};
 use crate::model::Model;
 use crate::sensitivity::{derivatives, parse_seeds, Schedule};
@@ -48,10 +48,7 @@ fn prepare<'a>(cfg: &BatchConfig, index: usize, spec: &'a PointSpec) -> Result<R
         y0: &y0,
     };
     check_task(&task, &cfg.method).map_err(|e| e.to_string())?;
-    let steps = match cfg.method {
-        Method::Rk4 { dt } => ((t_end - t_start) / dt).round() as usize,
-        Method::Dopri5 { .. } | Method::Rodas4 { .. } => 0,
-    };
+    let steps = cfg.method.fixed_step().map_or(0, |dt| ((t_end - t_start) / dt).round() as usize);
     Ok(Ready {
         index,
         spec,
@@ -98,12 +95,10 @@ fn run_group(
             .enumerate()
             .map(|(i, (end, y))| match end {
                 LaneEnd::Finished { steps, min_step } if y.iter().all(|x| x.is_finite()) => {
-                    let (duration, dt_used) = match *method {
+                    let (duration, dt_used) = match method.fixed_step() {
                         // the planned duration, as a whole number of steps
-                        Method::Rk4 { dt } => (steps as f64 * dt, dt),
-                        Method::Dopri5 { .. } | Method::Rodas4 { .. } => {
-                            (tasks[i].t_end - tasks[i].t_start, min_step)
-                        }
+                        Some(dt) => (steps as f64 * dt, dt),
+                        None => (tasks[i].t_end - tasks[i].t_start, min_step),
                     };
                     Ok(PointOutput {
                         metrics: obs.finish(i, &y, duration, dt_used, steps),
@@ -125,12 +120,9 @@ fn run_group(
 fn retry(cfg: &BatchConfig, ready: &Ready, first_failure: f64, cancel: &AtomicBool) -> Option<PointOutput> {
     let (mut method, mut record_every) = (cfg.method, cfg.record_every);
     let mut failed_at = first_failure;
-    let first_step = match method {
-        Method::Rk4 { dt } => dt,
-        Method::Dopri5 { first_step, .. } | Method::Rodas4 { first_step, .. } => first_step,
-    };
+    let first_step = method.first_step();
     let mut dt_tried = first_step;
-    if let Method::Rk4 { dt } = cfg.method {
+    if let Some(dt) = cfg.method.fixed_step() {
         let mut dt = dt;
         for _ in 0..cfg.retries {
             dt /= 2.0;
@@ -166,9 +158,10 @@ fn retry(cfg: &BatchConfig, ready: &Ready, first_failure: f64, cancel: &AtomicBo
             }
         }
     }
-    let how = match cfg.method {
-        Method::Rk4 { .. } => format!("at every step tried (down to dt = {dt_tried:e} s)"),
-        _ => "(the adaptive step collapsed or the state left its bounds)".to_string(),
+    let how = if cfg.method.is_fixed() {
+        format!("at every step tried (down to dt = {dt_tried:e} s)")
+    } else {
+        "(the adaptive step collapsed or the state left its bounds)".to_string()
     };
     Some(PointOutput {
         metrics: PointMetrics::diverged(failed_at, dt_tried),
@@ -190,7 +183,7 @@ fn add_sensitivities(cfg: &BatchConfig, ready: &Ready, mut out: PointOutput, can
         Ok(s) => s,
         Err(why) => return Some(PointOutput::invalid(why)),
     };
-    let (Method::Rk4 { dt }, dt_used) = (cfg.method, out.metrics.dt_used) else {
+    let (Some(dt), dt_used) = (cfg.method.fixed_step(), out.metrics.dt_used) else {
         return Some(out); // refused by BatchConfig::validate
     };
     // a retry halves the step and doubles the steps between recorded readings
