@@ -26,6 +26,7 @@ wave_fields = _core.wave_fields
 highest_frequency = _core.highest_frequency
 kernel_constants = _core.kernel_constants
 kernel_constant_count = _core.kernel_constant_count
+kernel_header = _core.kernel_header
 # declarations of the model (Table 1, the effect catalogue); typed views in `declarations.py`
 param_declarations = _core.param_declarations
 effect_declarations = _core.effect_declarations
@@ -43,6 +44,7 @@ __all__ = [
     "highest_frequency",
     "kernel_constants",
     "kernel_constant_count",
+    "kernel_header",
     "param_declarations",
     "param_names",
     "resolve_params",

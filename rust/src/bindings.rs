@@ -298,6 +298,13 @@ fn kernel_constant_count() -> (usize, usize, usize) {
     (crate::kernel::N_CONSTANTS, crate::kernel::N_SCALARS, crate::kernel::MAX_DOF)
 }
 
+/// The C `#define`s of the kernel's constants' layout (`rust/src/kernel.rs`), to put in front
+/// of the kernel source when it is compiled.
+#[pyfunction]
+fn kernel_header() -> String {
+    crate::kernel::kernel_header()
+}
+
 /// Highest structural natural frequency [rad/s] of the model.
 #[pyfunction]
 fn highest_frequency(params: HashMap<String, f64>, config: &RunConfig) -> PyResult<f64> {
@@ -618,6 +625,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(highest_frequency, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_constants, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_constant_count, m)?)?;
+    m.add_function(wrap_pyfunction!(kernel_header, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     declarations::register(m)?;
     Ok(())

@@ -74,16 +74,20 @@ def prepare(config: Any, params_table: NDArray[np.float64], breakpoints: list[tu
                        float(first_step))
 
 
+def kernel_source() -> str:
+    """The kernel as compiled: the engine's layout header (the constants' offsets by name,
+    ``engine.kernel_header()``) in front of ``idm_kernel.cu``."""
+    return engine.kernel_header() + SOURCE.read_text()
+
+
 def _check_layout() -> None:
-    """The kernel source and the engine must agree on the constants' layout (else the kernel
-    would read past each point's row)."""
+    """The kernel source must read its constants by the names the engine declares (a source
+    from another install that still counts them by hand would read past each point's row)."""
     import re
 
-    m = re.search(r"#define IDM_N_SCALARS (\d+)", SOURCE.read_text())
-    n_const, n_scalars, max_dof = engine.kernel_constant_count()
-    if m is None or int(m.group(1)) != n_scalars:
-        raise GpuUnavailable(f"kernel source ({SOURCE}) and engine disagree on the constants' layout "
-                             f"({m.group(1) if m else '?'} vs {n_scalars} scalars): reinstall idm-rs")
+    if re.search(r"#define IDM_N_SCALARS", SOURCE.read_text()):
+        raise GpuUnavailable(f"kernel source ({SOURCE}) defines its own constants' layout instead of the "
+                             "engine's: reinstall idm-rs")
 
 
 def _outputs(raw: NDArray[np.float64]) -> dict[str, NDArray[Any]]:
@@ -103,13 +107,13 @@ def _cpu_library() -> ctypes.CDLL:
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if cc is None:
         raise GpuUnavailable("no C compiler (cc) to build the kernel for the CPU")
-    source = SOURCE.read_bytes()
-    tag = hashlib.sha256(source).hexdigest()[:16]
+    source = kernel_source()
+    tag = hashlib.sha256(source.encode()).hexdigest()[:16]
     lib = Path(tempfile.gettempdir()) / f"idm_kernel_cpu_{tag}.so"
     if not lib.exists():
         tmp = lib.with_suffix(f".{os.getpid()}.so")
-        cmd = [cc, "-O2", "-std=c99", "-shared", "-fPIC", "-x", "c", str(SOURCE), "-o", str(tmp), "-lm"]
-        r = subprocess.run(cmd, capture_output=True, text=True)
+        cmd = [cc, "-O2", "-std=c99", "-shared", "-fPIC", "-x", "c", "-", "-o", str(tmp), "-lm"]
+        r = subprocess.run(cmd, input=source, capture_output=True, text=True)
         if r.returncode != 0:
             raise GpuUnavailable(f"building the kernel for the CPU failed: {r.stderr.strip()[:500]}")
         os.replace(tmp, lib)
@@ -161,7 +165,7 @@ def run_cuda(batch: KernelBatch) -> dict[str, NDArray[Any]]:
     except cp.cuda.runtime.CUDARuntimeError as exc:
         raise GpuUnavailable(f"backend='cuda': no usable CUDA device ({exc})") from None
     if _MODULE is None:
-        _MODULE = cp.RawModule(code=SOURCE.read_text(), options=("--std=c++14",))
+        _MODULE = cp.RawModule(code=kernel_source(), options=("--std=c++14",))
     d = {name: cp.asarray(getattr(batch, name)) for name in ("consts", "bt", "bv", "nb", "steps")}
     grid = ((batch.points + BLOCK - 1) // BLOCK,)
     common = (d["consts"], d["bt"], d["bv"], d["nb"], np.int32(batch.bt.shape[1]))

@@ -4,7 +4,7 @@
  *
  * It mirrors rust/src/model.rs for the models the kernel supports: the LPS or the DPS with up
  * to IDM_MAX_DOF nodes, Leuven friction, Bouc-Wen piezo hysteresis on or off, no effects. The
- * per-point constants come from the engine (rust/src/kernel.rs, in this order). */
+ * per-point constants come from the engine (rust/src/kernel.rs), read by name. */
 
 #if defined(__CUDACC__) || defined(__CUDACC_RTC__)
 #define IDM_HD __device__ __forceinline__
@@ -15,8 +15,11 @@
 #define IDM_KERNEL
 #endif
 
-#define IDM_MAX_DOF 6
-#define IDM_N_SCALARS 20
+/* IDM_MAX_DOF, IDM_N_SCALARS and the offset of each constant by name come from the
+ * engine (rust/src/kernel.rs: kernel_header), put in front of this source when it is compiled */
+#ifndef IDM_N_SCALARS
+#error "compile with the engine's header in front: idm_rs.engine.kernel_header()"
+#endif
 #define IDM_N_CONSTANTS (IDM_N_SCALARS + 2 * IDM_MAX_DOF * IDM_MAX_DOF + 2 * IDM_MAX_DOF)
 #define IDM_DIM (2 * IDM_MAX_DOF + 3)
 /* the slip threshold of the slip-fraction metric, in units of the Stribeck velocity */
@@ -26,7 +29,7 @@ IDM_HD double idm_sign0(double x) { return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0
 
 /* Stribeck curve S(v) [N] (friction.rs: Leuven::stribeck) */
 IDM_HD double idm_stribeck(const double *c, double v) {
-    double fc = c[3], fs_fc = c[4], inv_vs = c[5], delta = c[6], eps = c[13];
+    double fc = c[IDM_C_FC], fs_fc = c[IDM_C_FS_FC], inv_vs = c[IDM_C_INV_VS], delta = c[IDM_C_DELTA], eps = c[IDM_C_EPS];
     double s;
     if (fs_fc == 0.0) {
         s = fc;
@@ -41,16 +44,16 @@ IDM_HD double idm_stribeck(const double *c, double v) {
 /* dy/dt of the plain state [q (n), v (n), g, Fh, h] at voltage volt rising at dvolt;
  * returns the friction force Ff [N] (model.rs: Model::rhs_impl without effects). */
 IDM_HD double idm_rhs(const double *c, double volt, double dvolt, const double *y, double *dy) {
-    int n = (int)c[0];
-    double kp = c[1], d33 = c[2];
-    double fric_n = c[7], a = c[8], b = c[9], cc = c[10], sigma1 = c[11], sigma2 = c[12];
+    int n = (int)c[IDM_C_DOF];
+    double kp = c[IDM_C_KP], d33 = c[IDM_C_D33];
+    double fric_n = c[IDM_C_FRIC_N], a = c[IDM_C_A], b = c[IDM_C_B], cc = c[IDM_C_C], sigma1 = c[IDM_C_SIGMA1], sigma2 = c[IDM_C_SIGMA2];
     const double *mk = c + IDM_N_SCALARS;
     const double *mc = mk + IDM_MAX_DOF * IDM_MAX_DOF;
     const double *m0 = mc + IDM_MAX_DOF * IDM_MAX_DOF;
     const double *ml = m0 + IDM_MAX_DOF;
     int ig = 2 * n, ifh = 2 * n + 1, ih = 2 * n + 2;
     double h = y[ih];
-    dy[ih] = (c[14] != 0.0) ? c[15] * dvolt - c[16] * fabs(dvolt) * h - c[17] * dvolt * fabs(h) : 0.0;
+    dy[ih] = (c[IDM_C_HYST_ON] != 0.0) ? c[IDM_C_HYST_AP_D33] * dvolt - c[IDM_C_HYST_BP] * fabs(dvolt) * h - c[IDM_C_HYST_CP] * dvolt * fabs(h) : 0.0;
     double fp = kp * (d33 * volt + 0.0 - h);
     double v1 = y[n], fh = y[ifh];
     double ratio = fh / idm_stribeck(c, v1);
@@ -91,12 +94,12 @@ IDM_HD void idm_input(const double *bt, const double *bv, int nb, int *seg, doub
  * time of divergence [s]. */
 IDM_HD void idm_rk4_point(const double *c, const double *bt, const double *bv, int nb, double dt, long steps,
                           double *out) {
-    int n = (int)c[0];
+    int n = (int)c[IDM_C_DOF];
     int dim = 2 * n + 3;
     double y[IDM_DIM], k1[IDM_DIM], k2[IDM_DIM], k3[IDM_DIM], k4[IDM_DIM], tmp[IDM_DIM];
     for (int i = 0; i < dim; i++) y[i] = 0.0;
-    double bound = c[18] * (1.0 + 1e-6) + 1e-12;
-    double slip_v = IDM_SLIP_FACTOR / c[5];
+    double bound = c[IDM_C_FH_BOUND] * (1.0 + 1e-6) + 1e-12;
+    double slip_v = IDM_SLIP_FACTOR / c[IDM_C_INV_VS];
     double peak_v = 0.0, peak_f = 0.0, slip_t = 0.0;
     int seg = 0;
     out[4] = 1.0;
@@ -148,21 +151,21 @@ IDM_HD void idm_dopri5_point(const double *c, const double *bt, const double *bv
     const double B1 = 35.0 / 384.0, B3 = 500.0 / 1113.0, B4 = 125.0 / 192.0, B5 = -2187.0 / 6784.0, B6 = 11.0 / 84.0;
     const double E1 = 71.0 / 57600.0, E3 = -71.0 / 16695.0, E4 = 71.0 / 1920.0, E5 = -17253.0 / 339200.0,
                  E6 = 22.0 / 525.0, E7 = -1.0 / 40.0;
-    int n = (int)c[0];
+    int n = (int)c[IDM_C_DOF];
     int dim = 2 * n + 3;
     double y[IDM_DIM], yn[IDM_DIM], tmp[IDM_DIM], k[7][IDM_DIM], scale[IDM_DIM];
     for (int i = 0; i < dim; i++) y[i] = 0.0;
     double vmax = 0.0;
     for (int i = 0; i < nb; i++) vmax = fmax(vmax, fabs(bv[i]));
-    double stroke = fmax(c[2] * vmax, 1e-9), fs = c[3] + fmax(c[4], 0.0);
+    double stroke = fmax(c[IDM_C_D33] * vmax, 1e-9), fs = c[IDM_C_FC] + fmax(c[IDM_C_FS_FC], 0.0);
     int in_norm = 0;
     for (int i = 0; i < dim; i++) scale[i] = -1.0; /* out of the norm */
-    for (int i = 0; i < n; i++) { scale[i] = stroke; scale[n + i] = stroke * c[19]; }
+    for (int i = 0; i < n; i++) { scale[i] = stroke; scale[n + i] = stroke * c[IDM_C_OMEGA_LPS]; }
     scale[2 * n + 1] = fs;
     scale[2 * n + 2] = stroke;
     for (int i = 0; i < dim; i++) in_norm += scale[i] > 0.0;
     double h_max = fmax(t_end / 10.0, first_step), h = fmin(first_step, h_max), h_min = 1e-14;
-    double t = 0.0, peak_v = 0.0, peak_f = 0.0, slip_t = 0.0, min_step = 1e300, slip_v = IDM_SLIP_FACTOR / c[5];
+    double t = 0.0, peak_v = 0.0, peak_f = 0.0, slip_t = 0.0, min_step = 1e300, slip_v = IDM_SLIP_FACTOR / c[IDM_C_INV_VS];
     double ydummy[IDM_DIM];
     double ff_prev = idm_rhs(c, 0.0, 0.0, y, ydummy), v_prev = 0.0;
     long accepted = 0;
