@@ -105,7 +105,11 @@ else:
     ds = run(spec["t_end"])
     out["wall_s"] = time.perf_counter() - t0
     out["points"] = int(ds["final_position"].size)
-    out["vars"] = {k: [str(v.dtype), list(v.shape), base64.b64encode(np.ascontiguousarray(v.values).tobytes()).decode()]
+    def raw(a):  # the values' bytes; an object array (the 'reason' strings) by its text, not its pointers
+        if a.dtype == object:
+            return "\\x00".join(map(str, a.ravel())).encode()
+        return np.ascontiguousarray(a).tobytes()
+    out["vars"] = {k: [str(v.dtype), list(v.shape), base64.b64encode(raw(v.values)).decode()]
                    for k, v in ds.data_vars.items()}
 print("@@BEFORE_AFTER@@ " + json.dumps(out), flush=True)
 """

@@ -6,8 +6,8 @@
 //! Branches of the physics (|v|, sgn v, saturations) are decided on the value ([`Scalar::re`]);
 //! a derivative through them is the derivative of the branch taken (one-sided at a kink).
 
-use nalgebra::Const;
-use num_dual::{DualNum, DualSVec64, DualVec};
+use nalgebra::{ComplexField, Const};
+use num_dual::{Dual64, DualNum, DualSVec64, DualVec};
 
 /// A real number with optional forward-mode derivative parts.
 pub trait Scalar: DualNum<Primitive = f64> + Copy + Send + Sync + 'static {
@@ -86,6 +86,61 @@ impl<const N: usize> Scalar for DualSVec64<N> {
             Some(e) => out.copy_from_slice(e.as_slice()),
             None => out.fill(0.0),
         }
+    }
+}
+
+impl Scalar for Dual64 {
+    #[inline(always)]
+    fn value(&self) -> f64 {
+        self.re
+    }
+
+    #[inline(always)]
+    fn set_value(&mut self, v: f64) {
+        self.re = v;
+    }
+
+    #[inline(always)]
+    fn is_exactly(&self, x: f64) -> bool {
+        self.re == x && self.eps == 0.0
+    }
+
+    #[inline(always)]
+    fn pow(self, e: Self) -> Self {
+        if self.re <= 0.0 {
+            Self::from(0.0)
+        } else if e.eps == 0.0 {
+            DualNum::powf(&self, e.re)
+        } else {
+            (DualNum::ln(&self) * e).exp()
+        }
+    }
+
+    fn derivatives(&self, out: &mut [f64]) {
+        out[0] = self.eps;
+    }
+}
+
+/// A dual number a forward-mode pass can seed: `WIDTH` derivatives, input `index` set to 1.
+/// `Dual64` (one derivative, no storage overhead) for one name; `DualSVec64<N>` for several.
+pub trait Seed: Scalar + ComplexField {
+    const WIDTH: usize;
+    fn seed(x: f64, index: usize) -> Self;
+}
+
+impl Seed for Dual64 {
+    const WIDTH: usize = 1;
+    #[inline(always)]
+    fn seed(x: f64, _index: usize) -> Self {
+        Dual64::new(x, 1.0)
+    }
+}
+
+impl<const N: usize> Seed for DualSVec64<N> {
+    const WIDTH: usize = N;
+    #[inline(always)]
+    fn seed(x: f64, index: usize) -> Self {
+        seeded::<N>(x, index)
     }
 }
 

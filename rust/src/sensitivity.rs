@@ -13,18 +13,20 @@
 
 use std::sync::atomic::AtomicBool;
 
-use num_dual::DualSVec64;
+use num_dual::{Dual64, DualSVec64};
 
 use crate::stepper::Held;
 use crate::drive::{run_tasks_one_by_one, LaneEnd, Method, Observer, SimError, Task};
 use crate::effects::EFFECT_NAMES;
 use crate::model::Model;
 use crate::params::PARAM_NAMES;
-use crate::scalar::{seeded, Scalar};
+use crate::scalar::Seed as Dual;
 use crate::waveform::PiecewiseLinear;
 
 /// Widest dual number one pass carries; more names take several passes.
 pub const MAX_PER_PASS: usize = 8;
+/// Up to this many names (in a group of 8) run as one scalar dual pass each.
+pub const SCALAR_PASSES_UP_TO: usize = 3;
 
 /// A value a derivative is taken with respect to.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -140,29 +142,38 @@ pub fn derivatives(
         readings: Vec::new(),
         final_state: vec![0.0; dim * n],
     };
-    for (g, group) in seeds.chunks(MAX_PER_PASS).enumerate() {
-        let run = Pass { model, wave, t_start, t_end, y0, method, held, schedule, seeds: group, normal_force_derived };
-        let pass = match group.len() {
-            1 => run.go::<1>(cancel),
-            2 => run.go::<2>(cancel),
-            3 | 4 => run.go::<4>(cancel),
-            _ => run.go::<MAX_PER_PASS>(cancel),
-        }?;
-        let (readings, fin) = match pass {
-            Ok(x) => x,
-            Err(e) => return Some(Err(e)),
+    // Passes: groups of up to 8 names on 8-wide dual vectors, but a group of at most
+    // SCALAR_PASSES_UP_TO names as one scalar dual pass per name, which is cheaper there
+    // (measured: benches/RESULTS.md, section 7; the vector type pays for its generality).
+    let mut first = 0;
+    for chunk in seeds.chunks(MAX_PER_PASS) {
+        let groups: Vec<&[Seed]> = if chunk.len() <= SCALAR_PASSES_UP_TO {
+            chunk.chunks(1).collect()
+        } else {
+            vec![chunk]
         };
-        let k = group.len();
-        let first = g * MAX_PER_PASS;
-        let times = readings.len() / k;
-        if out.readings.is_empty() {
-            out.readings = vec![0.0; times * n];
-        }
-        for t in 0..times {
-            out.readings[t * n + first..t * n + first + k].copy_from_slice(&readings[t * k..(t + 1) * k]);
-        }
-        for c in 0..dim {
-            out.final_state[c * n + first..c * n + first + k].copy_from_slice(&fin[c * k..(c + 1) * k]);
+        for group in groups {
+            let run = Pass { model, wave, t_start, t_end, y0, method, held, schedule, seeds: group, normal_force_derived };
+            let pass = match group.len() {
+                1 => run.go::<Dual64>(cancel),
+                _ => run.go::<DualSVec64<MAX_PER_PASS>>(cancel),
+            }?;
+            let (readings, fin) = match pass {
+                Ok(x) => x,
+                Err(e) => return Some(Err(e)),
+            };
+            let k = group.len();
+            let times = readings.len() / k;
+            if out.readings.is_empty() {
+                out.readings = vec![0.0; times * n];
+            }
+            for t in 0..times {
+                out.readings[t * n + first..t * n + first + k].copy_from_slice(&readings[t * k..(t + 1) * k]);
+            }
+            for c in 0..dim {
+                out.final_state[c * n + first..c * n + first + k].copy_from_slice(&fin[c * k..(c + 1) * k]);
+            }
+            first += k;
         }
     }
     Some(Ok(out))
@@ -186,12 +197,12 @@ struct Pass<'a> {
 type PassOutput = (Vec<f64>, Vec<f64>);
 
 impl Pass<'_> {
-    fn go<const N: usize>(&self, cancel: &AtomicBool) -> Option<Result<PassOutput, SimError>> {
+    fn go<D: Dual>(&self, cancel: &AtomicBool) -> Option<Result<PassOutput, SimError>> {
         let m = self.model;
         let seeds = self.seeds;
         let lift = |name: &str, v: f64| match seeds.iter().position(|s| s.names(name)) {
-            Some(j) => seeded::<N>(v, j),
-            None => DualSVec64::<N>::from(v),
+            Some(j) => D::seed(v, j),
+            None => D::from(v),
         };
         let dual = match Model::build(
             m.params,
@@ -205,13 +216,13 @@ impl Pass<'_> {
             Ok(d) => d,
             Err(e) => return Some(Err(SimError::Input(e))),
         };
-        let y0: Vec<DualSVec64<N>> = self
+        let y0: Vec<D> = self
             .y0
             .iter()
             .enumerate()
             .map(|(c, &x)| match seeds.iter().position(|s| *s == Seed::State(c)) {
-                Some(j) => seeded::<N>(x, j),
-                None => DualSVec64::<N>::from(x),
+                Some(j) => D::seed(x, j),
+                None => D::from(x),
             })
             .collect();
         let task = Task { model: &dual, wave: self.wave, t_start: self.t_start, t_end: self.t_end, y0: &y0 };
@@ -233,9 +244,9 @@ impl Pass<'_> {
             LaneEnd::Finished { .. } => {
                 let k = seeds.len();
                 let mut fin = vec![0.0; y.len() * k];
-                let mut d = [0.0; N];
+                let mut d = [0.0; MAX_PER_PASS];
                 for (c, yc) in y.iter().enumerate() {
-                    yc.derivatives(&mut d);
+                    yc.derivatives(&mut d[..D::WIDTH]);
                     fin[c * k..(c + 1) * k].copy_from_slice(&d[..k]);
                 }
                 Ok((rec.out, fin))
@@ -275,8 +286,8 @@ fn unbounded(model: &Model, t: f64, v_peak: f64, method: &Method) -> SimError {
 
 /// Records the first `k` derivatives of the reading on the schedule of the plain run's saver,
 /// the first time a derivative is not finite, and the peak |v1| [m/s].
-struct Recorder<'a, const N: usize> {
-    model: &'a Model<DualSVec64<N>>,
+struct Recorder<'a, D: Dual> {
+    model: &'a Model<D>,
     schedule: Schedule,
     until: usize,
     k: usize,
@@ -285,10 +296,10 @@ struct Recorder<'a, const N: usize> {
     v_peak: f64,
 }
 
-impl<const N: usize> Recorder<'_, N> {
-    fn record(&mut self, t: f64, y: &[DualSVec64<N>]) {
-        let mut d = [0.0; N];
-        self.model.reading(t, y).derivatives(&mut d);
+impl<D: Dual> Recorder<'_, D> {
+    fn record(&mut self, t: f64, y: &[D]) {
+        let mut d = [0.0; MAX_PER_PASS];
+        self.model.reading(t, y).derivatives(&mut d[..D::WIDTH]);
         if self.blew_up.is_none() && d.iter().any(|x| !x.is_finite()) {
             self.blew_up = Some(t);
         }
@@ -296,8 +307,8 @@ impl<const N: usize> Recorder<'_, N> {
     }
 }
 
-impl<const N: usize> Observer<DualSVec64<N>> for Recorder<'_, N> {
-    fn start(&mut self, _task: usize, t: f64, y: &[DualSVec64<N>]) {
+impl<D: Dual> Observer<D> for Recorder<'_, D> {
+    fn start(&mut self, _task: usize, t: f64, y: &[D]) {
         self.record(t, y);
     }
 
@@ -306,9 +317,9 @@ impl<const N: usize> Observer<DualSVec64<N>> for Recorder<'_, N> {
         _task: usize,
         t: f64,
         _span: f64,
-        y: &[DualSVec64<N>],
+        y: &[D],
         _v: f64,
-        _s: Option<(DualSVec64<N>, DualSVec64<N>)>,
+        _s: Option<(D, D)>,
         last: bool,
     ) {
         self.v_peak = self.v_peak.max(y[self.model.layout.dof].value().abs());
