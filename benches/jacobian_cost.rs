@@ -16,12 +16,12 @@ use idm_rs::rodas4::Rodas4;
 use idm_rs::simulate::simulate;
 use idm_rs::stepper::{Rhs, Stepper};
 use idm_rs::waveform::PiecewiseLinear;
-use num_dual::DualSVec64;
+use num_dual::Dual64;
 
 /// The model's right-hand side with the derived Jacobian in place of the analytic one.
 struct Derived<'a> {
     inner: ModelRhs<'a, f64, 0, true, 1>,
-    dual: &'a Model<DualSVec64<1>>,
+    dual: &'a Model<Dual64>,
 }
 
 impl Rhs for Derived<'_> {

@@ -263,7 +263,8 @@ def simulate(
     held), not a finite difference; ``result.final_state_sensitivities`` the same for the final
     state. With the normal force left to its default it follows the masses (d/d m1 includes
     it). At the friction law's kinks (v1 = 0, dg/dt = 0) the derivative is the one-sided one of
-    the branch the run took. Cost: about 1.5-3 plain runs per name (docs/SENSITIVITIES.md).
+    the branch the run took. Cost: about 2-3 plain runs for one name, 6-9 for four to eight
+    (docs/SENSITIVITIES.md).
     """
     if not isinstance(params, Params):
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")

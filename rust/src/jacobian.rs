@@ -5,10 +5,10 @@
 //! ([`Model::derived_jacobian`]) for every structure and effect. The hand-written one stays
 //! because it costs a fraction of the derived one per Rodas4 step (benches/RESULTS.md).
 
-use num_dual::DualSVec64;
+use num_dual::Dual64;
 
 use crate::model::Model;
-use crate::scalar::{seeded, Scalar};
+use crate::scalar::{Scalar, Seed};
 
 impl<T: Scalar> Model<T> {
     /// Fill `jac` (dim x dim, row-major) with df/dy and `dfdt` (dim) with df/dt at state `y`,
@@ -162,21 +162,21 @@ impl<T: Scalar> Model<T> {
 impl Model {
     /// This model with its values as one-component dual numbers (no parameter seeded): the
     /// model [`Model::derived_jacobian`] differentiates.
-    pub fn dual(&self) -> Model<DualSVec64<1>> {
+    pub fn dual(&self) -> Model<Dual64> {
         Model::build(
             self.params,
             self.effects,
             self.structure,
             self.hysteresis.is_some(),
             self.layout.accounting.is_some(),
-            |_, v| DualSVec64::<1>::from(v),
+            |_, v| Dual64::from(v),
             false,
         )
         .expect("a model that was built once builds again")
     }
 }
 
-impl Model<DualSVec64<1>> {
+impl Model<Dual64> {
     /// df/dy and df/dt (as [`Model::jacobian`]) derived from the right-hand side itself by
     /// forward-mode dual numbers: one pass per state component, seeded in that component, and
     /// one seeded in the commanded voltage (df/dt = df/dV dV/dt along the step's linear input).
@@ -185,20 +185,20 @@ impl Model<DualSVec64<1>> {
     /// right-hand side on dual numbers; see benches/RESULTS.md for its cost).
     pub fn derived_jacobian(&self, v_cmd: f64, dv_cmd: f64, y: &[f64], jac: &mut [f64], dfdt: &mut [f64]) {
         let d = y.len();
-        let mut yd: Vec<DualSVec64<1>> = y.iter().map(|&x| DualSVec64::<1>::from(x)).collect();
-        let mut f = vec![DualSVec64::<1>::from(0.0); d];
+        let mut yd: Vec<Dual64> = y.iter().map(|&x| Dual64::from(x)).collect();
+        let mut f = vec![Dual64::from(0.0); d];
         let mut col = [0.0];
-        let v = DualSVec64::<1>::from(v_cmd);
+        let v = Dual64::from(v_cmd);
         for c in 0..d {
-            yd[c] = seeded::<1>(y[c], 0);
+            yd[c] = Dual64::seed(y[c], 0);
             self.rhs_impl::<0, true>(v, dv_cmd, &yd, &mut f);
             for r in 0..d {
                 f[r].derivatives(&mut col);
                 jac[r * d + c] = col[0];
             }
-            yd[c] = DualSVec64::<1>::from(y[c]);
+            yd[c] = Dual64::from(y[c]);
         }
-        self.rhs_impl::<0, true>(seeded::<1>(v_cmd, 0), dv_cmd, &yd, &mut f);
+        self.rhs_impl::<0, true>(Dual64::seed(v_cmd, 0), dv_cmd, &yd, &mut f);
         for r in 0..d {
             f[r].derivatives(&mut col);
             dfdt[r] = col[0] * dv_cmd;
