@@ -26,6 +26,7 @@ macro_rules! effects {
             $( $tid:ident {
                 physics: $tphysics:literal,
                 term: $tterm:literal,
+                $( state: { name: $sname:literal, unit: $sunit:literal, tau: $stau:ident, follows: $sfollows:ident, scale: $sscale:ident }, )?
                 params: { $( $field:ident: $symbol:literal, $unit:literal, $domain:expr, $meaning:literal; )* } $(,)?
             } )*
         }
@@ -68,6 +69,29 @@ macro_rules! effects {
                 params: &[$(effects!(@param $field, $symbol, $unit, $domain, $meaning)),*],
             },)*
         ];
+
+        /// The effects with a state of their own (first-order lags), in catalogue order, which is
+        /// the order of their states in the layout (`model::Layout`).
+        pub const LAGS: &[LagDecl] = &[$($(
+            LagDecl {
+                effect: stringify!($tid),
+                state: $sname,
+                unit: $sunit,
+                tau: stringify!($stau),
+                follows: LagInput::$sfollows,
+                scale: LagScale::$sscale,
+            },
+        )?)*];
+
+        impl<T: Copy> Effects<T> {
+            /// One parameter by name; None when unknown.
+            pub fn value_of(&self, name: &str) -> Option<T> {
+                match name {
+                    $($(stringify!($field) => Some(self.$field),)*)*
+                    _ => None,
+                }
+            }
+        }
 
         impl Effects {
             /// Every value as a `T` made by `lift(name, value)` (see `Params::lift`).
@@ -147,6 +171,7 @@ effects! {
         amplifier_lowpass {
             physics: "the PE voltage lags the command through a first-order amplifier (tau_amp)",
             term: "Vpe' = (Vcmd - Vpe) / tau_amp",
+            state: { name: "v_pe", unit: "V", tau: tau_amp, follows: Command, scale: Voltage },
             params: {
                 tau_amp: "tau_amp", "s", Domain::NonNegative, "amplifier lag of the PE voltage behind the command; 0 = off";
             },
@@ -154,6 +179,7 @@ effects! {
         piezo_creep {
             physics: "the PE creeps: an extra free extension relaxing to kappa d33 V with time constant tau_creep",
             term: "xc' = (kappa d33 V - xc) / tau_creep, Fp = kp (d33 V + xc)",
+            state: { name: "x_creep", unit: "m", tau: tau_creep, follows: CreepTarget, scale: Stroke },
             params: {
                 kappa: "kappa", "1", Domain::Finite, "creep amplitude, relative to the free extension d33 V";
                 tau_creep: "tau_creep", "s", Domain::NonNegative, "creep time constant; 0 = off";
@@ -177,6 +203,7 @@ effects! {
         sensor_lowpass {
             physics: "the sensor reads x1 through a first-order low-pass (tau_sensor)",
             term: "x' = (x1 - x) / tau_sensor (the reading)",
+            state: { name: "x_sensor", unit: "m", tau: tau_sensor, follows: Position, scale: Stroke },
             params: {
                 tau_sensor: "tau_sensor", "s", Domain::NonNegative, "sensor lag: the reading follows x1 through a first-order low-pass; 0 = off";
             },
@@ -229,14 +256,10 @@ impl Effects {
     }
 
 
-    /// The first-order lags that are on, by parameter name, with their time constants [s]: a
-    /// lag much faster than a fixed step makes its state stiff.
-    pub fn lags(&self) -> [(&'static str, f64); 3] {
-        [
-            ("tau_amp", self.tau_amp),
-            ("tau_creep", self.tau_creep),
-            ("tau_sensor", self.tau_sensor),
-        ]
+    /// Every lag's time-constant parameter and its value [s] (0: off): a lag much faster than
+    /// a fixed step makes its state stiff.
+    pub fn lags(&self) -> [(&'static str, f64); N_LAGS] {
+        std::array::from_fn(|k| (LAGS[k].tau, self.value_of(LAGS[k].tau).unwrap_or(0.0)))
     }
 
 }
@@ -252,6 +275,60 @@ impl<T: Scalar> Effects<T> {
         self.theta_rad.cos()
     }
 }
+
+/// What a lag's state follows (its input u in y' = (u - y) / tau).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LagInput {
+    /// the commanded voltage [V] (an amplifier's output)
+    Command,
+    /// the creep's equilibrium kappa d33 V_pe [m]
+    CreepTarget,
+    /// the main body's position x1 [m] (a sensor's reading)
+    Position,
+}
+
+/// The magnitude a lag state's error is measured against in adaptive error norms.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LagScale {
+    /// the input's peak voltage (at least 1 V)
+    Voltage,
+    /// the free stroke d33 V_max
+    Stroke,
+}
+
+/// An effect with a state of its own: a first-order lag y' = (u - y) / tau whose time constant
+/// is the effect parameter `tau` (0: the effect and its state are off).
+#[derive(Clone, Copy, Debug)]
+pub struct LagDecl {
+    pub effect: &'static str,
+    /// the state's name in `Layout::components` and its unit
+    pub state: &'static str,
+    pub unit: &'static str,
+    pub tau: &'static str,
+    pub follows: LagInput,
+    pub scale: LagScale,
+}
+
+/// Number of lag states.
+pub const N_LAGS: usize = LAGS.len();
+
+/// The position in [`LAGS`] of the lag following `input` (a compile error in a `const` when
+/// none does).
+pub const fn lag_following(input: LagInput) -> usize {
+    let mut k = 0;
+    while k < LAGS.len() {
+        if LAGS[k].follows as u8 == input as u8 {
+            return k;
+        }
+        k += 1;
+    }
+    panic!("no lag follows this input")
+}
+
+/// The amplifier's, the creep's and the sensor's place in [`LAGS`] and `Layout::lags`.
+pub const AMPLIFIER: usize = lag_following(LagInput::Command);
+pub const CREEP: usize = lag_following(LagInput::CreepTarget);
+pub const SENSOR: usize = lag_following(LagInput::Position);
 
 /// Ground spring force on the main body [N].
 #[inline(always)]

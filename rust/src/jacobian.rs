@@ -7,6 +7,7 @@
 
 use num_dual::Dual64;
 
+use crate::effects::{LagInput, AMPLIFIER, CREEP, LAGS};
 use crate::model::Model;
 use crate::scalar::{Scalar, Seed};
 
@@ -23,40 +24,42 @@ impl<T: Scalar> Model<T> {
         let (q, v) = (&y[..n], &y[n..2 * n]);
 
         // PE voltage: commanded, or behind the amplifier lag (dV/dt then depends on the state)
-        let (v_pe, dv_pe) = match l.vpe {
-            Some(i) => (y[i], (-y[i] + v_cmd) * self.inv_tau_amp),
+        let amp = l.lags[AMPLIFIER];
+        let (v_pe, dv_pe) = match amp {
+            Some(i) => (y[i], (-y[i] + v_cmd) * self.inv_tau[AMPLIFIER]),
             None => (T::from(v_cmd), T::from(dv_cmd)),
         };
         // d(v_pe)/dt along the step when v_pe is the command itself
-        let vpe_t = if l.vpe.is_some() { 0.0 } else { dv_cmd };
-        if let Some(i) = l.vpe {
-            set(i, i, -self.inv_tau_amp);
-            dfdt[i] = self.inv_tau_amp * dv_cmd;
-        }
+        let vpe_t = if amp.is_some() { 0.0 } else { dv_cmd };
         if let Some(hy) = self.hysteresis {
             let (d_ddv, d_dh) = hy.rate_partials(dv_pe, y[ih]);
             set(ih, ih, d_dh);
-            if let Some(i) = l.vpe {
-                set(ih, i, -d_ddv * self.inv_tau_amp);
-                dfdt[ih] = d_ddv * dv_cmd * self.inv_tau_amp;
+            if let Some(i) = amp {
+                set(ih, i, -d_ddv * self.inv_tau[AMPLIFIER]);
+                dfdt[ih] = d_ddv * dv_cmd * self.inv_tau[AMPLIFIER];
             }
         }
         let kappa_d33 = self.effect_values.kappa * self.d33;
-        if let Some(i) = l.xc {
-            set(i, i, -self.inv_tau_creep);
-            match l.vpe {
-                Some(j) => set(i, j, kappa_d33 * self.inv_tau_creep),
-                None => dfdt[i] = kappa_d33 * vpe_t * self.inv_tau_creep,
+        // every lag effect that is on: y' = (u - y) / tau, by itself and by what it follows
+        for (k, lag) in LAGS.iter().enumerate() {
+            let Some(i) = l.lags[k] else { continue };
+            let inv = self.inv_tau[k];
+            set(i, i, -inv);
+            match (lag.follows, amp) {
+                (LagInput::Command, _) => dfdt[i] = inv * dv_cmd,
+                (LagInput::CreepTarget, Some(j)) => set(i, j, kappa_d33 * inv),
+                (LagInput::CreepTarget, None) => dfdt[i] = kappa_d33 * vpe_t * inv,
+                (LagInput::Position, _) => set(i, 0, inv),
             }
         }
 
         // piezo force fp = kp (d33 v_pe + xc - h): its partials [N per unit] and rate [N/s]
-        let xc = l.xc.map_or(T::zero(), |i| y[i]);
+        let xc = l.lags[CREEP].map_or(T::zero(), |i| y[i]);
         let fp = crate::piezo::piezo_force(self.kp, self.d33, v_pe, xc, y[ih]);
         let fp_d = [
             Some((ih, -self.kp)),
-            l.xc.map(|i| (i, self.kp)),
-            l.vpe.map(|i| (i, self.kp * self.d33)),
+            l.lags[CREEP].map(|i| (i, self.kp)),
+            amp.map(|i| (i, self.kp * self.d33)),
         ];
         let fp_d = fp_d.iter().flatten();
         let fp_t = self.kp * self.d33 * vpe_t;
@@ -108,10 +111,6 @@ impl<T: Scalar> Model<T> {
             }
         }
 
-        if let Some(i) = l.xs {
-            set(i, 0, self.inv_tau_sensor);
-            set(i, i, -self.inv_tau_sensor);
-        }
         if let Some(a) = l.accounting {
             let dv = v[0] - v[n - 1];
             // work of the drive
@@ -261,7 +260,7 @@ mod tests {
                     2e-3 * x * if i % 2 == 0 { 1.0 } else { -0.7 }
                 } else if i == l.fh {
                     0.21 * m.presliding_bound()
-                } else if Some(i) == l.vpe {
+                } else if Some(i) == m.layout.lags[crate::effects::AMPLIFIER] {
                     47.0
                 } else {
                     3e-7 * x

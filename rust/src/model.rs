@@ -3,7 +3,10 @@
 
 use nalgebra::ComplexField;
 
-use crate::effects::{first_order_rate, ground_spring_force, weight_drag, Effects};
+use crate::effects::{
+    first_order_rate, ground_spring_force, weight_drag, Effects, LagInput, LagScale, AMPLIFIER, CREEP, LAGS, N_LAGS,
+    SENSOR,
+};
 use crate::friction::Leuven;
 use crate::mechanics::{Mechanics, Structure};
 use crate::params::Params;
@@ -41,12 +44,9 @@ pub struct Layout {
     pub g: usize,
     pub fh: usize,
     pub h: usize,
-    /// PE voltage behind the amplifier lag
-    pub vpe: Option<usize>,
-    /// creep extension xc
-    pub xc: Option<usize>,
-    /// sensor reading behind its lag
-    pub xs: Option<usize>,
+    /// the state of each lag effect that is on, in the order of `effects::LAGS` (the PE voltage
+    /// behind the amplifier, the creep extension, the sensor reading)
+    pub lags: [Option<usize>; N_LAGS],
     /// start of [W_input, W_friction, W_damping, W_external, I_friction, I_rayleigh, I_external]:
     /// works [J] and impulses [N s] integrated with the state, for energy and momentum budgets
     pub accounting: Option<usize>,
@@ -67,21 +67,17 @@ const ACCOUNTING_COMPONENTS: [(&str, &str); N_ACCOUNTING] = [
 impl Layout {
     /// Name and unit of every state component, in order: `q0..` nodal displacements [m] (node 0
     /// the main body, the last the weight), `v0..` nodal velocities [m/s], `g` asperity
-    /// deformation [m], `fh` presliding force [N], `h` piezo hysteresis [m], then the effect
-    /// states that are on (`v_pe` PE voltage [V], `x_creep` creep extension [m], `x_sensor`
-    /// sensor reading [m]) and the accounting states.
+    /// deformation [m], `fh` presliding force [N], `h` piezo hysteresis [m], then the states of
+    /// the lag effects that are on (`effects::LAGS`: `v_pe` PE voltage [V], `x_creep` creep
+    /// extension [m], `x_sensor` sensor reading [m]) and the accounting states.
     pub fn components(&self) -> Vec<(String, &'static str)> {
         let mut c: Vec<(String, &'static str)> = Vec::with_capacity(self.dim);
         c.extend((0..self.dof).map(|i| (format!("q{i}"), "m")));
         c.extend((0..self.dof).map(|i| (format!("v{i}"), "m/s")));
         c.extend([("g".into(), "m"), ("fh".into(), "N"), ("h".into(), "m")]);
-        for (idx, name, unit) in [
-            (self.vpe, "v_pe", "V"),
-            (self.xc, "x_creep", "m"),
-            (self.xs, "x_sensor", "m"),
-        ] {
-            if idx.is_some() {
-                c.push((name.into(), unit));
+        for (slot, lag) in self.lags.iter().zip(LAGS) {
+            if slot.is_some() {
+                c.push((lag.state.into(), lag.unit));
             }
         }
         if self.accounting.is_some() {
@@ -98,18 +94,14 @@ impl Layout {
                 next - len
             })
         };
-        let vpe = take(e.tau_amp > 0.0, 1);
-        let xc = take(e.tau_creep > 0.0, 1);
-        let xs = take(e.tau_sensor > 0.0, 1);
+        let lags = std::array::from_fn(|k| take(e.value_of(LAGS[k].tau).unwrap_or(0.0) > 0.0, 1));
         let accounting = take(accounting, N_ACCOUNTING);
         Layout {
             dof,
             g: 2 * dof,
             fh: 2 * dof + 1,
             h: 2 * dof + 2,
-            vpe,
-            xc,
-            xs,
+            lags,
             accounting,
             dim: next,
         }
@@ -137,9 +129,8 @@ pub struct Model<T: Scalar = f64> {
     pub(crate) d33: T,
     /// constant external force on the main body (incline + load) [N]
     pub(crate) f_constant: T,
-    pub(crate) inv_tau_amp: T,
-    pub(crate) inv_tau_creep: T,
-    pub(crate) inv_tau_sensor: T,
+    /// 1 / tau of each lag (`effects::LAGS`; 0 where off) [1/s]
+    pub(crate) inv_tau: [T; N_LAGS],
     pub(crate) pe_mass_sums: Vec<T>,
 }
 
@@ -200,9 +191,7 @@ impl<T: Scalar + ComplexField> Model<T> {
             kp: p.kp(),
             d33: p.d33,
             f_constant: e.incline_force(total_mass) + p.load_force,
-            inv_tau_amp: inv(e.tau_amp),
-            inv_tau_creep: inv(e.tau_creep),
-            inv_tau_sensor: inv(e.tau_sensor),
+            inv_tau: std::array::from_fn(|k| inv(e.value_of(LAGS[k].tau).unwrap_or(T::zero()))),
             pe_mass_sums: mech.pe_mass_column_sums(),
             values: p,
             effect_values: e,
@@ -270,8 +259,8 @@ impl<T: Scalar> Model<T> {
     /// PE voltage and its rate [V, V/s] given the commanded ones (the amplifier may lag).
     #[inline(always)]
     fn pe_voltage(&self, v_cmd: T, dv_cmd: f64, y: &[T]) -> (T, T) {
-        match self.layout.vpe {
-            Some(i) => (y[i], first_order_rate(v_cmd, y[i], self.inv_tau_amp)),
+        match self.layout.lags[AMPLIFIER] {
+            Some(i) => (y[i], first_order_rate(v_cmd, y[i], self.inv_tau[AMPLIFIER])),
             None => (v_cmd, T::from(dv_cmd)),
         }
     }
@@ -294,13 +283,12 @@ impl<T: Scalar> Model<T> {
         s[l.g] = f64::INFINITY;
         s[l.fh] = fs;
         s[l.h] = stroke;
-        for (idx, scale) in [
-            (l.vpe, v_max.abs().max(1.0)),
-            (l.xc, stroke),
-            (l.xs, stroke),
-        ] {
-            if let Some(i) = idx {
-                s[i] = scale;
+        for (slot, lag) in l.lags.iter().zip(LAGS) {
+            if let Some(i) = *slot {
+                s[i] = match lag.scale {
+                    LagScale::Voltage => v_max.abs().max(1.0),
+                    LagScale::Stroke => stroke,
+                };
             }
         }
         s
@@ -310,7 +298,7 @@ impl<T: Scalar> Model<T> {
     #[inline(always)]
     pub fn piezo_force(&self, v_cmd: f64, y: &[T]) -> T {
         let (v, _) = self.pe_voltage(T::from(v_cmd), 0.0, y);
-        let xc = self.layout.xc.map_or(T::zero(), |i| y[i]);
+        let xc = self.layout.lags[CREEP].map_or(T::zero(), |i| y[i]);
         piezo_force(self.kp, self.d33, v, xc, y[self.layout.h])
     }
 
@@ -326,7 +314,7 @@ impl<T: Scalar> Model<T> {
     /// What the sensor reads [m] at time `t` [s] in state `y`.
     #[inline(always)]
     pub fn reading(&self, t: f64, y: &[T]) -> T {
-        let x = self.layout.xs.map_or(y[0], |i| y[i]);
+        let x = self.layout.lags[SENSOR].map_or(y[0], |i| y[i]);
         x + self.effect_values.drift_rate * t
     }
 
@@ -367,17 +355,18 @@ impl<T: Scalar> Model<T> {
         dy[ih] = self.hysteresis.map_or(T::zero(), |hy| hy.rate(dv_pe, h));
         let mut xc = T::zero();
         if EXTRAS {
-            if let Some(i) = l.vpe {
-                dy[i] = dv_pe;
+            // every lag effect that is on: y' = (u - y) / tau, u what it follows
+            for (k, lag) in LAGS.iter().enumerate() {
+                if let Some(i) = l.lags[k] {
+                    let u = match lag.follows {
+                        LagInput::Command => v_cmd,
+                        LagInput::CreepTarget => self.effect_values.kappa * self.d33 * v_pe,
+                        LagInput::Position => q[0],
+                    };
+                    dy[i] = first_order_rate(u, y[i], self.inv_tau[k]);
+                }
             }
-            if let Some(i) = l.xc {
-                dy[i] = first_order_rate(
-                    self.effect_values.kappa * self.d33 * v_pe,
-                    y[i],
-                    self.inv_tau_creep,
-                );
-                xc = y[i];
-            }
+            xc = l.lags[CREEP].map_or(xc, |i| y[i]);
         }
         let fp = piezo_force(self.kp, self.d33, v_pe, xc, h);
 
@@ -412,9 +401,6 @@ impl<T: Scalar> Model<T> {
         };
 
         if EXTRAS {
-            if let Some(i) = l.xs {
-                dy[i] = first_order_rate(q[0], y[i], self.inv_tau_sensor);
-            }
             if let Some(a) = l.accounting {
                 // work of the piezo force on both ends, or of the rig's drive on its body
                 dy[a] = match self.rig {

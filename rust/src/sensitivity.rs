@@ -17,7 +17,7 @@ use num_dual::{Dual64, DualSVec64};
 
 use crate::stepper::Held;
 use crate::drive::{run_tasks_one_by_one, LaneEnd, Method, Observer, SimError, Task};
-use crate::effects::EFFECT_NAMES;
+use crate::effects::{EFFECTS, EFFECT_NAMES, LAGS};
 use crate::model::Model;
 use crate::params::PARAM_NAMES;
 use crate::scalar::Seed as Dual;
@@ -65,14 +65,10 @@ pub fn parse_seeds(model: &Model, names: &[String], normal_force_derived: bool) 
             }
             Seed::Param(n)
         } else if let Some(n) = EFFECT_NAMES.iter().find(|n| **n == name.as_str()) {
-            let e = &model.effects;
-            let off = match *n {
-                "tau_amp" => e.tau_amp == 0.0,
-                "tau_creep" | "kappa" => e.tau_creep == 0.0,
-                "tau_sensor" => e.tau_sensor == 0.0,
-                _ => false,
-            };
-            if off {
+            // a parameter of a lag effect that is off: the model has no state for it
+            let owner = EFFECTS.iter().find(|x| x.params.iter().any(|p| p.name == *n));
+            let lag = owner.and_then(|x| LAGS.iter().find(|l| l.effect == x.id));
+            if lag.is_some_and(|l| model.effects.value_of(l.tau) == Some(0.0)) {
                 return Err(format!(
                     "sensitivity '{n}': its effect is off (a time constant of 0 removes the effect's state); \
                      give the time constant a positive value to take a derivative"
