@@ -8,6 +8,7 @@
 use num_dual::Dual64;
 
 use crate::effects::{LagInput, AMPLIFIER, CREEP, LAGS};
+use crate::mechanics::Actuation;
 use crate::model::Model;
 use crate::scalar::{Scalar, Seed};
 
@@ -80,6 +81,7 @@ impl<T: Scalar> Model<T> {
 
         // mechanics: dv/dt = -M^-1 K q - M^-1 C v + m0 F_main + ml F_weight
         let mech = &self.mech;
+        let [dm_dfp, dl_dfp, dm_du, dm_dx, dm_dv] = self.actuator.force_partials(v_pe, q[0], v[0]);
         for i in 0..n {
             set(i, n + i, T::one());
         }
@@ -94,42 +96,29 @@ impl<T: Scalar> Model<T> {
                 set(r, c, -m0 * d);
             }
             set(r, 0, -m0 * kg);
-            match self.rig {
-                None => {
-                    set(r, last, -ml * cw);
-                    for &(c, d) in fp_d.clone() {
-                        set(r, c, (m0 - ml) * d);
-                    }
-                    dfdt[r] = (m0 - ml) * fp_t;
-                }
-                Some(rig) => {
-                    let (du, dx, dv) = rig.drive_partials(v_pe, q[0], v[0]);
-                    set(r, 0, m0 * dx);
-                    set(r, n, m0 * dv);
-                    dfdt[r] = m0 * du * dv_cmd;
-                }
+            set(r, last, -ml * cw);
+            // the actuation: through the piezo force, and through the input and the main body
+            let via_fp = m0 * dm_dfp + ml * dl_dfp;
+            for &(c, d) in fp_d.clone() {
+                set(r, c, via_fp * d);
             }
+            set(r, 0, m0 * dm_dx);
+            set(r, n, m0 * dm_dv);
+            dfdt[r] = via_fp * fp_t + m0 * dm_du * dv_cmd;
         }
 
         if let Some(a) = l.accounting {
-            let dv = v[0] - v[n - 1];
-            // work of the drive
-            match self.rig {
-                None => {
-                    for &(c, d) in fp_d.clone() {
-                        set(a, c, d * dv);
-                    }
-                    set(a, n, fp);
-                    set(a, last, -fp);
-                    dfdt[a] = fp_t * dv;
-                }
-                Some(rig) => {
-                    let (du, dx, dv) = rig.drive_partials(v_pe, q[0], v[0]);
-                    set(a, n, rig.drive_force(v_pe, dv_pe, q[0], v[0]) + v[0] * dv);
-                    set(a, 0, v[0] * dx);
-                    dfdt[a] = v[0] * (du * dv_cmd);
-                }
+            // work of the actuation
+            let (f_main, _) = self.actuator.forces(fp, v_pe, dv_pe, q[0], v[0]);
+            let [dp_df, dp_dvm, dp_dvl] = self.actuator.power_partials(f_main, v[0], v[n - 1]);
+            for &(c, d) in fp_d.clone() {
+                set(a, c, dp_df * dm_dfp * d);
             }
+            set(a, n, dp_dvm);
+            set(a, n, dp_df * dm_dv);
+            set(a, last, dp_dvl);
+            set(a, 0, dp_df * dm_dx);
+            dfdt[a] = dp_df * (fp_t * dm_dfp + dm_du * dv_cmd);
             // work of friction ff v1, and friction's impulse
             for &(c, d) in &ff_d {
                 set(a + 1, c, d * v[0]);

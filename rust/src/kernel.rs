@@ -51,7 +51,7 @@ pub fn kernel_constants(model: &Model) -> Result<Vec<f64>, String> {
     if !model.is_plain() || model.effects != crate::effects::Effects::default() {
         return Err("the GPU kernel runs the paper's model only: switch every effect off (or use the CPU backend)".into());
     }
-    if model.rig.is_some() {
+    if matches!(model.actuator, crate::mechanics::Actuator::Rig(_)) {
         return Err("the GPU kernel runs the IDM, not a rig".into());
     }
     let mut c = vec![0.0; N_CONSTANTS];

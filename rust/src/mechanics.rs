@@ -3,10 +3,85 @@
 //! node n the weight. Built once per run with nalgebra; the integrator then only needs the
 //! precomputed products M^-1 K, M^-1 C and the two columns of M^-1 that the forces load.
 
+use crate::effects::Effects;
 use crate::params::Params;
+use crate::piezo::PiezoElement;
 use crate::rig::RigDrive;
 use crate::scalar::Scalar;
 use nalgebra::{ComplexField, DMatrix};
+
+/// How the input acts on the bodies: what tells the mechanisms apart once their matrices are
+/// built. The IDM's piezo element (`piezo.rs`) pushes node 0 forward and the last node back
+/// with the piezo force; a rig's drive (`rig.rs`) pushes its one body. The right-hand side and
+/// its Jacobian ask only these questions; [`Actuator`] registers the implementations.
+pub trait Actuation {
+    /// Refuse effects and switches the mechanism does not have (the message names them).
+    fn check(&self, effects: &Effects, piezo_hysteresis: bool) -> Result<(), String>;
+    /// The mass resting on the guide [kg] (for the incline's pull along it).
+    fn supported_mass<T: Scalar>(&self, p: &Params<T>) -> T;
+    /// Forces [N] on the main body and on the last node, given the piezo force `fp` [N], the
+    /// input `u` rising at `du`, and the main body at `x` [m] moving at `v` [m/s].
+    fn forces<T: Scalar>(&self, fp: T, u: T, du: T, x: T, v: T) -> (T, T);
+    /// Partials of [`Actuation::forces`] at fixed du/dt: [d f_main/d fp, d f_last/d fp,
+    /// d f_main/du, d f_main/dx, d f_main/dv].
+    fn force_partials<T: Scalar>(&self, u: T, x: T, v: T) -> [f64; 5];
+    /// Power [W] the actuation puts in, its force on the main body being `f_main` [N], with
+    /// the main body and the last node at `v_main`, `v_last` [m/s].
+    fn power<T: Scalar>(&self, f_main: T, v_main: T, v_last: T) -> T;
+    /// Partials of [`Actuation::power`]: [d/d f_main, d/d v_main, d/d v_last].
+    fn power_partials<T: Scalar>(&self, f_main: T, v_main: T, v_last: T) -> [T; 3];
+}
+
+/// The mechanisms' actuations, one arm each (the registration of a mechanism).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Actuator {
+    Piezo(PiezoElement),
+    Rig(RigDrive),
+}
+
+macro_rules! each_actuator {
+    ($self:expr, $a:ident => $body:expr) => {
+        match $self {
+            Actuator::Piezo($a) => $body,
+            Actuator::Rig($a) => $body,
+        }
+    };
+}
+
+impl Actuation for Actuator {
+    fn check(&self, effects: &Effects, piezo_hysteresis: bool) -> Result<(), String> {
+        each_actuator!(self, a => a.check(effects, piezo_hysteresis))
+    }
+    fn supported_mass<T: Scalar>(&self, p: &Params<T>) -> T {
+        each_actuator!(self, a => a.supported_mass(p))
+    }
+    #[inline(always)]
+    fn forces<T: Scalar>(&self, fp: T, u: T, du: T, x: T, v: T) -> (T, T) {
+        each_actuator!(self, a => a.forces(fp, u, du, x, v))
+    }
+    #[inline(always)]
+    fn force_partials<T: Scalar>(&self, u: T, x: T, v: T) -> [f64; 5] {
+        each_actuator!(self, a => a.force_partials(u, x, v))
+    }
+    #[inline(always)]
+    fn power<T: Scalar>(&self, f_main: T, v_main: T, v_last: T) -> T {
+        each_actuator!(self, a => a.power(f_main, v_main, v_last))
+    }
+    #[inline(always)]
+    fn power_partials<T: Scalar>(&self, f_main: T, v_main: T, v_last: T) -> [T; 3] {
+        each_actuator!(self, a => a.power_partials(f_main, v_main, v_last))
+    }
+}
+
+impl Structure {
+    /// The actuation of this structure.
+    pub fn actuator(&self) -> Actuator {
+        match *self {
+            Structure::Lps | Structure::Dps(_) => Actuator::Piezo(PiezoElement),
+            Structure::Rig(d) => Actuator::Rig(d),
+        }
+    }
+}
 
 /// Which mechanism: the IDM's two structures, or a friction test rig.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -8,10 +8,9 @@ use crate::effects::{
     SENSOR,
 };
 use crate::friction::Leuven;
-use crate::mechanics::{Mechanics, Structure};
+use crate::mechanics::{Actuation, Actuator, Mechanics, Structure};
 use crate::params::Params;
 use crate::piezo::{piezo_force, PiezoHysteresis};
-use crate::rig::RigDrive;
 use crate::scalar::Scalar;
 
 /// Dispatch on the state size: `$fixed!(N, D)` for a plain state (see [`Model::is_plain`]) of
@@ -123,8 +122,8 @@ pub struct Model<T: Scalar = f64> {
     pub(crate) values: Params<T>,
     pub(crate) effect_values: Effects<T>,
     pub(crate) hysteresis: Option<PiezoHysteresis<T>>,
-    /// the input drives a rig's body instead of a piezo element
-    pub(crate) rig: Option<RigDrive>,
+    /// how the input acts on the bodies (the piezo element, or a rig's drive)
+    pub(crate) actuator: Actuator,
     pub(crate) kp: T,
     pub(crate) d33: T,
     /// constant external force on the main body (incline + load) [N]
@@ -170,24 +169,14 @@ impl<T: Scalar + ComplexField> Model<T> {
         let mech = Mechanics::new(&p, structure)?;
         let layout = Layout::new(mech.dof, &effects, accounting);
         let inv = |tau: T| if tau.value() > 0.0 { T::one() / tau } else { T::zero() };
-        let rig = match structure {
-            Structure::Rig(d) => {
-                RigDrive::check_effects(&effects, piezo_hysteresis)?;
-                Some(d)
-            }
-            _ => None,
-        };
-        // The PE mass rests on the guide in both IDM structures (MODEL.md's normal force);
-        // a rig is its one body.
-        let total_mass = match rig {
-            Some(_) => p.m1,
-            None => p.m1 + p.m2 + p.pe_mass(),
-        };
+        let actuator = structure.actuator();
+        actuator.check(&effects, piezo_hysteresis)?;
+        let total_mass = actuator.supported_mass(&p);
         Ok(Model {
             friction: Leuven::new(&p, p.normal_force * e.normal_scale(), e.eps),
             hysteresis: piezo_hysteresis
                 .then(|| PiezoHysteresis::new(p.hyst_alpha, p.hyst_beta, p.hyst_gamma, p.d33)),
-            rig,
+            actuator,
             kp: p.kp(),
             d33: p.d33,
             f_constant: e.incline_force(total_mass) + p.load_force,
@@ -381,32 +370,12 @@ impl<T: Scalar> Model<T> {
         for i in 0..n {
             dy[i] = v[i];
         }
-        let f_drive = match &self.rig {
-            None => {
-                self.mech.accelerations(
-                    q,
-                    v,
-                    (fp + f_ext_main) - ff,
-                    f_ext_weight - fp,
-                    &mut dy[n..2 * n],
-                );
-                fp
-            }
-            Some(rig) => {
-                let fd = rig.drive_force(v_pe, dv_pe, q[0], v[0]);
-                self.mech
-                    .accelerations(q, v, (fd + f_ext_main) - ff, T::zero(), &mut dy[n..2 * n]);
-                fd
-            }
-        };
+        let (f_main, f_last) = self.actuator.forces(fp, v_pe, dv_pe, q[0], v[0]);
+        self.mech.accelerations(q, v, (f_main + f_ext_main) - ff, f_ext_weight + f_last, &mut dy[n..2 * n]);
 
         if EXTRAS {
             if let Some(a) = l.accounting {
-                // work of the piezo force on both ends, or of the rig's drive on its body
-                dy[a] = match self.rig {
-                    None => f_drive * (v[0] - v[n - 1]),
-                    Some(_) => f_drive * v[0],
-                };
+                dy[a] = self.actuator.power(f_main, v[0], v[n - 1]);
                 dy[a + 1] = ff * v[0];
                 dy[a + 2] = self.mech.dissipation(v);
                 dy[a + 3] = f_ext_main * v[0] + f_ext_weight * v[n - 1];

@@ -45,6 +45,43 @@ impl PiezoHysteresis {
     }
 }
 
+/// The IDM's actuation: the piezo element between the main body (node 0) and the weight (the
+/// last node) pushes them apart with the piezo force.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PiezoElement;
+
+impl crate::mechanics::Actuation for PiezoElement {
+    fn check(&self, _effects: &crate::effects::Effects, _piezo_hysteresis: bool) -> Result<(), String> {
+        Ok(())
+    }
+
+    /// The PE mass rests on the guide with both bodies (MODEL.md's normal force).
+    fn supported_mass<T: Scalar>(&self, p: &crate::params::Params<T>) -> T {
+        p.m1 + p.m2 + p.pe_mass()
+    }
+
+    #[inline(always)]
+    fn forces<T: Scalar>(&self, fp: T, _u: T, _du: T, _x: T, _v: T) -> (T, T) {
+        (fp, -fp)
+    }
+
+    #[inline(always)]
+    fn force_partials<T: Scalar>(&self, _u: T, _x: T, _v: T) -> [f64; 5] {
+        [1.0, -1.0, 0.0, 0.0, 0.0]
+    }
+
+    /// The piezo force's work on both ends.
+    #[inline(always)]
+    fn power<T: Scalar>(&self, f_main: T, v_main: T, v_last: T) -> T {
+        f_main * (v_main - v_last)
+    }
+
+    #[inline(always)]
+    fn power_partials<T: Scalar>(&self, f_main: T, v_main: T, v_last: T) -> [T; 3] {
+        [v_main - v_last, f_main, -f_main]
+    }
+}
+
 /// Fp = kp (d33 V + xc - h) [N]: pushes the main body forward and the weight back. `xc` [m] is
 /// an extra free extension (creep; 0 in the paper's model).
 #[inline(always)]

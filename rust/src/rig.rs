@@ -103,7 +103,7 @@ impl RigDrive {
     }
 
     /// Refuse effects and switches that need the piezo element or the weight.
-    pub fn check_effects(e: &Effects, piezo_hysteresis: bool) -> Result<(), String> {
+    fn refuse_piezo_effects(e: &Effects, piezo_hysteresis: bool) -> Result<(), String> {
         if piezo_hysteresis {
             return Err("the rig has no piezo element: use piezo_hysteresis=False".into());
         }
@@ -120,6 +120,40 @@ impl RigDrive {
             }
         }
         Ok(())
+    }
+}
+
+impl crate::mechanics::Actuation for RigDrive {
+    fn check(&self, effects: &Effects, piezo_hysteresis: bool) -> Result<(), String> {
+        RigDrive::refuse_piezo_effects(effects, piezo_hysteresis)
+    }
+
+    /// The rig's one body.
+    fn supported_mass<T: Scalar>(&self, p: &Params<T>) -> T {
+        p.m1
+    }
+
+    /// The drive's force on the body; the rig has no last node of its own.
+    #[inline(always)]
+    fn forces<T: Scalar>(&self, _fp: T, u: T, du: T, x: T, v: T) -> (T, T) {
+        (self.drive_force(u, du, x, v), T::zero())
+    }
+
+    #[inline(always)]
+    fn force_partials<T: Scalar>(&self, u: T, x: T, v: T) -> [f64; 5] {
+        let (du, dx, dv) = self.drive_partials(u, x, v);
+        [0.0, 0.0, du, dx, dv]
+    }
+
+    /// The drive's work on the body.
+    #[inline(always)]
+    fn power<T: Scalar>(&self, f_main: T, v_main: T, _v_last: T) -> T {
+        f_main * v_main
+    }
+
+    #[inline(always)]
+    fn power_partials<T: Scalar>(&self, f_main: T, v_main: T, _v_last: T) -> [T; 3] {
+        [v_main, f_main, T::zero()]
     }
 }
 
