@@ -72,13 +72,7 @@ impl<const N: usize> Scalar for DualSVec64<N> {
 
     #[inline(always)]
     fn pow(self, e: Self) -> Self {
-        if self.re <= 0.0 {
-            Self::from(0.0)
-        } else if e.is_exactly(e.re) {
-            DualNum::powf(&self, e.re)
-        } else {
-            (DualNum::ln(&self) * e).exp()
-        }
+        dual_pow(self, e, e.is_exactly(e.re))
     }
 
     fn derivatives(&self, out: &mut [f64]) {
@@ -107,17 +101,24 @@ impl Scalar for Dual64 {
 
     #[inline(always)]
     fn pow(self, e: Self) -> Self {
-        if self.re <= 0.0 {
-            Self::from(0.0)
-        } else if e.eps == 0.0 {
-            DualNum::powf(&self, e.re)
-        } else {
-            (DualNum::ln(&self) * e).exp()
-        }
+        dual_pow(self, e, e.eps == 0.0)
     }
 
     fn derivatives(&self, out: &mut [f64]) {
         out[0] = self.eps;
+    }
+}
+
+/// `x^e` of dual numbers for a base >= 0: 0 (no derivatives) at a base of 0; through the log
+/// only when the exponent carries a derivative (`constant_e` false).
+#[inline(always)]
+fn dual_pow<D: DualNum<Primitive = f64> + Copy>(x: D, e: D, constant_e: bool) -> D {
+    if x.re() <= 0.0 {
+        D::from(0.0)
+    } else if constant_e {
+        x.powf(e.re())
+    } else {
+        (x.ln() * e).exp()
     }
 }
 
