@@ -110,3 +110,48 @@ def test_batch_points_have_the_sensitivities_of_simulate():
         np.testing.assert_array_equal(s[i].T, r.sensitivities)
     with pytest.raises(ValueError, match="record_every"):
         batch.run(points, batch.Structure("lps"), t_end=1e-3, dt=1e-8, sensitivities=names)
+
+
+def test_a_case_simulator_predicts_with_sensitivities_as_its_fits_need():
+    """The diagnosis's case model gives each experiment's readings with their derivatives
+    (the building block of exact fit Jacobians); where RK4's fit step is beyond the friction
+    state's stability limit (fast slips), it says so instead of returning chatter's derivatives."""
+    from pathlib import Path
+
+    from idm_rs.batch import Structure
+    from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec
+    from idm_rs.recording import load_case
+
+    case = Path(__file__).resolve().parents[1].parent / "shared" / "recordings" / "dev" / "dev02"
+    if not case.is_dir():
+        pytest.skip(f"dev recordings not found at {case}")
+    rec = load_case(case)
+    nom = rec.nominal
+    params = nom.params.to_dict(resolved=False)
+    # a Stribeck peak: at mu_s = mu_k exactly (this case's nominal) the readings have a kink in
+    # mu_k (one-sided differences disagree by 1e-3 of the scale), which differences cannot judge
+    params["mu_s"] = 1.1 * params["mu_k"]
+    spec = ModelSpec(Structure(nom.model, nom.n_elements, nom.piezo_hysteresis), params, {})
+    sim = CaseSimulator(rec, threads=2)
+    names = ["mu_k", "m2"]
+    preds, sens, why = sim.predict_with_sensitivities([spec], names, cycles=1)
+    plain = sim.predict([spec], cycles=1)
+    for j in range(len(rec.experiments)):
+        np.testing.assert_array_equal(preds[0][j], plain[0][j])
+        assert sens[0][j].shape == (2, preds[0][j].size)
+    # experiment 0 (40 V) slips slowly enough for the fit step: its derivatives match differences
+    assert np.isfinite(sens[0][0]).all() and why[0][0] == ""
+    for k, (name, h) in enumerate([("mu_k", 1e-6), ("m2", 1e-7)]):
+        p = dict(spec.params)
+        value = p[name] if p.get(name) is not None else getattr(idm_rs.Params(), name)
+        up = ModelSpec(spec.structure, {**p, name: value + h}, {})
+        down = ModelSpec(spec.structure, {**p, name: value - h}, {})
+        fd = (sim.predict([up], cycles=1)[0][0] - sim.predict([down], cycles=1)[0][0]) / (2 * h)
+        scale = np.abs(fd).max()
+        assert np.abs(sens[0][0][k] - fd).max() < 1e-3 * scale, name
+    # the nominal device's experiment 1 (60 V) slips at 8 mm/s: beyond the fit step's limit,
+    # named with the step that works
+    nominal = ModelSpec(spec.structure, nom.params.to_dict(resolved=False), {})
+    _, sens_all, why_all = sim.predict_with_sensitivities([nominal], names)
+    assert not np.isfinite(sens_all[0][1]).all()
+    assert "stability limit of the friction state" in why_all[0][1]

@@ -71,7 +71,23 @@ class CaseSimulator:
         first `cycles` drive cycles of each experiment (None: all of it). A run that diverges is
         retried at dt/2, dt/4 ... `retries` times (a population search passes 0: a model that
         needs a smaller step is far from the data anyway, and retrying costs more than the run)."""
+        return self._run(specs, cycles, retries, [])[0]
+
+    def predict_with_sensitivities(self, specs: Sequence[ModelSpec], names: Sequence[str],
+                                   cycles: Optional[int] = None, retries: int = 2
+                                   ) -> tuple[list[list[NDArray[np.float64]]], list[list[NDArray[np.float64]]],
+                                              list[list[str]]]:
+        """``predict`` plus, per spec and experiment, the readings' derivatives with respect to
+        ``names`` (Table 1 or effect parameters, from the engine: exact for the discrete run),
+        shape (names, samples), NaN where they could not be taken, and the engine's reasons
+        per spec and experiment (empty when all is well)."""
+        return self._run(specs, cycles, retries, list(names))
+
+    def _run(self, specs: Sequence[ModelSpec], cycles: Optional[int], retries: int, names: list[str]):
         out: list[list[NDArray[np.float64]]] = [[] for _ in specs]
+        sens: list[list[NDArray[np.float64]]] = [[] for _ in specs]
+        why: list[list[str]] = [[] for _ in specs]
+        extra = {"sensitivities": names} if names else {}
         by_structure: dict[Structure, list[int]] = {}
         for i, s in enumerate(specs):
             by_structure.setdefault(s.structure, []).append(i)
@@ -85,7 +101,8 @@ class CaseSimulator:
             sawtooth = [j for j in range(n_exp) if self._wave_rows[j] is not None]
             for j in range(n_exp):
                 if self._wave_rows[j] is None:
-                    self._predict_sampled(j, structure, idx, prows, erows, horizons[j], retries, out)
+                    self._predict_sampled(j, structure, idx, prows, erows, horizons[j], retries, out, sens, why,
+                                          names)
             if not sawtooth:
                 continue
             # experiment-major: neighbouring points share a duration, so the engine's lanes of
@@ -99,17 +116,27 @@ class CaseSimulator:
             tables = Tables(np.asarray(rows_p), np.asarray(rows_e), Sawtooth.batch_kind, np.asarray(rows_w),
                             t_ends=np.asarray(t_ends))
             res = run_batch(tables, structure, t_end=max(t_ends), method="rk4", dt=self.dt, retries=retries,
-                            threads=self.threads, record_every=self.record_every)
+                            threads=self.threads, record_every=self.record_every, **extra)
             self.evaluations += len(t_ends)
             traces = res.get("traces", [np.zeros(0)] * len(t_ends))
             for a, i in enumerate(idx):
                 for k, j in enumerate(sawtooth):
-                    tr = np.asarray(traces[k * len(idx) + a])
-                    if tr.size != horizons[j][1]:  # diverged or invalid point
-                        tr = np.full(horizons[j][1], np.nan)
-                    self._sawtooth_slot(out[i], j)
-                    out[i][j] = tr
-        return out
+                    self._store(res, traces, k * len(idx) + a, horizons[j][1], i, j, out, sens, why, names)
+        return out, sens, why
+
+    def _store(self, res: dict, traces: list, point: int, samples: int, i: int, j: int, out: list, sens: list,
+               why: list, names: list[str]) -> None:
+        """Point `point` of a batch result as spec i's experiment j (NaN where it did not run)."""
+        tr = np.asarray(traces[point])
+        if tr.size != samples:  # diverged or invalid point
+            tr = np.full(samples, np.nan)
+        for row in (out[i], sens[i], why[i]):
+            self._sawtooth_slot(row, j)
+        out[i][j] = tr
+        why[i][j] = res["reasons"][point]
+        if names:
+            s = res["sensitivities"][point][:, :samples]
+            sens[i][j] = s if s.shape[1] == samples else np.full((len(names), samples), np.nan)
 
     @staticmethod
     def _sawtooth_slot(row: list, j: int) -> None:
@@ -117,19 +144,17 @@ class CaseSimulator:
             row.append(None)
 
     def _predict_sampled(self, j: int, structure: Structure, idx: list[int], prows: list, erows: list,
-                         horizon: tuple[float, int], retries: int, out: list[list]) -> None:
+                         horizon: tuple[float, int], retries: int, out: list[list], sens: list[list],
+                         why: list[list], names: list[str]) -> None:
         """Experiment j (a sampled drive) for the specs `idx`: one batch with its samples."""
         e = self.recording.experiments[j]
         tables = Tables(np.asarray(prows), np.asarray(erows), "sampled", np.ones((len(idx), 1)),
                         sampled=(np.ascontiguousarray(e.t), np.ascontiguousarray(e.voltage)),
                         t_ends=np.full(len(idx), horizon[0]))
+        extra = {"sensitivities": names} if names else {}
         res = run_batch(tables, structure, t_end=horizon[0], method="rk4", dt=self.dt, retries=retries,
-                        threads=self.threads, record_every=self.record_every)
+                        threads=self.threads, record_every=self.record_every, **extra)
         self.evaluations += len(idx)
         traces = res.get("traces", [np.zeros(0)] * len(idx))
         for a, i in enumerate(idx):
-            tr = np.asarray(traces[a])
-            if tr.size != horizon[1]:
-                tr = np.full(horizon[1], np.nan)
-            self._sawtooth_slot(out[i], j)
-            out[i][j] = tr
+            self._store(res, traces, a, horizon[1], i, j, out, sens, why, names)
