@@ -595,6 +595,28 @@ mod tests {
     }
 
     #[test]
+    fn without_a_stribeck_peak_moving_mu_s_with_mu_k_is_differentiable() {
+        // at mu_s = mu_k the readings have a kink in mu_s - mu_k (docs/SENSITIVITIES.md); along
+        // mu_s = mu_k they are smooth and the sum of the two derivatives is that direction's
+        let mut c = paper(Structure::Lps, Effects::default());
+        c.p.mu_s = c.p.mu_k;
+        let d = c.engine(&["mu_k", "mu_s"]);
+        let shifted = |s: f64| {
+            let mut x = c.clone();
+            x.p.mu_k += s;
+            x.p.mu_s += s;
+            x.readings(&x.model().rest_state()).0
+        };
+        let h = 1e-7;
+        let (up, down) = (shifted(h), shifted(-h));
+        let fd: Vec<f64> = up.iter().zip(&down).map(|(a, b)| (a - b) / (2.0 * h)).collect();
+        let scale = fd.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        let worst = (0..fd.len()).map(|t| (d[2 * t] + d[2 * t + 1] - fd[t]).abs()).fold(0.0, f64::max);
+        eprintln!("tied mu_s = mu_k: {:.2e} of the scale", worst / scale);
+        assert!(scale > 0.0 && worst < 1e-5 * scale, "{worst:e} vs scale {scale:e}");
+    }
+
+    #[test]
     fn bad_names_are_refused_with_the_reason() {
         let m = paper(Structure::Lps, Effects::default()).model();
         let err = |names: &[&str]| parse_seeds(&m, &names.iter().map(|s| s.to_string()).collect::<Vec<_>>(), false).unwrap_err();
