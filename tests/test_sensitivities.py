@@ -56,6 +56,15 @@ def test_sensitivities_match_central_differences_of_the_engine():
     np.testing.assert_allclose(r.final_state_sensitivities[0], r.sensitivities[-1], rtol=0, atol=0)
 
 
+def test_sensitivities_travel_with_the_dataset_with_their_units():
+    r = idm_rs.simulate(idm_rs.Params(), WAVE, sensitivities=["mu_k", "m2", "q0"], **RUN)
+    ds = r.to_xarray()
+    np.testing.assert_array_equal(ds["d_reading_d_m2"].values, r.sensitivity("m2"))
+    assert ds["d_reading_d_mu_k"].attrs["units"] == "m"
+    assert ds["d_reading_d_m2"].attrs["units"] == "m/(kg)"
+    assert ds["d_reading_d_q0"].attrs["units"] == "m/(m)"
+
+
 def test_initial_state_sensitivity_of_the_position_is_one_at_the_start():
     r = idm_rs.simulate(idm_rs.Params(), WAVE, sensitivities=["q0", "v0"], **RUN)
     assert r.sensitivity("q0")[0] == 1.0 and r.sensitivity("v0")[0] == 0.0

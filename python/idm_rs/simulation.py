@@ -198,6 +198,15 @@ class SimulationResult:
                 "final_position_m": self.final_position,
             }
         )
+        if self.sensitivity_names:
+            from .declarations import EFFECT_PARAMS, TABLE1
+
+            units = {d.name: d.unit for d in (*TABLE1, *EFFECT_PARAMS)}
+            units.update(dict(self.final_state.components))
+            for k, name in enumerate(self.sensitivity_names):
+                unit = units.get(name, "1")
+                ds[f"d_reading_d_{name}"] = var(self.sensitivities[:, k], "m" if unit == "1" else f"m/({unit})",
+                                                f"derivative of the sensor reading with respect to {name}")
         for name, value in self.params.to_dict().items():
             ds.attrs[f"param_{name}"] = value
             ds.attrs[f"param_{name}_units"] = PARAM_INFO[name][1]
