@@ -3,7 +3,7 @@
 
 use crate::params::Params;
 use crate::scalar::Scalar;
-pub use crate::scalar::sign0;
+use crate::scalar::sign0;
 
 /// Leuven friction constants, precomputed once per run (`T` = f64, or a dual number when
 /// derivatives with respect to them are asked for).

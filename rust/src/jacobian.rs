@@ -10,7 +10,7 @@ use num_dual::Dual64;
 use crate::effects::{LagInput, AMPLIFIER, CREEP, LAGS};
 use crate::mechanics::Actuation;
 use crate::model::Model;
-use crate::scalar::{Scalar, Seed};
+use crate::scalar::{Scalar, Seedable};
 
 impl<T: Scalar> Model<T> {
     /// Fill `jac` (dim x dim, row-major) with df/dy and `dfdt` (dim) with df/dt at state `y`,

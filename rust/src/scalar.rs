@@ -7,12 +7,15 @@
 //! a derivative through them is the derivative of the branch taken (one-sided at a kink).
 
 use nalgebra::{ComplexField, Const};
-use num_dual::{Dual64, DualNum, DualSVec64, DualVec};
+use num_dual::{Dual64, DualNum, DualSVec64, DualStruct, DualVec};
 
 /// A real number with optional forward-mode derivative parts.
 pub trait Scalar: DualNum<Primitive = f64> + Copy + Send + Sync + 'static {
     /// The value (the derivative parts dropped).
-    fn value(&self) -> f64;
+    #[inline(always)]
+    fn value(&self) -> f64 {
+        DualStruct::re(self)
+    }
 
     /// Set the value, keeping the derivative parts (a derivative pass pinned to the states of
     /// the plain run it follows).
@@ -23,14 +26,25 @@ pub trait Scalar: DualNum<Primitive = f64> + Copy + Send + Sync + 'static {
     fn is_exactly(&self, x: f64) -> bool;
 
     /// `self^e` for a base >= 0 (the Stribeck and Leuven exponents). A base of 0 gives 0 with
-    /// zero derivatives (the one-sided limit for exponents above 1).
-    fn pow(self, e: Self) -> Self;
+    /// zero derivatives (the one-sided limit for exponents above 1); the exponent's derivative
+    /// is taken through the log only when it has one.
+    #[inline(always)]
+    fn pow(self, e: Self) -> Self {
+        if self.value() <= 0.0 {
+            Self::from(0.0)
+        } else if e.is_exactly(e.value()) {
+            self.powf(e.value())
+        } else {
+            (self.ln() * e).exp()
+        }
+    }
 
     /// The derivative parts, into `out` (length N; nothing for `f64`).
     fn derivatives(&self, out: &mut [f64]);
 }
 
 impl Scalar for f64 {
+    // the plain engine's hot path: no call across crates, whatever the inliner decides
     #[inline(always)]
     fn value(&self) -> f64 {
         *self
@@ -56,11 +70,6 @@ impl Scalar for f64 {
 
 impl<const N: usize> Scalar for DualSVec64<N> {
     #[inline(always)]
-    fn value(&self) -> f64 {
-        self.re
-    }
-
-    #[inline(always)]
     fn set_value(&mut self, v: f64) {
         self.re = v;
     }
@@ -68,11 +77,6 @@ impl<const N: usize> Scalar for DualSVec64<N> {
     #[inline(always)]
     fn is_exactly(&self, x: f64) -> bool {
         self.re == x && self.eps.0.is_none_or(|e| e.iter().all(|d| *d == 0.0))
-    }
-
-    #[inline(always)]
-    fn pow(self, e: Self) -> Self {
-        dual_pow(self, e, e.is_exactly(e.re))
     }
 
     fn derivatives(&self, out: &mut [f64]) {
@@ -85,11 +89,6 @@ impl<const N: usize> Scalar for DualSVec64<N> {
 
 impl Scalar for Dual64 {
     #[inline(always)]
-    fn value(&self) -> f64 {
-        self.re
-    }
-
-    #[inline(always)]
     fn set_value(&mut self, v: f64) {
         self.re = v;
     }
@@ -99,37 +98,19 @@ impl Scalar for Dual64 {
         self.re == x && self.eps == 0.0
     }
 
-    #[inline(always)]
-    fn pow(self, e: Self) -> Self {
-        dual_pow(self, e, e.eps == 0.0)
-    }
-
     fn derivatives(&self, out: &mut [f64]) {
         out[0] = self.eps;
     }
 }
 
-/// `x^e` of dual numbers for a base >= 0: 0 (no derivatives) at a base of 0; through the log
-/// only when the exponent carries a derivative (`constant_e` false).
-#[inline(always)]
-fn dual_pow<D: DualNum<Primitive = f64> + Copy>(x: D, e: D, constant_e: bool) -> D {
-    if x.re() <= 0.0 {
-        D::from(0.0)
-    } else if constant_e {
-        x.powf(e.re())
-    } else {
-        (x.ln() * e).exp()
-    }
-}
-
 /// A dual number a forward-mode pass can seed: `WIDTH` derivatives, input `index` set to 1.
 /// `Dual64` (one derivative, no storage overhead) for one name; `DualSVec64<N>` for several.
-pub trait Seed: Scalar + ComplexField {
+pub trait Seedable: Scalar + ComplexField {
     const WIDTH: usize;
     fn seed(x: f64, index: usize) -> Self;
 }
 
-impl Seed for Dual64 {
+impl Seedable for Dual64 {
     const WIDTH: usize = 1;
     #[inline(always)]
     fn seed(x: f64, _index: usize) -> Self {
@@ -137,17 +118,12 @@ impl Seed for Dual64 {
     }
 }
 
-impl<const N: usize> Seed for DualSVec64<N> {
+impl<const N: usize> Seedable for DualSVec64<N> {
     const WIDTH: usize = N;
     #[inline(always)]
     fn seed(x: f64, index: usize) -> Self {
-        seeded::<N>(x, index)
+        DualVec::<f64, Const<N>>::from_re(x).derivative(index)
     }
-}
-
-/// `x` with derivative 1 with respect to input `index` of N (the seed of a forward-mode pass).
-pub fn seeded<const N: usize>(x: f64, index: usize) -> DualSVec64<N> {
-    DualVec::<f64, Const<N>>::from_re(x).derivative(index)
 }
 
 /// Sign that is 0 at 0 (f64::signum gives +1 there), decided on the value.
@@ -169,8 +145,8 @@ mod tests {
 
     #[test]
     fn dual_pow_carries_both_derivatives() {
-        let x: DualSVec64<2> = seeded(1.7, 0);
-        let e: DualSVec64<2> = seeded(1.3, 1);
+        let x = DualSVec64::<2>::seed(1.7, 0);
+        let e = DualSVec64::<2>::seed(1.3, 1);
         let y = x.pow(e);
         let mut d = [0.0; 2];
         y.derivatives(&mut d);

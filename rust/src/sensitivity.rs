@@ -20,7 +20,7 @@ use crate::drive::{run_tasks_one_by_one, LaneEnd, Method, Observer, SimError, Ta
 use crate::effects::{EFFECTS, EFFECT_NAMES, LAGS};
 use crate::model::Model;
 use crate::params::PARAM_NAMES;
-use crate::scalar::Seed as Dual;
+use crate::scalar::Seedable as Dual;
 use crate::waveform::PiecewiseLinear;
 
 /// Widest dual number one pass carries; more names take several passes.
