@@ -71,9 +71,9 @@ def test_segments_start_before_each_fast_edge(long_case):
     assert obj.single_shooting().n_offsets == 2
 
 
-def _candidate(effect: str, delta_bic: float, z: float, rms: float = NOISE, at_null: bool = False) -> Candidate:
+def _candidate(effect: str, delta_bic: float, lr: float, rms: float = NOISE, at_null: bool = False) -> Candidate:
     return Candidate(effect, "", {"x": 1.0}, {"x": 1.0}, {}, 100.0, 10, 0.0, delta_bic, rms, math.nan, 0.0, False,
-                     significance={"x": z}, at_null=at_null)
+                     significance={"x": 1.0}, at_null=at_null, lr_chi2=lr)
 
 
 def _calibration(rms: float, converged: bool = True):
@@ -81,19 +81,21 @@ def _calibration(rms: float, converged: bool = True):
     return SimpleNamespace(fit=SimpleNamespace(rms=rms), whiteness_z=0.0, search=search)
 
 
-def test_an_effect_within_two_sigma_of_no_effect_is_never_the_verdict():
+def test_an_effect_its_likelihood_ratio_test_cannot_tell_from_absent_is_never_the_verdict():
     noise = SimpleNamespace(sigma=NOISE)
     verdict = diagnose_module._verdict
-    # a huge BIC gain, but the parameter is 1.5 σ from "no effect": indistinguishable from absent
-    ranking = [_candidate("incline", 1e4, 1.5)]
+    # a BIC gain (against a null found elsewhere), but against the null it contains the
+    # likelihood ratio is 5 chi^2 units: below chi2(1)'s 1e-3 point (10.83), indistinguishable from absent
+    assert _candidate("incline", 1e4, 0.0).lr_critical == pytest.approx(10.828, abs=1e-3)
+    ranking = [_candidate("incline", 1e4, 5.0)]
     assert verdict(ranking, _calibration(1.02 * NOISE), noise, math.nan)[0] == "none"
     # a fit that ended at the null model it contains is never the verdict either
-    assert verdict([_candidate("incline", 1e4, 50.0, at_null=True)], _calibration(1.02 * NOISE), noise,
+    assert verdict([_candidate("incline", 1e4, 1e4, at_null=True)], _calibration(1.02 * NOISE), noise,
                    math.nan)[0] == "none"
-    # the same with the parameter 5 σ away and noise left: named
-    assert verdict([_candidate("incline", 1e4, 5.0)], _calibration(1.5 * NOISE), noise, math.nan)[0] == "incline"
-    # below the threshold: not named
-    assert verdict([_candidate("incline", BIC_THRESHOLD / 2, 5.0)], _calibration(1.02 * NOISE), noise,
+    # the same with a likelihood ratio of 20 and noise left: named
+    assert verdict([_candidate("incline", 1e4, 20.0)], _calibration(1.5 * NOISE), noise, math.nan)[0] == "incline"
+    # below the BIC threshold: not named
+    assert verdict([_candidate("incline", BIC_THRESHOLD / 2, 1e3)], _calibration(1.02 * NOISE), noise,
                    math.nan)[0] == "none"
 
 

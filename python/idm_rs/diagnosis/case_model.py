@@ -66,12 +66,13 @@ class CaseSimulator:
         return t_end, int(round(t_end * self.recording.sample_rate_Hz)) + 1
 
     def predict(self, specs: Sequence[ModelSpec], cycles: Optional[int] = None,
-                retries: int = 2) -> list[list[NDArray[np.float64]]]:
+                retries: int = 2, experiments: Optional[Sequence[int]] = None) -> list[list[NDArray[np.float64]]]:
         """Readings [m] per spec, per experiment (NaN-filled where the run diverged), over the
         first `cycles` drive cycles of each experiment (None: all of it). A run that diverges is
         retried at dt/2, dt/4 ... `retries` times (a population search passes 0: a model that
-        needs a smaller step is far from the data anyway, and retrying costs more than the run)."""
-        return self._run(specs, cycles, retries, [])[0]
+        needs a smaller step is far from the data anyway, and retrying costs more than the run).
+        `experiments`: only these are simulated (the others come back as empty arrays)."""
+        return self._run(specs, cycles, retries, [], experiments)[0]
 
     def predict_with_sensitivities(self, specs: Sequence[ModelSpec], names: Sequence[str],
                                    cycles: Optional[int] = None, retries: int = 2
@@ -83,8 +84,9 @@ class CaseSimulator:
         per spec and experiment (empty when all is well)."""
         return self._run(specs, cycles, retries, list(names))
 
-    def _run(self, specs: Sequence[ModelSpec], cycles: Optional[int], retries: int, names: list[str]):
-        out: list[list[NDArray[np.float64]]] = [[] for _ in specs]
+    def _run(self, specs: Sequence[ModelSpec], cycles: Optional[int], retries: int, names: list[str],
+             experiments: Optional[Sequence[int]] = None):
+        out: list[list[NDArray[np.float64]]] = [[np.zeros(0)] * len(self.recording.experiments) for _ in specs]
         sens: list[list[NDArray[np.float64]]] = [[] for _ in specs]
         why: list[list[str]] = [[] for _ in specs]
         extra = {"sensitivities": names} if names else {}
@@ -98,8 +100,9 @@ class CaseSimulator:
             rows_p, rows_e, rows_w, t_ends = [], [], [], []
             prows = [param_row(specs[i].params) for i in idx]
             erows = [[float(specs[i].effects.get(n, 0.0)) for n in enames] for i in idx]
-            sawtooth = [j for j in range(n_exp) if self._wave_rows[j] is not None]
-            for j in range(n_exp):
+            wanted = range(n_exp) if experiments is None else sorted(set(experiments))
+            sawtooth = [j for j in wanted if self._wave_rows[j] is not None]
+            for j in wanted:
                 if self._wave_rows[j] is None:
                     self._predict_sampled(j, structure, idx, prows, erows, horizons[j], retries, out, sens, why,
                                           names)

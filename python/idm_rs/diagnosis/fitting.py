@@ -1,6 +1,8 @@
-"""Bounded least squares of a model against a recording, with the per-file sensor offsets
-profiled out (they are nuisance parameters, never physics). The Jacobian's columns are
-simulated together in one batch; parameters are fitted in scaled units."""
+"""Bounded least squares of a model against a recording, with the per-segment sensor offsets
+profiled out (they are nuisance parameters, never physics). The Jacobian is exact: the engine's
+sensitivities of the readings (:mod:`idm_rs` ``sensitivities=``) to the engine parameters the
+free parameters move, chained through how they move them; parameters are fitted in scaled
+units."""
 
 from __future__ import annotations
 
@@ -74,6 +76,8 @@ class FitResult:
     message: str
     #: correlation of the fitted parameters (from the Jacobian at the optimum)
     corr: dict[str, dict[str, float]] = field(default_factory=dict)
+    #: the exact Jacobian at the optimum (residual samples x free parameters, fit units), when fitted
+    jac: Optional[NDArray[np.float64]] = field(default=None, repr=False)
 
     @property
     def rms(self) -> float:
@@ -85,6 +89,52 @@ def apply(base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64]) ->
     for f, ui in zip(free, u):
         f.setter(params, effects, f.value(float(ui)))
     return ModelSpec(base.structure, params, effects)
+
+
+def _engine_values(spec: ModelSpec) -> dict[str, float]:
+    out = {n: float(v) for n, v in spec.params.items() if v is not None}
+    out.update({n: float(v) for n, v in spec.effects.items()})
+    return out
+
+
+#: a derivative of the readings [m per fit unit] beyond this many times the experiment's range of
+#: motion (+1 um) has blown up: one fit unit is a few percent of a parameter, which cannot move
+#: the reading by more than a few times its whole range
+BLOWN_UP = 1e3
+
+
+def usable_derivative(dpred: NDArray[np.float64], pred: NDArray[np.float64]) -> bool:
+    """Whether an experiment's reading derivatives (fit units x samples) can be used: finite,
+    and not grown without bound (an explicit step beyond the friction state's stability limit
+    in a fast slip keeps the plain run bounded while its derivative grows exponentially; the
+    engine reports the non-finite case, this catches the finite one)."""
+    if not np.all(np.isfinite(dpred)):
+        return False
+    scale = float(np.ptp(pred)) + 1e-6 if pred.size else 1e-6
+    return dpred.size == 0 or float(np.max(np.abs(dpred))) <= BLOWN_UP * scale
+
+
+#: step [fit units] of the central difference of the setters' composition (no simulation:
+#: exact for the linear setters, 1e-13 relative for the log-scaled ones)
+_CHAIN_STEP = 1e-6
+
+
+def engine_chain(base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64]
+                 ) -> tuple[list[str], NDArray[np.float64]]:
+    """The engine parameters the free parameters move at `u`, and d(engine value)/du
+    (names x free): the chain from the fit's units to the engine's sensitivities. Setters may
+    move several engine parameters (mu_k carrying a tied mu_s, the Stribeck excess setting
+    mu_s from mu_k), so the map is taken from the setters themselves, not assumed."""
+    cols = []
+    for k in range(len(free)):
+        up, dn = u.copy(), u.copy()
+        up[k] += _CHAIN_STEP
+        dn[k] -= _CHAIN_STEP
+        a, b = _engine_values(apply(base, free, up)), _engine_values(apply(base, free, dn))
+        cols.append({n: (a[n] - b.get(n, a[n])) / (2.0 * _CHAIN_STEP) for n in a})
+    names = sorted({n for c in cols for n, d in c.items() if d != 0.0})
+    D = np.array([[c.get(n, 0.0) for c in cols] for n in names]).reshape(len(names), len(free))
+    return names, D
 
 
 class Objective:
@@ -146,10 +196,52 @@ class Objective:
         v = self.vector(self.predict([spec])[0])
         return float(v @ v)
 
+    def profiled_columns(self, dpred: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
+        """d(residual vector)/d(something) from d(prediction)/d(something) per experiment
+        (columns x samples): the residual is data minus prediction minus each segment's mean,
+        so a column is minus the prediction's derivative less its segment mean, in noise units."""
+        blocks = []
+        for j in self.experiments:
+            s = np.asarray(dpred[j])[:, : self.samples[j]]
+            c = np.empty_like(s)
+            bounds = self.starts[j] + [s.shape[1]]
+            for a, b in zip(bounds[:-1], bounds[1:]):
+                c[:, a:b] = s[:, a:b] - s[:, a:b].mean(axis=1, keepdims=True)
+            blocks.append(c)
+        return -np.concatenate(blocks, axis=1).T / self.sigma
+
+    def jacobian(self, base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64],
+                 fd_step: float = 1e-3) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+        """(residual vector, its exact Jacobian in the fit units, simulations run) at `u`. An
+        experiment whose derivatives could not be taken (the engine reports why: e.g. a fast
+        slip beyond the friction state's RK4 stability limit at the fit step, where the plain
+        run stays bounded but its derivative does not; see :func:`usable_derivative`) gets
+        forward-difference columns."""
+        names, D = engine_chain(base, free, u)
+        spec = apply(base, free, u)
+        preds, sens, _ = self.sim.predict_with_sensitivities([spec], names, self.cycles)
+        preds, sens = preds[0], sens[0]
+        r = self.vector(preds)
+        dpred = [D.T @ np.nan_to_num(s, nan=0.0) if len(names) else np.zeros((len(free), preds[j].size))
+                 for j, s in enumerate(sens)]
+        bad = [j for j in self.experiments
+               if np.all(np.isfinite(preds[j])) and not usable_derivative(dpred[j] if np.all(np.isfinite(sens[j]))
+                                                                          else np.array([np.nan]), preds[j])]
+        runs = 1
+        if bad:
+            specs = [apply(base, free, u + fd_step * np.eye(len(free))[k]) for k in range(len(free))]
+            fd = self.sim.predict(specs, self.cycles, experiments=bad)
+            runs += len(specs)
+            for j in bad:
+                dpred[j] = np.stack([(fd[k][j] - preds[j]) / fd_step for k in range(len(free))])
+        return r, self.profiled_columns(dpred), runs
+
 
 def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max_nfev: int = 40,
         fd_step: float = 1e-3, progress: Optional[Callable[[], None]] = None) -> FitResult:
-    """Least squares over `free` (trust-region reflective, bounded), from u = 0."""
+    """Least squares over `free` (trust-region reflective, bounded, scipy), from u = 0, on the
+    exact Jacobian (:meth:`Objective.jacobian`; `fd_step` only where the engine could not take
+    an experiment's derivatives)."""
     from scipy.optimize import least_squares  # lazily: it is most of `import idm_rs`'s time
 
     sim = objective.sim
@@ -168,17 +260,10 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     hi = np.array([f.u_bounds()[1] for f in free])
 
     def jac(u: NDArray[np.float64]) -> NDArray[np.float64]:
-        r0 = fun(u)
-        specs, steps = [], []
-        for j in range(len(free)):
-            h = fd_step if u[j] + fd_step <= hi[j] else -fd_step  # stay inside the bounds
-            uj = u.copy()
-            uj[j] += h
-            specs.append(apply(base, free, uj))
-            steps.append(h)
-        preds = objective.predict(specs)
-        cols = [(objective.vector(p) - r0) / h for p, h in zip(preds, steps)]
-        return np.stack(cols, axis=1)
+        _, J, _ = objective.jacobian(base, free, u, fd_step)
+        if progress:
+            progress()
+        return J
 
     if not free:
         r = fun(np.zeros(0))
@@ -209,7 +294,7 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     corr = {f.name: {g.name: float(np.clip(cov_u[a, b] / (d[a] * d[b]), -1.0, 1.0)) for b, g in enumerate(free)}
             for a, f in enumerate(free)}
     return FitResult(values, std, chi2, objective.n, res, offs, spec, int(sol.nfev), bool(sol.success), str(sol.message),
-                     corr)
+                     corr, np.asarray(J))
 
 
 #: drive cycles fitted at each stage of a progressive fit (None: all). Stick-slip makes the

@@ -1,0 +1,134 @@
+"""Multistart least squares, as the field fits ODE models (Raue et al. 2013, PLoS ONE 8:e74335;
+Villaverde et al. 2019; pyPESTO/AMICI): many starts, ranked by their misfit in one batch call;
+local fits on exact Jacobians (:func:`.fitting.fit`) from the best distinct ones; every local
+fit reports where it started and where it ended. The best end, and how many local fits reached
+it, are the convergence evidence."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Optional, Sequence
+
+import numpy as np
+
+from .case_model import ModelSpec
+from .fitting import FitResult, FreeParam, Objective, apply, fit_progressive
+
+#: two local fits reached the same optimum when their chi^2 differ by less than this (noise
+#: units), or by less than AGREE_RELATIVE of the best chi^2 on a residual far from noise
+AGREE_CHI2 = 25.0
+AGREE_RELATIVE = 1e-3
+#: a ranked start is worth a local fit when its chi^2 is within this factor of the best start's:
+#: a start 100x worse does not reach the best basin in a few exact Gauss-Newton steps, and its
+#: local fit costs as much as the best one's
+PROMISING = 4.0
+
+
+@dataclass(frozen=True)
+class Start:
+    """One start: a label saying where it comes from, and the free parameters centred on it."""
+
+    label: str
+    free: list[FreeParam]
+    #: starts of one origin (e.g. "nominal values"); see `multistart`'s `always`
+    group: str = ""
+
+
+@dataclass
+class LocalFit:
+    """Where one local fit started and ended."""
+
+    label: str
+    start: dict[str, float]
+    start_chi2: float  #: over the ranking horizon
+    fit: FitResult
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"start": self.label, "start_values": self.start, "start_chi2_ranking_horizon": self.start_chi2,
+                "end_chi2": self.fit.chi2, "end_values": self.fit.values, "evaluations": self.fit.nfev}
+
+
+@dataclass
+class MultiStart:
+    """Every local fit (best first) and how many starts were ranked."""
+
+    fits: list[LocalFit]
+    ranked: int  #: starts simulated and ranked before the local fits
+    ranking_cycles: Optional[int]
+
+    @property
+    def best(self) -> FitResult:
+        return self.fits[0].fit
+
+    def agree(self, chi2: float) -> bool:
+        best = self.best.chi2
+        return chi2 - best <= max(AGREE_CHI2, AGREE_RELATIVE * best)
+
+    @property
+    def reached(self) -> int:
+        """Local fits that ended at the best optimum (within AGREE_CHI2)."""
+        return sum(self.agree(f.fit.chi2) for f in self.fits)
+
+    def summary(self) -> str:
+        chis = ", ".join(f"{f.fit.chi2:.0f} (from {f.label})" for f in self.fits)
+        return (f"{self.ranked} starts ranked over the first {self.ranking_cycles or 'all'} cycle(s); "
+                f"{len(self.fits)} local fits on exact Jacobians ended at chi^2 {chis}; "
+                f"{self.reached} of {len(self.fits)} reached the best")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"ranked": self.ranked, "reached": self.reached, "local_fits": [f.to_dict() for f in self.fits]}
+
+
+def _key(free: Sequence[FreeParam]) -> np.ndarray:
+    """A start's position in fit units (log-scaled parameters in log units), for distinctness."""
+    return np.array([math.log(max(f.x0, 1e-300)) / f.scale if f.log else f.x0 / f.scale for f in free])
+
+
+def distinct(order: Sequence[int], starts: Sequence[Start], k: int, min_distance: float = 0.5) -> list[int]:
+    """Up to `k` of `order` (best first), each at least `min_distance` fit units away from every
+    one already taken in some parameter: local fits from next-door starts tell nothing new."""
+    taken: list[int] = []
+    for i in order:
+        if len(taken) >= k:
+            break
+        ki = _key(starts[i].free)
+        if all(np.max(np.abs(ki - _key(starts[j].free))) >= min_distance for j in taken):
+            taken.append(i)
+    return taken
+
+
+def rank(objective: Objective, base: ModelSpec, starts: Sequence[Start], cycles: Optional[int],
+         progress: Optional[Callable[..., Any]] = None) -> list[float]:
+    """chi^2 of every start over the first `cycles` cycles: one batch call for all of them."""
+    obj = objective.with_cycles(cycles)
+    specs = [apply(base, s.free, np.zeros(len(s.free))) for s in starts]
+    preds = obj.predict(specs, retries=0)
+    if progress:
+        progress(len(specs))
+    return [float(np.sum(obj.vector(p) ** 2)) for p in preds]
+
+
+def multistart(objective: Objective, base: ModelSpec, starts: Sequence[Start], *, local_fits: int,
+               horizons: Sequence[Optional[int]] = (2, None), max_nfev: Sequence[int] = (10, 10),
+               always: Sequence[str] = (), progress: Optional[Callable[..., Any]] = None) -> MultiStart:
+    """Rank `starts` over the first horizon, then fit from the `local_fits` best distinct ones
+    among the promising (within PROMISING of the best start's chi^2), and from the best-ranked
+    start of every group in `always` (a start's misfit is not its basin: the nominal values
+    as given, with a large effect in place, can start far up a slope that leads to the truth),
+    over each horizon in turn; the fits best first."""
+    chis = rank(objective, base, starts, horizons[0], progress)
+    order = sorted(range(len(starts)), key=lambda i: chis[i] if math.isfinite(chis[i]) else math.inf)
+    promising = [i for i in order if chis[i] <= PROMISING * chis[order[0]]]
+    picks = distinct(promising, starts, local_fits)
+    for g in always:
+        i = next((i for i in order if starts[i].group == g), None)
+        if i is not None and i not in picks and all(starts[j].group != g for j in picks):
+            picks.append(i)
+    fits = []
+    for i in picks:
+        s = starts[i]
+        r = fit_progressive(objective, base, s.free, horizons=horizons, max_nfev=max_nfev, progress=progress)
+        fits.append(LocalFit(s.label, {f.name: f.x0 for f in s.free}, chis[i], r))
+    fits.sort(key=lambda f: f.fit.chi2)
+    return MultiStart(fits, len(starts), horizons[0])

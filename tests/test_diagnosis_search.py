@@ -1,0 +1,158 @@
+"""How the diagnosis searches, on cases idm-rs generates itself: the fits' Jacobian is the
+engine's exact one; multistart reaches the optimum from spread starts where one local fit
+stops in another basin; the screening score at the null optimum ranks the true effect first;
+a candidate's multistart contains its null and never ends worse than it; near-degenerate
+effects are reported as alternatives."""
+
+from __future__ import annotations
+
+import importlib
+import math
+
+import numpy as np
+import pytest
+
+import idm_rs
+from idm_rs.batch import Structure
+from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec
+from idm_rs.diagnosis.catalogue import CATALOGUE, by_id
+from idm_rs.diagnosis.fitting import FreeParam, Objective, apply, fit, set_param
+from idm_rs.diagnosis.multistart import Start, multistart
+from idm_rs.diagnosis.noise import cross_check, estimate_noise, residual_sigma
+from idm_rs.diagnosis.results import SEPARATION, Candidate
+from idm_rs.diagnosis.screening import Screened, near_degenerate, screen
+from idm_rs.recording import load_case
+from idm_rs.synthetic import make_case
+
+diagnose_module = importlib.import_module("idm_rs.diagnosis.diagnose")
+
+NOMINAL = idm_rs.Params(normal_force=(0.4 + 0.3) * 9.81)
+NOISE = 1.5e-9
+LONG = ({"amplitude_V": 80, "frequency_Hz": 200, "direction": "forward", "cycles": 6},
+        {"amplitude_V": 100, "frequency_Hz": 200, "direction": "backward", "cycles": 6})
+SHORT = ({"amplitude_V": 80, "frequency_Hz": 200, "direction": "forward", "cycles": 3},
+         {"amplitude_V": 60, "frequency_Hz": 200, "direction": "backward", "cycles": 3})
+SPEC = ModelSpec(Structure("lps", 1, False), NOMINAL.to_dict(resolved=False), {})
+
+
+def _m2(fraction: float) -> FreeParam:
+    m2 = NOMINAL.m2
+    return FreeParam("m2", fraction * m2, 0.5 * m2, 1.6 * m2, 0.05 * m2, set_param("m2"))
+
+
+@pytest.fixture(scope="module")
+def long_rec(tmp_path_factory):
+    return load_case(make_case(tmp_path_factory.mktemp("ms") / "long", nominal_params=NOMINAL, experiments=LONG,
+                               noise_rms=NOISE, seed=3, dt=2e-8))
+
+
+def test_the_fit_jacobian_is_the_engines_exact_one(long_rec):
+    obj = Objective(long_rec, CaseSimulator(long_rec), NOISE).with_cycles(2)
+    free = [_m2(1.02), FreeParam("mu_k", 0.49, 0.3, 0.7, 0.01, set_param("mu_k"))]
+    r, J, runs = obj.jacobian(SPEC, free, np.zeros(2))
+    h = 1e-4
+    for k in range(2):
+        e = h * np.eye(2)[k]
+        up, dn = (obj.vector(obj.predict([apply(SPEC, free, s * e)])[0]) for s in (1, -1))
+        fd = (up - dn) / (2 * h)
+        assert np.linalg.norm(J[:, k] - fd) < 1e-3 * np.linalg.norm(fd)
+    assert runs == 1  # one run with sensitivities, no difference quotients
+    assert np.array_equal(r, obj.vector(obj.predict([apply(SPEC, free, np.zeros(2))])[0]))
+
+
+def test_multistart_reaches_the_optimum_where_one_local_fit_stops_short(long_rec):
+    # the single-shooting misfit (one offset per experiment) has another basin: from m2 15 % low
+    # one local fit stops there ...
+    obj = Objective(long_rec, CaseSimulator(long_rec), NOISE, segmented=False)
+    alone = fit(obj, SPEC, [_m2(0.85)], max_nfev=20)
+    assert abs(alone.values["m2"] / NOMINAL.m2 - 1) > 0.03 and alone.rms > 10 * NOISE
+    # ... multistart from spread starts (that one among them) ranks them, fits from the best
+    # distinct ones, and reaches the true mass; every local fit says where it began and ended
+    starts = [Start(f"m2 x {f}", [_m2(f)]) for f in (0.85, 0.6, 1.12, 1.4)]
+    ms = multistart(obj, SPEC, starts, local_fits=2, horizons=(2, None), max_nfev=(10, 10))
+    assert ms.best.values["m2"] == pytest.approx(NOMINAL.m2, rel=3e-3)
+    assert ms.best.rms < 1.1 * NOISE
+    assert len(ms.fits) == 2 and all(f.label.startswith("m2 x") for f in ms.fits)
+    assert ms.to_dict()["local_fits"][0]["end_chi2"] == pytest.approx(ms.best.chi2)
+
+
+@pytest.fixture(scope="module")
+def incline_problem(tmp_path_factory):
+    """A device with a small incline, its nominal model exact otherwise: the calibrated null fit."""
+    case = make_case(tmp_path_factory.mktemp("incline") / "incline", nominal_params=NOMINAL,
+                     effects=idm_rs.Effects(theta_rad=-4e-4), experiments=SHORT, noise_rms=NOISE, seed=7, dt=2e-8)
+    rec = load_case(case)
+    obj = Objective(rec, CaseSimulator(rec), NOISE)
+    free = diagnose_module._calibration_params(SPEC.params)
+    null = fit(obj, SPEC, free, max_nfev=15)
+    return rec, obj, null, [f.at(null.values[f.name]) for f in free]
+
+
+def test_the_screening_score_ranks_the_true_effect_first(incline_problem):
+    rec, obj, null, at = incline_problem
+    effects = [e for e in CATALOGUE if e.applies(SPEC.structure, SPEC.params)]
+    scored = sorted(screen(obj, null, at, effects, NOISE), key=lambda s: -s.delta_chi2)
+    assert scored[0].effect.id == "incline", [(s.effect.id, round(s.delta_chi2)) for s in scored]
+    # the score is the chi^2 a linearised step would gain: at most what the null leaves above noise
+    assert 0 < scored[0].delta_chi2 <= null.chi2
+    # and its step points at the truth
+    assert scored[0].estimate[0] == pytest.approx(-4e-4, rel=0.3)
+
+
+def test_a_candidate_never_ends_worse_than_the_null_it_contains(incline_problem):
+    # drift is the wrong effect here; its multistart's starts are built around the null fit and
+    # include the null itself, and a fit that ends above the null is reported at the null
+    rec, obj, null, at = incline_problem
+    pb = diagnose_module._Problem(rec, estimate_noise(rec), obj.sim, obj, None)
+    cal = diagnose_module._Calibration(at, null, at, null, at, null.chi2, 0.0, None)  # type: ignore[arg-type]
+    drift = by_id("thermal_drift")
+    sc = Screened(drift, (0.0,), 0.0, [5e-5], None, np.zeros(len(at)))  # a step far off: tempting nothing
+    starts = diagnose_module._candidate_starts(pb, cal, drift, sc)
+    assert any(s.free[-1].x0 == 0.0 and [f.x0 for f in s.free[:-1]] == [f.x0 for f in at] for s in starts)
+    (r,) = diagnose_module._fit_candidates(pb, cal, [drift], {drift.id: sc}, refit_top=1)
+    assert r.candidate.chi2 <= null.chi2 * (1 + 1e-9)
+    assert r.candidate.multistart["local_fits"]
+
+
+def _cand(effect: str, delta_bic: float) -> Candidate:
+    return Candidate(effect, "", {"x": 1.0}, {"x": 1.0}, {}, 100.0, 10, 0.0, delta_bic, NOISE, math.nan, 0.0, False,
+                     significance={"x": 10.0}, lr_chi2=1e4)
+
+
+def test_near_degenerate_effects_are_alternatives_not_a_second_verdict():
+    # two effects whose projected signatures are parallel (|cos| 0.99), a third orthogonal
+    d = np.zeros(100)
+    d[:2] = [1.0, 0.0]
+    a = d.copy()
+    b = np.zeros(100)
+    b[:2] = [0.99, math.sqrt(1 - 0.99**2)]
+    c = np.zeros(100)
+    c[2] = 1.0
+    sc = [Screened(by_id("incline"), (0.0,), 50.0, [0.0], a), Screened(by_id("friction_asymmetry"), (0.0,), 49.0, [0.0], b),
+          Screened(by_id("thermal_drift"), (0.0,), 5.0, [0.0], c)]
+    pairs = near_degenerate(sc)
+    assert [(p[0], p[1]) for p in pairs] == [("incline", "friction_asymmetry")]
+    ranking = [_cand("incline", 500.0), _cand("friction_asymmetry", 400.0), _cand("thermal_drift", 495.0)]
+    alts = diagnose_module._alternatives(ranking, "incline", pairs)
+    # asymmetry: parallel signature (although 100 behind in ΔBIC); drift: within SEPARATION
+    assert {a.effect for a in alts} == {"friction_asymmetry", "thermal_drift"}
+    assert 500.0 - 495.0 < SEPARATION
+    # nothing is an alternative to a verdict of "none"
+    assert diagnose_module._alternatives(ranking, "none", pairs) == []
+
+
+def test_the_noise_floor_is_cross_checked_against_the_residual(long_rec):
+    # white noise of known RMS plus a smooth systematic part: the residual's estimate sees the noise only
+    rng = np.random.default_rng(0)
+    t = np.arange(20000) * 1e-5
+    res = [rng.normal(0.0, NOISE, t.size) + 5 * NOISE * np.sin(2 * np.pi * 300 * t)]
+    s, rel = residual_sigma(res)
+    assert s == pytest.approx(NOISE, rel=4 * rel) and rel < 0.01
+    # a rest estimate 6 % high (well beyond its uncertainty) gives way to the residual's
+    noise = estimate_noise(long_rec)
+    high = type(noise)(1.06 * NOISE, 1.06 * NOISE, noise.difference_sigma, 400, 0.01, source="rest")
+    checked = cross_check(high, res)
+    assert checked.source.startswith("residual") and checked.sigma == pytest.approx(s)
+    # agreeing estimates are pooled; a given floor stands
+    assert cross_check(type(noise)(NOISE, NOISE, NOISE, 400, 0.03), res).source == "rest and residual (pooled)"
+    assert cross_check(type(noise)(2 * NOISE, NOISE, NOISE, 400, 0.0, source="given"), res).sigma == 2 * NOISE
