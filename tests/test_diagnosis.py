@@ -167,8 +167,8 @@ def test_progress_advances_by_stage_to_the_end():
     assert STAGES[0][1] * 0.99 < p.bar.n <= STAGES[0][1]
     p.stage_done("calibration")
     assert p.bar.n == pytest.approx(STAGES[0][1])
-    p.stage_done("refits")  # a skipped stage's share is passed over
-    assert p.bar.n == pytest.approx(sum(s[1] for s in STAGES[:4]))
-    assert "null refits" in p.bar.postfix and "10000 simulations" in p.bar.postfix
+    p.stage_done("candidate fits")  # a skipped stage's share is passed over
+    assert p.bar.n == pytest.approx(sum(s[1] for s in STAGES[:3]))
+    assert "wider search" in p.bar.postfix and "10000 simulations" in p.bar.postfix
     p.close()
     assert p.bar.n == pytest.approx(100.0)

@@ -56,6 +56,9 @@ class CaseSimulator:
             for e in recording.experiments
         ]
         self.evaluations = 0  # simulated experiment runs, for reports
+        #: experiments whose reading derivatives blew up at this step (fast slips beyond the
+        #: friction state's RK4 stability limit): their Jacobian columns are taken by differences
+        self.derivatives_unbounded: set[int] = set()
 
     def horizon(self, j: int, cycles: Optional[int]) -> tuple[float, int]:
         """(duration [s], samples) of experiment j cut after `cycles` drive cycles (None: all)."""
@@ -75,20 +78,22 @@ class CaseSimulator:
         return self._run(specs, cycles, retries, [], experiments)[0]
 
     def predict_with_sensitivities(self, specs: Sequence[ModelSpec], names: Sequence[str],
-                                   cycles: Optional[int] = None, retries: int = 2
+                                   cycles: Optional[int] = None, retries: int = 2,
+                                   experiments: Optional[Sequence[int]] = None
                                    ) -> tuple[list[list[NDArray[np.float64]]], list[list[NDArray[np.float64]]],
                                               list[list[str]]]:
         """``predict`` plus, per spec and experiment, the readings' derivatives with respect to
         ``names`` (Table 1 or effect parameters, from the engine: exact for the discrete run),
         shape (names, samples), NaN where they could not be taken, and the engine's reasons
-        per spec and experiment (empty when all is well)."""
-        return self._run(specs, cycles, retries, list(names))
+        per spec and experiment (empty when all is well); `experiments` as for ``predict``."""
+        return self._run(specs, cycles, retries, list(names), experiments)
 
     def _run(self, specs: Sequence[ModelSpec], cycles: Optional[int], retries: int, names: list[str],
              experiments: Optional[Sequence[int]] = None):
-        out: list[list[NDArray[np.float64]]] = [[np.zeros(0)] * len(self.recording.experiments) for _ in specs]
-        sens: list[list[NDArray[np.float64]]] = [[] for _ in specs]
-        why: list[list[str]] = [[] for _ in specs]
+        n = len(self.recording.experiments)
+        out: list[list[NDArray[np.float64]]] = [[np.zeros(0)] * n for _ in specs]
+        sens: list[list[NDArray[np.float64]]] = [[np.zeros((len(names), 0))] * n for _ in specs]
+        why: list[list[str]] = [[""] * n for _ in specs]
         extra = {"sensitivities": names} if names else {}
         by_structure: dict[Structure, list[int]] = {}
         for i, s in enumerate(specs):

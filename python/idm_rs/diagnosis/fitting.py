@@ -216,24 +216,31 @@ class Objective:
         experiment whose derivatives could not be taken (the engine reports why: e.g. a fast
         slip beyond the friction state's RK4 stability limit at the fit step, where the plain
         run stays bounded but its derivative does not; see :func:`usable_derivative`) gets
-        forward-difference columns."""
+        forward-difference columns, from then on without trying the engine's derivative again
+        (`CaseSimulator.derivatives_unbounded`)."""
         names, D = engine_chain(base, free, u)
         spec = apply(base, free, u)
-        preds, sens, _ = self.sim.predict_with_sensitivities([spec], names, self.cycles)
-        preds, sens = preds[0], sens[0]
-        r = self.vector(preds)
-        dpred = [D.T @ np.nan_to_num(s, nan=0.0) if len(names) else np.zeros((len(free), preds[j].size))
-                 for j, s in enumerate(sens)]
-        bad = [j for j in self.experiments
-               if np.all(np.isfinite(preds[j])) and not usable_derivative(dpred[j] if np.all(np.isfinite(sens[j]))
-                                                                          else np.array([np.nan]), preds[j])]
+        skip = self.sim.derivatives_unbounded
+        exact = [j for j in self.experiments if j not in skip]
+        preds, sens, _ = self.sim.predict_with_sensitivities([spec], names, self.cycles, experiments=exact)
+        preds, sens = list(preds[0]), sens[0]
+        dpred: list[NDArray[np.float64]] = [np.zeros((len(free), 0))] * len(preds)
+        bad = [j for j in self.experiments if j in skip]
+        for j in exact:
+            d = D.T @ sens[j] if len(names) else np.zeros((len(free), preds[j].size))
+            if np.all(np.isfinite(preds[j])) and not usable_derivative(d, preds[j]):
+                bad.append(j)
+                skip.add(j)  # it will blow up again at the next parameters: differences from now on
+            dpred[j] = d
         runs = 1
         if bad:
             specs = [apply(base, free, u + fd_step * np.eye(len(free))[k]) for k in range(len(free))]
-            fd = self.sim.predict(specs, self.cycles, experiments=bad)
+            fd = self.sim.predict(specs + [spec], self.cycles, experiments=bad)
             runs += len(specs)
             for j in bad:
+                preds[j] = fd[-1][j]
                 dpred[j] = np.stack([(fd[k][j] - preds[j]) / fd_step for k in range(len(free))])
+        r = self.vector(preds)
         return r, self.profiled_columns(dpred), runs
 
 

@@ -125,10 +125,13 @@ def _columns(obj: Objective, base: ModelSpec, eff: Effect, progress: Optional[Ca
     for probe, free, spec, p, sn in zip(probes(eff), frees, specs, preds, sens):
         _, D = engine_chain(base, free, np.zeros(len(free)))
         dpred = [D.T @ x for x in sn]
-        if not all(usable_derivative(d, x) for d, x in zip(dpred, p) if x.size):  # not taken: forward differences
+        bad = [j for j, (d, x) in enumerate(zip(dpred, p)) if x.size and not usable_derivative(d, x)]
+        if bad:  # derivatives not taken there: forward differences of those experiments
             h = 1e-3
-            fd = obj.predict([apply(base, free, h * np.eye(len(free))[k]) for k in range(len(free))])
-            dpred = [np.stack([(fd[k][j] - p[j]) / h for k in range(len(free))]) for j in range(len(p))]
+            fd = obj.sim.predict([apply(base, free, h * np.eye(len(free))[k]) for k in range(len(free))], obj.cycles,
+                                 experiments=bad)
+            for j in bad:
+                dpred[j] = np.stack([(fd[k][j] - p[j]) / h for k in range(len(free))])
         out.append((probe, free, obj.vector(p), obj.profiled_columns(dpred)))
     return out
 
