@@ -36,6 +36,9 @@ class FitSetting:
     starts: tuple[float, ...] = (0.0,)
     log: bool = False
     setter: Optional[Setter] = None
+    #: the readings have a kink at "no effect" (the derivative there is one-sided and may be the
+    #: wrong side): the screening score is taken at the starting values too
+    kink: bool = False
 
 
 def _stribeck_setter(params: dict, effects: dict, excess: float) -> None:
@@ -46,7 +49,7 @@ def _stribeck_setter(params: dict, effects: dict, excess: float) -> None:
 #: fit settings of every declared effect parameter, by name
 FIT: dict[str, FitSetting] = {
     "hyst_alpha": FitSetting(1e-5, 2.0, 1.0, starts=(1e-4, 1e-3, 1e-2, 0.1), log=True),
-    "mu_s_excess": FitSetting(0.0, 0.5, 0.01, starts=(0.0, 0.02, 0.1), setter=_stribeck_setter),
+    "mu_s_excess": FitSetting(0.0, 0.5, 0.01, starts=(0.0, 0.02, 0.1), setter=_stribeck_setter, kink=True),
     "theta_rad": FitSetting(-0.02, 0.02, 1e-4),
     "k_ground": FitSetting(0.0, 2e5, 1e3, starts=(0.0, 2e3, 2e4)),
     # log scale from 0.3 us: a lag much shorter than the fit's step would make the state
@@ -121,6 +124,8 @@ class EffectParam:
     physical_upper: float = float("inf")
     #: the declared "no effect" value: at it the effect vanishes
     none: float = 0.0
+    #: a kink at "no effect" (see FitSetting.kink)
+    kink: bool = False
 
     def free(self, start: float) -> FreeParam:
         setter = self.setter or set_effect(self.name)
@@ -173,7 +178,7 @@ def _param(effect: str, d: ParamDecl) -> EffectParam:
         raise ValueError(f"fit bounds [{s.lower}, {s.upper}] of '{d.name}' leave its physical domain "
                          f"(it must {d.rule})")
     return EffectParam(d.name, s.lower, s.upper, s.scale, d.unit, s.starts, s.log, s.setter or _default_setter(d.name),
-                       d.lower, d.upper, 0.0 if d.value is None else float(d.value))
+                       d.lower, d.upper, 0.0 if d.value is None else float(d.value), s.kink)
 
 
 def _entry(e: EffectDecl) -> Effect:

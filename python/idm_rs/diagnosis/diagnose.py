@@ -37,6 +37,15 @@ NULL_REFITS = 1
 POLISH_NFEV = 12
 #: multiples of an effect parameter's fit scale its multistart tries (both signs where signed)
 MAGNITUDES = (1.0, 3.0, 10.0, 30.0)
+#: the wider search: every candidate's population search (per free parameter, generations) over
+#: the first cycle, and the candidates that then get local fits
+WIDE_POPULATION = 5
+WIDE_GENERATIONS = 15
+WIDE_FITS = 3
+#: a candidate whose screening score (the chi^2 a linearised step would gain) is below this is
+#: not fitted in the first round: it cannot approach BIC_THRESHOLD + its parameters' penalty
+#: (the wider search, run when the residual is systematic, fits every candidate regardless)
+MIN_SCORE = 5.0
 #: local fits per candidate's multistart from its best distinct ranked starts (the best start at
 #: the nominal values as given gets one more)
 CANDIDATE_FITS = 1
@@ -257,11 +266,12 @@ def _screen(pb: _Problem, cal: _Calibration, nominal: _Nominal) -> tuple[list[Ef
 
 
 def _fit_candidates(pb: _Problem, cal: _Calibration, order: list[Effect], screened: dict[str, Screened],
-                    refit_top: int, already: Optional[list[_Refit]] = None, local_fits: int = CANDIDATE_FITS
-                    ) -> list[_Refit]:
-    """The `refit_top` best-scored effects fitted by multistart over two cycles, then
-    everything; the others reported with their score's linearised step only. A fit that ends
-    no better than the null model it contains is reported at the null."""
+                    refit_top: int, already: Optional[list[_Refit]] = None, local_fits: int = CANDIDATE_FITS,
+                    min_score: float = MIN_SCORE) -> list[_Refit]:
+    """The `refit_top` best-scored effects (those scoring at least `min_score`) fitted by
+    multistart over two cycles, then everything; the others reported with their score's
+    linearised step only. A fit that ends no better than the null model it contains is
+    reported at the null."""
     done = {r.candidate.effect: r for r in (already or []) if not r.candidate.screened_only}
     out: list[_Refit] = []
     for i, eff in enumerate(order):
@@ -271,7 +281,7 @@ def _fit_candidates(pb: _Problem, cal: _Calibration, order: list[Effect], screen
         if eff.id in done:
             out.append(done[eff.id])
             continue
-        if i >= refit_top:
+        if i >= refit_top or (sc.delta_chi2 < min_score):
             # not fitted: the score's linearised step, evaluated without a simulation
             chi2 = max(cal.fit.chi2 - sc.delta_chi2, 0.0)
             values = dict(cal.fit.values)
@@ -298,6 +308,51 @@ def _fit_candidates(pb: _Problem, cal: _Calibration, order: list[Effect], screen
         c.score = sc.delta_chi2
         out.append(_Refit(c, base, [p.at(r.values[p.name]) for p in free]))
     return out
+
+
+def _wide_search(pb: _Problem, cal: _Calibration, order: list[Effect], screened: dict[str, Screened],
+                 first: list[_Refit]) -> list[_Refit]:
+    """Every candidate's own population search over its first cycle (nominal subset within its
+    plausible ranges and the effect within its fit bounds, started at the nominal values as
+    given with the effect's first start): a large missing effect can pull the null fit — and
+    every start built on it — into a basin of the nominal parameters from which no local fit
+    finds the truth. The WIDE_FITS best searched effects then get multistart local fits from
+    the search's distinct good members, their first-round fit and the nominal values."""
+    by_id = {r.candidate.effect: r for r in first}
+    searched: list[tuple[float, Effect, list[Start]]] = []
+    for eff in order:
+        sc = screened[eff.id]
+        base = ModelSpec(eff.structure(cal.fit.spec.structure), dict(cal.fit.spec.params), dict(cal.fit.spec.effects))
+        start = list(cal.free) + [ep.free(_magnitudes(ep)[1 if not ep.log and len(_magnitudes(ep)) > 1 else 0])
+                                  for ep in eff.params]
+        picks, best, _ = search(pb.obj, base, start, cycles=1, population_per_param=WIDE_POPULATION,
+                                generations=WIDE_GENERATIONS, progress=pb.tick)
+        starts = [Start("population search best" if k == 0 else f"population search member {k + 1}",
+                        [f.at(f.value(float(x))) for f, x in zip(start, u)], "population search best" if k == 0 else "")
+                  for k, u in enumerate(picks)]
+        prev = by_id.get(eff.id)
+        if prev is not None and not prev.candidate.screened_only:
+            starts.append(Start("first-round fit", list(prev.free), "first-round fit"))
+        starts += [st for st in _candidate_starts(pb, cal, eff, sc) if st.group == "nominal values"]
+        searched.append((best, eff, starts))
+    searched.sort(key=lambda x: x[0])
+    out = {r.candidate.effect: r for r in first}
+    for _, eff, starts in searched[:WIDE_FITS]:
+        base = ModelSpec(eff.structure(cal.fit.spec.structure), dict(cal.fit.spec.params), dict(cal.fit.spec.effects))
+        ms = multistart(pb.obj, base, starts, local_fits=1, horizons=(2, None), max_nfev=(10, 10),
+                        always=("population search best", "first-round fit"), progress=pb.tick)
+        r = ms.best
+        old = out.get(eff.id)
+        if old is not None and not old.candidate.screened_only and old.candidate.chi2 <= r.chi2:
+            continue
+        null = _at_null(cal, eff, base)
+        if null is not None and r.chi2 >= null.chi2:
+            continue
+        c = _candidate(pb, cal, eff, r, screened_only=False)
+        c.multistart = ms.to_dict()
+        c.score = screened[eff.id].delta_chi2
+        out[eff.id] = _Refit(c, base, [p.at(r.values[p.name]) for p in starts[0].free])
+    return list(out.values())
 
 
 def _candidate(pb: _Problem, cal: _Calibration, eff: Effect, r: FitResult, screened_only: bool,
@@ -346,7 +401,7 @@ def _null_refits(pb: _Problem, nominal: _Nominal, cal: _Calibration, refits: lis
         if c.screened_only or c.at_null or c.delta_bic < BIC_THRESHOLD:
             continue  # only a candidate that could win needs its credit checked
         start = [f.at(c.calibrated[f.name]) for f in cal.free]
-        n0 = fit(pb.obj, nominal.spec, start, max_nfev=8, progress=pb.tick)
+        n0 = fit(pb.obj, nominal.spec, start, max_nfev=6, progress=pb.tick)
         if n0.chi2 < best.fit.chi2 - 1e-6:
             at = [f.at(n0.values[f.name]) for f in cal.free]
             bic = n0.chi2 + (len(cal.free) + pb.n_offsets) * pb.ln_n
@@ -392,6 +447,11 @@ def _leaves_noise(pb: _Problem, cal: _Calibration) -> bool:
     return cal.fit.rms <= NOISE_RATIO_OK * pb.sigma and cal.whiteness_z <= WHITENESS_Z
 
 
+def _explains(pb: _Problem, c: Candidate) -> bool:
+    """A supported candidate whose fit leaves noise (as the verdict requires)."""
+    return _eligible(c) and c.rms_after <= NOISE_RATIO_OK * pb.sigma and c.whiteness_z <= WHITENESS_Z
+
+
 def _finite(x: float) -> bool:
     return isinstance(x, float) and math.isfinite(x)
 
@@ -435,10 +495,10 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     clock.lap("screening")
     refits = _fit_candidates(pb, cal, order, screened, refit_top)
     clock.lap("candidate fits")
-    if not any(_eligible(r.candidate) for r in refits) and not _leaves_noise(pb, cal):
-        # a systematic residual and no candidate found yet: the larger search (every candidate
-        # that scores, more local fits each) before the answer may be "unexplained"
-        refits = _fit_candidates(pb, cal, order, screened, len(order), refits, local_fits=CANDIDATE_FITS + 1)
+    if not any(_explains(pb, r.candidate) for r in refits) and not _leaves_noise(pb, cal):
+        # a systematic residual that no candidate fitted so far explains: the wider search
+        # (a population search of every candidate's own) before the answer may be "unexplained"
+        refits = _wide_search(pb, cal, order, screened, refits)
         searched_wide = True
     else:
         searched_wide = False

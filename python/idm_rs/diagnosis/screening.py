@@ -45,15 +45,17 @@ class Screened:
 def probes(eff: Effect) -> list[tuple[float, ...]]:
     """Where an effect's columns are taken: every log-scaled parameter (a time constant, whose
     "no effect" is a limit the engine has no state for) at each of its starting values, every
-    other at its "no effect" value — the score test's point — and, for a parameter whose
-    starting values leave "no effect" (a one-sided term the readings may meet at a kink, like
-    the Stribeck excess), at those too."""
+    other at its "no effect" value — the score test's point — and, for a parameter with a kink
+    there (a one-sided term like the Stribeck excess, whose derivative at "no effect" may be
+    the wrong side's), at its starting values too."""
     grids = []
     for ep in eff.params:
         if ep.log:
             grids.append(tuple(ep.starts))
-        else:
+        elif ep.kink:
             grids.append(tuple(dict.fromkeys((ep.none,) + tuple(ep.starts))))
+        else:
+            grids.append((ep.none,))
     if not grids:
         return [()]
     return [tuple(c) for c in np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(grids), -1).T]
