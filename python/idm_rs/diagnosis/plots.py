@@ -168,7 +168,8 @@ def plot_residual_phases(d: Diagnosis, directory: Path) -> Path:
 
 def plot_ranking(d: Diagnosis, directory: Path) -> Path:
     """``ranking.png``: ΔBIC of every candidate (symlog), RMS after / noise and held-out RMS
-    written beside each bar, the verdict highlighted, screened-only bars hatched."""
+    written beside each bar, the verdict highlighted, score-only (not fitted) bars hatched, the
+    same vocabulary as the report: "fitted", "at null", "score only"."""
     import matplotlib.pyplot as plt
 
     cands = list(d.ranking)
@@ -185,9 +186,11 @@ def plot_ranking(d: Diagnosis, directory: Path) -> Path:
     ax.set_xscale("symlog", linthresh=max(BIC_THRESHOLD, 1.0))
     ax.axvline(BIC_THRESHOLD, color="tab:green", ls="--", lw=1, label=f"ΔBIC threshold ({BIC_THRESHOLD:g})")
     ax.axvline(0, color="0.2", lw=0.8)
-    ax.set_yticks(y, [c.effect + (" (screened)" if c.screened_only else "") for c in cands], fontsize=9)
+    ax.set_yticks(y, [c.effect + (" (score only)" if c.screened_only else " (at null)" if c.at_null else "")
+                      for c in cands], fontsize=9)
     if any(c.screened_only for c in cands):
-        ax.barh(np.nan, 0, color="0.75", hatch="//", edgecolor="0.4", label="screened: one-cycle fit only")
+        ax.barh(np.nan, 0, color="0.75", hatch="//", edgecolor="0.4",
+                label="score only: not fitted, the screening step's linearised numbers")
     lo, hi = ax.get_xlim()
     ax.set_xlim(lo, hi * 10 if hi > 0 else hi)
     for yi, c in zip(y, cands):

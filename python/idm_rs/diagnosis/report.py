@@ -136,14 +136,16 @@ def text_report(d: Diagnosis) -> str:
     lines.append("")
     lines.append(f"VERDICT: {d.verdict.upper()}")
     lines.append(f"  {d.reason}")
+    for a in getattr(d, "alternatives", []) or []:
+        lines.append(f"  ALTERNATIVE: {a.effect} (ΔBIC {a.delta_bic:.0f}): {a.why}")
 
     # --- the RMS story
     best = next((c for c in d.ranking if c.effect == d.verdict), None)
     lines += ["", "Residual RMS (a position offset fitted per drive-cycle segment: multiple shooting by translation)"]
     rows = [
-        ["noise floor (from the data)", _nm(sigma), "1.00 ×",
-         f"rest {_nm(d.noise.rest_sigma)}, 2nd differences {_nm(d.noise.difference_sigma)}, "
-         f"±{100 * d.noise.relative_uncertainty:.1f} %"],
+        [f"noise floor ({getattr(d.noise, 'source', 'rest')})", _nm(sigma), "1.00 ×",
+         f"rest {_nm(d.noise.rest_sigma)}, fitted residual's 2nd differences "
+         f"{_nm(getattr(d.noise, 'residual_sigma', math.nan))}, ±{100 * d.noise.relative_uncertainty:.1f} %"],
         ["nominal model (meta.json)", _nm(d.rms_before), _ratio(d.rms_before, sigma), ""],
         ["calibrated nominal", _nm(d.rms_calibrated), _ratio(d.rms_calibrated, sigma),
          f"whiteness z = {d.whiteness_z_calibrated:.1f}"],
@@ -174,7 +176,7 @@ def text_report(d: Diagnosis) -> str:
     if summary:
         lines.append(f"  convergence: {summary}; null model from the {getattr(d, 'null_source', 'calibration')}")
         if not getattr(d, "calibration_converged", True):
-            lines.append("  the independent searches did NOT reach the same optimum: treat the calibration as unreliable")
+            lines.append("  the local fits did NOT reach the same optimum: treat the calibration as unreliable")
 
     # --- where the residual lives
     lines += ["", "Where the residual lives (calibrated model; share of the residual energy above the noise)"]
@@ -198,23 +200,25 @@ def text_report(d: Diagnosis) -> str:
         lines.append("  no systematic time window")
 
     # --- candidate ranking
-    lines += ["", "Candidate effects (each refitted with the calibrated subset and the offsets, started from "
-                  "the null model it contains; ΔBIC > 0: better than the best null fit, \"not supported\": no "
-                  "better than the nominal model the effect contains; σ: distance of the "
-                  "effect parameter from 'no effect' in 1σ — within 2σ the effect is indistinguishable from "
-                  "its absence)"]
+    lines += ["", "Candidate effects (score: the chi² one linearised step from the null optimum would gain, "
+                  "which orders the fits; \"fitted\": multistart local fits with the calibrated subset and the "
+                  "offsets, the null it contains among the starts; \"at null\": the fit ended no better than that "
+                  "null; \"score only\": not fitted, its numbers are the linearised step's; ΔBIC > 0: better than "
+                  "the best null fit; LR: likelihood ratio against the null it contains, with its 1e-3 critical "
+                  "value)"]
     rows = []
     for i, c in enumerate(d.ranking, 1):
         mark = "*" if c.effect == d.verdict else " "
-        sig = getattr(c, "significance", {}) or {}
-        z = min(sig.values()) if sig else math.nan
+        lr = getattr(c, "lr_chi2", math.nan)
+        score = getattr(c, "score", math.nan)
         rows.append([f"{mark}{i}", c.effect, format_params(c), _nm(c.rms_after), _ratio(c.rms_after, sigma),
+                     f"{score:.0f}" if _finite(score) else "–",
                      f"{c.delta_bic:.1f}" if c.delta_bic >= 0 else "not supported",
-                     f"{z:.1f}" if _finite(z) else "–",
+                     f"{lr:.0f} / {c.lr_critical:.1f}" if _finite(lr) and not c.screened_only else "–",
                      _nm(c.heldout_rms) if _finite(c.heldout_rms) else "–",
-                     "at null" if getattr(c, "at_null", False) else ("screened" if c.screened_only else "refit")])
-    lines += _table(["#", "effect", "fitted parameters (±1σ)", "RMS after", "/ noise", "ΔBIC", "σ", "held-out RMS",
-                     "fit"], rows, "rllrrrrrl")
+                     "at null" if getattr(c, "at_null", False) else ("score only" if c.screened_only else "fitted")])
+    lines += _table(["#", "effect", "fitted parameters (±1σ)", "RMS after", "/ noise", "score", "ΔBIC", "LR / crit",
+                     "held-out RMS", "fit"], rows, "rllrrrrrrl")
     for c in d.ranking:
         corr = getattr(c, "correlation", {}) or {}
         names = list(corr)
@@ -224,8 +228,12 @@ def text_report(d: Diagnosis) -> str:
                 if _finite(rho) and abs(rho) > 0.8:
                     lines.append(f"  {c.effect}: {names[a]} and {names[b]} are correlated (ρ = {rho:+.2f}): the data "
                                  f"constrain a combination of them; each value alone is uncertain beyond its ±1σ")
-    lines.append("  screened: fitted over the first drive cycle only, then evaluated over everything "
-                 "(not refined; its numbers understate what the effect could do)")
+    pairs = getattr(d, "degenerate_pairs", []) or []
+    if pairs:
+        lines.append("  near-degenerate (projected signatures almost parallel; the data tell them apart only "
+                     "beyond first order): " + "; ".join(f"{a} ~ {b} (|cos| = {c:.3f})" for a, b, c in pairs))
+    if getattr(d, "searched_wide", False):
+        lines.append("  the wider search ran: every candidate got a population search of its own")
 
     lines += ["", "Refit model:", "  " + refit_model_line(d)]
     return "\n".join(lines) + "\n"
