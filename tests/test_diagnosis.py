@@ -169,6 +169,6 @@ def test_progress_advances_by_stage_to_the_end():
     assert p.bar.n == pytest.approx(STAGES[0][1])
     p.stage_done("candidate fits")  # a skipped stage's share is passed over
     assert p.bar.n == pytest.approx(sum(s[1] for s in STAGES[:3]))
-    assert "wider search" in p.bar.postfix and "10000 simulations" in p.bar.postfix
+    assert "null refits" in p.bar.postfix and "10000 simulations" in p.bar.postfix
     p.close()
     assert p.bar.n == pytest.approx(100.0)

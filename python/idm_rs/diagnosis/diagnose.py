@@ -33,8 +33,10 @@ from .screening import Screened, near_degenerate, screen
 
 #: leading candidates whose nominal parameters seed a refit of the null model
 NULL_REFITS = 1
-#: least-squares evaluations of the final polish of the leading candidate
+#: least-squares evaluations of the final polish of the leading candidate (and of rivals within
+#: SEPARATION of it, at most POLISH_CLOSE candidates in all)
 POLISH_NFEV = 12
+POLISH_CLOSE = 3
 #: multiples of an effect parameter's fit scale its multistart tries (both signs where signed)
 MAGNITUDES = (1.0, 3.0, 10.0, 30.0)
 #: the wider search: every candidate's population search (per free parameter, generations) over
@@ -313,18 +315,21 @@ def _fit_candidates(pb: _Problem, cal: _Calibration, order: list[Effect], screen
 def _wide_search(pb: _Problem, cal: _Calibration, order: list[Effect], screened: dict[str, Screened],
                  first: list[_Refit]) -> list[_Refit]:
     """Every candidate's own population search over its first cycle (nominal subset within its
-    plausible ranges and the effect within its fit bounds, started at the nominal values as
-    given with the effect's first start): a large missing effect can pull the null fit — and
-    every start built on it — into a basin of the nominal parameters from which no local fit
-    finds the truth. The WIDE_FITS best searched effects then get multistart local fits from
-    the search's distinct good members, their first-round fit and the nominal values."""
+    plausible ranges and the effect within its fit bounds, the best null found so far with the
+    effect's first start one member): a large missing effect can pull the null fit — and every
+    start built on it — into a basin of the nominal parameters from which no local fit finds
+    the truth. The WIDE_FITS best searched effects then get multistart local fits from the
+    search's distinct good members, their first-round fit, the best null and the nominal
+    values (each with the effect's magnitude grid)."""
     by_id = {r.candidate.effect: r for r in first}
     searched: list[tuple[float, Effect, list[Start]]] = []
     for eff in order:
         sc = screened[eff.id]
         base = ModelSpec(eff.structure(cal.fit.spec.structure), dict(cal.fit.spec.params), dict(cal.fit.spec.effects))
-        start = list(cal.free) + [ep.free(_magnitudes(ep)[1 if not ep.log and len(_magnitudes(ep)) > 1 else 0])
-                                  for ep in eff.params]
+        # the search's box: the nominal subset's plausible ranges (bounds are absolute), centred
+        # on the best null so far; the effect's first non-null start
+        start = list(cal.at) + [ep.free(_magnitudes(ep)[1 if not ep.log and len(_magnitudes(ep)) > 1 else 0])
+                                for ep in eff.params]
         picks, best, _ = search(pb.obj, base, start, cycles=1, population_per_param=WIDE_POPULATION,
                                 generations=WIDE_GENERATIONS, progress=pb.tick)
         starts = [Start("population search best" if k == 0 else f"population search member {k + 1}",
@@ -333,14 +338,14 @@ def _wide_search(pb: _Problem, cal: _Calibration, order: list[Effect], screened:
         prev = by_id.get(eff.id)
         if prev is not None and not prev.candidate.screened_only:
             starts.append(Start("first-round fit", list(prev.free), "first-round fit"))
-        starts += [st for st in _candidate_starts(pb, cal, eff, sc) if st.group == "nominal values"]
+        starts += [st for st in _candidate_starts(pb, cal, eff, sc) if st.group in ("null fit", "nominal values")]
         searched.append((best, eff, starts))
     searched.sort(key=lambda x: x[0])
     out = {r.candidate.effect: r for r in first}
     for _, eff, starts in searched[:WIDE_FITS]:
         base = ModelSpec(eff.structure(cal.fit.spec.structure), dict(cal.fit.spec.params), dict(cal.fit.spec.effects))
         ms = multistart(pb.obj, base, starts, local_fits=1, horizons=(2, None), max_nfev=(10, 10),
-                        always=("population search best", "first-round fit"), progress=pb.tick)
+                        always=("population search best", "null fit"), progress=pb.tick)
         r = ms.best
         old = out.get(eff.id)
         if old is not None and not old.candidate.screened_only and old.candidate.chi2 <= r.chi2:
@@ -417,20 +422,24 @@ def _null_refits(pb: _Problem, nominal: _Nominal, cal: _Calibration, refits: lis
 
 
 def _polish_leader(pb: _Problem, cal: _Calibration, refits: list[_Refit]) -> None:
-    """The leading supported candidate fitted to convergence over everything from its optimum
-    (the refits stop after a fixed budget): its residual is then judged, not the budget's."""
-    lead = next((r for r in _ordered(refits) if _eligible(r.candidate)), None)
-    if lead is None:
+    """The leading supported candidate — and every supported one within SEPARATION of it in
+    ΔBIC (at most POLISH_CLOSE in all) — fitted to convergence over everything from its optimum
+    (the candidate fits stop after a fixed budget): their residuals are then judged, and close
+    rivals compared, at their optima, not at the budget's."""
+    eligible = [r for r in _ordered(refits) if _eligible(r.candidate)]
+    if not eligible:
         return
-    eff = next(e for e in CATALOGUE if e.id == lead.candidate.effect)
-    base = ModelSpec(lead.base.structure, dict(lead.candidate.spec.params), dict(lead.candidate.spec.effects))
-    r = fit(pb.obj, base, lead.free, max_nfev=POLISH_NFEV, progress=pb.tick)
-    if r.chi2 < lead.candidate.chi2:
-        c = _candidate(pb, cal, eff, r, screened_only=False)
-        c.delta_bic = cal.bic - c.bic
-        c.score, c.multistart = lead.candidate.score, lead.candidate.multistart
-        lead.candidate = c
-        lead.free = [p.at(r.values[p.name]) for p in lead.free]
+    lead_bic = eligible[0].candidate.delta_bic
+    for r0 in [r for r in eligible if lead_bic - r.candidate.delta_bic < SEPARATION][:POLISH_CLOSE]:
+        eff = next(e for e in CATALOGUE if e.id == r0.candidate.effect)
+        base = ModelSpec(r0.base.structure, dict(r0.candidate.spec.params), dict(r0.candidate.spec.effects))
+        r = fit(pb.obj, base, r0.free, max_nfev=POLISH_NFEV, progress=pb.tick)
+        if r.chi2 < r0.candidate.chi2:
+            c = _candidate(pb, cal, eff, r, screened_only=False)
+            c.delta_bic = cal.bic - c.bic
+            c.score, c.multistart = r0.candidate.score, r0.candidate.multistart
+            r0.candidate = c
+            r0.free = [p.at(r.values[p.name]) for p in r0.free]
 
 
 def _null_effect_start(eff: Effect) -> list[FreeParam]:
@@ -495,16 +504,17 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     clock.lap("screening")
     refits = _fit_candidates(pb, cal, order, screened, refit_top)
     clock.lap("candidate fits")
-    if not any(_explains(pb, r.candidate) for r in refits) and not _leaves_noise(pb, cal):
-        # a systematic residual that no candidate fitted so far explains: the wider search
-        # (a population search of every candidate's own) before the answer may be "unexplained"
-        refits = _wide_search(pb, cal, order, screened, refits)
-        searched_wide = True
-    else:
-        searched_wide = False
-    clock.lap("wider search")
     cal, null_source = _null_refits(pb, nominal, cal, refits, NULL_REFITS)
     clock.lap("null refits")
+    searched_wide = False
+    if not any(_explains(pb, r.candidate) for r in refits) and not _leaves_noise(pb, cal):
+        # a systematic residual that no candidate fitted so far explains: the wider search
+        # (a population search of every candidate's own, from the best null found so far)
+        # before the answer may be "unexplained"
+        refits = _wide_search(pb, cal, order, screened, refits)
+        searched_wide = True
+        cal, null_source = _null_refits(pb, nominal, cal, refits, NULL_REFITS)
+    clock.lap("wider search")
     _polish_leader(pb, cal, refits)
     clock.lap("polish")
     ranking = _rank_with_heldout(refits, heldout)
@@ -632,8 +642,8 @@ STAGES: tuple[tuple[str, float, float], ...] = (
     ("calibration", 40.0, 1500.0),
     ("screening", 6.0, 30.0),
     ("candidate fits", 34.0, 300.0),
-    ("wider search", 4.0, 300.0),
     ("null refits", 6.0, 30.0),
+    ("wider search", 4.0, 300.0),
     ("polish", 6.0, 30.0),
     ("held-out", 4.0, 10.0),
 )
