@@ -134,7 +134,8 @@ def test_a_candidate_never_ends_worse_than_the_null_it_contains(spring_problem):
     pb = diagnose_module._Problem(rec, estimate_noise(rec), obj.sim, obj, None)
     cal = diagnose_module._Calibration(at, null, at, null, at, null.chi2, 0.0, None)  # type: ignore[arg-type]
     drift = by_id("thermal_drift")
-    sc = Screened(drift, (0.0,), 0.0, [5e-5], None, np.zeros(len(at)))  # a step far off: tempting nothing
+    # scored above MIN_SCORE (so it is fitted), its step far off: tempting nothing
+    sc = Screened(drift, (0.0,), 50.0, [5e-5], None, np.zeros(len(at)))
     starts = diagnose_module._candidate_starts(pb, cal, drift, sc)
     assert any(s.free[-1].x0 == 0.0 and [f.x0 for f in s.free[:-1]] == [f.x0 for f in at] for s in starts)
     (r,) = diagnose_module._fit_candidates(pb, cal, [drift], {drift.id: sc}, refit_top=1)

@@ -42,7 +42,7 @@ MAGNITUDES = (1.0, 3.0, 10.0, 30.0)
 #: the wider search: every candidate's population search (per free parameter, generations) over
 #: the first cycle, and the candidates that then get local fits
 WIDE_POPULATION = 5
-WIDE_GENERATIONS = 15
+WIDE_GENERATIONS = 10
 WIDE_FITS = 3
 #: a candidate whose screening score (the chi^2 a linearised step would gain) is below this is
 #: not fitted in the first round: it cannot approach BIC_THRESHOLD + its parameters' penalty
@@ -456,6 +456,16 @@ def _leaves_noise(pb: _Problem, cal: _Calibration) -> bool:
     return cal.fit.rms <= NOISE_RATIO_OK * pb.sigma and cal.whiteness_z <= WHITENESS_Z
 
 
+def _better_of(a: list[_Refit], b: list[_Refit]) -> list[_Refit]:
+    """Per effect, the fitted candidate with the lower chi^2 of two rounds."""
+    out = {r.candidate.effect: r for r in a}
+    for r in b:
+        old = out.get(r.candidate.effect)
+        if old is None or (not r.candidate.screened_only and (old.candidate.screened_only or r.candidate.chi2 < old.candidate.chi2)):
+            out[r.candidate.effect] = r
+    return list(out.values())
+
+
 def _explains(pb: _Problem, c: Candidate) -> bool:
     """A supported candidate whose fit leaves noise (as the verdict requires)."""
     return _eligible(c) and c.rms_after <= NOISE_RATIO_OK * pb.sigma and c.whiteness_z <= WHITENESS_Z
@@ -513,7 +523,15 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
         # before the answer may be "unexplained"
         refits = _wide_search(pb, cal, order, screened, refits)
         searched_wide = True
+        before = cal.fit.chi2
         cal, null_source = _null_refits(pb, nominal, cal, refits, NULL_REFITS)
+        if cal.fit.chi2 < 0.5 * before and not any(_explains(pb, r.candidate) for r in refits):
+            # a candidate led the null to a far better basin of the nominal parameters: the
+            # candidates start again from there (scored and fitted as in the first round)
+            order, screened = _screen(pb, cal, nominal)
+            again = _fit_candidates(pb, cal, order, screened, refit_top)
+            refits = _better_of(refits, again)
+            cal, null_source = _null_refits(pb, nominal, cal, refits, NULL_REFITS)
     clock.lap("wider search")
     _polish_leader(pb, cal, refits)
     clock.lap("polish")
