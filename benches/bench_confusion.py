@@ -116,8 +116,8 @@ def _size(effect: str, magnitude: float, device: str, sim: Any, obj: Any, Q: np.
     p, eff, model, nominal_model = _true_device(effect, magnitude, device)
     null_p, _, _, _ = _true_device(effect, 0.0 if effect != "piezo_hysteresis" else 0.0, device)
     hyst = effect == "piezo_hysteresis"
-    s_eff = ModelSpec(Structure(model, 4 if model == "dps" else None, hyst), _spec_params(p), dataclasses.asdict(eff))
-    s_null = ModelSpec(Structure(nominal_model, 4 if nominal_model == "dps" else None, False),
+    s_eff = ModelSpec(Structure(model, 4 if model == "dps" else 1, hyst), _spec_params(p), dataclasses.asdict(eff))
+    s_null = ModelSpec(Structure(nominal_model, 4 if nominal_model == "dps" else 1, False),
                        _spec_params(null_p if effect != "stribeck" else null_p.replace(mu_s=null_p.mu_k)), {})
     a, b = obj.predict([s_eff, s_null])
     d = obj.vector(a) - obj.vector(b)
@@ -157,7 +157,7 @@ def effect_case(directory: Path, c: dict[str, Any], rng: np.random.Generator) ->
             rec = load_case(Path(tmp) / "n")
         sim = CaseSimulator(rec)
         obj = Objective(rec, sim, noise)
-        spec = ModelSpec(Structure(model, 4 if model == "dps" else None, False), _spec_params(null_p), {})
+        spec = ModelSpec(Structure(model, 4 if model == "dps" else 1, False), _spec_params(null_p), {})
         free = [FreeParam(n, float(getattr(null_p, n)), 0.6 * getattr(null_p, n), 1.5 * getattr(null_p, n),
                           CALIBRATION_SCALE * getattr(null_p, n), set_param(n)) for n in CALIBRATED]
         _, J, _ = obj.jacobian(spec, free, np.zeros(len(free)))
