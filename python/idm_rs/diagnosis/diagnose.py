@@ -43,7 +43,7 @@ MAGNITUDES = (1.0, 3.0, 10.0, 30.0)
 #: the first cycle, and the candidates that then get local fits
 WIDE_POPULATION = 5
 WIDE_GENERATIONS = 10
-WIDE_FITS = 3
+WIDE_FITS = 2
 #: a candidate whose screening score (the chi^2 a linearised step would gain) is below this is
 #: not fitted in the first round: it cannot approach BIC_THRESHOLD + its parameters' penalty
 #: (the wider search, run when the residual is systematic, fits every candidate regardless)
