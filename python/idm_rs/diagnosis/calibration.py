@@ -8,7 +8,6 @@ convergence evidence the verdict and the report use."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, Callable, Optional, Sequence
 
@@ -17,7 +16,7 @@ from numpy.typing import NDArray
 
 from .case_model import ModelSpec
 from .fitting import FitResult, FreeParam, Objective, apply
-from .multistart import AGREE_CHI2, MultiStart, Start, multistart
+from .multistart import MultiStart, Start, multistart
 
 #: drive cycles of every experiment the population search compares (cheap and smooth)
 SEARCH_CYCLES = 1

@@ -3,7 +3,6 @@ through the Rust batch engine, read out at the sensor's sample times."""
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 from typing import Mapping, Optional, Sequence

@@ -442,14 +442,6 @@ def _polish_leader(pb: _Problem, cal: _Calibration, refits: list[_Refit]) -> Non
             r0.free = [p.at(r.values[p.name]) for p in r0.free]
 
 
-def _null_effect_start(eff: Effect) -> list[FreeParam]:
-    """The effect's parameters at (next to) "no effect", as a least-squares start. A log-scaled
-    parameter starts at its smallest starting value, not at the floor of its range: there the
-    misfit hardly depends on log(value) and least squares would never leave it. (The guarantee
-    that a candidate never ends worse than its null does not rest on this start; see `_at_null`.)"""
-    return [ep.free(min(ep.starts) if ep.log else ep.none) for ep in eff.params]
-
-
 def _leaves_noise(pb: _Problem, cal: _Calibration) -> bool:
     """The calibrated null's residual is noise: nothing large is compensated by far-off nominal
     values, so a candidate's least squares from the null it contains needs no global search."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Callable, Mapping, Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -251,7 +251,6 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     an experiment's derivatives)."""
     from scipy.optimize import least_squares  # lazily: it is most of `import idm_rs`'s time
 
-    sim = objective.sim
     cache: dict[bytes, NDArray[np.float64]] = {}
 
     def fun(u: NDArray[np.float64]) -> NDArray[np.float64]:
