@@ -162,14 +162,23 @@ def effect_case(directory: Path, c: dict[str, Any], rng: np.random.Generator) ->
                           CALIBRATION_SCALE * getattr(null_p, n), set_param(n)) for n in CALIBRATED]
         _, J, _ = obj.jacobian(spec, free, np.zeros(len(free)))
         Q, _ = np.linalg.qr(J)
+        from idm_rs.diagnosis.catalogue import by_id
+
+        ep = next(p for p in by_id(effect).params if p.name == name)
+        # within the diagnosis's fit bounds (an effect it could not fit says nothing), and within
+        # half of them: a size that needs more is reported at that magnitude, not reached
+        cap = 0.5 * max(abs(ep.lower), abs(ep.upper))
         magnitude = guess
         for _ in range(6):  # secant in log space on size(magnitude) = target
             size = _size(effect, magnitude, device, sim, obj, Q)
-            if not math.isfinite(size) or size <= 0:
+            if not math.isfinite(size) or size <= 0 or abs(size / target - 1) < 0.05:
                 break
-            if abs(size / target - 1) < 0.05:
-                break
-            magnitude *= min(max(target / size, 0.1), 10.0)
+            new = magnitude * min(max(target / size, 0.1), 10.0)
+            new = math.copysign(min(abs(new), cap), new)
+            if new == magnitude:
+                break  # capped: the size stays below the target
+            magnitude = new
+            size = math.nan
     p, eff, model, nominal_model = _true_device(effect, magnitude, device)
     nominal = (p.replace(mu_s=p.mu_k) if effect == "stribeck" else p.replace(hyst_alpha=true0.hyst_alpha)
                if effect == "piezo_hysteresis" else p)
@@ -183,6 +192,8 @@ def effect_case(directory: Path, c: dict[str, Any], rng: np.random.Generator) ->
               model=nominal_model, n_elements=4, piezo_hysteresis=False, true_model=model,
               true_piezo_hysteresis=effect == "piezo_hysteresis", effects=eff, experiments=EXPERIMENTS,
               noise_rms=noise, seed=seed, dt=2e-8)
+    if effect != "pe_mass" and not math.isfinite(size):
+        size = _size(effect, magnitude, device, sim, obj, Q)
     return {"misset": misset, "magnitude": {name: magnitude} if name else {}, "size_after_refit": size,
             "noise_rms": noise}
 
