@@ -74,6 +74,24 @@ def test_report_tells_the_story(spring_diagnosis):
         assert part in text, part
     for c in d.ranking:
         assert c.effect in text
+    # the score, the likelihood ratio and the noise floor's source are shown; every local fit
+    # of the calibration is in the JSON
+    assert "score" in text and "LR / crit" in text and d.noise.source in text
+    js = d.to_dict()
+    assert js["calibration"]["multistart"]["local_fits"] and js["screening_scores"]
+    assert js["alternatives"] == [a.to_dict() for a in d.alternatives]
+
+
+def test_alternatives_are_named_in_report_and_json(spring_diagnosis):
+    from dataclasses import replace
+
+    from idm_rs.diagnosis.results import Alternative
+
+    alt = Alternative("incline", 123.0, "its signature is parallel to the leader's (|cos| = 0.999)")
+    d = replace(spring_diagnosis, alternatives=[alt])
+    assert "ALTERNATIVE: incline (ΔBIC 123): its signature is parallel" in d.report()
+    assert d.to_dict()["alternatives"] == [{"effect": "incline", "delta_bic": 123.0, "why": alt.why}]
+    assert d.verdict == spring_diagnosis.verdict  # the verdict stays the leader
 
 
 def test_cli_diagnose_writes_report_json_and_plots(spring_case, spring_diagnosis, tmp_path, capsys, monkeypatch):
