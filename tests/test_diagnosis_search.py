@@ -185,3 +185,23 @@ def test_the_noise_floor_is_cross_checked_against_the_residual(long_rec):
     # agreeing estimates are pooled; a given floor stands
     assert cross_check(type(noise)(NOISE, NOISE, NOISE, 400, 0.03), res).source == "rest and residual (pooled)"
     assert cross_check(type(noise)(2 * NOISE, NOISE, NOISE, 400, 0.0, source="given"), res).sigma == 2 * NOISE
+
+
+def test_a_diverged_experiment_leaves_a_finite_jacobian(long_rec, monkeypatch):
+    # the engine returns NaN readings (and derivatives) for an experiment whose run diverged: its
+    # residual is a constant penalty and its columns zero, never NaN (least squares would fail)
+    sim = CaseSimulator(long_rec)
+    obj = Objective(long_rec, sim, NOISE).with_cycles(1)
+    real = sim.predict_with_sensitivities
+
+    def diverged_first(*args, **kwargs):
+        preds, sens, why = real(*args, **kwargs)
+        preds[0][0] = np.full_like(preds[0][0], np.nan)
+        sens[0][0] = np.full_like(sens[0][0], np.nan)
+        return preds, sens, why
+
+    monkeypatch.setattr(sim, "predict_with_sensitivities", diverged_first)
+    r, J, _ = obj.jacobian(SPEC, [_m2(1.0)], np.zeros(1))
+    n0 = obj.samples[0]
+    assert np.all(np.isfinite(J)) and np.all(J[:n0] == 0.0) and np.any(J[n0:] != 0.0)
+    assert np.all(r[:n0] == r[0]) and r[0] > 100

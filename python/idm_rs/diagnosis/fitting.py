@@ -228,7 +228,9 @@ class Objective:
         bad = [j for j in self.experiments if j in skip]
         for j in exact:
             d = D.T @ sens[j] if len(names) else np.zeros((len(free), preds[j].size))
-            if np.all(np.isfinite(preds[j])) and not usable_derivative(d, preds[j]):
+            if not np.all(np.isfinite(preds[j])):
+                d = np.zeros((len(free), preds[j].size))  # a diverged run: a constant residual, no slope
+            elif not usable_derivative(d, preds[j]):
                 bad.append(j)
                 skip.add(j)  # it will blow up again at the next parameters: differences from now on
             dpred[j] = d
@@ -241,6 +243,9 @@ class Objective:
                 preds[j] = fd[-1][j]
                 dpred[j] = np.stack([(fd[k][j] - preds[j]) / fd_step for k in range(len(free))])
         r = self.vector(preds)
+        # a step that diverged (or a base run that did) has no usable slope: zero, not NaN, so
+        # the solver's factorisation never sees a non-finite entry
+        dpred = [np.where(np.isfinite(d), d, 0.0) for d in dpred]
         return r, self.profiled_columns(dpred), runs
 
 
