@@ -252,6 +252,15 @@ def table(rows: list[dict[str, Any]]) -> str:
             tr = [r for r in sel if r["truth"] == t]
             if tr:
                 lines.append(f"| {t} | " + " | ".join(str(sum(r["verdict"] == v for r in tr)) or "" for v in verdicts) + " |")
+        reached = []
+        for t in truths:
+            sizes = [r.get("size_after_refit") for r in sel if r["truth"] == t]
+            sizes = [x for x in sizes if isinstance(x, float) and math.isfinite(x)]
+            if t != "none" and sizes:
+                reached.append(t + " " + ", ".join("%.1f" % x for x in sizes))
+        if reached:
+            lines += ["", "sizes reached (the signal's RMS after a linearised refit, x noise; below the target where "
+                          "the magnitude hit half its fit bound or the signal saturates): " + "; ".join(reached)]
         lines.append("")
     healthy = [r for r in rows if r["truth"] == "none"]
     alarms = sum(r["verdict"] not in ("none", "unexplained", "not_converged") for r in healthy)
