@@ -26,10 +26,7 @@ from idm_rs.synthetic import make_case
 
 diagnose_module = importlib.import_module("idm_rs.diagnosis.diagnose")
 
-NOMINAL = idm_rs.Params(normal_force=(0.4 + 0.3) * 9.81)
-NOISE = 1.5e-9
-LONG = ({"amplitude_V": 80, "frequency_Hz": 200, "direction": "forward", "cycles": 6},
-        {"amplitude_V": 100, "frequency_Hz": 200, "direction": "backward", "cycles": 6})
+from test_diagnosis_fairness import LONG, NOISE, NOMINAL  # the same synthetic device and records
 SHORT = ({"amplitude_V": 80, "frequency_Hz": 200, "direction": "forward", "cycles": 3},
          {"amplitude_V": 60, "frequency_Hz": 200, "direction": "backward", "cycles": 3})
 SPEC = ModelSpec(Structure("lps", 1, False), NOMINAL.to_dict(resolved=False), {})

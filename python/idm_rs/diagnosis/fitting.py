@@ -137,6 +137,23 @@ def engine_chain(base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float
     return names, D
 
 
+def difference_columns(obj: "Objective", base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64],
+                       experiments: Sequence[int], step: float = 1e-3, with_base: bool = False,
+                       preds: Optional[Sequence[NDArray[np.float64]]] = None):
+    """Forward-difference d(prediction)/du (free x samples) of `experiments` only, where the
+    engine's derivative could not be used: one batch call with every stepped model (and the
+    base model when `with_base`; else `preds` is the base). Returns (base predictions, columns),
+    both indexed by experiment."""
+    specs = [apply(base, free, u + step * np.eye(len(free))[k]) for k in range(len(free))]
+    if with_base:
+        specs.append(apply(base, free, u))
+    fd = obj.sim.predict(specs, obj.cycles, experiments=experiments)
+    at = fd[-1] if with_base else preds
+    assert at is not None
+    cols = {j: np.stack([(fd[k][j] - at[j]) / step for k in range(len(free))]) for j in experiments}
+    return at, cols
+
+
 class Objective:
     """Residuals in noise units for a recording over the experiments listed and the first
     `cycles` drive cycles of each (None: everything). With `segmented` (the default) every drive
@@ -236,12 +253,10 @@ class Objective:
             dpred[j] = d
         runs = 1
         if bad:
-            specs = [apply(base, free, u + fd_step * np.eye(len(free))[k]) for k in range(len(free))]
-            fd = self.sim.predict(specs + [spec], self.cycles, experiments=bad)
-            runs += len(specs)
+            base_preds, cols = difference_columns(self, base, free, u, bad, fd_step, with_base=True)
+            runs += len(free)
             for j in bad:
-                preds[j] = fd[-1][j]
-                dpred[j] = np.stack([(fd[k][j] - preds[j]) / fd_step for k in range(len(free))])
+                preds[j], dpred[j] = base_preds[j], cols[j]
         r = self.vector(preds)
         # a step that diverged (or a base run that did) has no usable slope: zero, not NaN, so
         # the solver's factorisation never sees a non-finite entry

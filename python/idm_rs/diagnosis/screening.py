@@ -112,7 +112,7 @@ def screen(obj: Objective, null: FitResult, null_at: list[FreeParam], effects: S
 def _columns(obj: Objective, base: ModelSpec, eff: Effect, progress: Optional[Callable[..., Any]]):
     """(probe, its free parameters, residual vector, exact columns of the effect's parameters) at
     every probe of `eff`: one batch call with sensitivities for all of them."""
-    from .fitting import apply, engine_chain, usable_derivative
+    from .fitting import apply, difference_columns, engine_chain, usable_derivative
 
     frees = [[ep.free(v) for ep, v in zip(eff.params, probe)] for probe in probes(eff)]
     if not eff.params:  # a structure change, no parameter: one Gauss-Newton step of the nominal subset
@@ -129,11 +129,9 @@ def _columns(obj: Objective, base: ModelSpec, eff: Effect, progress: Optional[Ca
         dpred = [D.T @ x for x in sn]
         bad = [j for j, (d, x) in enumerate(zip(dpred, p)) if x.size and not usable_derivative(d, x)]
         if bad:  # derivatives not taken there: forward differences of those experiments
-            h = 1e-3
-            fd = obj.sim.predict([apply(base, free, h * np.eye(len(free))[k]) for k in range(len(free))], obj.cycles,
-                                 experiments=bad)
+            _, cols = difference_columns(obj, base, free, np.zeros(len(free)), bad, preds=p)
             for j in bad:
-                dpred[j] = np.stack([(fd[k][j] - p[j]) / h for k in range(len(free))])
+                dpred[j] = cols[j]
         out.append((probe, free, obj.vector(p), obj.profiled_columns(dpred)))
     return out
 
