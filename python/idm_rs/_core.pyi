@@ -262,3 +262,12 @@ def param_declarations() -> list[dict[str, Any]]:
 def effect_declarations() -> list[dict[str, Any]]:
     """The effect catalogue: id, kind, physics, term, params (as in `param_declarations`)."""
 
+
+def simd_level() -> str:
+    """The instruction set the lane groups of plain models run on: "scalar", "avx2" or "avx512"."""
+    ...
+
+def set_simd_level(level: str) -> None:
+    """Choose the lane groups' instruction set: "scalar", "avx2" (the default) or "avx512" (the
+    best the processor has at or below it). Results are bitwise the same; only speed differs."""
+    ...

@@ -258,6 +258,25 @@ fn effect_names() -> Vec<&'static str> {
     EFFECT_NAMES.to_vec()
 }
 
+/// The instruction set the lane groups of plain models run on ("scalar", "avx2", "avx512").
+#[pyfunction]
+fn simd_level() -> &'static str {
+    crate::lanes::simd_level()
+}
+
+/// Choose the lane groups' instruction set: "scalar", "avx2" (the default) or "avx512" (the
+/// best the processor has at or below it). Results are bitwise the same; only speed differs.
+#[pyfunction]
+fn set_simd_level(level: &str) -> PyResult<()> {
+    if !["scalar", "avx2", "avx512"].contains(&level) {
+        return Err(PyValueError::new_err(format!(
+            "simd level must be 'scalar', 'avx2' or 'avx512', got '{level}'"
+        )));
+    }
+    crate::lanes::set_simd_level(level);
+    Ok(())
+}
+
 /// Per-point waveform fields of a batch of `kind` ("triangle", "sawtooth", "sampled").
 #[pyfunction]
 fn wave_fields(kind: &str) -> PyResult<Vec<&'static str>> {
@@ -615,6 +634,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<RunConfig>()?;
     m.add_function(wrap_pyfunction!(start_batch, m)?)?;
     m.add_function(wrap_pyfunction!(wave_fields, m)?)?;
+    m.add_function(wrap_pyfunction!(simd_level, m)?)?;
+    m.add_function(wrap_pyfunction!(set_simd_level, m)?)?;
     m.add_function(wrap_pyfunction!(check_run, m)?)?;
     m.add("DivergenceError", m.py().get_type::<DivergenceError>())?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;

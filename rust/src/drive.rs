@@ -8,10 +8,13 @@
 //! `stepper.rs`); a lane's arithmetic is exactly that of a run alone, so results do not depend on
 //! how runs are grouped.
 
+use std::marker::PhantomData;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::dopri5::Dopri5;
 use crate::stepper::{AdaptiveOptions, Held};
+use crate::lanes::{simd_arch, LaneExp, LanesRhs, LibmExp, PlainLanes};
+use crate::lanes_rk4::run_rk4_lanes;
 use crate::model::{with_state_size, Model};
 use crate::rk4::Rk4;
 use crate::rodas4::Rodas4;
@@ -341,6 +344,50 @@ pub fn divergence_message(
     )
 }
 
+/// What the driver needs of a lane group's right-hand side besides evaluating it: each lane's
+/// input over the step (V = v0 + slope tau) and what the evaluation at the step's start found.
+pub trait LaneInputs<T: Scalar, const L: usize>: Rhs<T> {
+    /// Set lane `i`'s input for the next attempt: `v0` [V] at the step's start, `slope` [V/s].
+    fn set_input(&mut self, i: usize, v0: f64, slope: f64);
+    /// Lane `i`'s input as set: (v0 [V], slope [V/s]).
+    fn input(&self, i: usize) -> (f64, f64);
+    /// Lane `i`'s (Ff [N], dg/dt [m/s]) at the state its last step started from.
+    fn at_start(&self, i: usize) -> (T, T);
+}
+
+impl<T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> LaneInputs<T, L> for ModelRhs<'_, T, N, EXTRAS, L> {
+    #[inline(always)]
+    fn set_input(&mut self, i: usize, v0: f64, slope: f64) {
+        self.v0[i] = v0;
+        self.slope[i] = slope;
+    }
+    #[inline(always)]
+    fn input(&self, i: usize) -> (f64, f64) {
+        (self.v0[i], self.slope[i])
+    }
+    #[inline(always)]
+    fn at_start(&self, i: usize) -> (T, T) {
+        self.at_start[i]
+    }
+}
+
+impl<'a, T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> ModelRhs<'a, T, N, EXTRAS, L> {
+    /// The right-hand side of `tasks` (lane i runs task i; lanes beyond them idle on the last
+    /// one's model), with the presliding bound widened by the stepper's `slack`.
+    pub fn for_tasks(tasks: &[Task<'a, T>], slack: f64) -> Self {
+        let m = tasks.len();
+        let lane = |i: usize| i.min(m - 1);
+        let zero = T::from(0.0);
+        ModelRhs {
+            models: std::array::from_fn(|i| tasks[lane(i)].model),
+            v0: [0.0; L],
+            slope: [0.0; L],
+            at_start: [(zero, zero); L],
+            bound: std::array::from_fn(|i| tasks[lane(i)].model.presliding_bound() * (1.0 + slack) + 1e-12),
+        }
+    }
+}
+
 /// The model under a linear input over one step, per lane: V = v0 + slope tau. Keeps each
 /// lane's (Ff, dg/dt) from its evaluation at tau = 0, i.e. at the state the step starts from.
 pub struct ModelRhs<'a, T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> {
@@ -379,14 +426,18 @@ impl<T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> Rhs<T> for M
 }
 
 /// Advance up to `L` tasks of one state layout together (`tasks[i]` on lane i; unused lanes idle)
-/// from their initial states in `ys`, which end holding the final states. `first` is the index
-/// the observer sees for lane 0; `dt` [s] the step of a fixed-step stepper. `None` if cancelled.
+/// from their initial states in `ys`, which end holding the final states, with `rhs` their
+/// right-hand side (see [`ModelRhs::for_tasks`]). `first` is the index the observer sees for
+/// lane 0; `dt` [s] the step of a fixed-step stepper. `None` if cancelled. Always inlined: the
+/// caller may compile it for the processor's vector width (`run_tasks`).
 #[allow(clippy::too_many_arguments)]
-fn drive_lanes<S, St, O, const N: usize, const EXTRAS: bool, const L: usize>(
+#[inline(always)]
+fn drive_lanes<S, St, O, R, const L: usize>(
     tasks: &[Task<S::Elem>],
     first: usize,
     dt: f64,
     stepper: &mut St,
+    rhs: &mut R,
     ys: &mut [S; L],
     observer: &mut O,
     cancel: &AtomicBool,
@@ -395,6 +446,7 @@ where
     S: State,
     St: Stepper<S, L>,
     O: Observer<S::Elem>,
+    R: LaneInputs<S::Elem, L>,
 {
     let m = tasks.len();
     let lane = |i: usize| i.min(m - 1); // idle lanes point at a real model
@@ -402,14 +454,6 @@ where
     let bound: [f64; L] = std::array::from_fn(|i| {
         tasks[lane(i)].model.presliding_bound() * (1.0 + slack) + 1e-12
     });
-    let zero = S::Elem::from(0.0);
-    let mut rhs: ModelRhs<S::Elem, N, EXTRAS, L> = ModelRhs {
-        models: std::array::from_fn(|i| tasks[lane(i)].model),
-        v0: [0.0; L],
-        slope: [0.0; L],
-        at_start: [(zero, zero); L],
-        bound,
-    };
     let mut active = [false; L];
     let mut t = [0.0; L];
     let mut end = [0.0; L];
@@ -461,14 +505,13 @@ where
                 end[i] = cursor[i].next_breakpoint(wave, t[i]).min(tasks[i].t_end);
                 cursor[i].input(wave, t[i], t[i])
             };
-            rhs.v0[i] = v0;
-            rhs.slope[i] = s;
+            rhs.set_input(i, v0, s);
             any = true;
         }
         if !any {
             break;
         }
-        let results = stepper.attempt(&mut rhs, ys, &t, &end, &active);
+        let results = stepper.attempt(rhs, ys, &t, &end, &active);
         for i in 0..m {
             let (step, last) = match &results[i] {
                 Attempt::Accepted { step, last } => (*step, *last),
@@ -504,8 +547,9 @@ where
             v_last[i] = y[tasks[i].model.layout.dof].value();
             steps[i] += 1;
             min_step[i] = min_step[i].min(span);
-            let start = St::EVALUATES_START.then(|| rhs.at_start[i]);
-            let v_cmd = rhs.v0[i] + rhs.slope[i] * step;
+            let start = St::EVALUATES_START.then(|| rhs.at_start(i));
+            let (v0, slope) = rhs.input(i);
+            let v_cmd = v0 + slope * step;
             if !St::FIXED_STEP {
                 observer.accepted_step(first + i, step);
             }
@@ -541,16 +585,19 @@ fn adaptive_options<T: Scalar>(task: &Task<T>, rtol: f64, atol: f64, first_step:
     }
 }
 
-/// Run one group of up to `L` tasks of one state layout with `method` (`N` nodes and `D`
-/// components fixed at compile time, or 0 for any), appending each task's end and final state
-/// to `out`; `None` if cancelled.
+/// Run one group of up to `L` tasks of one state layout with `method` (`D` components fixed at
+/// compile time, or 0 for any; `rhs_for` builds the group's right-hand side from the tasks and
+/// the stepper's bound slack), appending each task's end and final state to `out`; `None` if
+/// cancelled.
 #[allow(clippy::too_many_arguments)]
-fn run_group<S, O, const N: usize, const D: usize, const EXTRAS: bool, const L: usize>(
-    chunk: &[Task<S::Elem>],
+#[inline(always)]
+fn run_group<'a, S, O, R, const D: usize, const L: usize>(
+    chunk: &[Task<'a, S::Elem>],
     first: usize,
     method: &Method,
     held: &Held,
     zero: S,
+    rhs_for: impl FnOnce(&[Task<'a, S::Elem>], f64) -> R,
     observer: &mut O,
     cancel: &AtomicBool,
     out: &mut Vec<(LaneEnd, Vec<S::Elem>)>,
@@ -558,6 +605,7 @@ fn run_group<S, O, const N: usize, const D: usize, const EXTRAS: bool, const L: 
 where
     S: State,
     O: Observer<S::Elem>,
+    R: LaneInputs<S::Elem, L>,
 {
     let task = |i: usize| &chunk[i.min(chunk.len() - 1)];
     let mut ys: [S; L] = std::array::from_fn(|i| {
@@ -568,23 +616,71 @@ where
     let ends = match *method {
         Method::Rk4 { dt } => {
             let mut st: Rk4<S, L> = Rk4::new(dt, zero);
-            drive_lanes::<S, _, O, N, EXTRAS, L>(chunk, first, dt, &mut st, &mut ys, observer, cancel)?
+            let mut rhs = rhs_for(chunk, st.bound_slack());
+            drive_lanes(chunk, first, dt, &mut st, &mut rhs, &mut ys, observer, cancel)?
         }
         Method::Dopri5 { rtol, atol, first_step } => {
             let opts = std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
             let mut st: Dopri5<S, L> = Dopri5::new(opts, zero);
-            drive_lanes::<S, _, O, N, EXTRAS, L>(chunk, first, 0.0, &mut st, &mut ys, observer, cancel)?
+            let mut rhs = rhs_for(chunk, st.bound_slack());
+            drive_lanes(chunk, first, 0.0, &mut st, &mut rhs, &mut ys, observer, cancel)?
         }
         Method::Rodas4 { rtol, atol, first_step } => {
             let opts = std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
             let mut st: Rodas4<S, L, D> = Rodas4::new(opts, zero);
-            drive_lanes::<S, _, O, N, EXTRAS, L>(chunk, first, 0.0, &mut st, &mut ys, observer, cancel)?
+            let mut rhs = rhs_for(chunk, st.bound_slack());
+            drive_lanes(chunk, first, 0.0, &mut st, &mut rhs, &mut ys, observer, cancel)?
         }
     };
     for (e, y) in ends.into_iter().zip(ys.iter()) {
         out.push((e, y.as_ref().to_vec()));
     }
     Some(())
+}
+
+/// Every lane group of plain f64 tasks with `N` nodes and `D` state components, as one
+/// operation for `pulp` to compile once per instruction set: its `with_simd` runs inside a
+/// function with that set's features enabled, and everything it calls is inlined into it
+/// (closures are not: the call through `FnOnce` stays out of line, compiled for the baseline).
+struct PlainGroups<'t, 'a, O, E, const N: usize, const D: usize, const L: usize> {
+    tasks: &'t [Task<'a>],
+    method: &'t Method,
+    observer: &'t mut O,
+    cancel: &'t AtomicBool,
+    out: &'t mut Vec<(LaneEnd, Vec<f64>)>,
+    _exp: PhantomData<E>,
+}
+
+impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pulp::WithSimd
+    for PlainGroups<'_, '_, O, E, N, D, L>
+{
+    type Output = Option<()>;
+
+    #[inline(always)]
+    fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<()> {
+        if let Method::Rk4 { dt } = *self.method {
+            if self.tasks.iter().all(|t| PlainLanes::<N, L>::accepts(t.model)) {
+                // the state stored component by component, lanes refilled from the queue
+                let ends = run_rk4_lanes::<O, E, N, D, L>(self.tasks, dt, self.observer, self.cancel)?;
+                self.out.extend(ends);
+                return Some(());
+            }
+        }
+        for (c, chunk) in self.tasks.chunks(L).enumerate() {
+            run_group::<[f64; D], O, _, D, L>(
+                chunk,
+                c * L,
+                self.method,
+                &Held::default(),
+                [0.0; D],
+                |c, slack| LanesRhs::<E, N, D, L>::new(ModelRhs::for_tasks(c, slack)),
+                self.observer,
+                self.cancel,
+                self.out,
+            )?;
+        }
+        Some(())
+    }
 }
 
 /// Run `tasks` (one state layout) with `method`, `L` at a time when their state is plain and of
@@ -596,15 +692,27 @@ pub fn run_tasks<O: Observer, const L: usize>(
     observer: &mut O,
     cancel: &AtomicBool,
 ) -> Option<Vec<(LaneEnd, Vec<f64>)>> {
+    run_tasks_exp::<O, LibmExp, L>(tasks, method, observer, cancel)
+}
+
+/// [`run_tasks`] with the vector lanes' `exp` chosen by `E` (`LibmExp`: bitwise the scalar
+/// model; `PolyExp`: vectorised, within 2 ulp per call).
+pub fn run_tasks_exp<O: Observer, E: LaneExp, const L: usize>(
+    tasks: &[Task],
+    method: &Method,
+    observer: &mut O,
+    cancel: &AtomicBool,
+) -> Option<Vec<(LaneEnd, Vec<f64>)>> {
     let mut out = Vec::with_capacity(tasks.len());
     if tasks.is_empty() {
         return Some(out);
     }
+    // the plain models' lanes as vectors (lanes.rs), compiled for the processor's widest
+    // vector instructions and chosen at run time (`simd_arch`)
     macro_rules! fixed {
         ($n:literal, $d:literal) => {{
-            for (c, chunk) in tasks.chunks(L).enumerate() {
-                run_group::<[f64; $d], O, $n, $d, false, L>(chunk, c * L, method, &Held::default(), [0.0; $d], observer, cancel, &mut out)?;
-            }
+            let groups = PlainGroups::<O, E, $n, $d, L> { tasks, method, observer, cancel, out: &mut out, _exp: PhantomData };
+            simd_arch().dispatch(groups)?
         }};
     }
     let plain = tasks.iter().all(|t| t.model.is_plain());
@@ -628,7 +736,11 @@ pub fn run_tasks_one_by_one<T: Scalar, O: Observer<T>>(
     let mut out = Vec::with_capacity(tasks.len());
     for (c, task) in tasks.iter().enumerate() {
         let zero = vec![T::zero(); task.model.layout.dim];
-        run_group::<Vec<T>, O, 0, 0, true, 1>(std::slice::from_ref(task), c, method, held, zero, observer, cancel, &mut out)?;
+        run_group::<Vec<T>, O, _, 0, 1>(
+            std::slice::from_ref(task), c, method, held, zero,
+            |c, slack| ModelRhs::<T, 0, true, 1>::for_tasks(c, slack),
+            observer, cancel, &mut out,
+        )?;
     }
     Some(out)
 }

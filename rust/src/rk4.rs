@@ -41,44 +41,13 @@ impl<S: State, const L: usize> Rk4<S, L> {
     #[inline(always)]
     pub fn step_lanes<F: Rhs<S::Elem>>(&mut self, f: &mut F, dt: f64, ys: &mut [S; L], active: &[bool; L]) {
         let h2 = 0.5 * dt;
-        for i in 0..L {
-            if active[i] {
-                f.eval(i, 0.0, ys[i].as_ref(), self.k1[i].as_mut());
-            }
-        }
-        for i in 0..L {
-            if active[i] {
-                axpy(
-                    self.tmp[i].as_mut(),
-                    ys[i].as_ref(),
-                    h2,
-                    self.k1[i].as_ref(),
-                );
-                f.eval(i, h2, self.tmp[i].as_ref(), self.k2[i].as_mut());
-            }
-        }
-        for i in 0..L {
-            if active[i] {
-                axpy(
-                    self.tmp[i].as_mut(),
-                    ys[i].as_ref(),
-                    h2,
-                    self.k2[i].as_ref(),
-                );
-                f.eval(i, h2, self.tmp[i].as_ref(), self.k3[i].as_mut());
-            }
-        }
-        for i in 0..L {
-            if active[i] {
-                axpy(
-                    self.tmp[i].as_mut(),
-                    ys[i].as_ref(),
-                    dt,
-                    self.k3[i].as_ref(),
-                );
-                f.eval(i, dt, self.tmp[i].as_ref(), self.k4[i].as_mut());
-            }
-        }
+        f.eval_lanes(&[0.0; L], ys, &mut self.k1, active);
+        self.stage(ys, h2, Stage::K1, active);
+        f.eval_lanes(&[h2; L], &self.tmp, &mut self.k2, active);
+        self.stage(ys, h2, Stage::K2, active);
+        f.eval_lanes(&[h2; L], &self.tmp, &mut self.k3, active);
+        self.stage(ys, dt, Stage::K3, active);
+        f.eval_lanes(&[dt; L], &self.tmp, &mut self.k4, active);
         let h6 = dt / 6.0;
         for i in 0..L {
             if active[i] {
@@ -95,6 +64,28 @@ impl<S: State, const L: usize> Rk4<S, L> {
             }
         }
     }
+
+    /// tmp = y + h k for the stage's k on every active lane.
+    #[inline(always)]
+    fn stage(&mut self, ys: &[S; L], h: f64, k: Stage, active: &[bool; L]) {
+        for i in 0..L {
+            if active[i] {
+                let k = match k {
+                    Stage::K1 => &self.k1[i],
+                    Stage::K2 => &self.k2[i],
+                    Stage::K3 => &self.k3[i],
+                };
+                axpy(self.tmp[i].as_mut(), ys[i].as_ref(), h, k.as_ref());
+            }
+        }
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Stage {
+    K1,
+    K2,
+    K3,
 }
 
 impl<S: State> Rk4<S, 1> {

@@ -27,6 +27,24 @@ impl<T: Scalar> State for Vec<T> {
 pub trait Rhs<T: Scalar = f64> {
     fn eval(&mut self, lane: usize, tau: f64, y: &[T], dy: &mut [T]);
 
+    /// [`Rhs::eval`] on every lane with `active[i]`, lane i at its own offset `tau[i]`. The
+    /// steppers call this once per stage, so an implementation may compute the lanes together
+    /// as vector arithmetic (`lanes.rs`); by default it is one lane at a time.
+    #[inline(always)]
+    fn eval_lanes<S: State<Elem = T>, const L: usize>(
+        &mut self,
+        tau: &[f64; L],
+        ys: &[S; L],
+        dys: &mut [S; L],
+        active: &[bool; L],
+    ) {
+        for i in 0..L {
+            if active[i] {
+                self.eval(i, tau[i], ys[i].as_ref(), dys[i].as_mut());
+            }
+        }
+    }
+
     /// Whether `y` lies in the system's domain (for the model: |Fh| within its bound). Adaptive
     /// implicit steps reject a step that leaves it. Default: everywhere.
     fn admissible(&self, _lane: usize, _y: &[T]) -> bool {

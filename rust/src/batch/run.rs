@@ -13,8 +13,9 @@ use crate::sensitivity::{derivatives, parse_seeds, Schedule};
 use super::metrics::{MetricsObserver, PointMetrics};
 use super::{BatchConfig, PointOutput, PointSpec, Status};
 
-/// Points advanced together per core (see `stepper.rs`).
-pub const LANES: usize = 4;
+/// Points advanced together per core (see `stepper.rs` and `lanes_rk4.rs`): eight f64 lanes fill
+/// two AVX2 registers per quantity; the choice is measured in `benches/lanes_cost.rs`.
+pub const LANES: usize = 8;
 
 /// Points per rayon task: one lane group. A task is milliseconds of work or more, so
 /// scheduling costs nothing, and small tasks balance the threads when a batch has few points
