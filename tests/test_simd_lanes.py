@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import idm_rs
-from idm_rs import _core
+from idm_rs import engine
 from idm_rs.batch import Point, Structure, run
 
 LEVELS = ("scalar", "avx2", "avx512")
@@ -22,7 +22,7 @@ LEVELS = ("scalar", "avx2", "avx512")
 @pytest.fixture(autouse=True)
 def default_level():
     yield
-    _core.set_simd_level("avx2")
+    engine.set_simd_level("avx2")
 
 
 def _scalar_model(pt: Point, structure: Structure, t_end: float, dt: float) -> np.ndarray:
@@ -59,7 +59,7 @@ def test_every_instruction_set_gives_the_scalar_models_bits(devices, model, hyst
     t_end, dt = 0.5e-3, 2e-8
     outs = {}
     for level in LEVELS:
-        _core.set_simd_level(level)
+        engine.set_simd_level(level)
         outs[level] = run(points, structure, t_end=t_end, dt=dt, final_states=True)
     for level in LEVELS[1:]:
         np.testing.assert_array_equal(outs[level]["final_states"], outs["scalar"]["final_states"], err_msg=level)
@@ -72,12 +72,12 @@ def test_every_instruction_set_gives_the_scalar_models_bits(devices, model, hyst
 
 
 def test_the_level_is_reported_and_a_bad_name_refused():
-    _core.set_simd_level("scalar")
-    assert _core.simd_level() == "scalar"
-    _core.set_simd_level("avx2")
-    assert _core.simd_level() in ("avx2", "scalar")  # scalar on a processor without AVX2
+    engine.set_simd_level("scalar")
+    assert engine.simd_level() == "scalar"
+    engine.set_simd_level("avx2")
+    assert engine.simd_level() in ("avx2", "scalar")  # scalar on a processor without AVX2
     with pytest.raises(ValueError, match="simd level must be"):
-        _core.set_simd_level("sse9")
+        engine.set_simd_level("sse9")
 
 
 def test_lanes_refill_under_mixed_durations_and_divergence():

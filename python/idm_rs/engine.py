@@ -27,6 +27,9 @@ highest_frequency = _core.highest_frequency
 kernel_constants = _core.kernel_constants
 kernel_constant_count = _core.kernel_constant_count
 kernel_header = _core.kernel_header
+#: the vector lanes' instruction set ("scalar", "avx2", "avx512"): results are bitwise the same
+simd_level = _core.simd_level
+set_simd_level = _core.set_simd_level
 # declarations of the model (Table 1, the effect catalogue); typed views in `declarations.py`
 param_declarations = _core.param_declarations
 effect_declarations = _core.effect_declarations
@@ -38,6 +41,8 @@ __all__ = [
     "DivergenceError",
     "RunConfig",
     "__version__",
+    "set_simd_level",
+    "simd_level",
     "check_run",
     "effect_declarations",
     "effect_names",

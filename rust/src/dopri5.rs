@@ -9,19 +9,19 @@ use crate::stepper::{AdaptiveOptions, AdaptiveStats, Attempt, Controller, Rhs, S
 use crate::stepper::Held;
 
 /// Dormand-Prince's control: a 4th-order embedded estimate (q = 5), growth up to 5x.
-const CONTROL: Controller = Controller { exponent: 0.2, max_growth: 5.0 };
+pub(crate) const CONTROL: Controller = Controller { exponent: 0.2, max_growth: 5.0 };
 
-const C: [f64; 7] = [0.0, 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0, 1.0, 1.0];
-const A2: [f64; 1] = [1.0 / 5.0];
-const A3: [f64; 2] = [3.0 / 40.0, 9.0 / 40.0];
-const A4: [f64; 3] = [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0];
-const A5: [f64; 4] = [
+pub(crate) const C: [f64; 7] = [0.0, 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0, 1.0, 1.0];
+pub(crate) const A2: [f64; 1] = [1.0 / 5.0];
+pub(crate) const A3: [f64; 2] = [3.0 / 40.0, 9.0 / 40.0];
+pub(crate) const A4: [f64; 3] = [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0];
+pub(crate) const A5: [f64; 4] = [
     19372.0 / 6561.0,
     -25360.0 / 2187.0,
     64448.0 / 6561.0,
     -212.0 / 729.0,
 ];
-const A6: [f64; 5] = [
+pub(crate) const A6: [f64; 5] = [
     9017.0 / 3168.0,
     -355.0 / 33.0,
     46732.0 / 5247.0,
@@ -29,7 +29,7 @@ const A6: [f64; 5] = [
     -5103.0 / 18656.0,
 ];
 /// fifth-order weights (also the last stage's coefficients: first same as last)
-const B: [f64; 6] = [
+pub(crate) const B: [f64; 6] = [
     35.0 / 384.0,
     0.0,
     500.0 / 1113.0,
@@ -38,7 +38,7 @@ const B: [f64; 6] = [
     11.0 / 84.0,
 ];
 /// difference between the fifth- and fourth-order weights
-const E: [f64; 7] = [
+pub(crate) const E: [f64; 7] = [
     71.0 / 57600.0,
     0.0,
     -71.0 / 16695.0,
@@ -51,7 +51,8 @@ const E: [f64; 7] = [
 /// Stages, step sizes and options of `L` lanes; each lane keeps its own step size.
 pub struct Dopri5<S, const L: usize = 1> {
     opts: [AdaptiveOptions; L],
-    k: [[S; 7]; L],
+    /// stage derivatives, stage-major (`k[stage][lane]`) so a stage of every lane is one array
+    k: [[S; L]; 7],
     tmp: [S; L],
     y_new: [S; L],
     h: [f64; L],
@@ -117,7 +118,7 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
                     continue;
                 };
                 if self.fresh[i] {
-                    f.eval(i, 0.0, ys[i].as_ref(), self.k[i][0].as_mut());
+                    f.eval(i, 0.0, ys[i].as_ref(), self.k[0][i].as_mut());
                     self.stats[i].evaluations += 1;
                     self.fresh[i] = false;
                 }
@@ -135,17 +136,19 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
         ] {
             for i in 0..L {
                 if active[i] {
-                    combine(self.tmp[i].as_mut(), ys[i].as_ref(), step[i], a, &self.k[i]);
-                    f.eval(i, C[s] * step[i], self.tmp[i].as_ref(), self.k[i][s].as_mut());
+                    combine(self.tmp[i].as_mut(), ys[i].as_ref(), step[i], a, &self.k, i);
                 }
             }
+            // the stage of every lane at once (vector lanes where the right-hand side has them)
+            let tau: [f64; L] = std::array::from_fn(|i| C[s] * step[i]);
+            f.eval_lanes(&tau, &self.tmp, &mut self.k[s], active);
         }
         for i in 0..L {
             if active[i] {
-                combine(self.y_new[i].as_mut(), ys[i].as_ref(), step[i], &B, &self.k[i]);
-                f.eval(i, step[i], self.y_new[i].as_ref(), self.k[i][6].as_mut());
+                combine(self.y_new[i].as_mut(), ys[i].as_ref(), step[i], &B, &self.k, i);
             }
         }
+        f.eval_lanes(&step, &self.y_new, &mut self.k[6], active);
         std::array::from_fn(|i| {
             if !active[i] {
                 return match was_active[i] {
@@ -158,7 +161,8 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
             let o = &self.opts[i];
             if err <= 1.0 || !o.held.is_empty() {
                 ys[i].as_mut().copy_from_slice(self.y_new[i].as_ref());
-                self.k[i].swap(0, 6); // first same as last
+                let (first, rest) = self.k.split_at_mut(6);
+                std::mem::swap(&mut first[0][i], &mut rest[0][i]); // first same as last
                 if !o.held.is_empty() {
                     o.pin(self.stats[i].accepted as usize, ys[i].as_mut());
                     self.fresh[i] = true; // the last stage was evaluated before the pin
@@ -183,13 +187,13 @@ impl<S: State, const L: usize> Dopri5<S, L> {
     /// Scaled RMS of the embedded error estimate of lane `i`'s last attempt [-].
     #[inline(always)]
     fn error_norm(&self, i: usize, y: &[S::Elem], step: f64) -> f64 {
-        let (ynv, o, k) = (self.y_new[i].as_ref(), &self.opts[i], &self.k[i]);
+        let (ynv, o, k) = (self.y_new[i].as_ref(), &self.opts[i], &self.k);
         let mut err2 = 0.0;
         for c in 0..y.len() {
             if o.scale[c].is_finite() {
                 let mut e = 0.0;
                 for (j, ej) in E.iter().enumerate() {
-                    e += ej * k[j].as_ref()[c].value();
+                    e += ej * k[j][i].as_ref()[c].value();
                 }
                 let tol = o.atol * o.scale[c] + o.rtol * y[c].value().abs().max(ynv[c].value().abs());
                 err2 += (step * e / tol).powi(2);
@@ -201,11 +205,11 @@ impl<S: State, const L: usize> Dopri5<S, L> {
 
 /// out = y + h sum_j a_j k_j
 #[inline(always)]
-fn combine<T: Scalar, S: AsRef<[T]>>(out: &mut [T], y: &[T], h: f64, a: &[f64], k: &[S; 7]) {
+fn combine<T: Scalar, S: AsRef<[T]>, const L: usize>(out: &mut [T], y: &[T], h: f64, a: &[f64], k: &[[S; L]; 7], lane: usize) {
     for i in 0..out.len() {
         let mut s = T::zero();
         for (j, aj) in a.iter().enumerate() {
-            s += k[j].as_ref()[i] * *aj;
+            s += k[j][lane].as_ref()[i] * *aj;
         }
         out[i] = y[i] + s * h;
     }

@@ -14,6 +14,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use crate::dopri5::Dopri5;
 use crate::stepper::{AdaptiveOptions, Held};
 use crate::lanes::{simd_arch, LaneExp, LanesRhs, LibmExp, PlainLanes};
+use crate::lanes_dopri5::run_dopri5_lanes;
 use crate::lanes_rk4::run_rk4_lanes;
 use crate::model::{with_state_size, Model};
 use crate::rk4::Rk4;
@@ -572,7 +573,7 @@ where
 
 /// Adaptive options for a task: error scales from the model and the input's peak; `held`
 /// steps to take instead of choosing them (see [`AdaptiveOptions::held`]).
-fn adaptive_options<T: Scalar>(task: &Task<T>, rtol: f64, atol: f64, first_step: f64, held: &Held) -> AdaptiveOptions {
+pub(crate) fn adaptive_options<T: Scalar>(task: &Task<T>, rtol: f64, atol: f64, first_step: f64, held: &Held) -> AdaptiveOptions {
     let v_max = task.wave.peak();
     AdaptiveOptions {
         rtol,
@@ -658,10 +659,16 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pu
 
     #[inline(always)]
     fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<()> {
-        if let Method::Rk4 { dt } = *self.method {
-            if self.tasks.iter().all(|t| PlainLanes::<N, L>::accepts(t.model)) {
-                // the state stored component by component, lanes refilled from the queue
-                let ends = run_rk4_lanes::<O, E, N, D, L>(self.tasks, dt, self.observer, self.cancel)?;
+        if self.tasks.iter().all(|t| PlainLanes::<N, L>::accepts(t.model)) {
+            // the state stored component by component, lanes refilled from the queue
+            let ends = match *self.method {
+                Method::Rk4 { dt } => Some(run_rk4_lanes::<O, E, N, D, L>(self.tasks, dt, self.observer, self.cancel)?),
+                Method::Dopri5 { rtol, atol, first_step } => Some(run_dopri5_lanes::<O, E, N, D, L>(
+                    self.tasks, rtol, atol, first_step, self.observer, self.cancel,
+                )?),
+                Method::Rodas4 { .. } => None,
+            };
+            if let Some(ends) = ends {
                 self.out.extend(ends);
                 return Some(());
             }

@@ -13,6 +13,7 @@ pub mod jacobian;
 pub mod fast_exp;
 pub mod kernel;
 pub mod lanes;
+pub mod lanes_dopri5;
 pub mod lanes_rk4;
 pub mod mechanics;
 pub mod model;
