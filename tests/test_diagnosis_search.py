@@ -97,6 +97,27 @@ def test_multistart_reaches_the_optimum_where_one_local_fit_stops_short(long_rec
     assert ms.to_dict()["local_fits"][0]["end_chi2"] == pytest.approx(ms.best.chi2)
 
 
+def test_a_1d_scan_start_leaves_the_side_basin_the_nominal_values_sit_in(long_rec):
+    # m2 15 % low with sigma2 beside it at its true value: the nominal values' local fit stops
+    # in m2's side basin (as above); the scan of m2 over its plausible range, sigma2 held, puts
+    # a start in the true basin, and the local fit from it reaches the true mass
+    from idm_rs.diagnosis.calibration import scan_starts
+
+    obj = Objective(long_rec, CaseSimulator(long_rec), NOISE, segmented=False)
+    s2 = NOMINAL.sigma2
+    free = [FreeParam("sigma2", s2, 0.6 * s2, 1.5 * s2, 0.05 * s2, set_param("sigma2")), _m2(0.85)]
+    stuck = fit(obj, SPEC, free, max_nfev=20)
+    assert abs(stuck.values["m2"] / NOMINAL.m2 - 1) > 0.03
+    scans = scan_starts(obj, SPEC, free, points=21)
+    label, u = scans[0]
+    assert "m2" in label
+    m2_start = free[1].value(float(u[1]))
+    assert m2_start == pytest.approx(NOMINAL.m2, rel=0.05) and u[0] == 0.0
+    freed = fit(obj, SPEC, [f.at(f.value(float(x))) for f, x in zip(free, u)], max_nfev=20)
+    assert freed.values["m2"] == pytest.approx(NOMINAL.m2, rel=3e-3)
+    assert freed.chi2 < 0.1 * stuck.chi2
+
+
 K_GROUND = 3e3  # [N/m]
 
 

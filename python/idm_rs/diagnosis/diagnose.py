@@ -138,6 +138,8 @@ class _Calibration:
     bic: float
     whiteness_z: float
     search: Calibration  #: the population search and its local fits (convergence evidence)
+    #: `free` at the best 1-D scan start (the nominal values with a side basin left), or None
+    scan_at: Optional[list[FreeParam]] = None
 
 
 @dataclass
@@ -217,7 +219,8 @@ def _calibrate(pb: _Problem, nominal: _Nominal) -> _Calibration:
     one_spec = apply(nominal.spec, free, u)
     one = FitResult({f.name: f.value(float(x)) for f, x in zip(free, u)}, dict(cal.std), g.search_best,
                     pb.obj.with_cycles(1).n, [], [], one_spec, g.evaluations, True, "population search, one cycle")
-    return _Calibration(free, one, one_at, cal, at, bic, whiteness_z(cal.residuals), g)
+    scan_at = [f.at(f.value(float(x))) for f, x in zip(free, g.scan_u)] if g.scan_u is not None else None
+    return _Calibration(free, one, one_at, cal, at, bic, whiteness_z(cal.residuals), g, scan_at)
 
 
 def _magnitudes(ep: EffectParam) -> list[float]:
@@ -243,6 +246,8 @@ def _candidate_starts(pb: _Problem, cal: _Calibration, eff: Effect, sc: Optional
     effect at "no effect") among them — plus the screening step's own estimate."""
     nominal: list[tuple[str, list[FreeParam]]] = [("null fit", cal.at), ("one-cycle optimum", cal.one_cycle_at),
                                                   ("nominal values", cal.free)]
+    if cal.scan_at is not None:
+        nominal.append(("1-D scan", cal.scan_at))
     if sc is not None and sc.nominal_step is not None:
         nominal.append(("score step", [f.at(f.value(float(d))) for f, d in zip(cal.at, sc.nominal_step)]))
     grids = [_magnitudes(ep) for ep in eff.params]
@@ -295,7 +300,7 @@ def _fit_candidates(pb: _Problem, cal: _Calibration, order: list[Effect], screen
             out.append(_Refit(c, base, free))
             continue
         ms = multistart(pb.obj, base, _candidate_starts(pb, cal, eff, sc), local_fits=local_fits,
-                        horizons=(2, None), max_nfev=(8, 8), always=("nominal values",), progress=pb.tick)
+                        horizons=(2, None), max_nfev=(8, 8), always=("nominal values", "1-D scan"), progress=pb.tick)
         r = ms.best
         null = _at_null(cal, eff, base)
         if null is not None and r.chi2 >= null.chi2:
@@ -410,7 +415,7 @@ def _null_refits(pb: _Problem, nominal: _Nominal, cal: _Calibration, refits: lis
         if n0.chi2 < best.fit.chi2 - 1e-6:
             at = [f.at(n0.values[f.name]) for f in cal.free]
             bic = n0.chi2 + (len(cal.free) + pb.n_offsets) * pb.ln_n
-            best = _Calibration(cal.free, n0, at, n0, at, bic, whiteness_z(n0.residuals), cal.search)
+            best = _Calibration(cal.free, n0, at, n0, at, bic, whiteness_z(n0.residuals), cal.search, cal.scan_at)
             source = f"nominal refit from the {c.effect} fit"
     for r in refits:
         c = r.candidate
