@@ -247,6 +247,8 @@ def _candidate_starts(pb: _Problem, cal: _Calibration, eff: Effect, sc: Optional
     nominal: list[tuple[str, list[FreeParam]]] = [("null fit", cal.at), ("one-cycle optimum", cal.one_cycle_at),
                                                   ("nominal values", cal.free)]
     if cal.scan_at is not None:
+        # the nominal values with a side basin left (the calibration's best 1-D scan start):
+        # ranked in the nominal values' group, so the better of the two gets that group's fit
         nominal.append(("1-D scan", cal.scan_at))
     if sc is not None and sc.nominal_step is not None:
         nominal.append(("score step", [f.at(f.value(float(d))) for f, d in zip(cal.at, sc.nominal_step)]))
@@ -257,7 +259,7 @@ def _candidate_starts(pb: _Problem, cal: _Calibration, eff: Effect, sc: Optional
         for c in combos:
             what = ", ".join(f"{ep.name}={v:.3g}" for ep, v in zip(eff.params, c))
             starts.append(Start(f"{label}; {what}" if what else label, list(nom) + [ep.free(v) for ep, v in zip(eff.params, c)],
-                                label))
+                                "nominal values" if label == "1-D scan" else label))
     if sc is not None and sc.nominal_step is not None and eff.params:
         what = ", ".join(f"{ep.name}={v:.3g}" for ep, v in zip(eff.params, sc.estimate))
         starts.append(Start(f"score step; {what}", nominal[-1][1] + [ep.free(v) for ep, v in zip(eff.params, sc.estimate)],
@@ -300,7 +302,7 @@ def _fit_candidates(pb: _Problem, cal: _Calibration, order: list[Effect], screen
             out.append(_Refit(c, base, free))
             continue
         ms = multistart(pb.obj, base, _candidate_starts(pb, cal, eff, sc), local_fits=local_fits,
-                        horizons=(2, None), max_nfev=(8, 8), always=("nominal values", "1-D scan"), progress=pb.tick)
+                        horizons=(2, None), max_nfev=(8, 8), always=("nominal values",), progress=pb.tick)
         r = ms.best
         null = _at_null(cal, eff, base)
         if null is not None and r.chi2 >= null.chi2:
