@@ -169,11 +169,11 @@ def test_results_bitwise_identical_across_thread_counts(method):
 
 
 def test_interrupted_sweep_keeps_finished_points():
-    # ~256 x 0.1 s of work on 2 threads (~10 s, several times that on a loaded machine);
-    # interrupted after 3 s (lanes of 4 points finish together, so the first points complete
-    # only after a few tenths of a second, or seconds under load)
-    grid = {"mass_ratio": np.linspace(0.5, 1.5, 16), "voltage": np.linspace(60.0, 100.0, 16)}
-    kw = dict(t_end=10e-3, dt=2e-8, model="lps", progress=False)
+    # 1,024 points x 10^6 steps: ~15 s on 2 threads with vector lanes (~33 ns per point-step),
+    # far more on a slower machine, so the interrupt after 3 s always lands mid-sweep; a lane
+    # group of 8 points finishes in ~0.3 s, so some points are done by then
+    grid = {"mass_ratio": np.linspace(0.5, 1.5, 32), "voltage": np.linspace(60.0, 100.0, 32)}
+    kw = dict(t_end=20e-3, dt=2e-8, model="lps", progress=False)
     timer = threading.Timer(3.0, _thread.interrupt_main)
     t0 = time.perf_counter()
     timer.start()
