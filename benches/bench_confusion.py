@@ -231,7 +231,19 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
     return {**c, **info, "truth": truth, "verdict": d.verdict, "right": d.verdict == truth, "seconds": seconds,
             "calibrated_over_noise": d.rms_calibrated / d.noise.sigma, "after_over_noise": d.rms_after / d.noise.sigma,
             "key_error": _key_error(d, c, info), "alternatives": [a.effect for a in d.alternatives],
-            "reason": d.reason}
+            "reason": d.reason, **_margin(d)}
+
+
+def _margin(d: Any) -> dict[str, Any]:
+    """The strongest competitor of the verdict among the refined candidates: on a healthy device,
+    how far the best effect came from being named (its ΔBIC against BIC_THRESHOLD, its
+    likelihood-ratio statistic), so the threshold's margin is measured, not only the count."""
+    fitted = [x for x in d.ranking if not x.screened_only and not x.at_null and x.effect != d.verdict]
+    if not fitted:
+        return {"best_other": None, "best_other_delta_bic": None, "best_other_lr_chi2": None}
+    best = max(fitted, key=lambda x: x.delta_bic)
+    lr = best.lr_chi2 if math.isfinite(best.lr_chi2) else None
+    return {"best_other": best.effect, "best_other_delta_bic": float(best.delta_bic), "best_other_lr_chi2": lr}
 
 
 def table(rows: list[dict[str, Any]]) -> str:
@@ -269,6 +281,17 @@ def table(rows: list[dict[str, Any]]) -> str:
     secs = [r["seconds"] for r in rows]
     lines.append(f"false alarms (an effect named on a healthy device): {alarms} of {n} (95 % upper bound of the "
                  f"rate {upper:.3f}); time per case: median {np.median(secs):.0f} s, max {max(secs):.0f} s")
+    margins = [r["best_other_delta_bic"] for r in healthy if r.get("best_other_delta_bic") is not None]
+    if margins:
+        from idm_rs.diagnosis.results import BIC_THRESHOLD
+
+        top = max((r for r in healthy if r.get("best_other_delta_bic") is not None),
+                  key=lambda r: r["best_other_delta_bic"])
+        lines.append(f"\nthe threshold's margin on healthy devices: the best refined effect's ΔBIC was "
+                     f"median {np.median(margins):.1f}, max {max(margins):.1f} ({top['best_other']}, case "
+                     f"{top['id']}) against BIC_THRESHOLD {BIC_THRESHOLD:g}; {len(margins)} of {n} had a refined "
+                     f"candidate")
+    lines.append("")
     return "\n".join(lines) + "\n"
 
 
