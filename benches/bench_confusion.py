@@ -291,6 +291,9 @@ def table(rows: list[dict[str, Any]]) -> str:
                      f"median {np.median(margins):.1f}, max {max(margins):.1f} ({top['best_other']}, case "
                      f"{top['id']}) against BIC_THRESHOLD {BIC_THRESHOLD:g}; {len(margins)} of {n} had a refined "
                      f"candidate")
+    elif healthy:
+        lines.append(f"\nthe threshold's margin on healthy devices: none of the {n} got as far as a refined candidate "
+                     f"(every effect was screened out or ended at its 'no effect' value)")
     lines.append("")
     return "\n".join(lines) + "\n"
 
