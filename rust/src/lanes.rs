@@ -12,7 +12,9 @@
 //! lane. Anything else runs lane by lane through the scalar model ([`PlainLanes::new`] says so
 //! by returning `None`).
 
-use crate::drive::{LaneInputs, ModelRhs};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use crate::drive::{LaneInputs, ModelRhs, Observer, Task};
 use crate::fast_exp::exp_poly;
 use crate::mechanics::Actuator;
 use crate::model::Model;
@@ -374,6 +376,59 @@ pub fn simd_level() -> &'static str {
         pulp::Arch::V3(_) => "avx2",
         _ => "scalar",
     }
+}
+
+/// How often (in attempts) a lane driver looks at the cancel flag.
+const CANCEL_CHECK_ATTEMPTS: usize = 1 << 12;
+
+/// What a lane driver does next (see [`refill_lanes`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Queue {
+    /// attempt a step on the lanes that hold a task
+    Go,
+    /// every task has ended
+    Done,
+    /// the cancel flag is set
+    Cancelled,
+}
+
+/// The queue step every SoA lane driver (`lanes_rk4.rs`, `lanes_dopri5.rs`) takes before an
+/// attempt: each empty lane gets the next task of `tasks` (its model into `p`, its initial state
+/// into `y`, the observer told it starts; `slot(lane, task)` builds what the driver keeps of it).
+/// Every [`CANCEL_CHECK_ATTEMPTS`] attempts it also looks at `cancel`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn refill_lanes<Sl, O: Observer, const N: usize, const D: usize, const L: usize>(
+    tasks: &[Task],
+    next: &mut usize,
+    slots: &mut [Option<Sl>; L],
+    p: &mut PlainLanes<N, L>,
+    y: &mut [[f64; L]; D],
+    observer: &mut O,
+    attempts: &mut usize,
+    cancel: &AtomicBool,
+    mut slot: impl FnMut(usize, usize) -> Sl,
+) -> Queue {
+    for i in 0..L {
+        if slots[i].is_none() && *next < tasks.len() {
+            let task = &tasks[*next];
+            p.set(i, task.model);
+            for j in 0..D {
+                y[j][i] = task.y0[j];
+            }
+            slots[i] = Some(slot(i, *next));
+            observer.start(*next, task.t_start, task.y0);
+            *next += 1;
+        }
+    }
+    if slots.iter().all(|s| s.is_none()) {
+        return Queue::Done;
+    }
+    if *attempts % CANCEL_CHECK_ATTEMPTS == 0 && cancel.load(Ordering::Relaxed) {
+        return Queue::Cancelled;
+    }
+    *attempts += 1;
+    Queue::Go
 }
 
 #[cfg(test)]

@@ -5,15 +5,14 @@
 //! stages, the error norm, the controller, first-same-as-last, landing on the input's
 //! breakpoints), so results are bitwise those of the scalar path (tested in `lanes.rs`).
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 use crate::dopri5::{A2, A3, A4, A5, A6, B, C, CONTROL, E};
 use crate::drive::{adaptive_options, LaneEnd, Observer, Task};
-use crate::lanes::{LaneExp, PlainLanes};
+use crate::lanes::{refill_lanes, LaneExp, PlainLanes, Queue};
 use crate::stepper::{AdaptiveOptions, Attempt, Held};
 use crate::waveform::Cursor;
 
-const CANCEL_CHECK_ATTEMPTS: usize = 1 << 12;
 
 /// What one lane is running.
 struct Slot {
@@ -61,38 +60,30 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
     let mut next = 0usize;
     let mut attempts = 0usize;
     loop {
-        for i in 0..L {
-            if slots[i].is_none() && next < tasks.len() {
-                let task = &tasks[next];
-                p.set(i, task.model);
-                let opts = adaptive_options(task, rtol, atol, first_step, &no_hold);
-                for j in 0..D {
-                    y[j][i] = task.y0[j];
-                    scale[j][i] = opts.scale[j];
-                }
-                slots[i] = Some(Slot {
-                    task: next,
-                    t: task.t_start,
-                    cursor: Cursor::at(task.wave, task.t_start),
-                    h: opts.h_init.min(opts.h_max),
-                    in_norm: opts.scale.iter().filter(|s| s.is_finite()).count().max(1) as f64,
-                    opts,
-                    fresh: true,
-                    v_last: task.y0[task.model.layout.dof],
-                    steps: 0,
-                    min_step: f64::INFINITY,
-                });
-                observer.start(next, task.t_start, task.y0);
-                next += 1;
+        let queue = refill_lanes(tasks, &mut next, &mut slots, &mut p, &mut y, observer, &mut attempts, cancel, |i, t| {
+            let task = &tasks[t];
+            let opts = adaptive_options(task, rtol, atol, first_step, &no_hold);
+            for j in 0..D {
+                scale[j][i] = opts.scale[j];
             }
+            Slot {
+                task: t,
+                t: task.t_start,
+                cursor: Cursor::at(task.wave, task.t_start),
+                h: opts.h_init.min(opts.h_max),
+                in_norm: opts.scale.iter().filter(|s| s.is_finite()).count().max(1) as f64,
+                opts,
+                fresh: true,
+                v_last: task.y0[task.model.layout.dof],
+                steps: 0,
+                min_step: f64::INFINITY,
+            }
+        });
+        match queue {
+            Queue::Go => {}
+            Queue::Done => break,
+            Queue::Cancelled => return None,
         }
-        if slots.iter().all(|s| s.is_none()) {
-            break;
-        }
-        if attempts % CANCEL_CHECK_ATTEMPTS == 0 && cancel.load(Ordering::Relaxed) {
-            return None;
-        }
-        attempts += 1;
         // each lane's input, segment end and step (drive.rs, then Dopri5::attempt)
         let (mut v0, mut slope, mut step) = ([0.0; L], [0.0; L], [0.0; L]);
         let (mut end, mut last, mut fresh) = ([0.0; L], [false; L], [false; L]);

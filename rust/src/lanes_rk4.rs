@@ -9,14 +9,13 @@
 //! operation: with [`LibmExp`](crate::lanes::LibmExp) the results are bitwise those of
 //! `run_tasks_one_by_one` (tested in `lanes.rs`).
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 use crate::drive::{LaneEnd, Observer, Task};
-use crate::lanes::{LaneExp, PlainLanes};
+use crate::lanes::{refill_lanes, LaneExp, PlainLanes, Queue};
 use crate::waveform::Cursor;
 
 /// Attempts between checks of the cancel flag.
-const CANCEL_CHECK_STEPS: usize = 1 << 12;
 /// RK4's slack on the presliding bound (as `Rk4::bound_slack`).
 const BOUND_SLACK: f64 = 1e-6;
 
@@ -59,34 +58,24 @@ pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, co
     let mut attempts = 0usize;
     loop {
         // refill idle lanes from the queue
-        for i in 0..L {
-            if slots[i].is_none() && next < tasks.len() {
-                let task = &tasks[next];
-                p.set(i, task.model);
-                for j in 0..D {
-                    y[j][i] = task.y0[j];
-                }
-                let k0 = (task.t_start / dt).round() as usize;
-                slots[i] = Some(Slot {
-                    task: next,
-                    k: k0,
-                    k_end: k0 + ((task.t_end - task.t_start) / dt).round() as usize,
-                    cursor: Cursor::at(task.wave, task.t_start),
-                    bound: task.model.presliding_bound() * (1.0 + BOUND_SLACK) + 1e-12,
-                    v_last: task.y0[task.model.layout.dof],
-                    steps: 0,
-                });
-                observer.start(next, task.t_start, task.y0);
-                next += 1;
+        let queue = refill_lanes(tasks, &mut next, &mut slots, &mut p, &mut y, observer, &mut attempts, cancel, |_, t| {
+            let task = &tasks[t];
+            let k0 = (task.t_start / dt).round() as usize;
+            Slot {
+                task: t,
+                k: k0,
+                k_end: k0 + ((task.t_end - task.t_start) / dt).round() as usize,
+                cursor: Cursor::at(task.wave, task.t_start),
+                bound: task.model.presliding_bound() * (1.0 + BOUND_SLACK) + 1e-12,
+                v_last: task.y0[task.model.layout.dof],
+                steps: 0,
             }
+        });
+        match queue {
+            Queue::Go => {}
+            Queue::Done => break,
+            Queue::Cancelled => return None,
         }
-        if slots.iter().all(|s| s.is_none()) {
-            break;
-        }
-        if attempts % CANCEL_CHECK_STEPS == 0 && cancel.load(Ordering::Relaxed) {
-            return None;
-        }
-        attempts += 1;
         // each lane's input over the step: V = v0 + slope tau (breakpoints on step boundaries)
         let (mut v0, mut slope) = ([0.0; L], [0.0; L]);
         for i in 0..L {
