@@ -332,14 +332,9 @@ impl<E: LaneExp, const N: usize, const D: usize, const L: usize> LaneInputs<f64,
     }
 }
 
-/// 0: the widest vector instructions the processor has; 1: scalar code (for tests and
-/// benchmarks: the results are bitwise the same, only the speed differs).
+/// 0: AVX2 where the processor has it; 1: scalar code; 3: AVX-512 where it has it (for tests
+/// and benchmarks: the results are bitwise the same, only the speed differs).
 static DISPATCH: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
-
-/// Force scalar code for the lane groups (`true`) or let the processor's best run (`false`).
-pub fn force_scalar(on: bool) {
-    DISPATCH.store(on as u8, std::sync::atomic::Ordering::Relaxed);
-}
 
 /// Choose the lane groups' instruction set: "scalar", "avx2" (the default) or "avx512" (each
 /// falling back to the best the processor has below it). Results are bitwise the same.
@@ -504,9 +499,9 @@ mod tests {
             let group: [&Model; 8] = std::array::from_fn(|i| &ms[i]);
             assert!(PlainLanes::<2, 8>::new(&group).is_some() || n != 2);
             let reference = run(&ms, &wave, false);
-            force_scalar(true);
+            set_simd_level("scalar");
             let scalar = run(&ms, &wave, true);
-            force_scalar(false);
+            set_simd_level("avx2");
             let vector = run(&ms, &wave, true);
             assert_eq!(scalar, reference, "{structure:?}: forced-scalar lanes differ from the model");
             assert_eq!(vector, reference, "{structure:?}: {} lanes differ from the model", simd_level());
