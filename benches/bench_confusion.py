@@ -2,7 +2,7 @@
 recordings, and the false-alarm rate on healthy devices.
 
     python benches/bench_confusion.py --jsonl confusion.jsonl --out benches/confusion.md \
-        --figure docs/img/confusion_matrix.png [--healthy 100] [--limit N]
+        --figure docs/img/confusion_matrix.png [--healthy 100] [--limit N] [--shard K/N]
 
 Every catalogue effect at two sizes — its signal left after a (linearised) refit of the nominal
 subset about 3x and 8x the noise RMS — on two devices (LPS and DPS n = 4, neither with piezo
@@ -18,7 +18,9 @@ those parameters would absorb, to first order), has the target RMS in noise unit
 One line of JSON per finished case goes to ``--jsonl`` as it finishes; cases already there are
 skipped, so the run resumes across sessions (the cases are drawn from ``--seed`` in a fixed
 order, so a resumed run diagnoses the same ones). Run it in the background from a separate
-install (a wheel in its own venv); a case takes about as long as one diagnosis.
+install (a wheel in its own venv); a case takes about as long as one diagnosis. ``--shard 0/2``
+and ``--shard 1/2`` side by side split the cases between two processes writing one JSONL (each
+case's seconds are then those of a diagnosis sharing the machine).
 """
 
 from __future__ import annotations
@@ -331,20 +333,32 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--healthy", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--limit", type=int, help="run at most this many new cases, then write the table")
+    ap.add_argument("--shard", default="0/1", metavar="K/N",
+                    help="run only the cases whose id is K modulo N (N processes side by side, one JSONL)")
     ap.add_argument("--jsonl", type=Path, required=True)
     ap.add_argument("--out", type=Path)
     ap.add_argument("--figure", type=Path)
     a = ap.parse_args(argv)
-    rows = [json.loads(x) for x in a.jsonl.read_text().splitlines()] if a.jsonl.exists() else []
-    done = {r["id"] for r in rows}
-    todo = [c for c in plan(a.healthy) if c["id"] not in done][: a.limit]
+    try:
+        k, n = (int(x) for x in a.shard.split("/"))
+        if not 0 <= k < n:
+            raise ValueError
+    except ValueError:
+        ap.error(f"--shard {a.shard!r}: expected K/N with 0 <= K < N, e.g. 0/2 and 1/2 for two processes")
+
+    def finished() -> list[dict[str, Any]]:
+        return [json.loads(x) for x in a.jsonl.read_text().splitlines()] if a.jsonl.exists() else []
+
+    done = {r["id"] for r in finished()}
+    todo = [c for c in plan(a.healthy) if c["id"] not in done and c["id"] % n == k][: a.limit]
     with tempfile.TemporaryDirectory() as tmp:
         for c in todo:
             row = run_case(c, Path(tmp), a.seed)
-            rows.append(row)
             print(json.dumps(row), flush=True)
+            # one short append per case: shards side by side share the file
             with a.jsonl.open("a") as f:
                 f.write(json.dumps(row) + "\n")
+    rows = finished()
     md = table(rows)
     print(md)
     if a.out:

@@ -97,6 +97,24 @@ def test_multistart_reaches_the_optimum_where_one_local_fit_stops_short(long_rec
     assert ms.to_dict()["local_fits"][0]["end_chi2"] == pytest.approx(ms.best.chi2)
 
 
+def test_local_fits_agree_within_the_best_fits_own_residual_variance():
+    # at the noise floor (chi^2 = n) two optima agree within 25 chi^2 units ...
+    from idm_rs.diagnosis.fitting import FitResult
+    from idm_rs.diagnosis.multistart import AGREE_CHI2, agree
+
+    def ended(chi2: float, n: int = 5600) -> FitResult:
+        return FitResult({}, {}, chi2, n, [], [], SPEC, 0, True, "")
+
+    at_noise = ended(5600.0)
+    assert agree(at_noise, 5600.0 + 0.9 * AGREE_CHI2) and not agree(at_noise, 5600.0 + 1.1 * AGREE_CHI2)
+    # ... and with a large effect missing (confusion case 6: chi^2 = 95 n) within 25 of the
+    # residual's own variances: optima 0.1 % and 0.2 % apart there (530,242, 530,803 and
+    # 531,474) are one optimum as far as a model that misses the effect can tell
+    far = ended(530242.0)
+    assert agree(far, 530803.0) and agree(far, 531474.0)
+    assert not agree(far, 530242.0 * (1 + 1.1 * AGREE_CHI2 / 5600))
+
+
 def test_a_1d_scan_start_leaves_the_side_basin_the_nominal_values_sit_in(long_rec):
     # m2 15 % low with sigma2 beside it at its true value: the nominal values' local fit stops
     # in m2's side basin (as above); the scan of m2 over its plausible range, sigma2 held, puts

@@ -25,7 +25,7 @@ from .calibration import calibrate as global_calibration
 from .catalogue import CALIBRATED, CALIBRATION_RANGE, CALIBRATION_SCALE, CATALOGUE, Effect, EffectParam
 from .fitting import FitResult, FreeParam, Objective, apply, fit, set_effect, set_param
 from .locate import locate, merge_windows
-from .multistart import Start, multistart
+from .multistart import Start, agree, multistart
 from .noise import NoiseEstimate, cross_check, estimate_noise
 from .results import (BIC_THRESHOLD, LR_ALPHA, NOISE_RATIO_OK, REFIT_TOP, SEPARATION, WHITENESS_Z,
                       Alternative, Candidate, Diagnosis)
@@ -48,6 +48,18 @@ WIDE_FITS = 2
 #: not fitted in the first round: it cannot approach BIC_THRESHOLD + its parameters' penalty
 #: (the wider search, run when the residual is systematic, fits every candidate regardless)
 MIN_SCORE = 5.0
+#: the group of a candidate's starts at the calibration's other optima (see `_candidate_starts`):
+#: ranked with the rest, without a local fit of their own
+OTHER_NULLS = "other null optima"
+#: a candidate's local fits: the horizons (drive cycles; None: everything) fitted in turn, and
+#: least-squares evaluations at each. Everything at once: a recording holds only 2-5 drive
+#: cycles, so two cycles save little, and their optimum can lie elsewhere (confusion case 6:
+#: from the nominal values with a spring of 3e4 N/m, 8+8 evaluations over two cycles then
+#: everything ended at chi^2 6.3e6 with mu_k at its bound; 12 over everything reach the truth).
+#: 16: in confusion case 1 the fit that reaches the truth (5,324) stands at 131,830 after 8,
+#: behind a local minimum's 17,600 (a short fit for all, a long one for the best, misses it)
+CANDIDATE_HORIZONS: tuple[Optional[int], ...] = (None,)
+CANDIDATE_NFEV: tuple[int, ...] = (16,)
 #: local fits per candidate's multistart from its best distinct ranked starts (the best start at
 #: the nominal values as given gets one more)
 CANDIDATE_FITS = 1
@@ -241,15 +253,26 @@ def _magnitudes(ep: EffectParam) -> list[float]:
 def _candidate_starts(pb: _Problem, cal: _Calibration, eff: Effect, sc: Optional[Screened]) -> list[Start]:
     """A candidate's multistart: the nominal subset at the best null fit, at the one-cycle
     optimum, at the nominal values as given (a large missing effect can pull the null fit far
-    from them) and after the screening step, each with the
+    from them), at the calibration's best 1-D scan start and at its other optima as good as
+    the best, and after the screening step, each with the
     effect's magnitude on a small log grid (both signs where signed) — the null itself (the
     effect at "no effect") among them — plus the screening step's own estimate."""
     nominal: list[tuple[str, list[FreeParam]]] = [("null fit", cal.at), ("one-cycle optimum", cal.one_cycle_at),
                                                   ("nominal values", cal.free)]
     if cal.scan_at is not None:
-        # the nominal values with a side basin left (the calibration's best 1-D scan start):
-        # ranked in the nominal values' group, so the better of the two gets that group's fit
+        # the nominal values with a side basin left (the calibration's best 1-D scan start),
+        # ranked with the rest; not in the nominal values' group, whose best start always gets
+        # a fit: with a large effect missing the scan start can outrank the nominal values at
+        # every magnitude although only they lead to the truth (confusion case 6: a spring to
+        # ground with m2 mis-set). Where the scan found the null's basin, the null fit is in it.
         nominal.append(("1-D scan", cal.scan_at))
+    # the calibration's other optima as good as the best (see `multistart.agree`): a missing
+    # effect leaves the null several equally bad basins, and the effect may be reachable by
+    # least squares from one of them only (ranked with the rest, no fit of their own)
+    optima = cal.search.polishes if cal.search is not None else []
+    for k, p in enumerate(optima[1:], 2):
+        if agree(optima[0], p.chi2):
+            nominal.append((f"null optimum {k}", [f.at(p.values[f.name]) for f in cal.free]))
     if sc is not None and sc.nominal_step is not None:
         nominal.append(("score step", [f.at(f.value(float(d))) for f, d in zip(cal.at, sc.nominal_step)]))
     grids = [_magnitudes(ep) for ep in eff.params]
@@ -259,7 +282,7 @@ def _candidate_starts(pb: _Problem, cal: _Calibration, eff: Effect, sc: Optional
         for c in combos:
             what = ", ".join(f"{ep.name}={v:.3g}" for ep, v in zip(eff.params, c))
             starts.append(Start(f"{label}; {what}" if what else label, list(nom) + [ep.free(v) for ep, v in zip(eff.params, c)],
-                                "nominal values" if label == "1-D scan" else label))
+                                OTHER_NULLS if label.startswith("null optimum") else label))
     if sc is not None and sc.nominal_step is not None and eff.params:
         what = ", ".join(f"{ep.name}={v:.3g}" for ep, v in zip(eff.params, sc.estimate))
         starts.append(Start(f"score step; {what}", nominal[-1][1] + [ep.free(v) for ep, v in zip(eff.params, sc.estimate)],
@@ -302,7 +325,8 @@ def _fit_candidates(pb: _Problem, cal: _Calibration, order: list[Effect], screen
             out.append(_Refit(c, base, free))
             continue
         ms = multistart(pb.obj, base, _candidate_starts(pb, cal, eff, sc), local_fits=local_fits,
-                        horizons=(2, None), max_nfev=(8, 8), always=("nominal values",), progress=pb.tick)
+                        horizons=CANDIDATE_HORIZONS, max_nfev=CANDIDATE_NFEV, always=("nominal values",),
+                        progress=pb.tick)
         r = ms.best
         null = _at_null(cal, eff, base)
         if null is not None and r.chi2 >= null.chi2:

@@ -15,10 +15,11 @@ import numpy as np
 from .case_model import ModelSpec
 from .fitting import FitResult, FreeParam, Objective, apply, fit_progressive
 
-#: two local fits reached the same optimum when their chi^2 differ by less than this (noise
-#: units), or by less than AGREE_RELATIVE of the best chi^2 on a residual far from noise
+#: two local fits reached the same optimum when their chi^2 differ by less than this, in units
+#: of the best fit's residual variance (the noise variance, or more where the residual is far
+#: from noise: a model that misses an effect cannot tell optima apart more finely than its own
+#: misfit, the quasi-likelihood scale of least squares)
 AGREE_CHI2 = 25.0
-AGREE_RELATIVE = 1e-3
 #: a ranked start is worth a local fit when its chi^2 is within this factor of the best start's:
 #: a start 100x worse does not reach the best basin in a few exact Gauss-Newton steps, and its
 #: local fit costs as much as the best one's
@@ -62,12 +63,11 @@ class MultiStart:
         return self.fits[0].fit
 
     def agree(self, chi2: float) -> bool:
-        best = self.best.chi2
-        return chi2 - best <= max(AGREE_CHI2, AGREE_RELATIVE * best)
+        return agree(self.best, chi2)
 
     @property
     def reached(self) -> int:
-        """Local fits that ended at the best optimum (within AGREE_CHI2)."""
+        """Local fits that ended at the best optimum (see `agree`)."""
         return sum(self.agree(f.fit.chi2) for f in self.fits)
 
     def summary(self) -> str:
@@ -78,6 +78,11 @@ class MultiStart:
 
     def to_dict(self) -> dict[str, Any]:
         return {"ranked": self.ranked, "reached": self.reached, "local_fits": [f.to_dict() for f in self.fits]}
+
+
+def agree(best: FitResult, chi2: float) -> bool:
+    """A fit ending at `chi2` reached `best`'s optimum: within AGREE_CHI2 residual variances."""
+    return chi2 - best.chi2 <= AGREE_CHI2 * max(1.0, best.chi2 / max(best.n, 1))
 
 
 def _key(free: Sequence[FreeParam]) -> np.ndarray:
@@ -103,7 +108,9 @@ def rank(objective: Objective, base: ModelSpec, starts: Sequence[Start], cycles:
     """chi^2 of every start over the first `cycles` cycles: one batch call for all of them."""
     obj = objective.with_cycles(cycles)
     specs = [apply(base, s.free, np.zeros(len(s.free))) for s in starts]
-    preds = obj.predict(specs, retries=0)
+    # with the fits' retries at a finer step: a start a local fit ended at (the null fit) may
+    # need them over two cycles, and a start ranked as failed never gets its local fit
+    preds = obj.predict(specs)
     if progress:
         progress(len(specs))
     return [float(np.sum(obj.vector(p) ** 2)) for p in preds]
