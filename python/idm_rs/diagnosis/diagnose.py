@@ -48,9 +48,6 @@ WIDE_FITS = 2
 #: not fitted in the first round: it cannot approach BIC_THRESHOLD + its parameters' penalty
 #: (the wider search, run when the residual is systematic, fits every candidate regardless)
 MIN_SCORE = 5.0
-#: the group of a candidate's starts at the calibration's other optima (see `_candidate_starts`):
-#: ranked with the rest, without a local fit of their own
-OTHER_NULLS = "other null optima"
 #: a candidate's local fits: the horizons (drive cycles; None: everything) fitted in turn, and
 #: least-squares evaluations at each. Everything at once: a recording holds only 2-5 drive
 #: cycles, so two cycles save little, and their optimum can lie elsewhere (confusion case 6:
@@ -281,8 +278,7 @@ def _candidate_starts(pb: _Problem, cal: _Calibration, eff: Effect, sc: Optional
     for label, nom in nominal:
         for c in combos:
             what = ", ".join(f"{ep.name}={v:.3g}" for ep, v in zip(eff.params, c))
-            starts.append(Start(f"{label}; {what}" if what else label, list(nom) + [ep.free(v) for ep, v in zip(eff.params, c)],
-                                OTHER_NULLS if label.startswith("null optimum") else label))
+            starts.append(Start(f"{label}; {what}" if what else label, list(nom) + [ep.free(v) for ep, v in zip(eff.params, c)], label))
     if sc is not None and sc.nominal_step is not None and eff.params:
         what = ", ".join(f"{ep.name}={v:.3g}" for ep, v in zip(eff.params, sc.estimate))
         starts.append(Start(f"score step; {what}", nominal[-1][1] + [ep.free(v) for ep, v in zip(eff.params, sc.estimate)],

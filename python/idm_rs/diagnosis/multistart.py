@@ -109,7 +109,7 @@ def rank(objective: Objective, base: ModelSpec, starts: Sequence[Start], cycles:
     obj = objective.with_cycles(cycles)
     specs = [apply(base, s.free, np.zeros(len(s.free))) for s in starts]
     # with the fits' retries at a finer step: a start a local fit ended at (the null fit) may
-    # need them over two cycles, and a start ranked as failed never gets its local fit
+    # need them, and a start ranked as failed never gets its local fit
     preds = obj.predict(specs)
     if progress:
         progress(len(specs))
