@@ -13,8 +13,11 @@ breakpoint is an integer multiple of 1e-5 s, so it falls on a step boundary of e
 
 from __future__ import annotations
 
+import _thread
 import functools
 import os
+import threading
+import time
 from dataclasses import dataclass
 from typing import Callable, Optional
 
@@ -227,3 +230,29 @@ def paper_x1() -> Callable[..., float]:
         return _paper_final_position(model, n, dt, tuple(sorted(overrides.items())))
 
     return run
+
+
+# --------------------------------------------------------------------------------------------
+# Ctrl-C
+# --------------------------------------------------------------------------------------------
+def interrupt_main_when(ready: Callable[[], bool], delay: float = 0.0, timeout: float = 300.0) -> threading.Thread:
+    """Start a thread that sends Ctrl-C (``_thread.interrupt_main``) to the main thread ``delay``
+    seconds [s] after ``ready()`` first holds (polled every 10 ms, for at most ``timeout`` s); the
+    thread's ``sent_at`` is then the ``time.perf_counter()`` of the interrupt.
+    A fixed timer is not enough: on a loaded machine it can fire before the work is under way,
+    and the KeyboardInterrupt then lands outside the code that handles it."""
+
+    def wait_then_interrupt() -> None:
+        t0 = time.perf_counter()
+        while not ready():
+            if time.perf_counter() - t0 > timeout:
+                return
+            time.sleep(0.01)
+        time.sleep(delay)
+        thread.sent_at = time.perf_counter()  # type: ignore[attr-defined]
+        _thread.interrupt_main()
+
+    thread = threading.Thread(target=wait_then_interrupt, daemon=True)
+    thread.sent_at = None  # type: ignore[attr-defined]
+    thread.start()
+    return thread

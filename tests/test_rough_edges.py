@@ -4,7 +4,7 @@ measured voltages."""
 
 from __future__ import annotations
 
-import _thread
+import importlib
 import re
 import threading
 import warnings
@@ -14,6 +14,8 @@ import pytest
 
 import idm_rs
 from idm_rs.cli import _waveform_title, main
+
+from conftest import interrupt_main_when
 
 P = idm_rs.Params()
 W = idm_rs.Triangle()
@@ -106,14 +108,21 @@ def test_a_step_that_does_not_divide_gets_one_that_does():
 # --- interrupting simulate -----------------------------------------------------------------------
 
 
-def test_ctrl_c_stops_simulate_and_keeps_the_trajectory_so_far():
-    timer = threading.Timer(0.5, _thread.interrupt_main)
-    timer.start()
-    try:
-        with pytest.warns(RuntimeWarning) as caught:
-            r = idm_rs.simulate(P, W, t_end=2.0, dt=1e-8, model="lps", save_every=100_000)
-    finally:
-        timer.cancel()
+def test_ctrl_c_stops_simulate_and_keeps_the_trajectory_so_far(monkeypatch):
+    # Ctrl-C 0.5 s after the engine call began (not after a fixed time: see interrupt_main_when)
+    started = threading.Event()
+    engine = importlib.import_module("idm_rs.simulation").engine
+    engine_simulate = engine.simulate
+
+    def simulate(*args):
+        started.set()
+        return engine_simulate(*args)
+
+    monkeypatch.setattr(engine, "simulate", simulate)
+    interrupter = interrupt_main_when(started.is_set, delay=0.5)
+    with pytest.warns(RuntimeWarning) as caught:
+        r = idm_rs.simulate(P, W, t_end=2.0, dt=1e-8, model="lps", save_every=100_000)
+    interrupter.join()
     messages = [str(w.message) for w in caught]
     assert any("take minutes" in m for m in messages)  # 2e8 steps: warned before the run
     assert any("interrupted" in m for m in messages)

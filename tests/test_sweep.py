@@ -4,9 +4,8 @@ input errors. Runs are short (LPS, 1-2 ms) so the whole file takes a few seconds
 
 from __future__ import annotations
 
-import _thread
+import importlib
 import math
-import threading
 import time
 import warnings
 from dataclasses import fields
@@ -17,6 +16,8 @@ import xarray  # noqa: F401  (imported here so that the Ctrl-C test does not int
 
 import idm_rs
 from idm_rs.sweep import METRICS
+
+from conftest import interrupt_main_when
 
 P = idm_rs.Params()
 WAVE = idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
@@ -168,22 +169,28 @@ def test_results_bitwise_identical_across_thread_counts(method):
 # --- Ctrl-C ---------------------------------------------------------------------------------------
 
 
-def test_interrupted_sweep_keeps_finished_points():
-    # 1,024 points x 10^6 steps: ~15 s on 2 threads with vector lanes (~33 ns per point-step),
-    # far more on a slower machine, so the interrupt after 3 s always lands mid-sweep; a lane
-    # group of 8 points finishes in ~0.3 s, so some points are done by then
+def test_interrupted_sweep_keeps_finished_points(monkeypatch):
+    # 1,024 points x 10^6 steps: ~15 s on 2 threads with vector lanes (~33 ns per point-step).
+    # Ctrl-C once the first block has finished points (not after a fixed time: on a loaded
+    # machine a timer can fire before any point is done, see interrupt_main_when)
     grid = {"mass_ratio": np.linspace(0.5, 1.5, 32), "voltage": np.linspace(60.0, 100.0, 32)}
     kw = dict(t_end=20e-3, dt=2e-8, model="lps", progress=False)
-    timer = threading.Timer(3.0, _thread.interrupt_main)
-    t0 = time.perf_counter()
-    timer.start()
-    try:
-        with pytest.warns(RuntimeWarning, match="interrupted"):
-            ds = idm_rs.sweep(P, WAVE, grid, threads=2, block_size=64, **kw)
-    finally:
-        timer.cancel()
-    elapsed = time.perf_counter() - t0
-    assert elapsed < 3.0 + 1.5, f"the sweep took {elapsed - 3.0:.1f} s to stop"
+    runs = []
+    module = importlib.import_module("idm_rs.sweep")  # the package's `sweep` is the function
+    start = module._start
+
+    def recording_start(*args):
+        runs.append(start(*args))
+        return runs[-1]
+
+    monkeypatch.setattr(module, "_start", recording_start)
+    interrupter = interrupt_main_when(lambda: bool(runs) and runs[0].progress() > 0)
+    with pytest.warns(RuntimeWarning, match="interrupted"):
+        ds = idm_rs.sweep(P, WAVE, grid, threads=2, block_size=64, **kw)
+    stopped = time.perf_counter()
+    interrupter.join()
+    assert len(runs) < 1024 // 64, "the sweep ran to the end: the interrupt came too late"
+    assert stopped - interrupter.sent_at < 1.5, f"the sweep took {stopped - interrupter.sent_at:.1f} s to stop"
     assert ds.attrs["complete"] == 0
     status = ds.status.values
     done = status == 1
