@@ -115,6 +115,41 @@ def test_local_fits_agree_within_the_best_fits_own_residual_variance():
     assert not agree(far, 530242.0 * (1 + 1.1 * AGREE_CHI2 / 5600))
 
 
+def test_a_fit_leaves_noise_only_when_its_residual_is_white_and_its_chi2_is_the_noises():
+    from idm_rs.diagnosis.fitting import FitResult
+    from idm_rs.diagnosis.multistart import leaves_noise
+
+    rng = np.random.default_rng(7)
+    n = 20_000
+    noise = rng.normal(0.0, 1.0, n)
+
+    def ended(residual: np.ndarray, sigma: float = 1.0) -> FitResult:
+        return FitResult({}, {}, float(residual @ residual) / sigma**2, n, [residual], [], SPEC, 0, True, "")
+
+    assert leaves_noise(ended(noise))
+    assert not leaves_noise(ended(1.05 * noise)), "chi^2 = 1.1 n is 10 sigma above pure noise's"
+    # a noise level estimated 5 % high: a basin that misses a smooth effect worth 900 chi^2
+    # units passes the chi^2 test (0.95 n), and its residual's autocorrelation gives it away
+    smooth = np.sin(np.linspace(0.0, 6 * np.pi, n))
+    missed = noise + smooth * math.sqrt(900.0 / (smooth @ smooth))
+    assert ended(missed, sigma=1.05).chi2 < n and not leaves_noise(ended(missed, sigma=1.05))
+
+
+def test_multistart_stops_once_a_fit_leaves_noise(long_rec):
+    obj = Objective(long_rec, CaseSimulator(long_rec), NOISE, segmented=False)
+    starts = [Start(f"m2 x {f}", [_m2(f)]) for f in (0.85, 0.6, 1.12, 1.4)]
+    full = multistart(obj, SPEC, starts, local_fits=2, horizons=(2, None), max_nfev=(10, 10))
+    short = multistart(obj, SPEC, starts, local_fits=2, horizons=(2, None), max_nfev=(10, 10), stop_at_noise=True)
+    from idm_rs.diagnosis.multistart import leaves_noise
+
+    # the fits run in ranked order up to the first that leaves noise; the rest are counted
+    assert leaves_noise(short.best) and len(short.fits) + short.skipped == len(full.fits)
+    assert short.skipped == 1, "the best-ranked start (m2 x 1.12) reaches the noise floor alone"
+    assert sum(leaves_noise(f.fit) for f in short.fits) == 1
+    assert short.best.values["m2"] == pytest.approx(full.best.values["m2"], rel=1e-3)
+    assert ("not run" in short.summary()) == (short.skipped > 0)
+
+
 def test_a_1d_scan_start_leaves_the_side_basin_the_nominal_values_sit_in(long_rec):
     # m2 15 % low with sigma2 beside it at its true value: the nominal values' local fit stops
     # in m2's side basin (as above); the scan of m2 over its plausible range, sigma2 held, puts

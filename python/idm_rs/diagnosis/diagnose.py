@@ -26,7 +26,7 @@ from .catalogue import CALIBRATED, CALIBRATION_RANGE, CALIBRATION_SCALE, CATALOG
 from .fitting import FitResult, FreeParam, Objective, apply, fit, set_effect, set_param
 from .locate import locate, merge_windows
 from .multistart import Start, agree, multistart
-from .noise import NoiseEstimate, cross_check, estimate_noise
+from .noise import NoiseEstimate, cross_check, estimate_noise, whiteness_z
 from .results import (BIC_THRESHOLD, LR_ALPHA, NOISE_RATIO_OK, REFIT_TOP, SEPARATION, WHITENESS_Z,
                       Alternative, Candidate, Diagnosis)
 from .screening import Screened, near_degenerate, screen
@@ -60,19 +60,6 @@ CANDIDATE_NFEV: tuple[int, ...] = (16,)
 #: local fits per candidate's multistart from its best distinct ranked starts (the best start at
 #: the nominal values as given gets one more)
 CANDIDATE_FITS = 1
-
-
-def whiteness_z(residuals: Sequence[NDArray[np.float64]]) -> float:
-    """Lag-1 autocorrelation of the residuals (per file, pooled) times sqrt(n): about N(0, 1) for
-    white noise, large for a smooth systematic residual — without needing the noise level."""
-    num = den = 0.0
-    n = 0
-    for r in residuals:
-        r = r - r.mean()
-        num += float(np.dot(r[1:], r[:-1]))
-        den += float(np.dot(r, r))
-        n += r.size
-    return num / den * math.sqrt(n) if den > 0 else 0.0
 
 
 def _heldout_index(rec: Recording) -> int:
@@ -322,7 +309,7 @@ def _fit_candidates(pb: _Problem, cal: _Calibration, order: list[Effect], screen
             continue
         ms = multistart(pb.obj, base, _candidate_starts(pb, cal, eff, sc), local_fits=local_fits,
                         horizons=CANDIDATE_HORIZONS, max_nfev=CANDIDATE_NFEV, always=("nominal values",),
-                        progress=pb.tick)
+                        stop_at_noise=True, progress=pb.tick)
         r = ms.best
         null = _at_null(cal, eff, base)
         if null is not None and r.chi2 >= null.chi2:

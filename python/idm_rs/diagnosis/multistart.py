@@ -14,6 +14,7 @@ import numpy as np
 
 from .case_model import ModelSpec
 from .fitting import FitResult, FreeParam, Objective, apply, fit_progressive
+from .noise import whiteness_z
 
 #: two local fits reached the same optimum when their chi^2 differ by less than this, in units
 #: of the best fit's residual variance (the noise variance, or more where the residual is far
@@ -24,6 +25,15 @@ AGREE_CHI2 = 25.0
 #: a start 100x worse does not reach the best basin in a few exact Gauss-Newton steps, and its
 #: local fit costs as much as the best one's
 PROMISING = 4.0
+#: a local fit "leaves noise" when its chi^2 is within NOISE_CHI2_Z standard deviations of the
+#: chi^2 of pure noise (n + z sqrt(2n)) and its residual's lag-1 whiteness z-score is within
+#: NOISE_WHITENESS_Z: no other start can then end better by more than the noise's own
+#: fluctuation, so `multistart(stop_at_noise=True)` fits no more starts. The whiteness test
+#: guards against a noise level estimated a few per cent high, under which a basin that misses
+#: a small effect passes the chi^2 test: the effect's smooth residual still shows in the
+#: autocorrelation (900 chi^2 units over n = 20,000 samples give z ~ 6)
+NOISE_CHI2_Z = 3.0
+NOISE_WHITENESS_Z = 2.0
 
 
 @dataclass(frozen=True)
@@ -57,6 +67,8 @@ class MultiStart:
     fits: list[LocalFit]
     ranked: int  #: starts simulated and ranked before the local fits
     ranking_cycles: Optional[int]
+    #: local fits planned but not run: an earlier one left noise (`multistart(stop_at_noise)`)
+    skipped: int = 0
 
     @property
     def best(self) -> FitResult:
@@ -74,15 +86,24 @@ class MultiStart:
         chis = ", ".join(f"{f.fit.chi2:.0f} (from {f.label})" for f in self.fits)
         return (f"{self.ranked} starts ranked over the first {self.ranking_cycles or 'all'} cycle(s); "
                 f"{len(self.fits)} local fits on exact Jacobians ended at chi^2 {chis}; "
-                f"{self.reached} of {len(self.fits)} reached the best")
+                f"{self.reached} of {len(self.fits)} reached the best"
+                + (f"; {self.skipped} more not run: a fit left noise" if self.skipped else ""))
 
     def to_dict(self) -> dict[str, Any]:
-        return {"ranked": self.ranked, "reached": self.reached, "local_fits": [f.to_dict() for f in self.fits]}
+        return {"ranked": self.ranked, "reached": self.reached, "skipped": self.skipped,
+                "local_fits": [f.to_dict() for f in self.fits]}
 
 
 def agree(best: FitResult, chi2: float) -> bool:
     """A fit ending at `chi2` reached `best`'s optimum: within AGREE_CHI2 residual variances."""
     return chi2 - best.chi2 <= AGREE_CHI2 * max(1.0, best.chi2 / max(best.n, 1))
+
+
+def leaves_noise(fit: FitResult) -> bool:
+    """The fit's residual is indistinguishable from the noise (see NOISE_CHI2_Z)."""
+    n = max(fit.n, 1)
+    return (fit.chi2 <= n + NOISE_CHI2_Z * math.sqrt(2.0 * n)
+            and abs(whiteness_z(fit.residuals)) <= NOISE_WHITENESS_Z)
 
 
 def _key(free: Sequence[FreeParam]) -> np.ndarray:
@@ -118,12 +139,14 @@ def rank(objective: Objective, base: ModelSpec, starts: Sequence[Start], cycles:
 
 def multistart(objective: Objective, base: ModelSpec, starts: Sequence[Start], *, local_fits: int,
                horizons: Sequence[Optional[int]] = (2, None), max_nfev: Sequence[int] = (10, 10),
-               always: Sequence[str] = (), progress: Optional[Callable[..., Any]] = None) -> MultiStart:
+               always: Sequence[str] = (), stop_at_noise: bool = False,
+               progress: Optional[Callable[..., Any]] = None) -> MultiStart:
     """Rank `starts` over the first horizon, then fit from the `local_fits` best distinct ones
     among the promising (within PROMISING of the best start's chi^2), and from the best-ranked
     start of every group in `always` (a start's misfit is not its basin: the nominal values
     as given, with a large effect in place, can start far up a slope that leads to the truth),
-    over each horizon in turn; the fits best first."""
+    over each horizon in turn, in that order; with `stop_at_noise`, no more once one fit
+    leaves noise (`leaves_noise`). The fits best first."""
     chis = rank(objective, base, starts, horizons[0], progress)
     order = sorted(range(len(starts)), key=lambda i: chis[i] if math.isfinite(chis[i]) else math.inf)
     promising = [i for i in order if chis[i] <= PROMISING * chis[order[0]]]
@@ -132,10 +155,12 @@ def multistart(objective: Objective, base: ModelSpec, starts: Sequence[Start], *
         i = next((i for i in order if starts[i].group == g), None)
         if i is not None and i not in picks and all(starts[j].group != g for j in picks):
             picks.append(i)
-    fits = []
+    fits: list[LocalFit] = []
     for i in picks:
         s = starts[i]
         r = fit_progressive(objective, base, s.free, horizons=horizons, max_nfev=max_nfev, progress=progress)
         fits.append(LocalFit(s.label, {f.name: f.x0 for f in s.free}, chis[i], r))
+        if stop_at_noise and leaves_noise(r):
+            break
     fits.sort(key=lambda f: f.fit.chi2)
-    return MultiStart(fits, len(starts), horizons[0])
+    return MultiStart(fits, len(starts), horizons[0], len(picks) - len(fits))
