@@ -4,6 +4,7 @@ reference, with far fewer steps, and the result says how it was computed."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -109,3 +110,32 @@ def test_auto_resolves_to_the_measured_setting(rk4):
     method, rtol, atol = idm_rs.methods.AUTO
     assert (r.method, r.rtol, r.atol) == (method, rtol, atol)
     assert abs(r.final_position - rk4.final_position) < 1e-9
+
+
+# --- a collapsed step stops the run with a message instead of crawling -------------------------
+
+NEAR_FRICTIONLESS = idm_rs.Params(mu_k=1e-6, mu_s=1e-6)
+SMALL_TRIANGLE = idm_rs.Triangle(50.0, 0.5e-3, 0.5e-3)
+
+
+@pytest.mark.parametrize("method", ["dopri5", "auto"])
+def test_a_near_frictionless_device_stops_the_explicit_method_with_a_hint(method):
+    # the issue's case: it ran for more than a minute without a word (2e8 steps); now it stops once
+    # its pace projects more than 1e8 (after 0.74 M steps); Rodas4 takes milliseconds
+    with pytest.raises(idm_rs.DivergenceError, match=r"integration stopped at t = .*the step fell to .*stability "
+                                                     r"limit .*use method 'rodas4'") as e:
+        idm_rs.simulate(NEAR_FRICTIONLESS, SMALL_TRIANGLE, t_end=1e-3, model="lps", method=method)
+    so_far = int(re.search(r"(\d+) steps so far", str(e.value)).group(1))
+    assert so_far < 2_000_000, str(e.value)
+    r = idm_rs.simulate(NEAR_FRICTIONLESS, SMALL_TRIANGLE, t_end=1e-3, model="lps", method="rodas4")
+    assert r.complete and math.isfinite(r.final_position)
+
+
+def test_a_crawling_sweep_point_is_diverged_with_the_method_s_reason():
+    # (that its neighbours in a lane group finish bitwise as alone: the Rust test
+    # a_crawling_lane_stops_as_on_the_scalar_path_and_its_neighbours_finish)
+    ds = idm_rs.sweep(NEAR_FRICTIONLESS, SMALL_TRIANGLE, {"voltage": [30.0, 50.0]}, t_end=1e-3, model="lps",
+                      method="dopri5", progress=False)
+    assert (ds.status.values == 3).all()
+    for reason in ds.reason.values:
+        assert "the step fell to" in str(reason) and "use method 'rodas4'" in str(reason), reason

@@ -48,6 +48,10 @@ pub(crate) const E: [f64; 7] = [
     -1.0 / 40.0,
 ];
 
+/// What a crawling explicit run is told (`crawl.rs`).
+pub(crate) const EXPLICIT_CRAWL_HINT: &str =
+    "the explicit method is held at its stability limit (the run is stiff): use method 'rodas4'";
+
 /// Stages, step sizes and options of `L` lanes; each lane keeps its own step size.
 pub struct Dopri5<S, const L: usize = 1> {
     opts: [AdaptiveOptions; L],
@@ -92,6 +96,10 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
     /// no longer finite counts as diverged.
     fn bound_slack(&self) -> f64 {
         f64::INFINITY
+    }
+
+    fn crawl_hint(&self, _lane: usize) -> &'static str {
+        EXPLICIT_CRAWL_HINT
     }
 
     fn restart(&mut self, lane: usize) {

@@ -20,6 +20,7 @@ use crate::model::{with_state_size, Model};
 use crate::rk4::Rk4;
 use crate::rodas4::Rodas4;
 use crate::scalar::Scalar;
+use crate::crawl::CrawlWatch;
 use crate::stepper::{Attempt, Rhs, State, Stepper};
 use crate::waveform::{Cursor, PiecewiseLinear};
 
@@ -464,12 +465,14 @@ where
     let mut k_end = [0usize; L];
     let mut steps = [0u64; L];
     let mut min_step = [f64::INFINITY; L];
+    let mut watch = [CrawlWatch::new(0.0); L];
     let mut v_last = [0.0; L];
     let mut out: Vec<Option<LaneEnd>> = vec![None; m];
     for i in 0..m {
         let task = &tasks[i];
         active[i] = true;
         t[i] = task.t_start;
+        watch[i] = CrawlWatch::new(task.t_start);
         cursor[i] = Cursor::at(task.wave, task.t_start);
         if St::FIXED_STEP {
             k[i] = (task.t_start / dt).round() as usize;
@@ -548,6 +551,13 @@ where
             v_last[i] = y[tasks[i].model.layout.dof].value();
             steps[i] += 1;
             min_step[i] = min_step[i].min(span);
+            if !St::FIXED_STEP && !done {
+                if let Some(why) = watch[i].observe(steps[i], t_new, tasks[i].t_end, stepper.crawl_hint(i)) {
+                    active[i] = false;
+                    out[i] = Some(LaneEnd::Diverged { t: t_new, why: Some(why), v_last: v_last[i] });
+                    continue;
+                }
+            }
             let start = St::EVALUATES_START.then(|| rhs.at_start(i));
             let (v0, slope) = rhs.input(i);
             let v_cmd = v0 + slope * step;

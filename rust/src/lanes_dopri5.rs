@@ -7,7 +7,8 @@
 
 use std::sync::atomic::AtomicBool;
 
-use crate::dopri5::{A2, A3, A4, A5, A6, B, C, CONTROL, E};
+use crate::crawl::CrawlWatch;
+use crate::dopri5::{A2, A3, A4, A5, A6, B, C, CONTROL, E, EXPLICIT_CRAWL_HINT};
 use crate::drive::{adaptive_options, LaneEnd, Observer, Task};
 use crate::lanes::{refill_lanes, LaneExp, PlainLanes, Queue};
 use crate::stepper::{AdaptiveOptions, Attempt, Held};
@@ -28,6 +29,8 @@ struct Slot {
     v_last: f64,
     steps: u64,
     min_step: f64,
+    /// the pace of its last steps (`crawl.rs`)
+    watch: CrawlWatch,
 }
 
 /// Run `tasks` (each accepted by [`PlainLanes::accepts`], `N` nodes, `D` = 2 N + 3 components)
@@ -77,6 +80,7 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
                 v_last: task.y0[task.model.layout.dof],
                 steps: 0,
                 min_step: f64::INFINITY,
+                watch: CrawlWatch::new(task.t_start),
             }
         });
         match queue {
@@ -156,6 +160,14 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
                     s.v_last = lane_state[task.model.layout.dof];
                     s.steps += 1;
                     s.min_step = s.min_step.min(span);
+                    if !done {
+                        // as the scalar path (`drive.rs`): a collapsed step stops the run
+                        if let Some(why) = s.watch.observe(s.steps, t_new, task.t_end, EXPLICIT_CRAWL_HINT) {
+                            out[s.task] = Some((LaneEnd::Diverged { t: t_new, why: Some(why), v_last: s.v_last }, lane_state.to_vec()));
+                            slots[i] = None;
+                            continue;
+                        }
+                    }
                     observer.accepted_step(s.task, step);
                     observer.step(s.task, t_new, span, &lane_state, v0[i] + slope[i] * step, None, done);
                     if done {

@@ -4,6 +4,7 @@
 //! The Python bindings (`python` feature) are a thin layer in `bindings`.
 
 pub mod batch;
+pub mod crawl;
 pub mod declare;
 pub mod dopri5;
 pub mod drive;

@@ -56,6 +56,10 @@ const CC: [&[f64]; 6] = [
     ],
 ];
 
+/// What a crawling implicit run is told (`crawl.rs`).
+pub(crate) const IMPLICIT_CRAWL_HINT: &str = "even the implicit method's step collapsed (a discontinuity in the \
+    model, or parameters far outside the physical range): check the parameters, or loosen 'rtol'/'atol'";
+
 /// Stages, Jacobians, factorisations and step sizes of `L` lanes.
 pub struct Rodas4<S: State, const L: usize = 1, const D: usize = 0> {
     opts: [AdaptiveOptions; L],
@@ -101,6 +105,10 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
     /// smaller, so an accepted state never does.
     fn bound_slack(&self) -> f64 {
         1e-6
+    }
+
+    fn crawl_hint(&self, _lane: usize) -> &'static str {
+        IMPLICIT_CRAWL_HINT
     }
 
     /// Nothing is carried between steps (the Jacobian is evaluated afresh every step).

@@ -6,6 +6,7 @@ use std::sync::atomic::AtomicBool;
 
 use crate::stepper::Held;
 use crate::drive::{divergence_message, run_tasks, LaneEnd, Method, Observer, SimError, Task};
+use crate::crawl::CRAWL_PREFIX;
 use crate::model::Model;
 use crate::waveform::PiecewiseLinear;
 
@@ -183,6 +184,7 @@ pub fn simulate_keeping(
                 (None, Some(dt)) => {
                     divergence_message(model, dt, t, &y, v_last, Some((wave, t_start, t_end)))
                 }
+                (Some(why), _) if why.starts_with(CRAWL_PREFIX) => format!("integration stopped at t = {t:.6e} s: {why}"),
                 (why, _) => format!(
                     "integration diverged at t = {t:.6e} s: {}; tighten rtol/atol or use method 'rk4' with a small dt",
                     why.unwrap_or_else(|| "the state is no longer finite".into())
@@ -292,6 +294,34 @@ mod tests {
             assert!((d.final_state[0] - rk4.final_state[0]).abs() < 1e-9, "{structure:?}");
             assert!(d.t.len() < 1_000_000 / 100, "{} steps", d.t.len());
         }
+    }
+
+    /// The near-frictionless device: mu 1e-6, LPS, 1 ms of a 50 V triangle.
+    fn near_frictionless() -> (Model, PiecewiseLinear) {
+        let mut p = Params::paper();
+        p.mu_k = 1e-6;
+        p.mu_s = 1e-6;
+        let m = Model::new(p, Effects::default(), Structure::Lps, true, false).unwrap();
+        (m, PiecewiseLinear::triangle(50.0, 0.5e-3, 0.5e-3, 0.0).unwrap())
+    }
+
+    #[test]
+    fn an_explicit_run_held_at_its_stability_limit_stops_with_a_message_instead_of_crawling() {
+        // it ran for more than a minute without a word; Rodas4 takes 2.5 ms
+        let (m, w) = near_frictionless();
+        let dp = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        let err = simulate(&m, &w, 0.0, 1e-3, &m.rest_state(), &dp, 100).unwrap_err().to_string();
+        assert!(err.starts_with("integration stopped at t = "), "{err}");
+        assert!(err.contains(crate::crawl::CRAWL_PREFIX) && err.contains("stability limit") && err.contains("'rodas4'"),
+                "{err}");
+        // once its pace projects more than 1e8 (the step shrinks as the contact speeds up: after
+        // 0.74 M steps here, a quarter of a second), not after the 2e8 the run would take
+        let so_far: u64 = err.split(" steps so far").next().and_then(|s| s.rsplit(' ').next()).and_then(|s| s.parse().ok())
+            .expect("the message counts the steps");
+        assert!(so_far < 2_000_000, "{err}");
+        let ro = Method::Rodas4 { rtol: 1e-6, atol: 1e-6, first_step: 1e-8 };
+        let r = simulate(&m, &w, 0.0, 1e-3, &m.rest_state(), &ro, 100).expect("Rodas4 runs it");
+        assert!(r.final_state.iter().all(|x| x.is_finite()));
     }
 
     #[test]

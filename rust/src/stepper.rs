@@ -239,6 +239,10 @@ pub trait Stepper<S: State, const L: usize> {
     /// Relative slack on the presliding-force bound before a state counts as diverged: the
     /// method's local error may overshoot the bound by this much.
     fn bound_slack(&self) -> f64;
+    /// What to do instead when `lane`'s run crawls (`crawl::crawling`; adaptive steppers only).
+    fn crawl_hint(&self, _lane: usize) -> &'static str {
+        ""
+    }
     /// Forget anything carried from a previous step of `lane` (first-same-as-last stages): it
     /// starts anew, or the input's slope changed.
     fn restart(&mut self, lane: usize);

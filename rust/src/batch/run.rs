@@ -59,15 +59,23 @@ fn prepare<'a>(cfg: &BatchConfig, index: usize, spec: &'a PointSpec) -> Result<R
     })
 }
 
-/// Drive a lane group with `method`. `Err(t)` marks a point that diverged at time `t` [s] (the
-/// caller may retry it); `None` if cancelled.
+/// Where and why a point's run failed.
+struct Failure {
+    /// [s]
+    t: f64,
+    /// the method's own account (an adaptive step that collapsed: `crawl.rs`), if it gave one
+    why: Option<String>,
+}
+
+/// Drive a lane group with `method`. `Err` marks a point that diverged (the caller may retry
+/// it); `None` if cancelled.
 fn run_group(
     cfg: &BatchConfig,
     method: &Method,
     record_every: usize,
     group: &[&Ready],
     cancel: &AtomicBool,
-) -> Option<Vec<Result<PointOutput, f64>>> {
+) -> Option<Vec<Result<PointOutput, Failure>>> {
     let tasks: Vec<Task> = group
         .iter()
         .map(|r| Task {
@@ -109,8 +117,8 @@ fn run_group(
                         reason: String::new(),
                     })
                 }
-                LaneEnd::Finished { .. } => Err(tasks[i].t_end),
-                LaneEnd::Diverged { t, .. } => Err(t),
+                LaneEnd::Finished { .. } => Err(Failure { t: tasks[i].t_end, why: None }),
+                LaneEnd::Diverged { t, why, .. } => Err(Failure { t, why }),
             })
             .collect(),
     )
@@ -118,8 +126,9 @@ fn run_group(
 
 /// What a diverged point reports after its retries (if any) at RK4 steps dt/2, dt/4, ...
 /// (recording at the same times). `None` if cancelled.
-fn retry(cfg: &BatchConfig, ready: &Ready, first_failure: f64, cancel: &AtomicBool) -> Option<PointOutput> {
+fn retry(cfg: &BatchConfig, ready: &Ready, first: Failure, cancel: &AtomicBool) -> Option<PointOutput> {
     let (mut method, mut record_every) = (cfg.method, cfg.record_every);
+    let first_failure = first.t;
     let mut failed_at = first_failure;
     let first_step = method.first_step();
     let mut dt_tried = first_step;
@@ -154,15 +163,15 @@ fn retry(cfg: &BatchConfig, ready: &Ready, first_failure: f64, cancel: &AtomicBo
                         ..o
                     })
                 }
-                Some(Err(t)) => failed_at = t,
+                Some(Err(f)) => failed_at = f.t,
                 None => break,
             }
         }
     }
-    let how = if cfg.method.is_fixed() {
-        format!("at every step tried (down to dt = {dt_tried:e} s)")
-    } else {
-        "(the adaptive step collapsed or the state left its bounds)".to_string()
+    let how = match first.why {
+        _ if cfg.method.is_fixed() => format!("at every step tried (down to dt = {dt_tried:e} s)"),
+        Some(why) => format!("({why})"),
+        None => "(the adaptive step collapsed or the state left its bounds)".to_string(),
     };
     Some(PointOutput {
         metrics: PointMetrics::diverged(failed_at, dt_tried),
@@ -252,7 +261,7 @@ fn run_chunk(
         for (r, res) in group.iter().zip(results) {
             let res = match res {
                 Ok(x) => Some(x),
-                Err(t) => retry(cfg, r, t, cancel),
+                Err(f) => retry(cfg, r, f, cancel),
             };
             let res = res.and_then(|o| add_sensitivities(cfg, r, o, cancel));
             if res.is_some() {
