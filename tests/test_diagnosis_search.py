@@ -17,7 +17,7 @@ from idm_rs.batch import Structure
 from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec
 from idm_rs.diagnosis.catalogue import CATALOGUE, by_id
 from idm_rs.diagnosis.fitting import FreeParam, Objective, apply, fit, set_param
-from idm_rs.diagnosis.multistart import Start, multistart
+from idm_rs.diagnosis.multistart import Start, leaves_noise, multistart
 from idm_rs.diagnosis.noise import cross_check, estimate_noise, residual_sigma
 from idm_rs.diagnosis.results import SEPARATION, Candidate
 from idm_rs.diagnosis.screening import Screened, near_degenerate, screen
@@ -117,7 +117,6 @@ def test_local_fits_agree_within_the_best_fits_own_residual_variance():
 
 def test_a_fit_leaves_noise_only_when_its_residual_is_white_and_its_chi2_is_the_noises():
     from idm_rs.diagnosis.fitting import FitResult
-    from idm_rs.diagnosis.multistart import leaves_noise
 
     rng = np.random.default_rng(7)
     n = 20_000
@@ -140,8 +139,6 @@ def test_multistart_stops_once_a_fit_leaves_noise(long_rec):
     starts = [Start(f"m2 x {f}", [_m2(f)]) for f in (0.85, 0.6, 1.12, 1.4)]
     full = multistart(obj, SPEC, starts, local_fits=2, horizons=(2, None), max_nfev=(10, 10))
     short = multistart(obj, SPEC, starts, local_fits=2, horizons=(2, None), max_nfev=(10, 10), stop_at_noise=True)
-    from idm_rs.diagnosis.multistart import leaves_noise
-
     # the fits run in ranked order up to the first that leaves noise; the rest are counted
     assert leaves_noise(short.best) and len(short.fits) + short.skipped == len(full.fits)
     assert short.skipped == 1, "the best-ranked start (m2 x 1.12) reaches the noise floor alone"
