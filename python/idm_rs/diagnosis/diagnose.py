@@ -522,6 +522,13 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     clock.lap("candidate fits")
     cal, null_source = _null_refits(pb, nominal, cal, refits, NULL_REFITS)
     clock.lap("null refits")
+    # the leaders fitted to convergence before their residuals are judged: a candidate fit
+    # stops after a fixed budget, and one that stopped short of noise would send the case to
+    # the wider search for nothing (confusion case 24: creep at 1.09 x noise after its budget)
+    _polish_leader(pb, cal, refits)
+    # and the null gets the same chance from where the polished leader's nominal values went
+    cal, null_source = _null_refits(pb, nominal, cal, refits, NULL_REFITS)
+    clock.lap("polish")
     searched_wide = False
     if not any(_explains(pb, r.candidate) for r in refits) and not _leaves_noise(pb, cal):
         # a systematic residual that no candidate fitted so far explains: the wider search
@@ -538,9 +545,8 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
             again = _fit_candidates(pb, cal, order, screened, refit_top)
             refits = _better_of(refits, again)
             cal, null_source = _null_refits(pb, nominal, cal, refits, NULL_REFITS)
+        _polish_leader(pb, cal, refits)
     clock.lap("wider search")
-    _polish_leader(pb, cal, refits)
-    clock.lap("polish")
     ranking = _rank_with_heldout(refits, heldout)
     # the null's held-out prediction, for comparison, only where a candidate has one
     ho_cal = heldout.rms(cal.fit.spec, cal.at) if any(_finite(c.heldout_rms) for c in ranking) else math.nan
@@ -667,8 +673,8 @@ STAGES: tuple[tuple[str, float, float], ...] = (
     ("screening", 6.0, 30.0),
     ("candidate fits", 34.0, 300.0),
     ("null refits", 6.0, 30.0),
-    ("wider search", 4.0, 300.0),
     ("polish", 6.0, 30.0),
+    ("wider search", 4.0, 300.0),
     ("held-out", 4.0, 10.0),
 )
 
