@@ -335,6 +335,8 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--limit", type=int, help="run at most this many new cases, then write the table")
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run only the cases whose id is K modulo N (N processes side by side, one JSONL)")
+    ap.add_argument("--only", type=int, nargs="+", metavar="ID",
+                    help="run only these case ids (e.g. a quiet re-run of the slowest: --only 24 25 39 54)")
     ap.add_argument("--jsonl", type=Path, required=True)
     ap.add_argument("--out", type=Path)
     ap.add_argument("--figure", type=Path)
@@ -350,7 +352,8 @@ def main(argv: Optional[list[str]] = None) -> int:
         return [json.loads(x) for x in a.jsonl.read_text().splitlines()] if a.jsonl.exists() else []
 
     done = {r["id"] for r in finished()}
-    todo = [c for c in plan(a.healthy) if c["id"] not in done and c["id"] % n == k][: a.limit]
+    todo = [c for c in plan(a.healthy) if c["id"] not in done and c["id"] % n == k
+            and (a.only is None or c["id"] in a.only)][: a.limit]
     with tempfile.TemporaryDirectory() as tmp:
         for c in todo:
             row = run_case(c, Path(tmp), a.seed)
