@@ -1,4 +1,5 @@
-"""Sweep throughput: the same 256 sweep points through idm-rs (RK4 and Dormand-Prince 5(4)), a
+"""Sweep throughput: the same 256 sweep points through idm-rs (each method with its lanes' vector
+code as the processor allows and forced to scalar dispatch), a
 numba RK4 ``prange`` sweep, and ``scipy.integrate.solve_ivp`` (LSODA with a numba right-hand side,
 on a sample of points).
 
@@ -238,6 +239,16 @@ def bench_256(a, model: str = "lps") -> dict:
         wall1, ds1, walls1 = best_time(
             lambda: run_idm_rs(g, method=method, dt=dt, tol=tol, threads=1, model=model), a.repeats)
         same = all(ds[v].values.tobytes() == ds1[v].values.tobytes() for v in ds.data_vars)
+        # the same run with the lanes' vector code forced to scalar (SIMD against scalar dispatch)
+        level = idm_rs.engine.simd_level()
+        print(f"{label} ({setting}), {a.threads} threads, scalar dispatch (SIMD: {level}) ...", flush=True)
+        idm_rs.engine.set_simd_level("scalar")
+        try:
+            wall_sc, ds_sc, _ = best_time(
+                lambda: run_idm_rs(g, method=method, dt=dt, tol=tol, threads=a.threads, model=model), a.repeats)
+        finally:
+            idm_rs.engine.set_simd_level(level)
+        x, x_sc = ds["final_position"].values, ds_sc["final_position"].values
         st = ds["status"].values.ravel()
         rows.append(dict(
             method=label, setting=setting, threads=a.threads, wall_s=wall, walls_s=walls, points=n,
@@ -246,6 +257,8 @@ def bench_256(a, model: str = "lps") -> dict:
             parallel_efficiency=wall1 / wall / a.threads, bitwise_same_1_vs_n_threads=same,
             statuses=np.bincount(st, minlength=5).tolist(),
             mean_steps=float(ds["steps"].values.mean()),
+            simd_level=level, scalar_points_per_s=n / wall_sc, simd_vs_scalar=wall_sc / wall,
+            simd_scalar_max_diff_m=float(np.max(np.abs(x - x_sc))), simd_scalar_bitwise=x.tobytes() == x_sc.tobytes(),
             points_over_1nm=int(np.sum(np.abs(ds["final_position"].values.ravel() - ref) > TARGET_ERR)),
         ))
     if model != "lps":
@@ -320,6 +333,9 @@ def print_256(res: dict, threads: int) -> None:
             print(f"  {r['method']} ({r['setting']}): 1 thread {r['wall_1_thread_s']:.2f} s; mean steps/point "
                   f"{r['mean_steps']:.0f}; statuses {r['statuses']}; 1 vs {threads} threads bitwise equal: "
                   f"{r['bitwise_same_1_vs_n_threads']}")
+            print(f"    {r['simd_level']} lanes {r['points_per_s']:.1f} points/s against scalar dispatch "
+                  f"{r['scalar_points_per_s']:.1f} ({r['simd_vs_scalar']:.2f}x); final positions "
+                  + ("bitwise equal" if r["simd_scalar_bitwise"] else f"differ by at most {r['simd_scalar_max_diff_m']:.1e} m"))
     d = res["divergence"]
     if d is None:
         return
