@@ -65,8 +65,45 @@ def test_kernel_sweep_equals_the_cpu_sweep_including_a_retried_point():
     assert b.attrs["backend"] == "kernel-cpu"
 
 
+@needs_cc
+@pytest.mark.parametrize("method", ["dopri5", "auto"])
+def test_adaptive_kernel_sweep_equals_the_cpu_sweep(method):
+    g = {"mass_ratio": [0.25, 2.0], "voltage": [40.0, 120.0]}
+    kw = dict(t_end=10e-3, model="lps", progress=False, method=method)
+    a = idm_rs.sweep(P, W, g, **kw)
+    b = idm_rs.sweep(P, W, g, backend="kernel-cpu", **kw)
+    assert (b.status.values == 1).all() and (b.reason.values == "").all()
+    assert a.attrs["rtol"] == b.attrs["rtol"] and a.attrs["method"] == b.attrs["method"]
+    # Dormand-Prince on both; "auto" on the CPU may hand a stiff stretch to Rodas4 (1 nm budget)
+    tol = 1e-10 if method == "dopri5" else 1e-9
+    np.testing.assert_allclose(b.final_position.values, a.final_position.values, rtol=0, atol=tol)
+    assert np.isfinite(b.dt_used.values).all() and (b.dt_used.values > 0).all()
+    if method == "dopri5":
+        np.testing.assert_allclose(b.steps.values.astype(float), a.steps.values.astype(float), rtol=0.05)
+
+
+@needs_cc
+def test_adaptive_kernel_stops_a_crawling_point_and_the_cpu_finishes_it_with_auto():
+    """A near-frictionless contact holds Dormand-Prince at its stability limit: the kernel stops
+    it at its first crawl check (as the engine does) instead of hanging its thread; rerun on the
+    CPU with "auto", it changes to Rodas4 and finishes, equal to rodas4 run directly."""
+    slick = P.replace(mu_k=1e-6, mu_s=1e-6)
+    w = idm_rs.Triangle(50.0, 0.5e-3, 0.5e-3)
+    g = {"voltage": [50.0, 60.0]}
+    kw = dict(t_end=1e-3, model="lps", progress=False, backend="kernel-cpu")
+    flagged = idm_rs.sweep(slick, w, g, method="auto", retries=0, **kw)
+    assert (flagged.status.values == 3).all()
+    assert all("step collapsed on the kernel" in r for r in flagged.reason.values)
+    assert (flagged.diverged_at.values > 0).all() and (flagged.diverged_at.values < 1e-3).all()
+    again = idm_rs.sweep(slick, w, g, method="auto", **kw)
+    assert (again.status.values == 1).all(), again.reason.values
+    assert all("finished on the CPU engine" in r for r in again.reason.values)
+    direct = idm_rs.sweep(slick, w, g, method="auto", t_end=1e-3, model="lps", progress=False)
+    np.testing.assert_array_equal(again.final_position.values, direct.final_position.values)
+
+
 @pytest.mark.parametrize("kw, needle", [
-    (dict(method="dopri5"), "RK4 only"),
+    (dict(method="rodas4"), "rodas4 runs on backend='cpu'"),
     (dict(effects=idm_rs.Effects(k_ground=1e3)), "k_ground"),
 ])
 def test_kernel_backends_refuse_what_they_do_not_run(kw, needle):

@@ -268,11 +268,14 @@ def sweep(
     [s], ``dt_used`` [s], ``steps``. Sweep ``frequency`` x ``voltage`` for the velocity map,
     ``load_force`` for the load curve.
 
-    ``backend="cuda"`` runs RK4 points one per GPU thread (CuPy; ``pip install 'idm-rs[cuda]'``)
-    with the paper's model (no effects; LPS or DPS up to 5 elements); points that diverge are
-    retried on the CPU at dt/2, dt/4. ``"kernel-cpu"`` runs that same kernel source compiled for
-    the CPU (slow; it is how the tests verify the GPU physics without a GPU). The steady-state
-    train metrics are NaN on the kernel backends.
+    ``backend="cuda"`` runs points one per GPU thread (CuPy; ``pip install 'idm-rs[cuda]'``)
+    with the paper's model (no effects; LPS or DPS up to 5 elements): ``method="rk4"`` (points
+    that diverge are retried on the CPU at dt/2, dt/4), ``"dopri5"`` or ``"auto"`` (Dormand-Prince
+    at the method's tolerances, with the engine's step collapse check; a point that diverges or
+    whose step collapses there is rerun on the CPU with the same method, where ``"auto"`` can
+    change it to Rodas4; ``retries=0`` flags it instead). ``"kernel-cpu"`` runs that same kernel
+    source compiled for the CPU (slow; it is how the tests verify the GPU physics without a
+    GPU). The steady-state train metrics are NaN on the kernel backends.
 
     Ctrl-C stops within about a second and returns the finished points (others NaN,
     ``attrs["complete"] == 0``). ``client`` (a ``dask.distributed.Client``) runs blocks of at
@@ -299,9 +302,9 @@ def sweep(
     if backend not in ("cpu", "cuda", "kernel-cpu"):
         raise ValueError(f"parameter 'backend' must be 'cpu', 'cuda' or 'kernel-cpu', got {backend!r}")
     if backend != "cpu":
-        if method != "rk4":
-            raise ValueError(f"backend={backend!r} runs fixed-step RK4 only (the adaptive kernel is not built); "
-                             "use method='rk4' with a dt, or backend='cpu'")
+        if method == "rodas4":
+            raise ValueError(f"backend={backend!r} runs RK4 and Dormand-Prince ('rk4', 'dopri5', 'auto'); "
+                             "rodas4 runs on backend='cpu'")
         if effects is not None and effects.active():
             raise ValueError(f"backend={backend!r} runs the paper's model only; effects on: "
                              f"{', '.join(effects.active())} (use backend='cpu')")
@@ -458,12 +461,16 @@ def _run_local(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_si
 
 def _run_kernel(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_size: int, bar: Any,
                 backend: str) -> bool:
-    """The GPU kernel (or its CPU build) block by block; diverged points are retried on the CPU
-    engine at dt/2, dt/4 (``plan.retries``). Ctrl-C between blocks keeps the finished ones."""
+    """The GPU kernel (or its CPU build) block by block. RK4: diverged points are retried on the
+    CPU engine at dt/2, dt/4 (``plan.retries``). Adaptive: the kernel runs Dormand-Prince at the
+    plan's tolerances; a point that diverged or whose step collapsed there is rerun on the CPU
+    engine with the plan's own method (``"auto"`` changes a stiff point to Rodas4 there) when
+    ``plan.retries`` > 0. Ctrl-C between blocks keeps the finished ones."""
     from .gpu import prepare, run_cpu, run_cuda
 
     run = run_cuda if backend == "cuda" else run_cpu
-    config = plan.structure.config(method="rk4", dt=plan.dt)
+    adaptive = plan.method != "rk4"
+    config = plan.structure.config(method="rk4", dt=plan.dt)  # the constants do not depend on the method
     cycles = getattr(plan.waveform, "cycles", None)
     n = plan.size
     try:
@@ -472,24 +479,38 @@ def _run_kernel(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_s
             tables = plan.tables(start, stop)
             wnames = engine.wave_fields(tables.wave_kind)
             bps = [plan.waveform.with_fields(dict(zip(wnames, row))).breakpoints() for row in tables.wave_fields]
-            res = run(prepare(config, tables.params, bps, plan.t_end, plan.dt))
+            batch = prepare(config, tables.params, bps, plan.t_end, plan.dt,
+                            **(dict(method="dopri5", rtol=plan.rtol, atol=plan.atol, first_step=plan.first_step)
+                               if adaptive else {}))
+            res = run(batch)
             sl = slice(start, stop)
             for k in ("final_position", "peak_velocity", "peak_friction", "slip_fraction", "status", "diverged_at"):
                 out[k][sl] = res[k]
             ok = res["status"] == 1
-            out["dt_used"][sl] = np.where(ok, plan.dt, np.nan)
-            out["steps"][sl] = np.where(ok, int(round(plan.t_end / plan.dt)), 0)
-            out["reason"][sl] = np.where(ok, "", "diverged on the GPU kernel")
+            if adaptive:
+                out["dt_used"][sl] = np.where(ok, res["dt_used"], np.nan)
+                out["steps"][sl] = np.where(ok, res["steps"], 0)
+                out["reason"][sl] = np.where(ok, "", np.where(
+                    res["crawled"], "the step collapsed on the kernel (Dormand-Prince held at its stability limit; "
+                    "method='rodas4' or 'auto' on backend='cpu' runs it)", "diverged on the kernel"))
+            else:
+                out["dt_used"][sl] = np.where(ok, plan.dt, np.nan)
+                out["steps"][sl] = np.where(ok, int(round(plan.t_end / plan.dt)), 0)
+                out["reason"][sl] = np.where(ok, "", "diverged on the GPU kernel")
             if cycles is not None and "cycles" not in plan.names:
                 out["step_per_cycle"][sl] = res["final_position"] / cycles
             bad = np.flatnonzero(~ok) + start
             if bad.size and plan.retries > 0:
-                handle = start_batch(plan.tables_at(bad), plan.structure, t_end=plan.t_end, method="rk4", dt=plan.dt,
+                handle = start_batch(plan.tables_at(bad), plan.structure, t_end=plan.t_end, method=plan.method,
+                                     dt=plan.dt, rtol=plan.rtol, atol=plan.atol, first_step=plan.first_step,
                                      retries=plan.retries, threads=threads, skip_cycles=plan.skip_cycles)
                 handle.wait(1e9)
                 again = handle.result()
                 for k in out:
                     out[k][bad] = again["reasons"] if k == "reason" else again[k]
+                if adaptive:  # rerun on the CPU: say so where it finished
+                    fine = again["status"] == 1
+                    out["reason"][bad[fine]] = "failed on the kernel; finished on the CPU engine"
             if bar is not None:
                 bar.update(stop - start)
     except KeyboardInterrupt:

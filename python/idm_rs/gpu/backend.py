@@ -21,6 +21,8 @@ from .. import engine
 SOURCE = Path(__file__).with_name("idm_kernel.cu")
 #: outputs per point, in the kernel's order
 OUTPUTS = ("final_position", "peak_velocity", "peak_friction", "slip_fraction", "status", "diverged_at")
+#: the adaptive kernel's outputs after those: accepted steps, smallest step, crawled (1/0)
+ADAPTIVE_EXTRA = 3
 #: CUDA threads per block
 BLOCK = 128
 
@@ -94,9 +96,10 @@ def _outputs(raw: NDArray[np.float64]) -> dict[str, NDArray[Any]]:
     out = {name: raw[:, i].copy() for i, name in enumerate(OUTPUTS)}
     out["status"] = out["status"].astype(np.uint8)
     out["diverged_at"] = np.where(out["status"] == 3, out["diverged_at"], np.nan)
-    if raw.shape[1] > len(OUTPUTS):  # the adaptive kernel: accepted steps, smallest step
+    if raw.shape[1] > len(OUTPUTS):  # the adaptive kernel: accepted steps, smallest step, crawled
         out["steps"] = raw[:, 6].astype(np.uint64)
         out["dt_used"] = raw[:, 7].copy()
+        out["crawled"] = raw[:, 8] == 1.0
     return out
 
 
@@ -138,7 +141,7 @@ def run_cpu(batch: KernelBatch) -> dict[str, NDArray[Any]]:
     common = (ptr(batch.consts), ptr(batch.bt), ptr(batch.bv), ptr(batch.nb, ctypes.POINTER(ctypes.c_int)),
               int(batch.bt.shape[1]))
     if batch.method == "dopri5":
-        out = np.zeros((batch.points, len(OUTPUTS) + 2))
+        out = np.zeros((batch.points, len(OUTPUTS) + ADAPTIVE_EXTRA))
         dll.idm_dopri5_sweep(*common, batch.t_end, batch.rtol, batch.atol, batch.first_step, batch.points, ptr(out))
     else:
         out = np.zeros((batch.points, len(OUTPUTS)))
@@ -170,7 +173,7 @@ def run_cuda(batch: KernelBatch) -> dict[str, NDArray[Any]]:
     grid = ((batch.points + BLOCK - 1) // BLOCK,)
     common = (d["consts"], d["bt"], d["bv"], d["nb"], np.int32(batch.bt.shape[1]))
     if batch.method == "dopri5":
-        out = cp.zeros((batch.points, len(OUTPUTS) + 2), dtype=cp.float64)
+        out = cp.zeros((batch.points, len(OUTPUTS) + ADAPTIVE_EXTRA), dtype=cp.float64)
         _MODULE.get_function("idm_dopri5_sweep")(grid, (BLOCK,), common + (
             np.float64(batch.t_end), np.float64(batch.rtol), np.float64(batch.atol), np.float64(batch.first_step),
             np.int32(batch.points), out))

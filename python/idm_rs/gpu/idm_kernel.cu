@@ -140,7 +140,10 @@ IDM_HD void idm_rk4_point(const double *c, const double *bt, const double *bv, i
 /* Dormand-Prince 5(4) with first-same-as-last stages (dopri5.rs), landing on every breakpoint
  * and on t_end (drive.rs), error norm in the model's natural units (model.rs: state_scales:
  * positions and h by the free stroke d33 V_max, velocities by stroke x the LPS frequency, Fh by
- * Fs; g left out). out as idm_rk4_point; out[6] = accepted steps, out[7] = smallest step. */
+ * Fs; g left out). out as idm_rk4_point; out[6] = accepted steps, out[7] = smallest step,
+ * out[8] = 1 where the run stopped because its step collapsed (crawl.rs: every
+ * IDM_CRAWL_CHECK_STEPS accepted steps, the steps it would need at the pace of the last ones
+ * are projected; beyond IDM_MAX_ADAPTIVE_STEPS it stops, status 3 at that time), else 0. */
 IDM_HD void idm_dopri5_point(const double *c, const double *bt, const double *bv, int nb, double t_end,
                              double rtol, double atol, double first_step, double *out) {
     const double C2 = 1.0 / 5.0, C3 = 3.0 / 10.0, C4 = 4.0 / 5.0, C5 = 8.0 / 9.0;
@@ -169,9 +172,11 @@ IDM_HD void idm_dopri5_point(const double *c, const double *bt, const double *bv
     double ydummy[IDM_DIM];
     double ff_prev = idm_rhs(c, 0.0, 0.0, y, ydummy), v_prev = 0.0;
     long accepted = 0;
+    double t_check = 0.0; /* the time of the last crawl check */
     int seg = 0, fresh = 1;
     out[4] = 1.0;
     out[5] = 0.0;
+    out[8] = 0.0;
     while (t < t_end) {
         /* the segment holding t, its end (the next breakpoint or t_end), the input there */
         int s0 = seg;
@@ -229,6 +234,14 @@ IDM_HD void idm_dopri5_point(const double *c, const double *bt, const double *bv
             }
             v_prev = y[n];
             ff_prev = idm_rhs(c, v0, slope, y, ydummy);
+            if (accepted % IDM_CRAWL_CHECK_STEPS == 0) {
+                double pace = (t - t_check) / (double)IDM_CRAWL_CHECK_STEPS;
+                t_check = t;
+                /* true too for a pace of 0 (no progress): the comparison fails */
+                if (!((double)accepted + (t_end - t) / pace <= IDM_MAX_ADAPTIVE_STEPS)) {
+                    out[4] = 3.0; out[5] = t; out[8] = 1.0; break;
+                }
+            }
         } else {
             double shrink = isfinite(err) ? fmin(fmax(0.9 * pow(err, -0.2), 0.1), 0.9) : 0.1;
             h = st * shrink;
@@ -245,18 +258,18 @@ IDM_HD void idm_dopri5_point(const double *c, const double *bt, const double *bv
     out[7] = min_step;
 }
 
-/* The adaptive sweep: as idm_rk4_sweep, with t_end, tolerances and the first step; 8 outputs. */
+/* The adaptive sweep: as idm_rk4_sweep, with t_end, tolerances and the first step; 9 outputs. */
 IDM_KERNEL void idm_dopri5_sweep(const double *consts, const double *bt, const double *bv, const int *nb, int max_nb,
                                  double t_end, double rtol, double atol, double first_step, int points, double *out) {
 #if defined(__CUDACC__) || defined(__CUDACC_RTC__)
     int p = blockIdx.x * blockDim.x + threadIdx.x;
     if (p >= points) return;
     idm_dopri5_point(consts + (long)p * IDM_N_CONSTANTS, bt + (long)p * max_nb, bv + (long)p * max_nb, nb[p], t_end,
-                     rtol, atol, first_step, out + (long)p * 8);
+                     rtol, atol, first_step, out + (long)p * 9);
 #else
     for (int p = 0; p < points; p++)
         idm_dopri5_point(consts + (long)p * IDM_N_CONSTANTS, bt + (long)p * max_nb, bv + (long)p * max_nb, nb[p],
-                         t_end, rtol, atol, first_step, out + (long)p * 8);
+                         t_end, rtol, atol, first_step, out + (long)p * 9);
 #endif
 }
 
