@@ -23,7 +23,7 @@ from .methods import METHODS
 from .effects import Effects
 from .params import Params
 from .simulation import DivergenceError, SimulationResult, simulate
-from .sweep import METRICS
+from .sweep import METRICS, STEADY_METRICS
 from .waveforms import Sampled, Sawtooth, Triangle, Waveform
 
 if TYPE_CHECKING:
@@ -31,7 +31,6 @@ if TYPE_CHECKING:
 
 EXIT_ERROR = 2
 CSV_COLUMNS = ("t", "voltage", "x1", "x2", "friction", "fh")
-CSV_UNITS = ("s", "V", "m", "m", "N", "N")
 
 
 class CliError(ValueError):
@@ -95,14 +94,15 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--model", choices=("lps", "dps"), default="dps", help="lumped or FEM model (default: dps)")
     sp.add_argument("--n-elements", type=_positive_int, default=4, metavar="N",
                     help="FEM elements of the DPS (default: 4)")
-    sp.add_argument("--dt", type=_positive_float, default=1e-8, metavar="DT", help="RK4 step [s] (default: 1e-8)")
+    _add_method_arguments(sp)
     sp.add_argument("--t-end", type=_positive_float, default=None, metavar="T",
                     help="simulated time [s] (default: the end of the waveform)")
     sp.add_argument("--save-every", type=_positive_int, default=100, metavar="K",
                     help="save every K-th step (default: 100)")
     _add_case_arguments(sp)
     sp.add_argument("--out", default=None, metavar="FILE",
-                    help="save the trajectory: FILE.csv (columns " + ", ".join(CSV_COLUMNS) + "; SI units) "
+                    help="save the trajectory: FILE.csv (columns " + ", ".join(CSV_COLUMNS) + ", and reading "
+                         "where a sensor effect makes it differ from x1; SI units) "
                          "or FILE.nc (netCDF, every variable)")
     sp.add_argument("--plot", default=None, metavar="FILE.png", help="plot voltage, x1, x2 and friction")
 
@@ -143,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     rf = sub.add_parser(
         "rig-fit",
-        help="identify a friction rig from a measured data file (EMPS so far)",
+        help="identify a friction rig from a measured data file (EMPS, spring-slider, frame)",
         description=(
             "Identify the friction and rig parameters from one file of the measured data sets (see "
             "docs/REALDATA.md): print them with their 1-sigma uncertainties, what the data cannot identify, "
@@ -182,18 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--model", choices=("lps", "dps"), default="dps", help="lumped or FEM model (default: dps)")
     sw.add_argument("--n-elements", type=_positive_int, default=4, metavar="N",
                     help="FEM elements of the DPS (default: 4)")
-    sw.add_argument("--method", choices=METHODS, default="rk4",
-                    help="fixed-step RK4 (the reference), adaptive Dormand-Prince 5(4), adaptive Rosenbrock "
-                         "Rodas4 (implicit; fastest where friction is stiff), or auto (the adaptive setting "
-                         "measured to stay within 1 nm of RK4) (default: rk4)")
-    sw.add_argument("--dt", type=_positive_float, default=None, metavar="DT",
-                    help="RK4 step [s] (default: 1e-8); adaptive methods need none (given, it is their first step)")
-    sw.add_argument("--first-step", type=_positive_float, default=None, metavar="H",
-                    help="adaptive methods' first trial step [s] (default: 1e-8)")
-    sw.add_argument("--rtol", type=_positive_float, default=1e-7,
-                    help="adaptive relative tolerance (default: 1e-7; ignored by auto)")
-    sw.add_argument("--atol", type=_positive_float, default=1e-7,
-                    help="adaptive absolute tolerance, in units of each state's scale (default: 1e-7; ignored by auto)")
+    _add_method_arguments(sw)
     sw.add_argument("--retries", type=int, default=2, metavar="K",
                     help="rk4: retry a diverging point at dt/2, ..., dt/2^K before flagging it (default: 2)")
     sw.add_argument("--t-end", type=_positive_float, default=None, metavar="T",
@@ -234,6 +223,22 @@ def _add_diagnose_parser(sub: "argparse._SubParsersAction") -> None:
     dp.add_argument("--no-progress", action="store_true", help="no progress bar")
     dp.add_argument("--threads", type=_positive_int, default=None, metavar="N",
                     help="threads of the batch simulations (default: all cores)")
+
+
+def _add_method_arguments(sp: argparse.ArgumentParser) -> None:
+    """The integration method and its step or tolerances (simulate and sweep)."""
+    sp.add_argument("--method", choices=METHODS, default="rk4",
+                    help="fixed-step RK4 (the reference), adaptive Dormand-Prince 5(4), adaptive Rosenbrock "
+                         "Rodas4 (implicit; fastest where friction is stiff), or auto (the adaptive setting "
+                         "measured to stay within 1 nm of RK4) (default: rk4)")
+    sp.add_argument("--dt", type=_positive_float, default=None, metavar="DT",
+                    help="RK4 step [s] (default: 1e-8); adaptive methods need none (given, it is their first step)")
+    sp.add_argument("--first-step", type=_positive_float, default=None, metavar="H",
+                    help="adaptive methods' first trial step [s] (default: 1e-8)")
+    sp.add_argument("--rtol", type=_positive_float, default=1e-7,
+                    help="adaptive relative tolerance (default: 1e-7; ignored by auto)")
+    sp.add_argument("--atol", type=_positive_float, default=1e-7,
+                    help="adaptive absolute tolerance, in units of each state's scale (default: 1e-7; ignored by auto)")
 
 
 def _add_case_arguments(sp: argparse.ArgumentParser) -> None:
@@ -323,6 +328,15 @@ def sampled_from_csv(path: Path) -> Sampled:
     return Sampled(data[:, 0], data[:, 1])
 
 
+def _warn_past_samples(waveform: Waveform, t_end: float) -> None:
+    """A sampled input holds its last value after its last sample: say so when the run goes on."""
+    if isinstance(waveform, Sampled) and t_end > waveform.t[-1] * (1 + 1e-12):
+        import warnings
+
+        warnings.warn(f"--t-end {t_end:g} s is past the last sample of --voltage-csv (t = {waveform.t[-1]:g} s): "
+                      f"the input holds {waveform.voltage[-1]:g} V from there", UserWarning, stacklevel=2)
+
+
 def effects_from_overrides(items: Sequence[str]) -> Effects:
     """``["theta_rad=0.01"]`` → ``Effects(theta_rad=0.01)``; unknown names are refused."""
     values = {}
@@ -348,11 +362,14 @@ def _snap(t: float, dt: float) -> float:
 
 
 def write_csv(result: SimulationResult, path: Path) -> None:
-    """Columns t, voltage, x1, x2, friction, fh (SI units), full double precision."""
-    data = np.column_stack(
-        [result.t, result.voltage, result.main_body, result.weight, result.friction, result.fh]
-    )
-    np.savetxt(path, data, delimiter=",", header=",".join(CSV_COLUMNS), comments="", fmt="%.17g")
+    """Columns t, voltage, x1, x2, friction, fh (SI units), full double precision, and
+    ``reading`` (what the sensor reads [m]) where a sensor effect makes it differ from x1."""
+    cols = [result.t, result.voltage, result.main_body, result.weight, result.friction, result.fh]
+    names = list(CSV_COLUMNS)
+    if not np.array_equal(result.reading, result.main_body):
+        cols.append(result.reading)
+        names.append("reading")
+    np.savetxt(path, np.column_stack(cols), delimiter=",", header=",".join(names), comments="", fmt="%.17g")
 
 
 def write_netcdf(result: SimulationResult, path: Path) -> None:
@@ -372,6 +389,14 @@ def save_trajectory(result: SimulationResult, path: Path) -> None:
         raise CliError(f"--out: unknown file type {path.suffix!r} (use .csv or .nc)")
     path.parent.mkdir(parents=True, exist_ok=True)
     (write_csv if suffix == ".csv" else write_netcdf)(result, path)
+
+
+def result_title(result: SimulationResult) -> str:
+    """The trajectory plot's title: the model, the effects that were on, x1(t_end)."""
+    label = "LPS" if result.model == "lps" else f"DPS (n = {result.n_elements})"
+    on = result.effects.active()
+    effects = ("; " + ", ".join(f"{k} = {v:g}" for k, v in on.items())) if on else ""
+    return f"{label}{effects}: x1(t_end) = {result.final_position * 1e6:.4f} µm"
 
 
 def plot_result(result: SimulationResult, path: Path) -> None:
@@ -396,8 +421,7 @@ def plot_result(result: SimulationResult, path: Path) -> None:
     axv.set_ylabel("voltage V [V]", color="0.4")
     lines = ax.get_lines() + axv.get_lines()
     ax.legend(lines, [ln.get_label() for ln in lines], fontsize=8.5, loc="best")
-    label = "LPS" if result.model == "lps" else f"DPS (n = {result.n_elements})"
-    ax.set_title(f"{label}: x1(t_end) = {result.final_position * 1e6:.4f} µm")
+    ax.set_title(result_title(result), fontsize=10)
     if zoom:
         assert isinstance(w, Sawtooth)
         last = min(w.cycles, int((result.t[-1] - w.delay) / w.period + 1e-9)) - 1
@@ -600,14 +624,25 @@ def plot_sweep(ds: "xarray.Dataset", metric: str, path: Path) -> None:
         handles.append(Patch(facecolor="0.75" if len(dims) == 2 else "0.85", label=f"not run ({int(not_run.sum())})"))
     if handles:
         ax.legend(handles=handles, loc="best", fontsize=8.5)
-    a = ds.attrs
-    model = "LPS" if a.get("model") == "lps" else f"DPS (n = {a.get('n_elements')})"
-    step = f"dt = {a.get('dt_s'):g} s" if a.get("method") == "rk4" else f"rtol = {a.get('rtol'):g}"
-    ax.set_title(f"{long_name}\n{model}, {a.get('method')} ({step}), t_end = {a.get('t_end_s'):g} s, "
-                 f"{_waveform_title(str(a.get('waveform')), dims)}", fontsize=9.5)
+    ax.set_title(sweep_title(ds, metric), fontsize=9.5)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=130)
     plt.close(fig)
+
+
+def sweep_title(ds: "xarray.Dataset", metric: str) -> str:
+    """The sweep plot's title: the metric, then the model, method, span and waveform, wrapped to
+    the figure's width (at 9.5 pt about 95 characters fit in 8 inches)."""
+    import textwrap
+
+    a = ds.attrs
+    model = "LPS" if a.get("model") == "lps" else f"DPS (n = {a.get('n_elements')})"
+    step = f"dt = {a.get('dt_s'):g} s" if a.get("method") == "rk4" else f"rtol = {a.get('rtol'):g}"
+    on = [k[len("effect_"):] + f" = {v:g}" for k, v in a.items() if k.startswith("effect_")]
+    details = (f"{model}, {a.get('method')} ({step}), t_end = {a.get('t_end_s'):g} s, "
+               f"{_waveform_title(str(a.get('waveform')), list(ds[metric].dims))}"
+               + (f"; effects: {', '.join(on)}" if on else ""))
+    return ds[metric].attrs.get("long_name", metric) + "\n" + textwrap.fill(details, 95)
 
 
 def _waveform_title(text: str, swept: Sequence[str]) -> str:
@@ -656,25 +691,40 @@ def sweep_summary(ds: "xarray.Dataset", metric: str) -> str:
 def cmd_simulate(a: argparse.Namespace) -> int:
     params = params_from_overrides(a.param)
     waveform = waveform_from_args(a)
-    t_end = _snap(a.t_end if a.t_end is not None else waveform.duration, a.dt)
+    adaptive = a.method != "rk4"
+    if a.first_step is not None and not adaptive:
+        raise CliError("--first-step is for the adaptive methods; RK4 takes --dt")
+    dt = a.dt if a.dt is not None else 1e-8
+    t_end = a.t_end if a.t_end is not None else waveform.duration
+    _warn_past_samples(waveform, t_end)
+    if not adaptive:
+        t_end = _snap(t_end, dt)
     out = Path(a.out) if a.out else None
     if out is not None and out.suffix.lower() not in (".csv", ".nc"):
         raise CliError(f"--out: unknown file type {out.suffix!r} (use .csv or .nc)")
     t0 = time.perf_counter()
     result = simulate(
-        params, waveform, t_end=t_end, dt=a.dt, model=a.model, n_elements=a.n_elements,
+        params, waveform, t_end=t_end, dt=None if adaptive else dt, model=a.model, n_elements=a.n_elements,
         save_every=a.save_every, piezo_hysteresis=not a.no_hysteresis, effects=effects_from_overrides(a.effect),
+        method=a.method, rtol=a.rtol, atol=a.atol,
+        first_step=a.first_step if a.first_step is not None else a.dt if adaptive else None,
     )
     elapsed = time.perf_counter() - t0
     label = "LPS" if a.model == "lps" else f"DPS (n = {a.n_elements})"
     t_last = float(result.t[-1])
-    steps = round(t_last / a.dt)
-    print(f"{label}, {waveform!r}, t_end = {t_end:g} s, dt = {a.dt:g} s")
+    how = (f"dt = {dt:g} s" if not adaptive else
+           f"{a.method}" + (f" ({result.method})" if result.method != a.method else "")
+           + f", rtol = {result.rtol:g}, atol = {result.atol:g}")
+    print(f"{label}, {waveform!r}, t_end = {t_end:g} s, {how}")
     if not result.complete:
         print(f"interrupted at t = {t_last:g} s: the trajectory up to there is kept")
     print(f"{'final' if result.complete else 'last'} position x1({t_last * 1e3:g} ms) = "
           f"{result.final_position * 1e6:.6f} µm")
-    print(f"run time {elapsed:.3f} s ({steps} steps, {steps / max(elapsed, 1e-9) / 1e6:.1f} M steps/s)")
+    if adaptive:
+        print(f"run time {elapsed:.3f} s ({result.t.size} saved times, every {a.save_every} accepted steps)")
+    else:
+        steps = round(t_last / dt)
+        print(f"run time {elapsed:.3f} s ({steps} steps, {steps / max(elapsed, 1e-9) / 1e6:.1f} M steps/s)")
     if out is not None:
         save_trajectory(result, out)
         print(f"wrote {out}")
@@ -700,10 +750,14 @@ def cmd_sweep(a: argparse.Namespace) -> int:
         raise CliError(f"--retries must be 0 or more, got {a.retries}")
     params = params_from_overrides(a.param)
     waveform = waveform_from_args(a)
+    if a.metric in (*STEADY_METRICS, "step_per_cycle") and not isinstance(waveform, Sawtooth):
+        raise CliError(f"--metric {a.metric} is defined for sawtooth trains only (--waveform sawtooth); "
+                       f"this sweep drives a {type(waveform).__name__.lower()}")
     if a.first_step is not None and a.method == "rk4":
         raise CliError("--first-step is for the adaptive methods; RK4 takes --dt")
     dt = a.dt if a.dt is not None else 1e-8
     t_end = a.t_end if a.t_end is not None else waveform.duration
+    _warn_past_samples(waveform, t_end)
     if a.method == "rk4":
         t_end = _snap(t_end, dt)
     client = None
@@ -869,13 +923,62 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(str(msg).split())
 
 
+def _plain_warning(message: "Warning | str", category: type, filename: str, lineno: int, file: object = None,
+                   line: Optional[str] = None) -> None:
+    """Print a warning as one ``warning: ...`` line (not Python's file path and source line)."""
+    print(f"warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+
+def _value_options(parser: argparse.ArgumentParser) -> set[str]:
+    """Every option string (of the parser and its subcommands) that takes exactly one value."""
+    found: set[str] = set()
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                found |= _value_options(sub)
+        elif action.option_strings and action.nargs is None and action.const is None:
+            found.update(action.option_strings)
+    return found
+
+
+def _negatives_as_values(parser: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
+    """``--dt -1e-8`` as ``--dt=-1e-8``: argparse takes a value such as -1e-8 (unlike -1 or
+    -0.5) for an option and says "expected one argument"; joined, the option's own check names
+    it ("must be a positive number")."""
+    options = _value_options(parser)
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        tok = argv[i]
+        if tok in options and i + 1 < len(argv) and argv[i + 1].startswith("-"):
+            try:
+                float(argv[i + 1])
+            except ValueError:
+                pass
+            else:
+                out.append(f"{tok}={argv[i + 1]}")
+                i += 2
+                continue
+        out.append(tok)
+        i += 1
+    return out
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Entry point of ``idm-rs`` and ``python -m idm_rs``; returns the exit status."""
+    import warnings
+
     parser = build_parser()
-    a = parser.parse_args(argv)
+    a = parser.parse_args(_negatives_as_values(parser, list(sys.argv[1:] if argv is None else argv)))
     if a.command is None:
         parser.print_help()
         return EXIT_ERROR
+    with warnings.catch_warnings():
+        warnings.showwarning = _plain_warning
+        return _run(a)
+
+
+def _run(a: argparse.Namespace) -> int:
     try:
         command = {"reproduce": cmd_reproduce, "simulate": cmd_simulate, "sweep": cmd_sweep,
                    "characterize": cmd_characterize, "rig-fit": cmd_rig_fit, "diagnose": cmd_diagnose}[a.command]

@@ -64,10 +64,11 @@ class RigData:
 
 def _mat(path: Path) -> dict[str, Any]:
     from scipy.io import loadmat
+    from scipy.io.matlab import MatReadError
 
     try:
         return {k: v for k, v in loadmat(str(path)).items() if not k.startswith("__")}
-    except (OSError, ValueError, NotImplementedError) as exc:
+    except (OSError, ValueError, NotImplementedError, MatReadError) as exc:
         raise RealDataError(f"{path}: cannot read as a MATLAB file ({exc})") from None
 
 

@@ -113,6 +113,18 @@ class SimulationResult:
     #: d final_state / d name, shape (state component, name)
     final_state_sensitivities: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
 
+    def __repr__(self) -> str:
+        """A one-line summary (the arrays are attributes: ``result.t``, ``result.nodes``, ...)."""
+        model = "LPS" if self.model == "lps" else f"DPS (n = {self.n_elements})"
+        how = (f"rk4, dt = {self.dt:g} s" if self.method == "rk4"
+               else f"{self.method}, rtol = {self.rtol:g}, atol = {self.atol:g}")
+        span = f"t = {self.t[0]:g}..{self.t[-1]:g} s" if self.t.size else "no saved times"
+        on = self.effects.active()
+        effects = f", effects {on}" if on else ""
+        return (f"SimulationResult({model}, {self.waveform!r}, {how}, {span}, {self.t.size} saved times, "
+                f"x1(end) = {self.final_position * 1e6:.6g} µm{effects}"
+                f"{'' if self.complete else ', INCOMPLETE (interrupted)'})")
+
     def sensitivity(self, name: str) -> NDArray[np.float64]:
         """d ``reading`` / d ``name`` at every saved time [m per unit of ``name``]: the exact
         derivative of this discrete run (RK4 with its steps; an adaptive method with the steps
