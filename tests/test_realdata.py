@@ -12,8 +12,8 @@ import pytest
 
 import idm_rs
 from idm_rs.batch import Rig
-from idm_rs.realdata import RealDataError, RigData, load
-from idm_rs.rig_fit import EMPS_REFERENCE, idim_ls, rig_fit
+from idm_rs.rigs import RealDataError, RigData, load
+from idm_rs.rigs.fit import EMPS_REFERENCE, idim_ls, rig_fit
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata"
 needs_data = pytest.mark.skipif(not REAL.exists(), reason="the measured data sets (../shared/realdata) are absent")
@@ -108,7 +108,7 @@ def test_frame_friction_scales_with_the_normal_load():
 def test_frame_identification_recovers_a_simulated_frame():
     """A base-excited frame simulated by the engine (f0 = 3 Hz, 3 % damping, Fc/k = 0.8 mm,
     1 Hz base motion of 1.8 mm), sampled at 250 Hz: the identification returns them."""
-    from idm_rs.rig_fit import fit_frame
+    from idm_rs.rigs.fit import fit_frame
 
     m, f0, zeta, fc_k = 1.0, 3.0, 0.03, 0.8e-3
     k = m * (2 * np.pi * f0) ** 2
@@ -132,8 +132,8 @@ def test_spring_slider_features_recover_known_static_and_kinetic_friction():
     """A spring–slider simulated by the engine (30.7 g, 1002 N/m, 1.1 mm/s, μs = 0.36, μk = 0.30)
     sampled at 2 kHz with the data set's spike-like noise: the stick-slip features give μs and μk
     back (to 2 %: with constant kinetic friction the slip swings symmetrically about Fc)."""
-    from idm_rs.realdata import ENSL_SLIDER_MASS, GRAVITY
-    from idm_rs.rig_fit import fit_spring_slider
+    from idm_rs.rigs.data import ENSL_SLIDER_MASS, GRAVITY
+    from idm_rs.rigs.fit import fit_spring_slider
 
     n_force, k, speed = ENSL_SLIDER_MASS * GRAVITY, 1002.0, 1.1e-3
     a = 1e7
@@ -178,7 +178,7 @@ def _servo_regression(ripple: float, seed: int = 0):
 
 @pytest.mark.parametrize("ripple, verdict", [(0.0, "none"), (1.5, "cogging")])
 def test_rig_diagnosis_names_a_ripple_and_stays_quiet_without_one(ripple, verdict):
-    from idm_rs.rig_diagnosis import _linear_rig
+    from idm_rs.rigs.diagnosis import _linear_rig
 
     t, q, v, a, force = _servo_regression(ripple)
     X0 = np.column_stack([a, v, np.sign(v), np.ones_like(v)])

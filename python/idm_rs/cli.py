@@ -860,17 +860,27 @@ def cmd_characterize(a: argparse.Namespace) -> int:
 
 def cmd_rig_fit(a: argparse.Namespace) -> int:
     import json
+    import math
 
-    from .realdata import load
-    from .rig_fit import plot_rig_fit, rig_fit
+    from .rigs import load, plot_rig_fit, rig_fit
+    from .rigs.fit import RESIDUAL_UNITS, UNITS
 
     t0 = time.perf_counter()
     fit = rig_fit(load(a.path), simulate=not a.no_simulation)
     print(f"{fit.rig}: {fit.name}")
+    head = {True: "describes the record", False: "DOES NOT DESCRIBE THE RECORD", None: "not judged"}[fit.describes]
+    print(f"  fit: {head} — {fit.judgement}")
+    caveat = "   (not a model of this record: see above)" if fit.describes is False else ""
     for k, v in fit.params.items():
         ref = fit.reference.get(k)
-        print(f"  {k:<8} = {v:12.5g} ± {fit.params_std[k]:.2g}" + (f"   (benchmark reference {ref:g})" if ref else ""))
-    print(f"  residual RMS {fit.rms:.4g}, noise RMS {fit.noise_rms:.4g} (SI)")
+        unit = UNITS.get(k, "")
+        shown = f" {unit}" if unit and unit != "1" else ""
+        print(f"  {k:<8} = {v:12.5g} ± {fit.params_std[k]:.2g}{shown}"
+              + (f"   (benchmark reference {ref:g}{shown})" if ref else "") + caveat)
+    unit = RESIDUAL_UNITS[fit.rig]
+    noise = (f"{fit.noise_rms:.4g} {unit} (robust estimate)" if math.isfinite(fit.noise_rms) and fit.noise_rms > 0
+             else "could not be estimated")
+    print(f"  residual RMS {fit.rms:.4g} {unit}, noise RMS {noise}")
     print("  not identifiable from these data: " + (", ".join(fit.not_identifiable) or "-"))
     for k, v in fit.metrics.items():
         print(f"  {k}: {v:.4g}")
@@ -893,8 +903,7 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
     from .diagnosis.report import json_safe
 
     if Path(a.case_dir).is_file():  # a measured rig data file: the rig diagnosis
-        from .realdata import load
-        from .rig_diagnosis import diagnose_rig
+        from .rigs import diagnose_rig, load, plot_rig_diagnosis
 
         rd = diagnose_rig(load(a.case_dir))
         print(rd.report())
@@ -903,6 +912,9 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
             out.parent.mkdir(parents=True, exist_ok=True)
             out.write_text(json.dumps(json_safe(rd.to_dict()), indent=2, allow_nan=False) + "\n", encoding="utf-8")
             print(f"wrote {out}")
+        if a.plots:
+            paths = plot_rig_diagnosis(rd, a.plots)
+            print(f"wrote {len(paths)} figures in {a.plots}: " + ", ".join(p.name for p in paths))
         return 0
     d = diagnose(a.case_dir, progress=not a.no_progress, threads=a.threads)
     print(d.report())

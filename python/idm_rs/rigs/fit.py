@@ -21,23 +21,37 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .realdata import RealDataError, RigData
+from .data import RealDataError, RigData
+from .regressors import (EMPS_BORDER, EMPS_DECIMATE, EMPS_FILTER_HZ, EMPS_FILTER_ORDER, SLIDER_MIN_GAP,
+                         SLIDER_PROMINENCE, Regression, emps_regression, frame_regression, slider_events)
+from .signals import low_pass_derivatives, lstsq, slips
 
 #: the benchmark's published reference model (Janot, Gautier & Brunot 2019, Simulation_EMPS.m)
 EMPS_REFERENCE = {"m": 95.1089, "fv": 203.5034, "fc": 20.3935, "offset": -3.1648}
-#: the benchmark's filter and decimation (Script_IDIM_LS.m)
-EMPS_FILTER_HZ, EMPS_FILTER_ORDER, EMPS_BORDER = 100.0, 4, 50
-EMPS_DECIMATE = 5
 #: Stribeck velocity tried for a static-friction peak [m/s]
 EMPS_STRIBECK_VS = 5e-3
 #: presliding stiffness of the Leuven element in the simulation [N/m]: stiff enough that
 #: presliding is far below the encoder's resolution, the contact then acts as Coulomb friction
 EMPS_PRESLIDING_STIFFNESS = 1e8
+
+#: the unit of every reported parameter (SI; "1": dimensionless)
+UNITS = {"m": "kg", "fv": "N s/m", "fc": "N", "offset": "N", "mu_s": "1", "mu_k": "1", "fs": "N",
+         "mu_sliding": "1", "f0_Hz": "Hz", "zeta": "1", "fc_over_k_m": "m", "mu_over_k_m_per_N": "m/N",
+         "offset_m": "m"}
+#: the unit of each rig's residual and noise RMS (its regression's left-hand side)
+RESIDUAL_UNITS = {"emps": "N", "spring_slider": "N", "frame": "m"}
+
+#: when a fit describes its record (``judge``): the benchmark's relative errors [%] of the
+#: simulated force (EMPS; the published reference model reaches 5.4 %) or position (frame,
+#: 5-11 % on the four loads) at most this; a spring–slider's simulated stick-slip period and
+#: force swing within these shares of the measured ones (the slow runs: < 1 %)
+MAX_RELATIVE_ERROR_PCT = 20.0
+MAX_PERIOD_ERROR, MAX_SWING_ERROR = 0.10, 0.25
 
 
 @dataclass
@@ -49,65 +63,46 @@ class RigFit:
     params: dict[str, float]
     params_std: dict[str, float]
     rms: float  #: RMS of the fit's residual [N for EMPS's force equation]
-    noise_rms: float  #: estimated measurement-noise RMS of the same quantity
+    noise_rms: float  #: estimated measurement-noise RMS of the same quantity (NaN: could not be estimated)
     not_identifiable: list[str]
     correlation: dict[str, dict[str, float]] = field(default_factory=dict)
     metrics: dict[str, float] = field(default_factory=dict)
     reference: dict[str, float] = field(default_factory=dict)
     arrays: dict[str, NDArray[np.float64]] = field(default_factory=dict, repr=False)
+    #: whether the identified model describes the record (None: not judged, e.g. no simulation)
+    describes: Optional[bool] = None
+    #: why, in one sentence with the numbers
+    judgement: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return {"rig": self.rig, "name": self.name, "params": self.params, "params_std": self.params_std,
+                "units": {k: UNITS.get(k, "") for k in self.params}, "residual_unit": RESIDUAL_UNITS[self.rig],
                 "rms": self.rms, "noise_rms": self.noise_rms, "not_identifiable": self.not_identifiable,
-                "correlation": self.correlation, "metrics": self.metrics, "reference": self.reference}
-
-
-def _differentiate(q: NDArray[np.float64], t: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-    from scipy.signal import butter, filtfilt
-
-    fs = 1.0 / float(np.median(np.diff(t)))
-    b, a = butter(EMPS_FILTER_ORDER, EMPS_FILTER_HZ / (fs / 2.0))
-    qf = filtfilt(b, a, q)
-    dq = np.gradient(qf, t)
-    ddq = np.gradient(dq, t)
-    return qf, dq, ddq
-
-
-def _lstsq(X: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64],
-                                                                     NDArray[np.float64]]:
-    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
-    e = y - X @ beta
-    # pinv: a candidate's columns may be nearly collinear with the base model's (rig_diagnosis)
-    cov = np.var(e, ddof=X.shape[1]) * np.linalg.pinv(X.T @ X)
-    return beta, e, cov
+                "correlation": self.correlation, "metrics": self.metrics, "reference": self.reference,
+                "describes": self.describes, "judgement": self.judgement}
 
 
 def idim_ls(data: RigData) -> tuple[dict[str, float], dict[str, float], dict[str, dict[str, float]], float,
-                                     NDArray[np.float64], float]:
-    """(values, std, correlations, residual RMS [N], residual, Stribeck amplitude / its σ) of the
-    inverse-model least squares on an EMPS run."""
+                                     NDArray[np.float64], float, Regression]:
+    """(values, std, correlations, residual RMS [N], residual, Stribeck amplitude / its σ, the
+    regression) of the inverse-model least squares on an EMPS run."""
     from scipy.signal import decimate
 
-    qf, dq, ddq = _differentiate(data.response, data.t)
-    sl = slice(EMPS_BORDER, -EMPS_BORDER)
-    force = data.force[sl] if data.force is not None else None
-    if force is None:
+    if data.force is None:
         raise RealDataError(f"{data.name}: no measured force")
-    cols = [ddq[sl], dq[sl], np.sign(dq[sl]), np.ones_like(dq[sl])]
-    X = np.column_stack([decimate(c, EMPS_DECIMATE) for c in cols])
-    y = decimate(force, EMPS_DECIMATE)
-    beta, e, cov = _lstsq(X, y)
-    names = ["m", "fv", "fc", "offset"]
+    reg = emps_regression(data)
+    beta, e, cov = lstsq(reg.X, reg.y)
+    names = list(reg.names)
     std = np.sqrt(np.diag(cov))
     corr = cov / np.outer(std, std)
     # a static-friction peak beside the Coulomb level: does the data support one?
-    v = dq[sl]
+    v = reg.signals["v"][EMPS_BORDER:-EMPS_BORDER]
     stribeck = decimate(np.exp(-((v / EMPS_STRIBECK_VS) ** 2)) * np.sign(v), EMPS_DECIMATE)
-    b2, _, cov2 = _lstsq(np.column_stack([X, stribeck]), y)
+    b2, _, cov2 = lstsq(np.column_stack([reg.X, stribeck]), reg.y)
     z = float(abs(b2[-1]) / math.sqrt(cov2[-1, -1]))
     return (dict(zip(names, map(float, beta))), dict(zip(names, map(float, std))),
             {a: {b: float(corr[i, j]) for j, b in enumerate(names) if j != i} for i, a in enumerate(names)},
-            float(np.sqrt(np.mean(e ** 2))), e, z)
+            float(np.sqrt(np.mean(e ** 2))), e, z, reg)
 
 
 def simulate_emps(data: RigData, params: dict[str, float], *, rtol: float = 1e-6) -> tuple[NDArray[np.float64],
@@ -146,17 +141,18 @@ def relative_error(measured: NDArray[np.float64], simulated: NDArray[np.float64]
 
 
 def fit_emps(data: RigData, *, simulate: bool = True) -> RigFit:
-    values, std, corr, rms, resid, z_stribeck = idim_ls(data)
+    values, std, corr, rms, resid, z_stribeck, reg = idim_ls(data)
     # white measurement noise of the force equation, from the residual's sample-to-sample part
-    noise = float(np.std(np.diff(resid)) / math.sqrt(2.0))
+    noise = reg.noise
     not_identifiable = ["fric_alpha (presliding stiffness)", "sigma1 (presliding damping)"]
     if z_stribeck < 2.0:
         not_identifiable.insert(0, "mu_s - mu_k (static-friction peak)")
     fit = RigFit("emps", data.name, values, std, rms, noise, not_identifiable, corr,
-                 reference=dict(EMPS_REFERENCE), metrics={"stribeck_amplitude_sigmas": z_stribeck})
+                 reference=dict(EMPS_REFERENCE), metrics={"stribeck_amplitude_sigmas": z_stribeck,
+                 "inverse_model_relative_error_pct": float(100 * np.linalg.norm(resid) / np.linalg.norm(reg.y))})
     if simulate:
         q_sim, f_sim = simulate_emps(data, values)
-        qf = _differentiate(data.response, data.t)[0]
+        qf = reg.signals["q"]
         fit.metrics["position_relative_error_pct"] = relative_error(qf, q_sim)
         if data.force is not None:
             fit.metrics["force_relative_error_pct"] = relative_error(data.force, f_sim)
@@ -172,7 +168,7 @@ def validate_emps(fit: RigFit, validation: RigData, *, simulate: bool = True) ->
     """Add the benchmark's validation to ``fit`` (identified on the estimation run): the inverse
     model's force prediction on the validation run and, with ``simulate``, the closed loop's
     position and force errors there (``validation_*`` metrics) [%]."""
-    qf, dq, ddq = _differentiate(validation.response, validation.t)
+    qf, dq, ddq = low_pass_derivatives(validation.response, validation.t, EMPS_FILTER_HZ, EMPS_FILTER_ORDER)
     p = fit.params
     pred = p["m"] * ddq + p["fv"] * dq + p["fc"] * np.sign(dq) + p["offset"]
     assert validation.force is not None
@@ -186,25 +182,11 @@ def validate_emps(fit: RigFit, validation: RigData, *, simulate: bool = True) ->
         fit.metrics["validation_force_relative_error_pct"] = relative_error(validation.force, f_sim)
 
 
-#: spring-slider: median-filter width against the impulsive noise [samples], slip events are
-#: drops of at least this share of the force's 1-99 % range, at least this far apart [s]
-SLIDER_MEDIAN, SLIDER_PROMINENCE, SLIDER_MIN_GAP = 7, 0.1, 0.05
 #: the simulated stick-slip: presliding stiffness [N/m] and number of periods simulated. In the
 #: Leuven element a stuck body creeps at k V / (a (1 - Fh/S)); it breaks away when that reaches
 #: the Stribeck velocity, at Fh = S (1 - k V / (a vs)): a stiff contact (a vs >> k V) makes the
 #: breakaway force the static level Fs the record shows
 SLIDER_PRESLIDING_STIFFNESS, SLIDER_PERIODS = 1e7, 8
-
-
-def _slips(t: NDArray[np.float64], force: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Indices of the force's peaks (slip onsets) and troughs (slip ends)."""
-    from scipy.signal import find_peaks
-
-    span = float(np.percentile(force, 99) - np.percentile(force, 1))
-    gap = max(1, int(SLIDER_MIN_GAP / float(np.median(np.diff(t)))))
-    peaks, _ = find_peaks(force, prominence=SLIDER_PROMINENCE * span, distance=gap)
-    troughs, _ = find_peaks(-force, prominence=SLIDER_PROMINENCE * span, distance=gap)
-    return peaks, troughs
 
 
 def fit_spring_slider(data: RigData, *, simulate: bool = True) -> RigFit:
@@ -215,16 +197,13 @@ def fit_spring_slider(data: RigData, *, simulate: bool = True) -> RigFit:
     at the drive speed, the Leuven element with those levels) is simulated over
     ``SLIDER_PERIODS`` periods and its peaks, troughs and period compared with the record's.
     A run without stick-slip (steady sliding) gives the sliding friction level only."""
-    from scipy.signal import medfilt
-
     import idm_rs
     from idm_rs.batch import Rig
 
     meta = data.meta
     n_force, k, speed = meta["normal_force_N"], meta["stiffness_N_per_m"], meta["drive_speed_m_per_s"]
-    force = medfilt(data.response, SLIDER_MEDIAN)
-    noise = float(1.4826 * np.median(np.abs(data.response - force)))  # robust spread of the spikes-free noise
-    peaks, troughs = _slips(data.t, force)
+    ev = slider_events(data)
+    force, noise, peaks, troughs = ev.force, ev.noise, ev.peaks, ev.troughs
     if peaks.size < 3 or troughs.size < 3:
         level = float(np.median(force))
         spread = float(np.std(force))
@@ -261,7 +240,7 @@ def fit_spring_slider(data: RigData, *, simulate: bool = True) -> RigFit:
                             initial_state=state)
         sel = data.t <= t_end
         f_sim = k * (speed * data.t[sel] - np.interp(data.t[sel], r.t, r.main_body))
-        sp, st = _slips(data.t[sel], f_sim)
+        sp, st = slips(data.t[sel], f_sim, SLIDER_PROMINENCE, SLIDER_MIN_GAP)
         metrics.update({
             "simulated_period_s": float(np.median(np.diff(data.t[sel][sp]))) if sp.size > 1 else math.nan,
             "simulated_peak_N": float(f_sim[sp].mean()) if sp.size else math.nan,
@@ -272,10 +251,6 @@ def fit_spring_slider(data: RigData, *, simulate: bool = True) -> RigFit:
     return fit
 
 
-#: frame: low-pass of the kinematics [Hz] (the drive is 1 Hz, the frame's mode ~3 Hz); samples
-#: counted as sliding: |dx/dt| above this share of its 95th percentile (while stuck, the
-#: friction force is anywhere in [-Fs, Fs] and says nothing about Fc)
-FRAME_FILTER_HZ, FRAME_SLIDING_SHARE, FRAME_BORDER = 20.0, 0.2, 25
 #: the simulated frame's mass [kg]: only ratios to the stiffness are identified, so any mass
 #: with the identified m/k, c/k and Fc/k gives the same motion
 FRAME_SIM_MASS = 1.0
@@ -290,18 +265,10 @@ def fit_frame(data: RigData, *, simulate: bool = True) -> RigFit:
     the contact slides) and Fc / (k N) [m/N] with N the disc's weight. The mass, the stiffness
     and the friction coefficient are not identifiable on their own. The identified frame is then
     simulated with the engine's rig mechanism driven by the measured base motion."""
-    from scipy.signal import butter, filtfilt
-
     t = data.t
-    fs_hz = data.sample_rate_Hz
-    b, a = butter(4, FRAME_FILTER_HZ / (fs_hz / 2.0))
-    x, y = filtfilt(b, a, data.response), filtfilt(b, a, data.drive)
-    dx = np.gradient(x, t)
-    ddx = np.gradient(dx, t)
-    slide = np.abs(dx) > FRAME_SLIDING_SHARE * np.percentile(np.abs(dx), 95)
-    slide[:FRAME_BORDER] = slide[-FRAME_BORDER:] = False
-    X = np.column_stack([ddx, dx, np.sign(dx), np.ones_like(x)])[slide]
-    beta, e, cov = _lstsq(X, (y - x)[slide])
+    reg = frame_regression(data)
+    x, y = reg.signals["x"], reg.signals["drive"]
+    beta, e, cov = lstsq(reg.X, reg.y)
     sd = np.sqrt(np.diag(cov))
     m_k, c_k, fc_k, off = map(float, beta)
     weight = data.meta["disc_weight_N"]
@@ -310,13 +277,13 @@ def fit_frame(data: RigData, *, simulate: bool = True) -> RigFit:
     params = {"f0_Hz": f0, "zeta": zeta, "fc_over_k_m": fc_k, "mu_over_k_m_per_N": fc_k / weight, "offset_m": off}
     std = {"f0_Hz": 0.5 * f0 * float(sd[0]) / m_k, "zeta": float(sd[1]) / (2.0 * math.sqrt(m_k)),
            "fc_over_k_m": float(sd[2]), "mu_over_k_m_per_N": float(sd[2]) / weight, "offset_m": float(sd[3])}
-    noise = float(1.4826 * np.median(np.abs(data.response - x)))
+    noise = reg.noise
     fit = RigFit("frame", data.name, params, std, float(np.sqrt(np.mean(e ** 2))), noise,
                  ["m", "k", "mu_k (only mu_k N / k: no force is measured)", "mu_s - mu_k", "stribeck_velocity",
                   "fric_alpha", "sigma1"],
-                 metrics={"sliding_share": float(slide.mean()),
+                 metrics={"sliding_share": float(reg.signals["sliding"].mean()),
                           "inverse_model_relative_error_pct": float(100 * np.linalg.norm(e) /
-                                                                    np.linalg.norm((y - x)[slide]))})
+                                                                    np.linalg.norm(reg.y))})
     if simulate:
         import idm_rs
         from idm_rs.batch import Rig
@@ -338,98 +305,58 @@ def fit_frame(data: RigData, *, simulate: bool = True) -> RigFit:
 
 
 def rig_fit(data: RigData, *, simulate: bool = True) -> RigFit:
-    """Identify the rig that recorded ``data``. For the EMPS estimation run, the validation run
+    """Identify the rig that recorded ``data`` and judge whether the identified model describes
+    the record (:func:`judge`). For the EMPS estimation run, the validation run
     (``DATA_EMPS_PULSES.mat`` beside it) is evaluated too when present."""
     if data.rig == "emps":
         fit = fit_emps(data, simulate=simulate)
         other = data.path.with_name("DATA_EMPS_PULSES.mat")
         if data.path.name == "DATA_EMPS.mat" and other.exists():
-            from .realdata import load_emps
+            from .data import load_emps
 
             validate_emps(fit, load_emps(other), simulate=simulate)
-        return fit
-    if data.rig == "spring_slider":
-        return fit_spring_slider(data, simulate=simulate)
-    if data.rig == "frame":
-        return fit_frame(data, simulate=simulate)
-    raise RealDataError(f"rig-fit of the {data.rig} data set is not implemented yet (EMPS is)")
+    elif data.rig == "spring_slider":
+        fit = fit_spring_slider(data, simulate=simulate)
+    elif data.rig == "frame":
+        fit = fit_frame(data, simulate=simulate)
+    else:
+        raise RealDataError(f"rig-fit of the {data.rig} data set is not implemented")
+    fit.describes, fit.judgement = judge(fit)
+    return fit
 
 
-def plot_rig_fit(fit: RigFit, directory: Any) -> list[Any]:
-    """Measured vs simulated position and force, and their residuals (one PNG)."""
-    from pathlib import Path
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    if not fit.arrays:
-        return []
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
-    a = fit.arrays
-    if "q" not in a:  # a force record (spring-slider)
-        fig, (ax, axr) = plt.subplots(2, 1, figsize=(10, 6), sharex=True, constrained_layout=True)
-        ax.plot(a["t"], a["force"], color="0.3", lw=1.5, alpha=0.5, label="measured (median-filtered)")
-        ax.plot(a["t"], a["force_sim"], color="C3", lw=0.9, label="simulated (rig mechanism, fitted mu_s, mu_k)")
-        ax.set_ylabel("spring force [N]")
-        ax.legend(fontsize=8)
-        axr.plot(a["t"], a["force"] - a["force_sim"], color="C3", lw=0.7)
-        axr.set_ylabel("residual [N]")
-        axr.set_xlabel("time t [s]")
-        for x in (ax, axr):
-            x.grid(alpha=0.3)
-        m = fit.metrics
-        ax.set_title(f"{fit.name}: mu_s = {fit.params['mu_s']:.4f}, mu_k = {fit.params['mu_k']:.4f}; period measured "
-                     f"{m['period_s']:.3g} s, simulated {m.get('simulated_period_s', math.nan):.3g} s", fontsize=9)
-        path = out / f"rig_fit_{fit.name}.png"
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return [path]
-    if "force" not in a:  # a displacement record (frame)
-        fig, (ax, axr) = plt.subplots(2, 1, figsize=(10, 6), sharex=True, constrained_layout=True)
-        ax.plot(a["t"], a["drive"] * 1e3, color="0.6", lw=0.8, label="base (drive)")
-        ax.plot(a["t"], a["q"] * 1e3, color="0.3", lw=1.5, alpha=0.6, label="top plate, measured")
-        ax.plot(a["t"], a["q_sim"] * 1e3, color="C3", lw=0.9, label="top plate, simulated")
-        ax.set_ylabel("displacement [mm]")
-        ax.legend(fontsize=8)
-        axr.plot(a["t"], (a["q"] - a["q_sim"]) * 1e3, color="C3", lw=0.7)
-        axr.set_ylabel("residual [mm]")
-        axr.set_xlabel("time t [s]")
-        for x in (ax, axr):
-            x.grid(alpha=0.3)
-        p = fit.params
-        ax.set_title(f"{fit.name}: f0 = {p['f0_Hz']:.3g} Hz, zeta = {p['zeta']:.3g}, Fc/k = {p['fc_over_k_m'] * 1e3:.3g} mm;"
-                     f" simulated position error {fit.metrics.get('position_relative_error_pct', math.nan):.3g} %",
-                     fontsize=9)
-        path = out / f"rig_fit_{fit.name}.png"
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return [path]
-    fig, axes = plt.subplots(4, 1, figsize=(10, 9), sharex=True, constrained_layout=True)
-    axes[0].plot(a["t"], a["q"] * 1e3, color="0.3", lw=2, alpha=0.5, label="measured")
-    axes[0].plot(a["t"], a["q_sim"] * 1e3, color="C3", lw=0.9, label="simulated (closed loop)")
-    axes[0].set_ylabel("position [mm]")
-    axes[0].legend(fontsize=8)
-    axes[1].plot(a["t"], (a["q"] - a["q_sim"]) * 1e3, color="C3", lw=0.7)
-    axes[1].set_ylabel("position error [mm]")
-    axes[2].plot(a["t"], a["force"], color="0.3", lw=1.5, alpha=0.5, label="measured gtau vir")
-    axes[2].plot(a["t"], a["force_sim"], color="C0", lw=0.7, label="simulated")
-    axes[2].set_ylabel("motor force [N]")
-    axes[2].legend(fontsize=8)
-    axes[3].plot(a["t"], a["force"] - a["force_sim"], color="C0", lw=0.6)
-    axes[3].set_ylabel("force error [N]")
-    axes[3].set_xlabel("time t [s]")
-    for ax in axes:
-        ax.grid(alpha=0.3)
+def judge(fit: RigFit) -> tuple[Optional[bool], str]:
+    """Whether ``fit``'s identified model describes its record, and why (one sentence with the
+    numbers): the simulation against the record where one was run (EMPS: the force's relative
+    error; frame: the position's; spring–slider: the stick-slip period and force swing), else the
+    inverse model's relative error. None where nothing judges it."""
     m = fit.metrics
-    axes[0].set_title(f"{fit.name}: m = {fit.params['m']:.2f} kg, fc = {fit.params['fc']:.2f} N, "
-                      f"fv = {fit.params['fv']:.1f} N s/m, offset = {fit.params['offset']:.2f} N; relative error "
-                      f"position {m.get('position_relative_error_pct', math.nan):.3g} %, "
-                      f"force {m.get('force_relative_error_pct', math.nan):.3g} %", fontsize=9)
-    path = out / f"rig_fit_{fit.name}.png"
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return [path]
-
+    lim = MAX_RELATIVE_ERROR_PCT
+    if fit.rig == "spring_slider":
+        if "period_s" not in m:
+            return True, "steady sliding (no stick-slip): the record gives the sliding friction level only"
+        if "simulated_period_s" not in m:
+            return None, "not judged: no simulation was run (--no-simulation)"
+        t_meas, t_sim = m["period_s"], m["simulated_period_s"]
+        swing = 2.0 * (fit.params["fs"] - fit.params["fc"])  # peak - trough, measured
+        swing_sim = m["simulated_peak_N"] - m["simulated_trough_N"]
+        dt, ds = t_sim / t_meas - 1.0, swing_sim / swing - 1.0
+        what = (f"simulated stick-slip period {t_sim:.4g} s against {t_meas:.4g} s measured ({100 * dt:+.0f} %), "
+                f"force swing {swing_sim:.3g} N against {swing:.3g} N ({100 * ds:+.0f} %)")
+        if not math.isfinite(dt) or abs(dt) > MAX_PERIOD_ERROR or not math.isfinite(ds) or abs(ds) > MAX_SWING_ERROR:
+            return False, (f"{what}: the model (constant mu_s and mu_k, a stiff contact) does not reproduce this "
+                           f"record (limits {100 * MAX_PERIOD_ERROR:.0f} % and {100 * MAX_SWING_ERROR:.0f} %); "
+                           "mu_s and mu_k are the levels of its slips, not a model of it")
+        return True, what
+    if fit.rig == "emps":
+        key, what = "force_relative_error_pct", "simulated motor force"
+    else:
+        key, what = "position_relative_error_pct", "simulated top-plate position"
+    if key not in m:  # no simulation: the inverse model's residual against its left-hand side
+        key, what = "inverse_model_relative_error_pct", ("inverse model's force" if fit.rig == "emps"
+                                                          else "inverse model's spring deflection")
+    err = m[key]
+    text = f"{what}: relative error {err:.3g} % (limit {lim:g} %)"
+    if not (err <= lim):
+        return False, f"{text}: the identified model does not describe this record"
+    return True, text

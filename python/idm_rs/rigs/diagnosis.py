@@ -2,7 +2,8 @@
 the missing physics from a catalogue of rig effects, refit with it and show the improvement
 (``idm-rs diagnose PATH`` with a data file).
 
-The rigs' identified models are linear in their parameters (``rig_fit``'s inverse models), so
+The rigs' identified models are linear in their parameters (``fit.py``'s inverse models, on the
+rows ``regressors.py`` prepares for both), so
 each candidate effect is a few more regression columns, refitted exactly by least squares:
 
 * ``stribeck_peak`` — a static-friction excess at low speed: ``s · exp(−(v/vs)²) sgn v`` with
@@ -34,13 +35,14 @@ from typing import Any, Callable, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from .realdata import RigData
-from .rig_fit import (EMPS_BORDER, EMPS_DECIMATE, FRAME_BORDER, FRAME_FILTER_HZ, FRAME_SLIDING_SHARE,
-                      _differentiate, _lstsq, _slips)
+from ..diagnosis.results import BIC_THRESHOLD
+from .data import RigData
+from .fit import RESIDUAL_UNITS
+from .regressors import emps_regression, frame_regression, slider_events
+from .signals import lstsq
 
-#: a candidate must lower BIC by this much (the IDM diagnosis's threshold)
-BIC_THRESHOLD = 10.0
-#: and each of its amplitudes be this many σ from zero
+#: a candidate's amplitudes must each be this many σ from zero (its BIC gain must reach the IDM
+#: diagnosis's ``BIC_THRESHOLD``)
 NULL_SIGMAS = 2.0
 #: scanned Stribeck velocities [m/s] and cogging wavelengths [m]
 STRIBECK_VS = (1e-3, 3e-3, 1e-2, 3e-2)
@@ -58,11 +60,25 @@ class RigCandidate:
 
     #: amplitudes that must be positive to be this physics
     positive: tuple[str, ...] = ()
+    #: the residual with this candidate refitted
+    residual: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0), repr=False)
 
     @property
     def significant(self) -> bool:
-        return all(abs(v) > NULL_SIGMAS * self.std[k] and (k not in self.positive or v > 0)
-                   for k, v in self.values.items())
+        return not self.why_not_named()
+
+    def why_not_named(self) -> str:
+        """Why this candidate cannot be named whatever its BIC gain ("" when it can): an
+        amplitude with the unphysical sign, or one within ``NULL_SIGMAS`` σ of zero."""
+        for k, v in self.values.items():
+            if k in self.positive and v <= 0:
+                return (f"its amplitude {k} = {v:.4g} has the unphysical sign (a static-friction excess must be "
+                        "positive)")
+        weak = [k for k, v in self.values.items() if not abs(v) > NULL_SIGMAS * self.std[k]]
+        if weak:
+            return (f"its amplitude{'s' if len(weak) > 1 else ''} {', '.join(weak)} "
+                    f"{'are' if len(weak) > 1 else 'is'} within {NULL_SIGMAS:g} σ of zero")
+        return ""
 
 
 @dataclass
@@ -79,17 +95,28 @@ class RigDiagnosis:
     arrays: dict[str, NDArray[np.float64]] = field(default_factory=dict, repr=False)
 
     def report(self) -> str:
+        unit = RESIDUAL_UNITS.get(self.rig, "SI")
         lines = [f"{self.rig}: {self.name}", f"VERDICT: {self.verdict.upper()} — {self.reason}",
-                 f"residual RMS {self.rms_before:.4g} (identified model) -> {self.rms_after:.4g} (with the verdict); "
-                 f"white-noise estimate {self.noise_rms:.4g} (SI)", "Where the residual lives:"]
+                 f"residual RMS {self.rms_before:.4g} {unit} (identified model) -> {self.rms_after:.4g} {unit} "
+                 f"(with the verdict); white-noise estimate {self.noise_rms:.4g} {unit}", "Where the residual lives:"]
         lines += [f"  {loc}" for loc in self.locations]
         lines.append("Candidates (ΔBIC > 0: better than the identified model; σ: smallest |amplitude|/σ):")
         for c in self.ranking:
             z = min((abs(v) / c.std[k] for k, v in c.values.items() if c.std[k] > 0), default=math.nan)
             vals = ", ".join(f"{k} = {v:.4g} ± {c.std[k]:.2g}" for k, v in c.values.items())
-            lines.append(f"  {c.effect:<22} ΔBIC {c.delta_bic:10.1f}   {z:6.1f} σ   RMS {c.rms_after:.4g}   {vals}"
-                         + (f"   [{c.setting}]" if c.setting else ""))
-        if self.rms_after > 1.5 * self.noise_rms:
+            lines.append(f"  {c.effect:<22} ΔBIC {c.delta_bic:10.1f}   {z:6.1f} σ   RMS {c.rms_after:.4g} {unit}   "
+                         f"{vals}" + (f"   [{c.setting}]" if c.setting else ""))
+        # a candidate whose BIC gain passes the threshold but that is not named: say why
+        named = next((c for c in self.ranking if c.effect == self.verdict), None)
+        for c in self.ranking:
+            why = c.why_not_named()
+            if why and c.delta_bic >= BIC_THRESHOLD:
+                more = named is not None and c.delta_bic > named.delta_bic
+                lines.append(f"  Not named: {c.effect} lowers BIC{' more' if more else ''} (by {c.delta_bic:.0f}), "
+                             f"but {why}.")
+        if not self.noise_rms > 0:
+            lines.append("What remains: not judged — the record's white noise could not be estimated.")
+        elif self.rms_after > 1.5 * self.noise_rms:
             ratio = self.rms_after / self.noise_rms if self.noise_rms > 0 else math.inf
             lines.append(f"What remains: {ratio:.1f} x the white-noise estimate — real data "
                          "do not fit to their noise floor; the remainder is not explained by this catalogue.")
@@ -111,7 +138,7 @@ def _bic(e: NDArray[np.float64], k: int) -> float:
 def _candidates(X0: NDArray[np.float64], y: NDArray[np.float64], columns: dict[str, list[tuple[str, list[str],
                 Callable[[], NDArray[np.float64]]]]]) -> tuple[list[RigCandidate], NDArray[np.float64]]:
     """Each effect's best setting (by BIC) added to the base regression X0 -> y."""
-    _, e0, _ = _lstsq(X0, y)
+    _, e0, _ = lstsq(X0, y)
     bic0 = _bic(e0, X0.shape[1])
     out = []
     for effect, settings in columns.items():
@@ -119,11 +146,12 @@ def _candidates(X0: NDArray[np.float64], y: NDArray[np.float64], columns: dict[s
         for setting, names, make in settings:
             extra = make()
             X = np.column_stack([X0, extra])
-            beta, e, cov = _lstsq(X, y)
+            beta, e, cov = lstsq(X, y)
             k0 = X0.shape[1]
             c = RigCandidate(effect, bic0 - _bic(e, X.shape[1]), float(np.sqrt(np.mean(e ** 2))),
                              {n: float(beta[k0 + i]) for i, n in enumerate(names)},
-                             {n: float(math.sqrt(max(cov[k0 + i, k0 + i], 0.0))) for i, n in enumerate(names)}, setting)
+                             {n: float(math.sqrt(max(cov[k0 + i, k0 + i], 0.0))) for i, n in enumerate(names)}, setting,
+                             residual=e)
             if best is None or c.delta_bic > best.delta_bic:
                 best = c
         assert best is not None
@@ -145,7 +173,7 @@ def _refine_cogging(c: RigCandidate, X0: NDArray[np.float64], y: NDArray[np.floa
 
     def fit(lam: float) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         X = np.column_stack([X0, np.sin(2 * np.pi * q / lam), np.cos(2 * np.pi * q / lam)])
-        return _lstsq(X, y)
+        return lstsq(X, y)
 
     best = minimize_scalar(lambda lam: float(np.mean(fit(lam)[1] ** 2)), bounds=(lo, hi), method="bounded",
                            options={"xatol": 1e-4 * lam0})
@@ -157,12 +185,16 @@ def _refine_cogging(c: RigCandidate, X0: NDArray[np.float64], y: NDArray[np.floa
     return RigCandidate("cogging", dbic, float(np.sqrt(np.mean(e ** 2))),
                         {"a": float(beta[k0]), "b": float(beta[k0 + 1])},
                         {"a": float(math.sqrt(cov[k0, k0])), "b": float(math.sqrt(cov[k0 + 1, k0 + 1]))},
-                        f"wavelength = {lam * 1e3:.4g} mm (refined)")
+                        f"wavelength = {lam * 1e3:.4g} mm (refined)", residual=e)
 
 
 def _verdict(ranking: list[RigCandidate], rms0: float, noise: float) -> tuple[str, str, float]:
     eligible = [c for c in ranking if c.delta_bic >= BIC_THRESHOLD and c.significant]
     if not eligible:
+        if not noise > 0:
+            return "unexplained", ("the record's noise could not be estimated, so whether the residual is noise "
+                                   "cannot be judged; no catalogue effect lowers BIC by "
+                                   f"{BIC_THRESHOLD:g} with its amplitudes beyond {NULL_SIGMAS:g} σ"), rms0
         if rms0 <= 1.5 * noise:
             return "none", "the identified model leaves noise; no catalogue effect is supported", rms0
         ratio = rms0 / noise if noise > 0 else math.inf
@@ -213,52 +245,28 @@ def _linear_rig(rig: str, name: str, X0: NDArray[np.float64], y: NDArray[np.floa
     locations = _locate_by(e0, {"moving forward": v > 0, "moving backward": v < 0,
                                 "first half of the stroke": q < half, "second half of the stroke": q >= half,
                                 "low speed (|v| < 10 % of its max)": np.abs(v) < 0.1 * np.abs(v).max()})
+    named = next((c for c in ranking if c.effect == verdict), None)
     return RigDiagnosis(rig, name, verdict, reason, rms0, rms_after, noise, ranking, locations,
-                        {"t": t, "residual": e0, "q": q, "v": v})
+                        {"t": t, "residual": e0, "residual_after": named.residual if named is not None else e0,
+                         "q": q, "v": v})
 
 
 def diagnose_emps(data: RigData) -> RigDiagnosis:
-    from scipy.signal import decimate
-
-    qf, dq, ddq = _differentiate(data.response, data.t)
-    sl = slice(EMPS_BORDER, -EMPS_BORDER)
-    assert data.force is not None
-    dec = lambda a: decimate(a[sl], EMPS_DECIMATE)  # noqa: E731
-    q, v, a = dec(qf), dec(dq), dec(ddq)
-    y = dec(data.force)
-    X0 = np.column_stack([a, v, np.sign(v), np.ones_like(v)])
-    _, e0, _ = _lstsq(X0, y)
-    noise = float(np.std(np.diff(e0)) / math.sqrt(2.0))
-    return _linear_rig("emps", data.name, X0, y, q, v, noise, dec(data.t))
+    reg = emps_regression(data)
+    return _linear_rig("emps", data.name, reg.X, reg.y, reg.q, reg.v, reg.noise, reg.t)
 
 
 def diagnose_frame(data: RigData) -> RigDiagnosis:
-    from scipy.signal import butter, filtfilt
-
-    t = data.t
-    b, a = butter(4, FRAME_FILTER_HZ / (data.sample_rate_Hz / 2.0))
-    x, yb = filtfilt(b, a, data.response), filtfilt(b, a, data.drive)
-    dx = np.gradient(x, t)
-    ddx = np.gradient(dx, t)
-    slide = np.abs(dx) > FRAME_SLIDING_SHARE * np.percentile(np.abs(dx), 95)
-    slide[:FRAME_BORDER] = slide[-FRAME_BORDER:] = False
-    X0 = np.column_stack([ddx, dx, np.sign(dx), np.ones_like(x)])[slide]
-    y = (yb - x)[slide]
-    noise = float(1.4826 * np.median(np.abs(data.response - x)))
     # y - x is the spring's deflection: it balances friction with the same sign as x'
-    return _linear_rig("frame", data.name, X0, y, x[slide], dx[slide], noise, t[slide])
+    reg = frame_regression(data)
+    return _linear_rig("frame", data.name, reg.X, reg.y, reg.q, reg.v, reg.noise, reg.t)
 
 
 def diagnose_spring_slider(data: RigData) -> RigDiagnosis:
     """The slips' onset forces against the time stuck before them: constant (Coulomb static
     friction) or growing with ln(t_stick) (rate/state aging); plus a drift over the record."""
-    from scipy.signal import medfilt
-
-    from .rig_fit import SLIDER_MEDIAN
-
-    force = medfilt(data.response, SLIDER_MEDIAN)
-    noise = float(1.4826 * np.median(np.abs(data.response - force)))
-    peaks, troughs = _slips(data.t, force)
+    ev = slider_events(data)
+    force, noise, peaks, troughs = ev.force, ev.noise, ev.peaks, ev.troughs
     # the stick before each slip: from the previous trough to the peak
     pairs = [(int(troughs[troughs < pk].max()), int(pk)) for pk in peaks if (troughs < pk).any()]
     if len(pairs) < 5:
@@ -279,8 +287,10 @@ def diagnose_spring_slider(data: RigData) -> RigDiagnosis:
     verdict, reason, rms_after = _verdict(ranking, rms0, noise)
     locations = [f"{fs.size} slips; onset force {fs.mean():.4f} ± {fs.std():.4f} N, stick times "
                  f"{t_stick.min():.3g}-{t_stick.max():.3g} s"]
+    named = next((c for c in ranking if c.effect == verdict), None)
     return RigDiagnosis("spring_slider", data.name, verdict, reason, rms0, rms_after, noise, ranking, locations,
-                        {"t_stick": t_stick, "fs": fs})
+                        {"t_stick": t_stick, "t_onset": data.t[pk_i], "fs": fs, "residual": e0,
+                         "residual_after": named.residual if named is not None else e0})
 
 
 def diagnose_rig(data: RigData) -> RigDiagnosis:

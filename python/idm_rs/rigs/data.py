@@ -15,7 +15,8 @@ are in the data folder's README; the data are never copied into the project — 
   frame on a shaker with a brass-on-steel contact loaded by a W-gram disc; drive = base
   displacement y, response = top-plate displacement x (given in mm).
 
-:func:`load` takes any one file of the three and returns a :class:`RigData`.
+:func:`load` takes any one file of the three and returns a :class:`RigData`; a variable that is
+missing, empty or holds NaN/inf samples is refused by name.
 """
 
 from __future__ import annotations
@@ -73,9 +74,22 @@ def _mat(path: Path) -> dict[str, Any]:
 
 
 def _column(d: dict[str, Any], key: str, path: Path) -> NDArray[np.float64]:
+    """Variable ``key`` as a flat float array; refused by name when missing, empty or not finite
+    (a record with NaN samples would give NaN parameters and "± nan" uncertainties)."""
     if key not in d:
         raise RealDataError(f"{path}: variable '{key}' missing (has {', '.join(sorted(d))})")
-    return np.asarray(d[key], dtype=float).ravel()
+    try:
+        a = np.asarray(d[key], dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise RealDataError(f"{path}: variable '{key}' is not numeric") from None
+    if a.size == 0:
+        raise RealDataError(f"{path}: variable '{key}' is empty")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        raise RealDataError(f"{path}: variable '{key}' has {int(bad.sum()):,} non-finite samples (NaN or inf) of "
+                            f"{a.size:,}, the first at index {int(np.flatnonzero(bad)[0])}; this record cannot be "
+                            "identified (remove or repair those samples)")
+    return a
 
 
 def _scalar(d: dict[str, Any], key: str, path: Path) -> float:
