@@ -9,6 +9,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import idm_rs
@@ -54,6 +55,18 @@ def test_a_ground_spring_is_named_and_fitted(spring_diagnosis):
     assert any(l.systematic for l in d.locations)
 
 
+def test_the_fit_figures_show_the_reports_residuals(spring_diagnosis):
+    from idm_rs.diagnosis.plots import refit_candidate, report_residuals
+
+    d = spring_diagnosis
+    pairs = [report_residuals(d, j) for j in range(len(d.recording.experiments))]
+    for (cal, ref), e in zip(pairs, d.recording.experiments):
+        assert cal.size == ref.size == e.t.size
+    pooled = lambda rs: math.sqrt(sum(float(np.sum(r * r)) for r in rs) / sum(r.size for r in rs))  # noqa: E731
+    assert pooled([p[0] for p in pairs]) == pytest.approx(d.rms_calibrated, rel=1e-9)
+    assert pooled([p[1] for p in pairs]) == pytest.approx(refit_candidate(d).rms_after, rel=1e-9)
+
+
 def test_a_misset_friction_coefficient_is_not_missing_physics(tmp_path):
     case = make_case(tmp_path / "none_case", nominal_params=NOMINAL, true_params=NOMINAL.replace(mu_k=0.5 * 1.05),
                      experiments=EXPERIMENTS, noise_rms=NOISE, seed=2, dt=2e-8)
@@ -80,6 +93,17 @@ def test_report_tells_the_story(spring_diagnosis):
     js = d.to_dict()
     assert js["calibration"]["multistart"]["local_fits"] and js["screening_scores"]
     assert js["alternatives"] == [a.to_dict() for a in d.alternatives]
+
+
+def test_the_report_says_it_in_plain_words_first(spring_diagnosis):
+    text = spring_diagnosis.report()
+    plain = text.index("In plain words")
+    assert plain < text.index("VERDICT:") < text.index("ΔBIC")
+    summary = text[plain:text.index("The numbers behind it")]
+    assert "Found: a spring from the main body to the ground" in summary and "k_ground = " in summary
+    assert "How sure: overwhelming evidence" in summary and "What to do: add this effect" in summary
+    for jargon in ("ΔBIC", "whiteness", "LR", "chi"):
+        assert jargon not in summary, jargon
 
 
 def test_alternatives_are_named_in_report_and_json(spring_diagnosis):
@@ -190,3 +214,29 @@ def test_progress_advances_by_stage_to_the_end():
     assert "null refits" in p.bar.postfix and "10000 simulations" in p.bar.postfix
     p.close()
     assert p.bar.n == pytest.approx(100.0)
+
+
+def test_ctrl_c_keeps_what_was_finished(spring_case, tmp_path, capsys, monkeypatch):
+    """Ctrl-C during the calibration: the nominal model's misfit is kept, the result is marked
+    incomplete, the report says so in plain words, the CLI writes the JSON and exits 130."""
+    import importlib
+
+    from idm_rs.cli import main
+
+    module = importlib.import_module("idm_rs.diagnosis.diagnose")  # the module, not the function
+
+    def stop(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(module, "_calibrate", stop)
+    d = idm_rs.diagnose(spring_case, progress=False)
+    assert d.verdict == "interrupted" and not d.complete
+    assert "stopped by Ctrl-C during the calibration" in d.reason
+    assert d.rms_before > 0 and math.isnan(d.rms_calibrated) and d.ranking == []
+    text = d.report()
+    assert "Found: no answer yet" in text and "run it again" in text
+    out = tmp_path / "d.json"
+    assert main(["diagnose", str(spring_case), "--json", str(out), "--no-progress"]) == 130
+    data = json.loads(out.read_text())
+    assert data["complete"] is False and data["verdict"] == "interrupted"
+    assert "what was finished" in capsys.readouterr().err

@@ -19,7 +19,8 @@ from idm_rs.diagnosis.catalogue import CATALOGUE, by_id
 from idm_rs.diagnosis.fitting import FreeParam, Objective, apply, fit, set_param
 from idm_rs.diagnosis.multistart import Start, leaves_noise, multistart
 from idm_rs.diagnosis.noise import cross_check, estimate_noise, residual_sigma
-from idm_rs.diagnosis.results import SEPARATION, Candidate
+from idm_rs.diagnosis.results import Candidate
+from idm_rs.diagnosis.thresholds import SEPARATION
 from idm_rs.diagnosis.screening import Screened, near_degenerate, screen
 from idm_rs.recording import load_case
 from idm_rs.synthetic import make_case

@@ -1,4 +1,4 @@
-"""Unit physics of each catalogue effect (recordings/FORMAT.md) through ``idm_rs.simulate``.
+"""Unit physics of each catalogue effect (docs/RECORDINGS.md) through ``idm_rs.simulate``.
 
 Short LPS runs (a 2-cycle 200 Hz sawtooth, 10 ms, dt 2e-8 s, no piezo hysteresis), each compared
 with the same run without the effect, so every test fails if the effect is missing, has the

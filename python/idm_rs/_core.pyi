@@ -188,7 +188,7 @@ def start_batch(
     initial_states: Optional[NDArray[np.float64]] = None,
     sensitivities: Optional[list[str]] = None,
 ) -> BatchRun:
-    """Start a batch on a background thread. One row per point: ``params`` (P, 23) in
+    """Start a batch on a background thread. One row per point: ``params`` (P, 24) in
     ``param_names()`` order (NaN ``normal_force`` = derived from the masses), ``effects``
     (P, 9) in ``effect_names()`` order, ``wave_fields`` (P, k) in ``wave_fields(wave_kind)``
     order; ``wave_kind`` "triangle", "sawtooth" or "sampled" (then ``sampled`` = the shared

@@ -195,7 +195,7 @@ def characterize(params: Optional[Params] = None, *, model: Literal["lps", "dps"
     first ``skip_cycles`` are start-up. Defaults suit the paper's device (Table 1)."""
     import xarray as xr
 
-    from . import __version__
+    from .engine import __version__
     from .sweep import sweep
 
     params = params or Params()

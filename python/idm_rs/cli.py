@@ -18,12 +18,13 @@ from typing import TYPE_CHECKING, Optional, Sequence
 
 import numpy as np
 
-from . import __version__
+from .engine import __version__
 from .methods import METHODS
 from .effects import Effects
 from .params import Params
 from .simulation import DivergenceError, SimulationResult, simulate
 from .sweep import METRICS, STEADY_METRICS
+from .cli_figures import plot_result, plot_sweep
 from .waveforms import Sampled, Sawtooth, Triangle, Waveform
 
 if TYPE_CHECKING:
@@ -391,58 +392,6 @@ def save_trajectory(result: SimulationResult, path: Path) -> None:
     (write_csv if suffix == ".csv" else write_netcdf)(result, path)
 
 
-def result_title(result: SimulationResult) -> str:
-    """The trajectory plot's title: the model, the effects that were on, x1(t_end)."""
-    label = "LPS" if result.model == "lps" else f"DPS (n = {result.n_elements})"
-    on = result.effects.active()
-    effects = ("; " + ", ".join(f"{k} = {v:g}" for k, v in on.items())) if on else ""
-    return f"{label}{effects}: x1(t_end) = {result.final_position * 1e6:.4f} µm"
-
-
-def plot_result(result: SimulationResult, path: Path) -> None:
-    """Displacements and voltage over the run, and the friction force. A sawtooth train of 4 or
-    more cycles switches friction between ±Fs several times per cycle, which over the whole run
-    is a solid band: its friction panel zooms on the last full cycle instead (shaded above)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    t = result.t * 1e3
-    w = result.waveform
-    zoom = isinstance(w, Sawtooth) and w.cycles >= 4
-    fig, (ax, axf) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=not zoom, layout="constrained")
-    ax.plot(t, result.main_body * 1e6, color="C0", label="x1 (main body)")
-    ax.plot(t, result.weight * 1e6, color="C2", ls="--", lw=1.0, label="x2 (weight)")
-    ax.set_ylabel("displacement [µm]")
-    ax.grid(alpha=0.3)
-    axv = ax.twinx()
-    axv.plot(t, result.voltage, color="0.5", lw=0.9, label="voltage")
-    axv.set_ylabel("voltage V [V]", color="0.4")
-    lines = ax.get_lines() + axv.get_lines()
-    ax.legend(lines, [ln.get_label() for ln in lines], fontsize=8.5, loc="best")
-    ax.set_title(result_title(result), fontsize=10)
-    if zoom:
-        assert isinstance(w, Sawtooth)
-        last = min(w.cycles, int((result.t[-1] - w.delay) / w.period + 1e-9)) - 1
-        t0 = w.delay + max(last, 0) * w.period
-        sel = (result.t >= t0 - 1e-12) & (result.t <= t0 + w.period + 1e-12)
-        ax.axvspan(t0 * 1e3, (t0 + w.period) * 1e3, color="C3", alpha=0.08, lw=0)
-        axf.plot((result.t[sel] - t0) * 1e3, result.friction[sel], color="C3", lw=0.8)
-        axf.set_xlabel(f"time in cycle {last + 1} of {w.cycles} [ms] (from t = {t0 * 1e3:g} ms; shaded above)")
-        ax.set_xlabel("time t [ms]")
-        ax.set_xlim(t[0], t[-1])
-    else:
-        axf.plot(t, result.friction, color="C3", lw=0.8)
-        axf.set_xlabel("time t [ms]")
-        axf.set_xlim(t[0], t[-1])
-    axf.set_ylabel("friction force Ff [N]")
-    axf.grid(alpha=0.3)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-
-
 def paper_case_csv(lps: SimulationResult, dps: SimulationResult, path: Path, every: int = 1) -> None:
     """Both paper-case trajectories in one CSV: t, voltage, then x1, x2, friction, fh per model."""
     if lps.t.shape != dps.t.shape or not np.array_equal(lps.t, dps.t):
@@ -535,125 +484,6 @@ def write_sweep_netcdf(ds: "xarray.Dataset", path: Path, engine: Optional[str] =
     path.parent.mkdir(parents=True, exist_ok=True)
     ds.to_netcdf(path, engine=engine)
     return engine
-
-
-def _cell_edges(c: np.ndarray) -> np.ndarray:
-    """Edges of the cells centred on the (sorted or not) coordinates ``c``."""
-    c = np.asarray(c, dtype=float)
-    if c.size == 1:
-        half = 0.05 * abs(c[0]) or 0.5
-        return np.array([c[0] - half, c[0] + half])
-    mid = 0.5 * (c[1:] + c[:-1])
-    return np.concatenate([[c[0] - (mid[0] - c[0])], mid, [c[-1] + (c[-1] - mid[-1])]])
-
-
-def _display_scale(units: str) -> tuple[float, str]:
-    """Plot lengths in µm and velocities in mm/s; everything else in its own units."""
-    return {"m": (1e6, "µm"), "m/s": (1e3, "mm/s")}.get(units, (1.0, units))
-
-
-def _axis_label(da: "xarray.DataArray", name: str) -> str:
-    """``name [units]``; a dimensionless quantity shows ``[-]``."""
-    units = da.attrs.get("units", "")
-    return f"{name} [{'-' if units == '1' else units}]" if units else name
-
-
-def plot_sweep(ds: "xarray.Dataset", metric: str, path: Path) -> None:
-    """A heat map of ``metric`` over a 2-axis sweep (pcolormesh, colour bar with units) or a line
-    plot over a 1-axis sweep. Points that diverged (status 3) are hatched grey, points not run
-    (an interrupted sweep) plain grey."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.collections import PatchCollection
-    from matplotlib.patches import Patch, Rectangle
-
-    da = ds[metric]
-    dims = list(da.dims)
-    if len(dims) not in (1, 2):
-        raise CliError(f"--plot draws sweeps of 1 or 2 axes; this one has {len(dims)} ({', '.join(dims)})")
-    scale, units = _display_scale(da.attrs.get("units", ""))
-    values = da.values.astype(float) * scale
-    status = ds["status"].values
-    diverged = status == 3
-    not_run = status == 0
-    label = f"{metric} [{units}]" if units and units != "1" else metric
-    long_name = da.attrs.get("long_name", metric)
-    hatch = dict(facecolor="0.75", edgecolor="0.35", hatch="///", lw=0.0)
-
-    fig, ax = plt.subplots(figsize=(8, 6) if len(dims) == 2 else (8, 4.5), layout="constrained")
-    if len(dims) == 2:
-        ydim, xdim = dims
-        x, y = ds[xdim].values, ds[ydim].values
-        xe, ye = _cell_edges(x), _cell_edges(y)
-        finite = values[np.isfinite(values)]
-        signed = finite.size > 0 and finite.min() < 0 < finite.max()
-        # a signed quantity (a displacement that can go either way) on a diverging map centred on 0
-        if signed:
-            from matplotlib.colors import TwoSlopeNorm
-
-            cmap = plt.get_cmap("RdBu_r").with_extremes(bad="0.75")
-            norm = TwoSlopeNorm(vcenter=0.0, vmin=float(finite.min()), vmax=float(finite.max()))
-        else:
-            cmap, norm = plt.get_cmap("viridis").with_extremes(bad="0.75"), None
-        mesh = ax.pcolormesh(xe, ye, np.ma.masked_invalid(values), cmap=cmap, norm=norm, shading="flat")
-        cb = fig.colorbar(mesh, ax=ax)
-        cb.set_label(f"{long_name} [{units}]" if units and units != "1" else long_name)
-        rects = [Rectangle((xe[j], ye[i]), xe[j + 1] - xe[j], ye[i + 1] - ye[i]) for i, j in zip(*np.nonzero(diverged))]
-        if rects:
-            ax.add_collection(PatchCollection(rects, **hatch))
-        ax.set_xlabel(_axis_label(ds[xdim], xdim))
-        ax.set_ylabel(_axis_label(ds[ydim], ydim))
-    else:
-        (xdim,) = dims
-        x = ds[xdim].values
-        xe = _cell_edges(x)
-        ax.plot(x, values, ".-", color="C0", lw=1.2, ms=4)
-        for j in np.flatnonzero(diverged):
-            ax.axvspan(xe[j], xe[j + 1], **hatch)
-        for j in np.flatnonzero(not_run):
-            ax.axvspan(xe[j], xe[j + 1], color="0.85", lw=0)
-        ax.set_xlabel(_axis_label(ds[xdim], xdim))
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-    handles = []
-    if diverged.any():
-        handles.append(Patch(**hatch, label=f"diverged ({int(diverged.sum())})"))
-    if not_run.any():
-        handles.append(Patch(facecolor="0.75" if len(dims) == 2 else "0.85", label=f"not run ({int(not_run.sum())})"))
-    if handles:
-        ax.legend(handles=handles, loc="best", fontsize=8.5)
-    ax.set_title(sweep_title(ds, metric), fontsize=9.5)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-
-
-def sweep_title(ds: "xarray.Dataset", metric: str) -> str:
-    """The sweep plot's title: the metric, then the model, method, span and waveform, wrapped to
-    the figure's width (at 9.5 pt about 95 characters fit in 8 inches)."""
-    import textwrap
-
-    a = ds.attrs
-    model = "LPS" if a.get("model") == "lps" else f"DPS (n = {a.get('n_elements')})"
-    step = f"dt = {a.get('dt_s'):g} s" if a.get("method") == "rk4" else f"rtol = {a.get('rtol'):g}"
-    on = [k[len("effect_"):] + f" = {v:g}" for k, v in a.items() if k.startswith("effect_")]
-    details = (f"{model}, {a.get('method')} ({step}), t_end = {a.get('t_end_s'):g} s, "
-               f"{_waveform_title(str(a.get('waveform')), list(ds[metric].dims))}"
-               + (f"; effects: {', '.join(on)}" if on else ""))
-    return ds[metric].attrs.get("long_name", metric) + "\n" + textwrap.fill(details, 95)
-
-
-def _waveform_title(text: str, swept: Sequence[str]) -> str:
-    """The waveform's repr with the fields a sweep varies shown as swept (``voltage`` is the
-    ``amplitude``), not at the base value that no point of the plot has."""
-    import re
-
-    for name in swept:
-        field = "amplitude" if name == "voltage" else name
-        text = re.sub(rf"\b{field}=[^,)]+", f"{field}=swept", text)
-    return text
 
 
 STATUS_NAMES = ("not run", "ok", "ok at a smaller dt", "diverged", "invalid")
@@ -918,16 +748,19 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
         return 0
     d = diagnose(a.case_dir, progress=not a.no_progress, threads=a.threads)
     print(d.report())
+    if not d.complete:
+        print("interrupted: the report above and the JSON (\"complete\": false) hold what was finished",
+              file=sys.stderr)
     if a.json:
         out = Path(a.json)
         if out.parent != Path(""):
             out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps(json_safe(d.to_dict()), indent=2, allow_nan=False) + "\n", encoding="utf-8")
         print(f"wrote {out}")
-    if a.plots:
+    if a.plots and d.complete:
         paths = d.plot(a.plots)
         print(f"wrote {len(paths)} figures in {a.plots}: " + ", ".join(p.name for p in paths))
-    return 0
+    return 0 if d.complete else 130
 
 
 def _one_line(exc: BaseException) -> str:

@@ -1,4 +1,4 @@
-"""Optional physics beyond the paper's model (the catalogue of ``recordings/FORMAT.md``).
+"""Optional physics beyond the paper's model (the catalogue of ``docs/RECORDINGS.md``, declared in ``rust/src/effects.rs``).
 
 Each effect parameter is off at 0. They run inside the Rust engine (extra forces or states),
 so fits and sweeps with an effect run at engine speed. The effects and their parameters are

@@ -342,8 +342,3 @@ def choose_fig7_dt(
         return fallback, 0.0
     diff = step_convergence(case, coarse=preferred, fine=fallback)
     return (preferred if diff < tol else fallback), diff
-
-
-def final_positions_um(runs: Sequence[SweepRun]) -> list[float]:
-    """x1(t_end) [µm] of each run."""
-    return [r.result.final_position * 1e6 for r in runs]

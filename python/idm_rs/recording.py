@@ -1,4 +1,4 @@
-"""Reader for IDM lab recordings in the ``idm-recording/1`` format (``recordings/FORMAT.md``).
+"""Reader for IDM lab recordings in the ``idm-recording/1`` format (``docs/RECORDINGS.md``).
 
 A *case* is a directory holding ``meta.json`` and one CSV file (``t,voltage,x``) per experiment::
 

@@ -172,7 +172,7 @@ class SimulationResult:
         """The trajectory as an xarray Dataset with units, and every setting in ``attrs``."""
         import xarray as xr
 
-        from . import __version__
+        from .engine import __version__
 
         def var(data: NDArray[np.float64], units: str, long_name: str, dims: tuple[str, ...] = ("time",)):
             return xr.Variable(dims, data, {"units": units, "long_name": long_name})

@@ -289,7 +289,7 @@ def sweep(
     """
     import xarray as xr
 
-    from . import __version__
+    from .engine import __version__
 
     if not isinstance(params, Params):
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")

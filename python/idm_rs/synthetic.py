@@ -38,7 +38,7 @@ OFFSET_RANGE_M = 2e-6
 
 
 def _fmt_number(v: float) -> Union[int, float]:
-    """Integers as JSON integers (80, not 80.0), as in FORMAT.md."""
+    """Integers as JSON integers (80, not 80.0), as in docs/RECORDINGS.md."""
     return int(v) if float(v).is_integer() and abs(v) < 2**53 else float(v)
 
 
@@ -195,7 +195,7 @@ def make_case(
         nominal["n_elements"] = int(n_elements)
     nominal["piezo_hysteresis"] = bool(piezo_hysteresis)
     resolved = nominal_params.to_dict(resolved=True)
-    nominal["params"] = {f.name: resolved[f.name] for f in fields(Params)}  # FORMAT.md's order
+    nominal["params"] = {f.name: resolved[f.name] for f in fields(Params)}  # the Params order
     meta = {
         "format": FORMAT_ID,
         "nominal": nominal,

@@ -570,7 +570,7 @@ impl BatchRun {
     }
 }
 
-/// Start a batch. One row per point: `params` (P, 23) in `param_names()` order (NaN
+/// Start a batch. One row per point: `params` (P, 24) in `param_names()` order (NaN
 /// normal_force = derived), `effects` (P, 9) in `effect_names()` order, `wave_fields` (P, k) in
 /// `wave_fields(wave_kind)` order; optional per-point `t_ends`, `t_starts` [s] and
 /// `initial_states` (P, state size).
@@ -655,7 +655,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
 // ==== declarations: Table 1, the effect catalogue, gravity ===================================
 // Read-only descriptions of the model for the Python side (units, bounds, catalogue text); kept
 // in one block apart from the engine's entry points above, registered by
-// `register_declarations`.
+// `declarations::register` in the module's init.
 
 mod declarations {
     use pyo3::prelude::*;

@@ -103,7 +103,7 @@ impl EffectKind {
     }
 }
 
-/// One effect of the catalogue of `recordings/FORMAT.md`.
+/// One effect of the catalogue (docs/RECORDINGS.md).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EffectDecl {
     /// catalogue id, e.g. "spring_to_ground"

@@ -1,4 +1,4 @@
-//! Optional physics beyond the paper's model: the effect catalogue of `recordings/FORMAT.md`,
+//! Optional physics beyond the paper's model: the effect catalogue (docs/RECORDINGS.md),
 //! declared once in [`EFFECTS`]. Effects that add a term to the engine are off at their zero
 //! value and have one small function here; their parameters are the fields of [`Effects`].
 //! (`pe_mass` is a change of structure, LPS -> DPS, and `piezo_hysteresis` and `stribeck`

@@ -210,7 +210,8 @@ pub fn simulate_keeping(
 }
 
 /// Run from rest over [0, `t_end`] with RK4 of step `dt` [s], saving every `save_every` steps:
-/// the paper's setting.
+/// the paper's setting (the Rust tests' shorthand; the bindings call `simulate`).
+#[cfg(test)]
 pub fn simulate_from_rest(
     model: &Model,
     wave: &PiecewiseLinear,

@@ -1,4 +1,4 @@
-"""The catalogue of physics a nominal model may lack (recordings/FORMAT.md), as data.
+"""The catalogue of physics a nominal model may lack (docs/RECORDINGS.md), as data.
 
 What each effect *is* (id, one-line physics, the term it adds, its parameters with units and
 physical bounds) is declared once in the Rust core (``rust/src/effects.rs``) and read here through

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence, Union
 
@@ -24,11 +24,11 @@ from .calibration import Calibration, search
 from .calibration import calibrate as global_calibration
 from .catalogue import CALIBRATED, CALIBRATION_RANGE, CALIBRATION_SCALE, CATALOGUE, Effect, EffectParam
 from .fitting import FitResult, FreeParam, Objective, apply, fit, set_effect, set_param
-from .locate import locate, merge_windows
+from .locate import Location, locate, merge_windows
 from .multistart import Start, agree, multistart
 from .noise import NoiseEstimate, cross_check, estimate_noise, whiteness_z
-from .results import (BIC_THRESHOLD, LR_ALPHA, NOISE_RATIO_OK, REFIT_TOP, SEPARATION, WHITENESS_Z,
-                      Alternative, Candidate, Diagnosis)
+from .results import Alternative, Candidate, Diagnosis
+from .thresholds import BIC_THRESHOLD, LR_ALPHA, NOISE_RATIO_OK, REFIT_TOP, SEPARATION, WHITENESS_Z
 from .screening import Screened, near_degenerate, screen
 
 #: leading candidates whose nominal parameters seed a refit of the null model
@@ -282,13 +282,14 @@ def _screen(pb: _Problem, cal: _Calibration, nominal: _Nominal) -> tuple[list[Ef
 
 def _fit_candidates(pb: _Problem, cal: _Calibration, order: list[Effect], screened: dict[str, Screened],
                     refit_top: int, already: Optional[list[_Refit]] = None, local_fits: int = CANDIDATE_FITS,
-                    min_score: float = MIN_SCORE) -> list[_Refit]:
+                    min_score: float = MIN_SCORE, sink: Optional[list[_Refit]] = None) -> list[_Refit]:
     """The `refit_top` best-scored effects (those scoring at least `min_score`) fitted by
     multistart over two cycles, then everything; the others reported with their score's
     linearised step only. A fit that ends no better than the null model it contains is
     reported at the null."""
     done = {r.candidate.effect: r for r in (already or []) if not r.candidate.screened_only}
-    out: list[_Refit] = []
+    # each finished candidate goes straight into `sink` (kept if the run is interrupted)
+    out: list[_Refit] = sink if sink is not None else []
     for i, eff in enumerate(order):
         sc = screened[eff.id]
         base = ModelSpec(eff.structure(cal.fit.spec.structure), dict(cal.fit.spec.params), dict(cal.fit.spec.effects))
@@ -427,12 +428,31 @@ def _null_refits(pb: _Problem, nominal: _Nominal, cal: _Calibration, refits: lis
             best = _Calibration(cal.free, n0, at, n0, at, bic, whiteness_z(n0.residuals), cal.search, cal.scan_at)
             source = f"nominal refit from the {c.effect} fit"
     for r in refits:
-        c = r.candidate
-        c.delta_bic = best.bic - c.bic
-        c.lr_chi2 = best.fit.chi2 - c.chi2
-        if c.chi2 >= best.fit.chi2:
-            c.at_null = True
+        _against_null(pb, best, r)
     return best, source
+
+
+def _against_null(pb: _Problem, null: _Calibration, r: _Refit) -> None:
+    """Take `r`'s ΔBIC and likelihood ratio against `null`; a candidate that ended no better
+    than it is reported at the null it contains (its effect at "no effect", the null's fit,
+    residual and nominal values): never worse than the null, never a significance of its own."""
+    c = r.candidate
+    if c.chi2 >= null.fit.chi2:
+        if c.screened_only:
+            # the score's linearised step, taken at an earlier null: no better than this one
+            c.chi2, c.rms_after, c.residuals = null.fit.chi2, null.fit.rms, null.fit.residuals
+            c.bic = c.chi2 + c.n_params * pb.ln_n
+        else:
+            eff = next(e for e in CATALOGUE if e.id == c.effect)
+            at = _at_null(null, eff, r.base)
+            if at is not None:
+                nc = _candidate(pb, null, eff, at, False, at_null=True)
+                nc.score, nc.multistart = c.score, c.multistart
+                r.candidate = c = nc
+                r.free = [p.at(null.fit.values[p.name]) if p.name in null.fit.values else p for p in r.free]
+            c.at_null = True
+    c.delta_bic = null.bic - c.bic
+    c.lr_chi2 = null.fit.chi2 - c.chi2
 
 
 def _polish_leader(pb: _Problem, cal: _Calibration, refits: list[_Refit]) -> None:
@@ -498,37 +518,116 @@ def _rank_with_heldout(refits: list[_Refit], heldout: _HeldOut) -> list[Candidat
     return [r.candidate for r in refits]
 
 
+@dataclass
+class _Run:
+    """What a diagnosis has finished so far, kept for an interrupted run."""
+
+    stage: str = "the nominal model"
+    pb: Optional[_Problem] = None
+    nominal: Optional[_Nominal] = None
+    cal: Optional[_Calibration] = None
+    screened: dict[str, Screened] = field(default_factory=dict)
+    #: the candidates fitted so far, each appended as it finishes
+    refits: list[_Refit] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
 def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: float = FIT_DT,
              threads: Optional[int] = None, refit_top: int = REFIT_TOP) -> Diagnosis:
-    """Diagnose a recorded case (a directory in the `idm-recording/1` format, or a Recording)."""
+    """Diagnose a recorded case (a directory in the `idm-recording/1` format, or a Recording).
+    Ctrl-C (KeyboardInterrupt) returns what was finished — the calibration and the candidates
+    fitted so far — as a Diagnosis with verdict "interrupted" and ``complete`` False."""
     t_start = time.perf_counter()
     rec = case if isinstance(case, Recording) else load_case(case)
-    bar = _bar(progress, rec.name)
     noise = estimate_noise(rec)
     sim = CaseSimulator(rec, dt=dt, threads=threads)
+    bar = _bar(progress, rec.name, lambda: sim.evaluations)
+    run = _Run()
+    try:
+        d = _diagnose(rec, noise, sim, bar, run, refit_top, t_start)
+    except KeyboardInterrupt:
+        if bar is not None:
+            bar.close(done=False)
+        return _interrupted(rec, noise, sim, run, t_start)
+    if bar is not None:
+        bar.close()
+    return d
+
+
+def _interrupted(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, run: _Run, t_start: float) -> Diagnosis:
+    """The Diagnosis of a run stopped by Ctrl-C: what was finished, marked incomplete."""
+    cal, nominal = run.cal, run.nominal
+    n_all = run.pb.obj.n if run.pb is not None else max(rec.n_samples, 1)
+    ranking = [r.candidate for r in _ordered(run.refits)]
+    rms0 = (math.sqrt(sum(float(np.sum(r * r)) for r in nominal.residuals) / n_all) if nominal is not None
+            else math.nan)
+    locations: list[Location] = []
+    if cal is not None:
+        locations, _ = locate(rec, cal.fit.residuals, noise.sigma)
+    fitted = sum(1 for c in ranking if not c.screened_only)
+    return Diagnosis(
+        case=rec.name, verdict="interrupted",
+        reason=(f"stopped by Ctrl-C during {run.stage} after {time.perf_counter() - t_start:.0f} s; "
+                f"finished: {'the calibration' if cal is not None else 'nothing past the nominal model'}"
+                + (f" and {fitted} candidate fit{'s' if fitted != 1 else ''}" if fitted else "")
+                + " (no verdict was reached)"),
+        ranking=ranking, noise=noise, rms_before=rms0,
+        rms_calibrated=cal.fit.rms if cal is not None else math.nan,
+        rms_after=cal.fit.rms if cal is not None else math.nan,
+        calibrated=dict(cal.fit.values) if cal is not None else {},
+        calibrated_std=dict(cal.fit.std) if cal is not None else {}, locations=locations, windows=[],
+        heldout_experiment="", heldout_rms_calibrated=math.nan,
+        whiteness_z_calibrated=cal.whiteness_z if cal is not None else math.nan,
+        seconds=time.perf_counter() - t_start, timings=run.timings, simulations=sim.evaluations, recording=rec,
+        nominal_residuals=nominal.residuals if nominal is not None else [],
+        calibrated_residuals=cal.fit.residuals if cal is not None else [],
+        nominal_spec=nominal.spec if nominal is not None else None,
+        calibrated_spec=cal.fit.spec if cal is not None else None, simulator=sim,
+        calibration_converged=cal.search.converged if cal is not None else False,
+        calibration_summary=cal.search.summary() if cal is not None else "",
+        screening={k: v.delta_chi2 for k, v in sorted(run.screened.items(), key=lambda kv: -kv[1].delta_chi2)},
+        complete=False,
+    )
+
+
+def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Optional[_Progress], run: _Run,
+              refit_top: int, t_start: float) -> Diagnosis:
     pb = _Problem(rec, noise, sim, Objective(rec, sim, noise.sigma), bar.update if bar is not None else None)
-    nominal = _nominal(pb)
+    run.pb = pb
+    nominal = run.nominal = _nominal(pb)
 
     clock = _Clock(bar)
+    run.timings = clock.timings
+    run.stage = "the calibration"
     cal = _calibrate(pb, nominal)
     # the noise floor cross-checked against the calibrated residual's high-frequency content
     noise = cross_check(noise, cal.fit.residuals)
     pb, cal = _renoised(pb, cal, noise)
+    run.pb, run.cal = pb, cal
     clock.lap("calibration")
+    run.stage = "the screening"
     heldout = _HeldOut(pb)
     order, screened = _screen(pb, cal, nominal)
+    run.screened = screened
     clock.lap("screening")
-    refits = _fit_candidates(pb, cal, order, screened, refit_top)
+    run.stage = "the candidate fits"
+    refits = _fit_candidates(pb, cal, order, screened, refit_top, sink=run.refits)
+    run.refits = refits
     clock.lap("candidate fits")
+    run.stage = "the null refits"
     cal, null_source = _null_refits(pb, nominal, cal, refits, NULL_REFITS)
+    run.cal = cal
     clock.lap("null refits")
+    run.stage = "the polish"
     # the leaders fitted to convergence before their residuals are judged: a candidate fit
     # stops after a fixed budget, and one that stopped short of noise would send the case to
     # the wider search for nothing (confusion case 24: creep at 1.09 x noise after its budget)
     _polish_leader(pb, cal, refits)
     # and the null gets the same chance from where the polished leader's nominal values went
     cal, null_source = _null_refits(pb, nominal, cal, refits, NULL_REFITS)
+    run.cal = cal
     clock.lap("polish")
+    run.stage = "the wider search"
     searched_wide = False
     if not any(_explains(pb, r.candidate) for r in refits) and not _leaves_noise(pb, cal):
         # a systematic residual that no candidate fitted so far explains: the wider search
@@ -546,7 +645,9 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
             refits = _better_of(refits, again)
             cal, null_source = _null_refits(pb, nominal, cal, refits, NULL_REFITS)
         _polish_leader(pb, cal, refits)
+    run.cal, run.refits = cal, refits
     clock.lap("wider search")
+    run.stage = "the held-out prediction"
     ranking = _rank_with_heldout(refits, heldout)
     # the null's held-out prediction, for comparison, only where a candidate has one
     ho_cal = heldout.rms(cal.fit.spec, cal.at) if any(_finite(c.heldout_rms) for c in ranking) else math.nan
@@ -559,8 +660,6 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     alternatives = _alternatives(ranking, verdict, degenerate)
     if alternatives:
         reason += "; cannot be told apart from " + ", ".join(f"{a.effect} ({a.why})" for a in alternatives)
-    if bar is not None:
-        bar.close()
     n_all = pb.obj.n
     return Diagnosis(
         case=rec.name, verdict=verdict, reason=reason, ranking=ranking, noise=noise,
@@ -681,20 +780,25 @@ STAGES: tuple[tuple[str, float, float], ...] = (
 
 class _Progress:
     """A percent bar over the stages: each stage owns its share, simulations advance it within the
-    stage (approaching the share's end, as a stage's length is not known in advance), and the
-    bar's ETA follows; the stage and the simulation count are shown beside it."""
+    stage (approaching the share's end, as a stage's length is not known in advance). The ETA is
+    the average rate of the whole run so far (tqdm's smoothing 0), not the last few updates':
+    a stage that runs long no longer sends it from minutes to an hour and back. Beside it: the
+    stage and the simulated runs, counted as the report counts them (``runs()``, the
+    simulator's own count, one per experiment simulated)."""
 
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, runs: Optional[Callable[[], int]] = None) -> None:
         from tqdm.auto import tqdm
 
-        self.bar = tqdm(total=100.0, desc=f"diagnosing {name}", unit="%",
+        self.bar = tqdm(total=100.0, desc=f"diagnosing {name}", unit="%", smoothing=0.0,
                         bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
         self.stage, self.start, self.in_stage, self.evals = 0, 0.0, 0.0, 0
+        self.runs = runs
         self._show()
 
     def _show(self) -> None:
         name = STAGES[self.stage][0] if self.stage < len(STAGES) else "done"
-        self.bar.set_postfix_str(f"{name}, {self.evals} simulations", refresh=False)
+        count = self.runs() if self.runs is not None else self.evals
+        self.bar.set_postfix_str(f"{name}, {count} simulated runs", refresh=False)
 
     def update(self, n: int = 1) -> None:
         """``n`` more simulations."""
@@ -717,10 +821,11 @@ class _Progress:
         self.bar.update(max(0.0, self.start - self.bar.n))
         self._show()
 
-    def close(self) -> None:
-        self.bar.update(max(0.0, 100.0 - self.bar.n))
+    def close(self, done: bool = True) -> None:
+        if done:
+            self.bar.update(max(0.0, 100.0 - self.bar.n))
         self.bar.close()
 
 
-def _bar(show: bool, name: str) -> Optional[_Progress]:
-    return _Progress(name) if show else None
+def _bar(show: bool, name: str, runs: Optional[Callable[[], int]] = None) -> Optional[_Progress]:
+    return _Progress(name, runs) if show else None

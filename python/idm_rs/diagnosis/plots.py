@@ -12,9 +12,10 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 
 from .locate import PHASES
-from .results import BIC_THRESHOLD, NOISE_RATIO_OK, Candidate, Diagnosis
+from .thresholds import BIC_THRESHOLD, NOISE_RATIO_OK
 
 if TYPE_CHECKING:
+    from .results import Candidate, Diagnosis
     from matplotlib.figure import Figure
 
 DPI = 120
@@ -67,9 +68,37 @@ def _save(fig: "Figure", path: Path) -> Path:
     return path
 
 
+#: the residual's systematic part: a moving mean over this share of a drive cycle
+SMOOTH_CYCLE_SHARE = 1.0 / 25.0
+
+
+def _moving_mean(r: np.ndarray, w: int) -> np.ndarray:
+    """Centred moving mean over `w` samples (shorter windows at the ends)."""
+    if w <= 1 or r.size < w:
+        return r.copy()
+    c = np.cumsum(np.insert(r, 0, 0.0))
+    half = w // 2
+    lo = np.clip(np.arange(r.size) - half, 0, r.size)
+    hi = np.clip(np.arange(r.size) - half + w, 0, r.size)
+    return (c[hi] - c[lo]) / (hi - lo)
+
+
+def report_residuals(d: Diagnosis, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """Experiment `j`'s residuals [m] as the report computes them (data − model − each drive
+    cycle's fitted segment offset): of the calibrated nominal and of the refitted model (the
+    calibrated one again when no effect is named). Empty where the result kept none."""
+    cal = np.asarray(d.calibrated_residuals[j]) if j < len(d.calibrated_residuals) else np.zeros(0)
+    cand = refit_candidate(d)
+    ref = np.asarray(cand.residuals[j]) if cand is not None and j < len(cand.residuals) else cal
+    return cal, ref
+
+
 def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
-    """``fit_<experiment>.png``: voltage; data vs nominal vs refitted model; residuals of the
-    calibrated nominal and of the refitted model with the systematic windows shaded."""
+    """``fit_<experiment>.png``: voltage; data vs nominal vs refitted model; the residuals of the
+    calibrated nominal and of the refitted model *as the report computes them* (each drive
+    cycle's segment less its own fitted offset, so their RMS is the report's), faint, with
+    their systematic part (a moving mean over 1/25 of a drive cycle) bold against the noise
+    band and that band narrowed to the moving mean's own noise; the located windows shaded."""
     import matplotlib.pyplot as plt
 
     if d.simulator is None or d.nominal_spec is None or d.calibrated_spec is None:
@@ -91,8 +120,13 @@ def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
             off_ref = float(np.mean(x))
         nom_aligned, _ = _aligned(x, p_nom, rest)
         cal_aligned, _ = _aligned(x, p_cal, rest)
-        r_cal = (x - cal_aligned) * 1e9
-        r_ref = (x - ref_aligned) * 1e9
+        # the report's residuals (per-segment offsets removed); the rest-aligned difference
+        # only where a result kept none
+        r_cal, r_ref = report_residuals(d, j)
+        r_cal = r_cal * 1e9 if r_cal.size == x.size else (x - cal_aligned) * 1e9
+        r_ref = r_ref * 1e9 if r_ref.size == x.size else (x - ref_aligned) * 1e9
+        per_cycle = d.recording.sample_rate_Hz / e.frequency_Hz if e.frequency_Hz > 0 else x.size
+        w = max(1, int(round(SMOOTH_CYCLE_SHARE * per_cycle)))
 
         fig, (ax_v, ax_x, ax_r) = plt.subplots(3, 1, figsize=(10, 7.5), sharex=True,
                                                gridspec_kw={"height_ratios": [1, 3, 2]}, constrained_layout=True)
@@ -115,16 +149,20 @@ def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
             if w.experiment == e.name:
                 for ax in (ax_x, ax_r):
                     ax.axvspan(w.t_start * 1e3, w.t_end * 1e3, color=C_WINDOW, alpha=0.12, lw=0)
-        ax_r.axhspan(-sigma_nm, sigma_nm, color="0.8", alpha=0.6, lw=0, label=f"±1σ noise ({sigma_nm:.2f} nm)")
-        ax_r.plot(t_ms, r_cal, color=C_CALIBRATED, lw=0.7,
-                  label=f"calibrated nominal (RMS {np.sqrt(np.nanmean(r_cal ** 2)):.2f} nm)")
+        ax_r.axhspan(-sigma_nm, sigma_nm, color="0.85", alpha=0.6, lw=0, label=f"±1σ noise ({sigma_nm:.2f} nm)")
+        band = sigma_nm / math.sqrt(w)
+        ax_r.axhspan(-band, band, color="0.6", alpha=0.5, lw=0, label=f"±1σ of the moving mean ({band:.2f} nm)")
+        ax_r.plot(t_ms, r_cal, color=C_CALIBRATED, lw=0.5, alpha=0.35)
+        ax_r.plot(t_ms, _moving_mean(r_cal, w), color=C_CALIBRATED, lw=1.6,
+                  label=f"calibrated nominal (RMS {np.sqrt(np.nanmean(r_cal ** 2)):.2f} nm; bold: systematic part)")
         if cand is not None:
-            ax_r.plot(t_ms, r_ref, color=C_REFIT, lw=0.7,
+            ax_r.plot(t_ms, r_ref, color=C_REFIT, lw=0.5, alpha=0.35)
+            ax_r.plot(t_ms, _moving_mean(r_ref, w), color=C_REFIT, lw=1.6,
                       label=f"{refit_label} (RMS {np.sqrt(np.nanmean(r_ref ** 2)):.2f} nm)")
         if any(w.experiment == e.name for w in d.windows):
             ax_r.axvspan(np.nan, np.nan, color=C_WINDOW, alpha=0.12, lw=0, label="systematic windows (calibrated)")
         ax_r.axhline(0, color="0.3", lw=0.5)
-        ax_r.set_ylabel("residual (data − model) [nm]")
+        ax_r.set_ylabel("residual [nm]\n(data − model − segment offset)")
         ax_r.set_xlabel("time [ms]")
         ax_r.legend(loc="upper left", fontsize=8, ncol=2)
         ax_r.grid(alpha=0.3)
@@ -186,8 +224,7 @@ def plot_ranking(d: Diagnosis, directory: Path) -> Path:
     ax.set_xscale("symlog", linthresh=max(BIC_THRESHOLD, 1.0))
     ax.axvline(BIC_THRESHOLD, color="tab:green", ls="--", lw=1, label=f"ΔBIC threshold ({BIC_THRESHOLD:g})")
     ax.axvline(0, color="0.2", lw=0.8)
-    ax.set_yticks(y, [c.effect + (" (score only)" if c.screened_only else " (at null)" if c.at_null else "")
-                      for c in cands], fontsize=9)
+    ax.set_yticks(y, [c.effect + ("" if c.fit_label == "fitted" else f" ({c.fit_label})") for c in cands], fontsize=9)
     if any(c.screened_only for c in cands):
         ax.barh(np.nan, 0, color="0.75", hatch="//", edgecolor="0.4",
                 label="score only: not fitted, the screening step's linearised numbers")
@@ -201,7 +238,7 @@ def plot_ranking(d: Diagnosis, directory: Path) -> Path:
             text += f", held-out {c.heldout_rms * 1e9:.2f} nm"
         xpos = max(c.delta_bic, 0.0) if math.isfinite(c.delta_bic) else 0.0
         ax.annotate(text, (xpos, yi), xytext=(4, 0), textcoords="offset points", va="center", fontsize=8)
-    ax.set_xlabel("ΔBIC against the calibrated nominal model (symlog; > 0: better)")
+    ax.set_xlabel("ΔBIC against the best null fit (symlog; > 0: better)")
     ax.set_title(f"{d.case}: candidate effects — verdict: {d.verdict}")
     ax.legend(loc="lower right", fontsize=8)
     ax.grid(axis="x", alpha=0.3)

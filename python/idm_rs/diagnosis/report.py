@@ -6,11 +6,14 @@ candidate ranking with its evidence, and the refitted model in one line. Units e
 from __future__ import annotations
 
 import math
-from typing import Optional, Sequence
+from typing import TYPE_CHECKING, Optional, Sequence
 
 from ..params import PARAM_INFO
 from .catalogue import CALIBRATION_RANGE, CATALOGUE, by_id
-from .results import Candidate, Diagnosis
+from .thresholds import BIC_THRESHOLD
+
+if TYPE_CHECKING:
+    from .results import Candidate, Diagnosis
 
 #: experiment x phase locations listed in the report
 TOP_LOCATIONS = 6
@@ -120,6 +123,78 @@ def _table(headers: Sequence[str], rows: Sequence[Sequence[str]], align: str) ->
     return [line(headers), "  " + "  ".join("-" * w for w in widths)] + [line(r) for r in rows]
 
 
+def _evidence(delta_bic: float) -> str:
+    """A BIC gain in words (Kass & Raftery's scale: > 10 very strong)."""
+    if delta_bic >= 100:
+        return "overwhelming"
+    if delta_bic >= BIC_THRESHOLD:
+        return "very strong"
+    return "weak"
+
+
+def plain_summary(d: Diagnosis) -> list[str]:
+    """What was found, how sure, what to do — for a reader who does not speak statistics; the
+    numbers behind each sentence follow in the report."""
+    sigma = d.noise.sigma
+    ratio = lambda x: x / sigma if sigma > 0 else math.nan  # noqa: E731
+    best = next((c for c in d.ranking if c.effect == d.verdict), None)
+    p_meta = d.recording.nominal.params.to_dict(resolved=False)
+    moved = sorted(((n, v / p_meta[n] - 1.0) for n, v in d.calibrated.items()
+                    if _finite(p_meta.get(n)) and p_meta[n]), key=lambda kv: -abs(kv[1]))
+    biggest = f"; the largest change is {moved[0][0]} {100 * moved[0][1]:+.1f} % against meta.json" if moved else ""
+    where = next((l for l in d.locations if l.systematic), None)
+    alts = getattr(d, "alternatives", []) or []
+    lines = ["In plain words"]
+    if best is not None:
+        params = format_params(best)
+        lines.append(f"  Found: {best.description}"
+                     + (f" ({params})" if params not in ("–", "(structure only)") else "")
+                     + " — the nominal model lacks it. With it added and the nominal values re-fitted, the model "
+                     f"matches the recordings to {ratio(best.rms_after):.2f} × their noise, against "
+                     f"{ratio(d.rms_calibrated):.2f} × with the nominal values re-fitted alone.")
+        sure = f"  How sure: {_evidence(best.delta_bic)} evidence against \"nothing missing\""
+        if _finite(best.heldout_rms):
+            sure += (f"; the refitted model also predicts an experiment it was not fitted to "
+                     f"({ratio(best.heldout_rms):.2f} × noise)")
+        if alts:
+            sure += (f". But {', '.join(a.effect for a in alts)} explain{'s' if len(alts) == 1 else ''} these "
+                     "recordings about as well: the data cannot tell them apart")
+        lines.append(sure + ".")
+        todo = "  What to do: add this effect to your model with the fitted values (the refit model below)"
+        if alts:
+            todo += ("; to decide between it and the alternative, record experiments that excite them differently "
+                     "(the other drive direction, another amplitude or frequency)")
+        lines.append(todo + ".")
+    elif d.verdict == "none":
+        lines.append(f"  Found: nothing missing. The nominal model with re-fitted values matches the recordings to "
+                     f"their noise ({ratio(d.rms_calibrated):.2f} × noise){biggest}.")
+        top = next((c for c in d.ranking if not c.screened_only), None)
+        lines.append("  How sure: no catalogue effect improves the fit by more than the noise allows"
+                     + (f" (the closest, {top.effect}, gains ΔBIC {top.delta_bic:.0f}; 10 would be needed)"
+                        if top is not None and _finite(top.delta_bic) else "") + ".")
+        lines.append("  What to do: use the re-fitted values below; where one moved far from meta.json, check that "
+                     "setting of the device.")
+    elif d.verdict == "unexplained":
+        lines.append(f"  Found: the recordings disagree with the model in a way no catalogue effect explains: "
+                     f"{ratio(d.rms_after):.2f} × the noise remains"
+                     + (f", most of it in {where.experiment} ({where.phase})" if where is not None else "") + ".")
+        lines.append(f"  How sure: the residual is systematic, not noise (whiteness z = {d.whiteness_z_calibrated:.1f}; "
+                     "noise gives |z| < 3).")
+        lines.append("  What to do: look at the located windows and the fit figures: the missing physics is not "
+                     "among the catalogue's effects.")
+    elif d.verdict == "interrupted":
+        lines.append(f"  Found: no answer yet — {d.reason}.")
+        lines.append("  How sure: not at all: the run did not reach a verdict; the numbers below are what it "
+                     "had finished.")
+        lines.append("  What to do: run it again to the end.")
+    else:
+        lines.append(f"  Found: no firm answer ({d.verdict}): {d.reason}.")
+        lines.append("  How sure: not sure — the fits that should agree did not.")
+        lines.append("  What to do: record more experiments (both directions, several amplitudes), check meta.json, "
+                     "and run again.")
+    return lines
+
+
 def text_report(d: Diagnosis) -> str:
     sigma = d.noise.sigma
     rec = d.recording
@@ -134,6 +209,8 @@ def text_report(d: Diagnosis) -> str:
     if timings:
         lines.append("time per stage: " + ", ".join(f"{k} {v:.1f} s" for k, v in timings.items()))
     lines.append("")
+    lines += plain_summary(d)
+    lines += ["", "The numbers behind it", "---------------------"]
     lines.append(f"VERDICT: {d.verdict.upper()}")
     lines.append(f"  {d.reason}")
     for a in getattr(d, "alternatives", []) or []:
@@ -216,7 +293,7 @@ def text_report(d: Diagnosis) -> str:
                      f"{c.delta_bic:.1f}" if c.delta_bic >= 0 else "not supported",
                      f"{lr:.0f} / {c.lr_critical:.1f}" if _finite(lr) and not c.screened_only else "–",
                      _nm(c.heldout_rms) if _finite(c.heldout_rms) else "–",
-                     "at null" if getattr(c, "at_null", False) else ("score only" if c.screened_only else "fitted")])
+                     c.fit_label])
     lines += _table(["#", "effect", "fitted parameters (±1σ)", "RMS after", "/ noise", "score", "ΔBIC", "LR / crit",
                      "held-out RMS", "fit"], rows, "rllrrrrrrl")
     for c in d.ranking:

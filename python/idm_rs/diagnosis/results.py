@@ -1,7 +1,7 @@
 """What a diagnosis returns (:class:`Diagnosis`, with a :class:`Candidate` per catalogue effect
-tried) and the thresholds its verdict uses. The algorithm (:mod:`.diagnose`), the report
-(:mod:`.report`) and the figures (:mod:`.plots`) all read these; this module imports none of them
-at load time."""
+tried). The algorithm (:mod:`.diagnose`) builds these; ``Diagnosis.report()`` and ``.plot()``
+call the report (:mod:`.report`) and the figures (:mod:`.plots`), which read these classes for
+their types only, so the imports run one way."""
 
 from __future__ import annotations
 
@@ -18,24 +18,7 @@ from .case_model import CaseSimulator, ModelSpec
 from .locate import Location
 from .noise import NoiseEstimate
 
-#: BIC improvement (in chi^2 units) an effect needs to count as found: "very strong" evidence
-#: on the Kass-Raftery scale
-BIC_THRESHOLD = 10.0
-#: an effect must beat the runner-up by this much BIC to be named alone
-SEPARATION = 10.0
-#: residual RMS / noise RMS below which what is left counts as noise
-NOISE_RATIO_OK = 1.1
-#: lag-1 autocorrelation z-score above which a residual counts as systematic (about N(0, 1) for
-#: white noise: one-sided 3e-5 beyond 4; every healthy dev device's calibrated residual was
-#: within 1.4, effect cases mostly beyond 4.4)
-WHITENESS_Z = 4.0
-#: candidates refitted over everything after the one-cycle fits of all of them
-REFIT_TOP = 3
-#: significance level of the likelihood-ratio test of an effect against the null model it
-#: contains; the effect sits at a boundary of its nested model (a chi-bar-squared reference,
-#: Self & Liang 1987), whose tail the chi-squared with as many degrees of freedom as the effect
-#: has parameters bounds from above: the test used is that conservative bound
-LR_ALPHA = 1e-3
+from .thresholds import LR_ALPHA
 
 
 @dataclass
@@ -72,6 +55,13 @@ class Candidate:
 
     #: likelihood ratio against the null model it contains: null chi^2 minus this fit's chi^2
     lr_chi2: float = math.nan
+
+    @property
+    def fit_label(self) -> str:
+        """How the candidate's numbers came about, in the words the report and the figures share:
+        "score only" (not fitted: the screening step's linearised numbers), "at null" (fitted, and
+        no better than the null model it contains: reported at that null) or "fitted"."""
+        return "score only" if self.screened_only else "at null" if self.at_null else "fitted"
 
     @property
     def lr_critical(self) -> float:
@@ -173,6 +163,8 @@ class Diagnosis:
     searched_wide: bool = False
     #: the calibration's multistart: every local fit's start and end
     calibration_multistart: dict[str, Any] = field(default_factory=dict, repr=False)
+    #: False when Ctrl-C stopped the run: verdict "interrupted", what was finished is kept
+    complete: bool = True
 
     @property
     def best(self) -> Optional[Candidate]:
@@ -181,6 +173,7 @@ class Diagnosis:
     def to_dict(self) -> dict[str, Any]:
         return {
             "case": self.case,
+            "complete": self.complete,
             "verdict": self.verdict,
             "reason": self.reason,
             "ranking": [c.to_dict() for c in self.ranking],

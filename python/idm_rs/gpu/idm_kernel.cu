@@ -1,4 +1,4 @@
-/* The IDM's physics and a fixed-step RK4 for one point per thread: the source of the CUDA
+/* The IDM's physics, a fixed-step RK4 and an adaptive Dormand-Prince for one point per thread: the source of the CUDA
  * sweep backend (compiled by NVRTC through CuPy) and, unchanged, of the CPU build the test suite
  * compiles with the system C compiler to check it against the Rust engine.
  *

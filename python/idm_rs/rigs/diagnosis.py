@@ -35,7 +35,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from ..diagnosis.results import BIC_THRESHOLD
+from ..diagnosis.thresholds import BIC_THRESHOLD
 from .data import RigData
 from .fit import RESIDUAL_UNITS
 from .regressors import emps_regression, frame_regression, slider_events

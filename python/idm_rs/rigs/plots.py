@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..diagnosis.results import BIC_THRESHOLD
+from ..diagnosis.thresholds import BIC_THRESHOLD
 from .diagnosis import NULL_SIGMAS, RigDiagnosis
 from .fit import RESIDUAL_UNITS, RigFit
 
