@@ -256,3 +256,75 @@ def interrupt_main_when(ready: Callable[[], bool], delay: float = 0.0, timeout: 
     thread.sent_at = None  # type: ignore[attr-defined]
     thread.start()
     return thread
+
+
+# --------------------------------------------------------------------------------------------
+# wide strategies: every parameter the friction and hysteresis laws have, any input, effects
+# --------------------------------------------------------------------------------------------
+@st.composite
+def wide_params(draw) -> idm_rs.Params:
+    """``physical_params`` plus the friction law's shape (fric_n, the Stribeck exponent, sigma1,
+    a/(b+c) on both sides of Fs), the hysteresis constants around Table 1's, and a load."""
+    base = idm_rs.Params()
+    return draw(physical_params(
+        sigma1=st.floats(0.0, 200.0, allow_nan=False),
+        fric_n=st.floats(1.0, 2.5, allow_nan=False),
+        stribeck_exponent=st.floats(0.5, 2.5, allow_nan=False),
+        fric_gamma=st.floats(0.1e10, 0.6e10, allow_nan=False),
+        **{name: st.floats(*sorted((0.5 * getattr(base, name), 1.5 * getattr(base, name))), allow_nan=False)
+           for name in ("hyst_alpha", "hyst_beta", "hyst_gamma")},
+        load_force=st.floats(-0.3, 0.3, allow_nan=False),
+    ))
+
+
+@st.composite
+def sawtooths(draw) -> idm_rs.Sawtooth:
+    """A sawtooth train: |V| 10-120 V, either direction, period 0.5-3 ms, 1-3 cycles."""
+    period = draw(grid_times(0.5e-3, 3e-3))
+    rise = draw(grid_times(0.05e-3, period / 2))
+    return idm_rs.Sawtooth(draw(amplitudes), 1.0 / period, draw(st.integers(1, 3)), rise=rise,
+                           direction=draw(st.sampled_from(["forward", "backward"])))
+
+
+@st.composite
+def sampled_inputs(draw) -> idm_rs.Sampled:
+    """A recorded-looking input: 3-8 knots on the 1e-5 s grid over 0.1-2 ms, any sign."""
+    n = draw(st.integers(3, 8))
+    ks = sorted(set(draw(st.lists(st.integers(1, 200), min_size=n - 1, max_size=n - 1))))
+    t = np.array([0.0] + [k * TIME_GRID for k in ks])
+    v = np.array([0.0] + [draw(st.floats(-120.0, 120.0, allow_nan=False)) for _ in ks])
+    return idm_rs.Sampled(t, v)
+
+
+def any_input() -> st.SearchStrategy:
+    """A triangle, a sawtooth train or a sampled input."""
+    return st.one_of(triangles(), sawtooths(), sampled_inputs())
+
+
+#: each catalogue effect with a physical range of its parameter(s)
+EFFECT_RANGES: dict[str, tuple[float, float]] = {
+    "tau_amp": (1e-6, 2e-5), "tau_sensor": (1e-6, 5e-5), "k_ground": (1e2, 1e4), "c_weight": (0.05, 2.0),
+    "theta_rad": (-0.05, 0.05), "drift_rate": (-1e-5, 1e-5), "eps": (-0.1, 0.1),
+}
+
+
+@st.composite
+def some_effects(draw, exclude: tuple[str, ...] = ()) -> idm_rs.Effects:
+    """Up to three catalogue effects on at once (creep as its pair kappa, tau_creep)."""
+    names = sorted(set(EFFECT_RANGES) - set(exclude)) + ([] if "kappa" in exclude else ["creep"])
+    chosen = draw(st.lists(st.sampled_from(names), max_size=3, unique=True))
+    values: dict[str, float] = {}
+    for name in chosen:
+        if name == "creep":
+            values["kappa"] = draw(st.floats(0.002, 0.05, allow_nan=False))
+            values["tau_creep"] = draw(st.floats(1e-4, 5e-3, allow_nan=False))
+        else:
+            values[name] = draw(st.floats(*EFFECT_RANGES[name], allow_nan=False))
+    return idm_rs.Effects(**values)
+
+
+def fastest_slew(w) -> float:
+    """Fastest |dV/dt| of any piecewise-linear input [V/s]."""
+    t, v = w.breakpoints()
+    d = np.diff(np.asarray(t, dtype=float))
+    return float(np.max(np.abs(np.diff(np.asarray(v, dtype=float))[d > 0] / d[d > 0]), initial=0.0))

@@ -143,3 +143,22 @@ def test_characterize_cli(tmp_path):
                "--cycles", "3", "--skip-cycles", "1", "--loads", "4", "--no-progress"])
     assert rc == 0
     assert (tmp_path / "characteristics.nc").exists() and (tmp_path / "velocity_vs_load.png").exists()
+
+
+def test_the_readme_design_point_by_a_second_route():
+    """README: the paper's device (DPS, n = 4) at 100 Hz and 80 V moves at 0.138 mm/s and stalls
+    under 0.558 N. Second route, not through ``characterize``: ``simulate()`` the sawtooth train
+    and read the steady step from x1 at the cycle boundaries (after two start-up cycles); under
+    an opposing load of 0.558 N the step is gone (< 1 % of the unloaded one), under 0.5 N not."""
+    saw = idm_rs.Sawtooth(80.0, 100.0, 6, rise=0.5e-3)
+    bounds = saw.delay + np.arange(2, 7) * saw.period
+
+    def velocity(load: float) -> float:
+        r = idm_rs.simulate(P.replace(load_force=-load), saw, t_end=saw.duration, model="dps", method="auto",
+                            save_every=1)
+        return float(np.mean(np.diff(np.interp(bounds, r.t, r.main_body)))) * saw.frequency
+
+    free = velocity(0.0)
+    assert free == pytest.approx(0.138e-3, rel=5e-3)
+    assert abs(velocity(0.558)) < 0.01 * free
+    assert velocity(0.5) > 0.05 * free

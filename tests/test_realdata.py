@@ -198,5 +198,7 @@ def test_cli_diagnoses_a_rig_data_file(tmp_path, capsys):
     out = tmp_path / "d.json"
     assert main(["diagnose", str(REAL / "emps" / "DATA_EMPS.mat"), "--json", str(out)]) == 0
     d = json.loads(out.read_text())
-    assert d["rig"] == "emps" and d["verdict"] and d["ranking"]
+    # the documented result (docs/realdata/EMPS.md): a force of the position, ΔBIC 964
+    assert d["rig"] == "emps" and d["verdict"] == "position_force"
+    assert d["ranking"][0]["effect"] == "position_force" and d["ranking"][0]["delta_bic"] == pytest.approx(964.2, abs=0.5)
     assert "Where the residual lives" in capsys.readouterr().out

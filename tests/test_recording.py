@@ -235,9 +235,16 @@ def test_make_case_refuses_bad_settings(tmp_path):
 
 
 def test_crlf_and_trailing_blank_lines_are_accepted(case):
+    before = load_case(case).experiments
     text = (case / F1).read_text()
     (case / F1).write_text(text.replace("\n", "\r\n") + "\r\n")
-    load_case(case)
+    after = load_case(case).experiments
+    # the same samples, none lost or added by the line endings or the blank line
+    assert len(after) == len(before)
+    for a, b in zip(after, before):
+        np.testing.assert_array_equal(a.t, b.t)
+        np.testing.assert_array_equal(a.x, b.x)
+        np.testing.assert_array_equal(a.voltage, b.voltage)
 
 
 # --------------------------------------------------------------------------------------------

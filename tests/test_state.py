@@ -132,8 +132,12 @@ def test_presliding_force_beyond_its_bound_is_refused_naming_fh():
 
 
 def test_presliding_force_at_its_bound_is_accepted():
-    s = State.build(P, {"fh": presliding_bound(P)}, model="lps")
-    idm_rs.simulate(P, WAVE, t_end=1e-5, dt=1e-8, model="lps", initial_state=s)
+    bound = presliding_bound(P)
+    s = State.build(P, {"fh": bound}, model="lps")
+    r = idm_rs.simulate(P, WAVE, t_end=1e-5, dt=1e-8, model="lps", initial_state=s, save_every=1)
+    # accepted, and the run starts from it: Fh at its bound at t = 0 and within it after
+    assert r.fh[0] == bound
+    assert np.all(np.abs(r.fh) <= bound * (1 + 1e-9)) and np.isfinite(r.final_position)
 
 
 def test_initial_state_of_the_wrong_length_is_refused_naming_the_components():

@@ -79,7 +79,15 @@ def test_sweep_equals_simulate_point_by_point(model, grid, params):
                            save_every=1)
         point = ds.isel(dict(zip(ds.final_position.dims, index)))
         # the normal force follows the swept masses unless it is set
-        assert r.params.normal_force == params.normal_force
+        q = r.params
+        resolved = q.to_dict(resolved=True)["normal_force"]
+        if params.normal_force is None:
+            from idm_rs.declarations import GRAVITY
+
+            assert resolved == pytest.approx((q.m1 + q.m2 + q.pe_density * q.pe_area * q.pe_length) * GRAVITY,
+                                             rel=1e-12), index
+        else:
+            assert resolved == params.normal_force, index
         assert float(point.final_position) == r.final_position, index
         assert float(point.peak_velocity) == float(np.max(np.abs(r.main_body_velocity))), index
         assert int(point.steps) == round(t_end / dt)

@@ -207,20 +207,31 @@ def characterize(params: Optional[Params] = None, *, model: Literal["lps", "dps"
     _check_train(train, skip_cycles)
     common = dict(model=model, n_elements=n_elements, effects=effects, method=method, threads=threads,
                   skip_cycles=skip_cycles, progress=progress)
-    vmap = sweep(params, train, {"voltage": np.asarray(voltages, float), "frequency": np.asarray(frequencies, float)},
-                 t_end=_longest(train, frequencies), **common)
-    steps = sweep(params, train, {"voltage": np.asarray(step_voltages, float)}, t_end=train.duration, **common)
-    stall = stall_force(params, train, model=model, n_elements=n_elements, effects=effects, skip_cycles=skip_cycles,
-                        method=method, loads=loads, threads=threads)
-    load_grid, load_v = stall.loads, stall.velocities
-    if math.isfinite(stall.force) and stall.force > 0:
-        # the curve a designer reads: from no load to past the stall, not the coarse bracket
-        # (which runs to where the load drags the body backwards at speed)
-        load_grid = np.linspace(0.0, 1.5 * stall.force, max(int(loads), 5))
-        ps = [replace(params, load_force=params.load_force - stall.direction * f) for f in load_grid]
-        out = _run_trains(ps, [train] * len(ps), model=model, n_elements=n_elements, effects=effects,
-                          skip_cycles=skip_cycles, method=method, threads=threads)
-        load_v = np.array([_steady(out, i).mean_velocity for i in range(len(ps))])
+    done: dict[str, Any] = {}
+    try:
+        vmap = done["vmap"] = sweep(params, train, {"voltage": np.asarray(voltages, float),
+                                                    "frequency": np.asarray(frequencies, float)},
+                                    t_end=_longest(train, frequencies), **common)
+        if not vmap.attrs["complete"]:
+            raise KeyboardInterrupt
+        steps = done["steps"] = sweep(params, train, {"voltage": np.asarray(step_voltages, float)},
+                                      t_end=train.duration, **common)
+        if not steps.attrs["complete"]:
+            raise KeyboardInterrupt
+        stall = stall_force(params, train, model=model, n_elements=n_elements, effects=effects,
+                            skip_cycles=skip_cycles, method=method, loads=loads, threads=threads)
+        load_grid, load_v = stall.loads, stall.velocities
+        if math.isfinite(stall.force) and stall.force > 0:
+            # the curve a designer reads: from no load to past the stall, not the coarse bracket
+            # (which runs to where the load drags the body backwards at speed)
+            load_grid = np.linspace(0.0, 1.5 * stall.force, max(int(loads), 5))
+            ps = [replace(params, load_force=params.load_force - stall.direction * f) for f in load_grid]
+            out = _run_trains(ps, [train] * len(ps), model=model, n_elements=n_elements, effects=effects,
+                              skip_cycles=skip_cycles, method=method, threads=threads)
+            load_v = np.array([_steady(out, i).mean_velocity for i in range(len(ps))])
+    except KeyboardInterrupt:
+        return _interrupted(done, step_voltages, frequency, params, model, n_elements, rise, cycles, skip_cycles,
+                            voltage)
     ds = xr.Dataset()
     for name in STEADY_METRICS:
         ds[name] = vmap[name]
@@ -238,7 +249,40 @@ def characterize(params: Optional[Params] = None, *, model: Literal["lps", "dps"
         "method": vmap.attrs["method"], "rise_s": rise, "cycles": cycles, "skip_cycles": skip_cycles,
         "design_frequency_Hz": frequency, "design_voltage_V": voltage,
         "velocity_at_design_m_per_s": float(ds["load_velocity"].values[0]),
-        "stall_force_N": stall.force,
+        "stall_force_N": stall.force, "complete": 1,
+    })
+    for name, value in params.to_dict(resolved=False).items():
+        ds.attrs[f"param_{name}"] = value if value is not None else "derived"
+    return ds
+
+
+def _interrupted(done: dict[str, Any], step_voltages: Any, frequency: float, params: Params, model: str,
+                 n_elements: int, rise: float, cycles: int, skip_cycles: int, voltage: float) -> "xarray.Dataset":
+    """What ``characterize`` had finished when Ctrl-C stopped it: the velocity map and the
+    step curve as far as they ran (NaN where not), no stall force; ``attrs["complete"]`` 0."""
+    import warnings
+
+    import xarray as xr
+
+    from .engine import __version__
+
+    ds = xr.Dataset()
+    if "vmap" in done:
+        for name in STEADY_METRICS:
+            ds[name] = done["vmap"][name]
+    if "steps" in done:
+        for name in ("step_mean", "step_std", "backslip", "backslip_ratio", "direction"):
+            ds[f"{name}_vs_voltage"] = ("step_voltage", done["steps"][name].values, done["steps"][name].attrs)
+        ds = ds.assign_coords(step_voltage=("step_voltage", np.asarray(step_voltages, float),
+                                            {"units": "V", "long_name": f"drive amplitude (at {frequency:g} Hz)"}))
+    kept = ", ".join({"vmap": "the velocity map", "steps": "the step curve"}[k] for k in done) or "nothing"
+    warnings.warn(f"characterize interrupted: kept {kept} (as far as it ran; NaN where not); no stall force "
+                  "(attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
+    ds.attrs.update({
+        "idm_rs_version": __version__, "model": model, "n_elements": int(n_elements) if model == "dps" else 1,
+        "rise_s": rise, "cycles": cycles, "skip_cycles": skip_cycles, "design_frequency_Hz": frequency,
+        "design_voltage_V": voltage, "velocity_at_design_m_per_s": math.nan, "stall_force_N": math.nan,
+        "complete": 0, "kept": kept,
     })
     for name, value in params.to_dict(resolved=False).items():
         ds.attrs[f"param_{name}"] = value if value is not None else "derived"

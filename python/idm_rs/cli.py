@@ -677,6 +677,11 @@ def cmd_characterize(a: argparse.Namespace) -> int:
         loads=a.loads, method=a.method, threads=a.threads, progress=not a.no_progress,
     )
     out = Path(a.out)
+    if not ds.attrs.get("complete", 1):
+        out.mkdir(parents=True, exist_ok=True)
+        write_sweep_netcdf(ds, out / "characteristics.nc")
+        print(f"interrupted: wrote {out / 'characteristics.nc'} with {ds.attrs['kept']} (no figures, no stall force)")
+        return 130
     paths = plot_characteristics(ds, out)
     write_sweep_netcdf(ds, out / "characteristics.nc")
     at = ds.attrs

@@ -294,16 +294,25 @@ mod tests {
                 false,
                 true,
             ),
+            (p, Effects { eps: 0.05, ..Effects::default() }, Structure::Rig(RigDrive::Force), false, true),
         ] {
             let m = Model::new(params, effects, structure, hyst, acc).unwrap();
             let y = state(&m);
-            // the rig's input is a position [m]; the IDM's a voltage [V]
+            // the same state with the hysteresis state, the presliding force and the main body's
+            // velocity on the other side of their kinks (h < 0: the |h| branch of dh/dt)
+            let mut flipped = y.clone();
+            flipped[m.layout.h] = -y[m.layout.h];
+            flipped[m.layout.fh] = -y[m.layout.fh];
+            flipped[m.layout.dof] = -y[m.layout.dof];
+            // the rig's input is a position [m] or a force [N]; the IDM's a voltage [V]
             let inputs = match structure {
+                Structure::Rig(RigDrive::Force) => [(0.4, 30.0), (-0.25, -12.0)],
                 Structure::Rig(_) => [(2e-6, 1e-3), (-3e-6, -4e-4)],
                 _ => [(40.0, 1.6e5), (75.0, -8.4e3)],
             };
             for (v, dv) in inputs {
                 check(&m, &y, v, dv);
+                check(&m, &flipped, v, dv);
             }
         }
     }

@@ -21,8 +21,9 @@ A direction asymmetry of the Coulomb level is not a separate candidate for EMPS 
 their identified models hold a constant force, and ``fc sgn v + offset`` already is a level of
 ``fc + offset`` forward and ``fc − offset`` backward (the offset is the asymmetry's half).
 
-A candidate is named when it lowers BIC by at least ``BIC_THRESHOLD`` and all its amplitudes
-are beyond ``NULL_SIGMAS`` σ of zero (with the physical sign where it has one). Real data do not fit to their noise floor: the report says
+A candidate is named when it lowers BIC by at least ``BIC_THRESHOLD`` and its amplitude is
+beyond ``NULL_SIGMAS`` σ of zero — several amplitudes jointly, by a Wald test at that level —
+with the physical sign where it has one. Real data do not fit to their noise floor: the report says
 what remains (residual RMS against the white-noise estimate, and where it lives).
 """
 
@@ -62,6 +63,8 @@ class RigCandidate:
     positive: tuple[str, ...] = ()
     #: the residual with this candidate refitted
     residual: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0), repr=False)
+    #: covariance of the amplitudes (in `values` order), for their joint test
+    cov: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
 
     @property
     def significant(self) -> bool:
@@ -74,10 +77,24 @@ class RigCandidate:
             if k in self.positive and v <= 0:
                 return (f"its amplitude {k} = {v:.4g} has the unphysical sign (a static-friction excess must be "
                         "positive)")
-        weak = [k for k, v in self.values.items() if not abs(v) > NULL_SIGMAS * self.std[k]]
-        if weak:
-            return (f"its amplitude{'s' if len(weak) > 1 else ''} {', '.join(weak)} "
-                    f"{'are' if len(weak) > 1 else 'is'} within {NULL_SIGMAS:g} σ of zero")
+        names = list(self.values)
+        if len(names) == 1 or self.cov.shape != (len(names), len(names)):
+            weak = [k for k, v in self.values.items() if not abs(v) > NULL_SIGMAS * self.std[k]]
+            if weak:
+                return (f"its amplitude{'s' if len(weak) > 1 else ''} {', '.join(weak)} "
+                        f"{'are' if len(weak) > 1 else 'is'} within {NULL_SIGMAS:g} σ of zero")
+            return ""
+        # several amplitudes (a linear and a quadratic term, a sine and a cosine): jointly away
+        # from zero, as far as one amplitude beyond NULL_SIGMAS σ is (a Wald test at its level;
+        # one of them may well be zero: a purely linear dependence, a ripple in phase)
+        from scipy.stats import chi2, norm
+
+        b = np.array([self.values[k] for k in names])
+        wald = float(b @ np.linalg.pinv(self.cov) @ b)
+        level = 2.0 * float(norm.sf(NULL_SIGMAS))
+        if not wald > chi2.isf(level, len(names)):
+            return (f"its amplitudes {', '.join(names)} are jointly within {NULL_SIGMAS:g} σ of zero "
+                    f"(Wald χ² {wald:.1f} on {len(names)})")
         return ""
 
 
@@ -151,7 +168,7 @@ def _candidates(X0: NDArray[np.float64], y: NDArray[np.float64], columns: dict[s
             c = RigCandidate(effect, bic0 - _bic(e, X.shape[1]), float(np.sqrt(np.mean(e ** 2))),
                              {n: float(beta[k0 + i]) for i, n in enumerate(names)},
                              {n: float(math.sqrt(max(cov[k0 + i, k0 + i], 0.0))) for i, n in enumerate(names)}, setting,
-                             residual=e)
+                             residual=e, cov=cov[k0:, k0:].copy())
             if best is None or c.delta_bic > best.delta_bic:
                 best = c
         assert best is not None
@@ -185,7 +202,7 @@ def _refine_cogging(c: RigCandidate, X0: NDArray[np.float64], y: NDArray[np.floa
     return RigCandidate("cogging", dbic, float(np.sqrt(np.mean(e ** 2))),
                         {"a": float(beta[k0]), "b": float(beta[k0 + 1])},
                         {"a": float(math.sqrt(cov[k0, k0])), "b": float(math.sqrt(cov[k0 + 1, k0 + 1]))},
-                        f"wavelength = {lam * 1e3:.4g} mm (refined)", residual=e)
+                        f"wavelength = {lam * 1e3:.4g} mm (refined)", residual=e, cov=cov[k0:, k0:].copy())
 
 
 def _verdict(ranking: list[RigCandidate], rms0: float, noise: float) -> tuple[str, str, float]:
