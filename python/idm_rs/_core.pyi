@@ -250,6 +250,9 @@ def kernel_header() -> str:
 def resolve_params(params: dict[str, float]) -> dict[str, float]:
     """Table 1 overridden by ``params``, with the derived normal force [N] filled in (SI)."""
 
+def metric_columns() -> list[tuple[str, str, str]]:
+    """The batch's metric columns: (name, unit, long name), in result order."""
+
 def param_names() -> list[str]:
     """Parameter names in the batch tables' column order."""
 

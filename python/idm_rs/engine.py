@@ -21,6 +21,7 @@ check_run = _core.check_run
 state_components = _core.state_components
 resolve_params = _core.resolve_params
 param_names = _core.param_names
+metric_columns = _core.metric_columns
 effect_names = _core.effect_names
 wave_fields = _core.wave_fields
 highest_frequency = _core.highest_frequency
@@ -52,6 +53,7 @@ __all__ = [
     "kernel_header",
     "param_declarations",
     "param_names",
+    "metric_columns",
     "resolve_params",
     "simulate",
     "start_batch",

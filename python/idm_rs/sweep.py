@@ -32,21 +32,9 @@ from .waveforms import Sampled, Sawtooth, Triangle, Waveform
 if TYPE_CHECKING:
     import xarray
 
-#: metric name -> (units, long name)
-METRICS: dict[str, tuple[str, str]] = {
-    "final_position": ("m", "main body displacement x1 at t_end"),
-    "step_per_cycle": ("m", "mean main body step per drive cycle, x1(t_end)/cycles"),
-    "peak_velocity": ("m/s", "largest |v1|"),
-    "peak_friction": ("N", "largest |Ff|"),
-    "slip_fraction": ("1", "share of time the main body slides (|v1| > 0.1 stribeck_velocity)"),
-    # steady state of a sawtooth train, over the cycles after `skip_cycles` (NaN for other inputs)
-    "mean_velocity": ("m/s", "steady-state mean velocity of the main body, mean step x frequency"),
-    "step_mean": ("m", "mean main body step per drive cycle (steady state)"),
-    "step_std": ("m", "standard deviation of the step over the steady-state cycles"),
-    "backslip": ("m", "mean back-slip per cycle: travel against the net direction"),
-    "backslip_ratio": ("1", "back-slip over the travel along the net direction"),
-    "direction": ("1", "net motion: +1 forward, -1 backward, 0 stalled (|step| < 1e-3 d33 V)"),
-}
+#: metric name -> (units, long name), declared once in the engine (``batch/metrics.rs``); the
+#: steady state of a sawtooth train is over the cycles after `skip_cycles` (NaN for other inputs)
+METRICS: dict[str, tuple[str, str]] = {name: (unit, long) for name, unit, long in engine.metric_columns()}
 
 #: the steady-state metrics of a sawtooth train (the CPU backend computes them; NaN for other inputs)
 STEADY_METRICS: tuple[str, ...] = ("mean_velocity", "step_mean", "step_std", "backslip", "backslip_ratio",

@@ -1,7 +1,10 @@
 //! Thin PyO3 layer: numpy views in (zero copy where contiguous), the pure-Rust core called with
 //! the GIL released, numpy arrays out (moved, not copied), errors mapped to Python exceptions.
-//! No numerics and no threads here: the batch's thread, pool and cancellation live in
-//! `batch::runner`.
+//! No numerics here: a model's structure is parsed by `Structure::from_name`/`RigDrive::from_name`,
+//! a single run (stoppable, with its derivatives) is `simulate::simulate_with_derivatives`, the
+//! batch's thread, pool and cancellation live in `batch::runner`, its metric columns are
+//! declared in `batch::metrics::METRIC_COLUMNS`. What stays here is what needs the GIL: the
+//! Ctrl-C watch of a single run, conversions.
 
 use std::borrow::Cow;
 use std::collections::HashMap;
@@ -11,19 +14,19 @@ use std::time::{Duration, Instant};
 
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
-use crate::batch::{BatchConfig, BatchRunner, PointMetrics, PointTables, WaveFamily};
+use crate::batch::{BatchConfig, BatchRunner, PointMetrics, PointTables, WaveFamily, METRIC_COLUMNS};
 use crate::drive::{check_task, Method, SimError, Task};
 use crate::effects::{Effects, EFFECT_NAMES};
 use crate::mechanics::Structure;
 use crate::model::{Model, N_ACCOUNTING};
 use crate::params::{Params, PARAM_NAMES};
 use crate::rig::RigDrive;
-use crate::sensitivity::{derivatives, parse_seeds, Schedule};
-use crate::simulate::simulate_keeping;
+use crate::sensitivity::parse_seeds;
+use crate::simulate::simulate_with_derivatives;
 use crate::waveform::PiecewiseLinear;
 
 create_exception!(
@@ -89,85 +92,99 @@ fn parse_effects(effects: &HashMap<String, f64>) -> PyResult<Effects> {
     Effects::from_pairs(&pairs).map_err(value_error)
 }
 
-/// How to run: the model's structure and the integration method, shared by `simulate` and the
-/// batch. Built once in Python with keywords; checked on construction.
-#[pyclass(module = "idm_rs._core", frozen, get_all)]
-#[derive(Clone, Debug)]
-struct RunConfig {
-    /// "lps" or "dps"
-    model: String,
+/// Declares [`RunConfig`] from one list of fields — name, type, default, doc — written once:
+/// the struct, its defaults, and the keyword parsing of its Python constructor.
+macro_rules! run_config {
+    ($( $(#[doc = $doc:expr])* $name:ident : $ty:ty = $default:expr ),* $(,)?) => {
+        /// How to run: the model's structure and the integration method, shared by `simulate` and
+        /// the batch. Built once in Python with keywords; checked on construction.
+        #[pyclass(module = "idm_rs._core", frozen, get_all)]
+        #[derive(Clone, Debug)]
+        struct RunConfig {
+            $( $(#[doc = $doc])* $name: $ty, )*
+        }
+
+        impl Default for RunConfig {
+            fn default() -> Self {
+                RunConfig { $( $name: $default, )* }
+            }
+        }
+
+        impl RunConfig {
+            /// Set the fields named in `kwargs`; None keeps a field's default, an unknown keyword
+            /// is refused by name.
+            fn set_from(&mut self, kwargs: &Bound<'_, PyDict>) -> PyResult<()> {
+                for (key, value) in kwargs.iter() {
+                    let key: String = key.extract()?;
+                    if value.is_none() {
+                        continue;
+                    }
+                    match key.as_str() {
+                        $( stringify!($name) => {
+                            self.$name = value.extract().map_err(|e| {
+                                PyTypeError::new_err(format!("parameter '{}': {e}", stringify!($name)))
+                            })?
+                        } )*
+                        other => {
+                            return Err(PyTypeError::new_err(format!(
+                                "RunConfig() got an unexpected keyword argument '{other}'"
+                            )))
+                        }
+                    }
+                }
+                Ok(())
+            }
+        }
+    };
+}
+
+run_config! {
+    /// "lps", "dps" or "rig"
+    model: String = "dps".to_string(),
     /// FEM elements of the DPS bar
-    n_elements: usize,
+    n_elements: usize = 4,
     /// whether the piezo hysteresis state h runs
-    piezo_hysteresis: bool,
-    /// "rk4", "dopri5" or "rodas4"
-    method: String,
+    piezo_hysteresis: bool = true,
+    /// "rk4", "dopri5", "rodas4" or "auto"
+    method: String = "rk4".to_string(),
     /// RK4 step [s]
-    dt: f64,
+    dt: f64 = 1e-8,
     /// adaptive tolerances (atol in units of each state's scale)
-    rtol: f64,
-    atol: f64,
-    /// adaptive first trial step [s]
-    first_step: f64,
+    rtol: f64 = 1e-7,
+    atol: f64 = 1e-7,
+    /// adaptive first trial step [s] (not given: `dt`)
+    first_step: f64 = f64::NAN,
     /// RK4 retries at dt/2, dt/4, ... for a diverging batch point
-    retries: u32,
-    /// batch worker threads
-    threads: usize,
+    retries: u32 = 2,
+    /// batch worker threads (below 1: 1)
+    threads: usize = 1,
     /// batch: record the sensor reading every this many RK4 steps (0: none)
-    record_every: usize,
+    record_every: usize = 0,
     /// batch: return each point's final state
-    final_states: bool,
+    final_states: bool = false,
     /// batch: start-up cycles of a sawtooth train left out of the steady-state metrics
-    skip_cycles: usize,
-    /// model "rig": "position" (spring to a moving end) or "force" (the input is the force)
-    rig_drive: String,
+    skip_cycles: usize = 1,
+    /// model "rig": "position" (spring to a moving end), "force" (the input is the force) or
+    /// "closed_loop" (a position servo)
+    rig_drive: String = "position".to_string(),
     /// model "rig", position drive: spring [N/m] and damper [N s/m] to the moving end
-    rig_stiffness: f64,
-    rig_damping: f64,
+    rig_stiffness: f64 = 0.0,
+    rig_damping: f64 = 0.0,
     /// model "rig", closed-loop drive: position gain [1/s], velocity gain [V s/m], actuator
     /// constant [N/V] and the controller's saturation [V] (0: none)
-    rig_kp: f64,
-    rig_kv: f64,
-    rig_gain: f64,
-    rig_limit: f64,
+    rig_kp: f64 = 0.0,
+    rig_kv: f64 = 0.0,
+    rig_gain: f64 = 0.0,
+    rig_limit: f64 = 0.0,
 }
 
 impl RunConfig {
     fn structure(&self) -> PyResult<Structure> {
-        match self.model.as_str() {
-            "lps" => Ok(Structure::Lps),
-            "dps" if self.n_elements >= 1 => Ok(Structure::Dps(self.n_elements)),
-            "dps" => Err(value_error(format!(
-                "parameter 'n_elements' must be at least 1, got {}",
-                self.n_elements
-            ))),
-            "rig" => {
-                let drive = match self.rig_drive.as_str() {
-                    "position" => RigDrive::Position {
-                        stiffness: self.rig_stiffness,
-                        damping: self.rig_damping,
-                    },
-                    "force" => RigDrive::Force,
-                    "closed_loop" => RigDrive::ClosedLoop {
-                        kp: self.rig_kp,
-                        kv: self.rig_kv,
-                        gain: self.rig_gain,
-                        // 0: no saturation (the stub's literal default)
-                        limit: if self.rig_limit == 0.0 { f64::INFINITY } else { self.rig_limit },
-                    },
-                    other => {
-                        return Err(value_error(format!(
-                            "parameter 'rig_drive' must be 'position', 'force' or 'closed_loop', got '{other}'"
-                        )))
-                    }
-                };
-                drive.validate().map_err(value_error)?;
-                Ok(Structure::Rig(drive))
-            }
-            other => Err(value_error(format!(
-                "parameter 'model' must be 'lps', 'dps' or 'rig', got '{other}'"
-            ))),
-        }
+        Structure::from_name(&self.model, self.n_elements, || {
+            RigDrive::from_name(&self.rig_drive, self.rig_stiffness, self.rig_damping, self.rig_kp, self.rig_kv,
+                                self.rig_gain, self.rig_limit)
+        })
+        .map_err(value_error)
     }
 
     fn method(&self) -> PyResult<Method> {
@@ -182,52 +199,16 @@ impl RunConfig {
 #[pymethods]
 impl RunConfig {
     #[new]
-    #[pyo3(signature = (*, model="dps".to_string(), n_elements=4, piezo_hysteresis=true, method="rk4".to_string(), dt=1e-8, rtol=1e-7, atol=1e-7, first_step=None, retries=2, threads=1, record_every=0, final_states=false, skip_cycles=1, rig_drive="position".to_string(), rig_stiffness=0.0, rig_damping=0.0, rig_kp=0.0, rig_kv=0.0, rig_gain=0.0, rig_limit=0.0))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        model: String,
-        n_elements: usize,
-        piezo_hysteresis: bool,
-        method: String,
-        dt: f64,
-        rtol: f64,
-        atol: f64,
-        first_step: Option<f64>,
-        retries: u32,
-        threads: usize,
-        record_every: usize,
-        final_states: bool,
-        skip_cycles: usize,
-        rig_drive: String,
-        rig_stiffness: f64,
-        rig_damping: f64,
-        rig_kp: f64,
-        rig_kv: f64,
-        rig_gain: f64,
-        rig_limit: f64,
-    ) -> PyResult<Self> {
-        let c = RunConfig {
-            model,
-            n_elements,
-            piezo_hysteresis,
-            method,
-            dt,
-            rtol,
-            atol,
-            first_step: first_step.unwrap_or(dt),
-            retries,
-            threads: threads.max(1),
-            record_every,
-            final_states,
-            skip_cycles,
-            rig_drive,
-            rig_stiffness,
-            rig_damping,
-            rig_kp,
-            rig_kv,
-            rig_gain,
-            rig_limit,
-        };
+    #[pyo3(signature = (**kwargs))]
+    fn new(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let mut c = RunConfig::default();
+        if let Some(k) = kwargs {
+            c.set_from(k)?;
+        }
+        if c.first_step.is_nan() {
+            c.first_step = c.dt;
+        }
+        c.threads = c.threads.max(1);
         c.structure()?;
         c.method()?;
         Ok(c)
@@ -246,6 +227,12 @@ fn resolve_params(params: HashMap<String, f64>) -> PyResult<HashMap<String, f64>
         .iter()
         .map(|n| (n.to_string(), p.get(n).unwrap()))
         .collect())
+}
+
+/// The batch's metric columns: (name, unit, long name), in result order.
+#[pyfunction]
+fn metric_columns() -> Vec<(&'static str, &'static str, &'static str)> {
+    METRIC_COLUMNS.iter().map(|(n, u, l, _)| (*n, *u, *l)).collect()
 }
 
 #[pyfunction]
@@ -410,17 +397,8 @@ fn simulate<'py>(
     let (traj, complete, derived) = std::thread::scope(|scope| -> PyResult<_> {
         let worker = scope.spawn(|| {
             catch_unwind(AssertUnwindSafe(|| {
-                let keep = !seeds.is_empty();
-                let (traj, complete) = simulate_keeping(&m, &wave, t_start, t_end, &y0, &method, save_every, keep, &cancel)?;
-                if !(complete && keep) {
-                    return Ok((traj, complete, None));
-                }
-                let schedule = Schedule { every: save_every, also_last: true };
-                let d = derivatives(&m, &wave, t_start, t_end, &y0, &method, &traj.held, schedule, &seeds, normal_force_derived, &cancel);
-                match d {
-                    None => Ok((traj, false, None)), // cancelled: the trajectory stands
-                    Some(d) => Ok((traj, true, Some(d?))),
-                }
+                simulate_with_derivatives(&m, &wave, t_start, t_end, &y0, &method, save_every, &seeds,
+                                          normal_force_derived, &cancel)
             }))
         });
         while !py.detach(|| {
@@ -549,17 +527,9 @@ impl BatchRun {
         d.set_item("reasons", reasons)?;
         let metrics: Vec<PointMetrics> = outputs.into_iter().map(|o| o.metrics).collect();
         let col = |f: fn(&PointMetrics) -> f64| metrics.iter().map(f).collect::<Vec<f64>>();
-        d.set_item("final_position", col(|m| m.final_position).into_pyarray(py))?;
-        d.set_item("step_per_cycle", col(|m| m.step_per_cycle).into_pyarray(py))?;
-        d.set_item("peak_velocity", col(|m| m.peak_velocity).into_pyarray(py))?;
-        d.set_item("peak_friction", col(|m| m.peak_friction).into_pyarray(py))?;
-        d.set_item("slip_fraction", col(|m| m.slip_fraction).into_pyarray(py))?;
-        d.set_item("mean_velocity", col(|m| m.steady.mean_velocity).into_pyarray(py))?;
-        d.set_item("step_mean", col(|m| m.steady.step_mean).into_pyarray(py))?;
-        d.set_item("step_std", col(|m| m.steady.step_std).into_pyarray(py))?;
-        d.set_item("backslip", col(|m| m.steady.backslip).into_pyarray(py))?;
-        d.set_item("backslip_ratio", col(|m| m.steady.backslip_ratio).into_pyarray(py))?;
-        d.set_item("direction", col(|m| m.steady.direction).into_pyarray(py))?;
+        for (name, _, _, value) in METRIC_COLUMNS {
+            d.set_item(name, col(value).into_pyarray(py))?;
+        }
         d.set_item("diverged_at", col(|m| m.diverged_at).into_pyarray(py))?;
         d.set_item("dt_used", col(|m| m.dt_used).into_pyarray(py))?;
         let steps: Vec<u64> = metrics.iter().map(|m| m.steps).collect();
@@ -642,6 +612,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(state_components, m)?)?;
     m.add_function(wrap_pyfunction!(resolve_params, m)?)?;
     m.add_function(wrap_pyfunction!(param_names, m)?)?;
+    m.add_function(wrap_pyfunction!(metric_columns, m)?)?;
     m.add_function(wrap_pyfunction!(effect_names, m)?)?;
     m.add_function(wrap_pyfunction!(highest_frequency, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_constants, m)?)?;

@@ -74,6 +74,18 @@ impl Actuation for Actuator {
 }
 
 impl Structure {
+    /// The structure named `model`: "lps", "dps" with `n_elements` (at least 1), or "rig" with
+    /// the drive `rig` builds (called only then); the message names what is wrong.
+    pub fn from_name(model: &str, n_elements: usize, rig: impl FnOnce() -> Result<RigDrive, String>) -> Result<Self, String> {
+        match model {
+            "lps" => Ok(Structure::Lps),
+            "dps" if n_elements >= 1 => Ok(Structure::Dps(n_elements)),
+            "dps" => Err(format!("parameter 'n_elements' must be at least 1, got {n_elements}")),
+            "rig" => Ok(Structure::Rig(rig()?)),
+            other => Err(format!("parameter 'model' must be 'lps', 'dps' or 'rig', got '{other}'")),
+        }
+    }
+
     /// The actuation of this structure.
     pub fn actuator(&self) -> Actuator {
         match *self {

@@ -27,6 +27,21 @@ pub enum RigDrive {
 }
 
 impl RigDrive {
+    /// The drive named `name`, validated: "position" (a spring [N/m] and a damper [N s/m] to the
+    /// moving end), "force" (the input is the force), or "closed_loop" (position gain [1/s],
+    /// velocity gain [V s/m], actuator constant [N/V], saturation [V]; `limit` 0: none).
+    pub fn from_name(name: &str, stiffness: f64, damping: f64, kp: f64, kv: f64, gain: f64, limit: f64) -> Result<Self, String> {
+        let drive = match name {
+            "position" => RigDrive::Position { stiffness, damping },
+            "force" => RigDrive::Force,
+            // 0: no saturation (the Python stub's literal default)
+            "closed_loop" => RigDrive::ClosedLoop { kp, kv, gain, limit: if limit == 0.0 { f64::INFINITY } else { limit } },
+            other => return Err(format!("parameter 'rig_drive' must be 'position', 'force' or 'closed_loop', got '{other}'")),
+        };
+        drive.validate()?;
+        Ok(drive)
+    }
+
     /// Refuse a spring or damper that is negative or not finite (the message names it).
     pub fn validate(&self) -> Result<(), String> {
         let non_negative: &[(&str, f64)] = match self {
@@ -266,6 +281,23 @@ mod tests {
         // and saturates: a far reference drives at most gain * limit
         assert_eq!(drive.drive_force(1.0, 0.0, 0.0, 0.0), gain * 10.0);
         assert!(RigDrive::ClosedLoop { kp, kv, gain, limit: 0.0 }.validate().unwrap_err().contains("'rig_limit'"));
+    }
+
+    #[test]
+    fn structures_and_drives_are_parsed_by_name_and_refused_by_name() {
+        let none = || -> Result<RigDrive, String> { unreachable!("only a rig builds its drive") };
+        assert_eq!(Structure::from_name("lps", 0, none), Ok(Structure::Lps));
+        assert_eq!(Structure::from_name("dps", 3, none), Ok(Structure::Dps(3)));
+        assert!(Structure::from_name("dps", 0, none).unwrap_err().contains("'n_elements' must be at least 1"));
+        assert!(Structure::from_name("fem", 4, none).unwrap_err().contains("'model' must be 'lps', 'dps' or 'rig', got 'fem'"));
+        let rig = |name: &str, limit: f64| RigDrive::from_name(name, 5e4, 2.0, 160.0, 240.0, 35.0, limit);
+        assert_eq!(rig("position", 0.0), Ok(RigDrive::Position { stiffness: 5e4, damping: 2.0 }));
+        assert_eq!(rig("force", 0.0), Ok(RigDrive::Force));
+        assert_eq!(rig("closed_loop", 0.0), Ok(RigDrive::ClosedLoop { kp: 160.0, kv: 240.0, gain: 35.0, limit: f64::INFINITY }));
+        assert_eq!(rig("closed_loop", 10.0), Ok(RigDrive::ClosedLoop { kp: 160.0, kv: 240.0, gain: 35.0, limit: 10.0 }));
+        assert!(rig("servo", 0.0).unwrap_err().contains("'rig_drive' must be 'position', 'force' or 'closed_loop', got 'servo'"));
+        assert!(RigDrive::from_name("position", -1.0, 0.0, 0.0, 0.0, 0.0, 0.0).unwrap_err().contains("'rig_stiffness'"));
+        assert_eq!(Structure::from_name("rig", 0, || rig("force", 0.0)), Ok(Structure::Rig(RigDrive::Force)));
     }
 
     #[test]

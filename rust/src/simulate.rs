@@ -8,6 +8,7 @@ use crate::stepper::Held;
 use crate::drive::{divergence_message, run_tasks, LaneEnd, Method, Observer, SimError, Task};
 use crate::crawl::CRAWL_PREFIX;
 use crate::model::Model;
+use crate::sensitivity::{derivatives, Derivatives, Schedule, Seed};
 use crate::waveform::PiecewiseLinear;
 
 /// Saved trajectory; each per-time array has one entry per saved time.
@@ -206,6 +207,36 @@ pub fn simulate_keeping(
             out.final_state = y;
             Ok((out, true))
         }
+    }
+}
+
+/// One run as Python's `simulate()` makes it, stoppable: the trajectory saved every `save_every`
+/// steps, whether it ran to `t_end`, and — when `seeds` are asked for and the run completed —
+/// the exact derivatives of its readings and final state with respect to them (the run's own
+/// steps held). `cancel` stops it between steps; the trajectory so far stands (not complete,
+/// no derivatives). The binding runs this on a worker thread and sets `cancel` on Ctrl-C.
+#[allow(clippy::too_many_arguments)]
+pub fn simulate_with_derivatives(
+    model: &Model,
+    wave: &PiecewiseLinear,
+    t_start: f64,
+    t_end: f64,
+    y0: &[f64],
+    method: &Method,
+    save_every: usize,
+    seeds: &[Seed],
+    normal_force_derived: bool,
+    cancel: &AtomicBool,
+) -> Result<(Trajectory, bool, Option<Derivatives>), SimError> {
+    let keep = !seeds.is_empty();
+    let (traj, complete) = simulate_keeping(model, wave, t_start, t_end, y0, method, save_every, keep, cancel)?;
+    if !(complete && keep) {
+        return Ok((traj, complete, None));
+    }
+    let schedule = Schedule { every: save_every, also_last: true };
+    match derivatives(model, wave, t_start, t_end, y0, method, &traj.held, schedule, seeds, normal_force_derived, cancel) {
+        None => Ok((traj, false, None)), // cancelled: the trajectory stands
+        Some(d) => Ok((traj, true, Some(d?))),
     }
 }
 

@@ -35,6 +35,26 @@ pub struct PointMetrics {
     pub steady: Steady,
 }
 
+/// A metric column of a batch's result: its name, unit, long name and value at a point.
+pub type MetricColumn = (&'static str, &'static str, &'static str, fn(&PointMetrics) -> f64);
+
+/// The metric columns a batch returns, declared once: the binding hands them to Python by these
+/// names, and `sweep.py` takes its metrics' units and long names from here
+/// (`engine.metric_columns()`). The steady-state ones are NaN except for sawtooth trains.
+pub const METRIC_COLUMNS: [MetricColumn; 11] = [
+    ("final_position", "m", "main body displacement x1 at t_end", |m| m.final_position),
+    ("step_per_cycle", "m", "mean main body step per drive cycle, x1(t_end)/cycles", |m| m.step_per_cycle),
+    ("peak_velocity", "m/s", "largest |v1|", |m| m.peak_velocity),
+    ("peak_friction", "N", "largest |Ff|", |m| m.peak_friction),
+    ("slip_fraction", "1", "share of time the main body slides (|v1| > 0.1 stribeck_velocity)", |m| m.slip_fraction),
+    ("mean_velocity", "m/s", "steady-state mean velocity of the main body, mean step x frequency", |m| m.steady.mean_velocity),
+    ("step_mean", "m", "mean main body step per drive cycle (steady state)", |m| m.steady.step_mean),
+    ("step_std", "m", "standard deviation of the step over the steady-state cycles", |m| m.steady.step_std),
+    ("backslip", "m", "mean back-slip per cycle: travel against the net direction", |m| m.steady.backslip),
+    ("backslip_ratio", "1", "back-slip over the travel along the net direction", |m| m.steady.backslip_ratio),
+    ("direction", "1", "net motion: +1 forward, -1 backward, 0 stalled (|step| < 1e-3 d33 V)", |m| m.steady.direction),
+];
+
 impl PointMetrics {
     pub fn not_run() -> Self {
         PointMetrics {

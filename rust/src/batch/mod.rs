@@ -12,7 +12,7 @@ mod run;
 mod runner;
 mod steady;
 
-pub use metrics::{PointMetrics, SLIP_VELOCITY_FACTOR};
+pub use metrics::{MetricColumn, PointMetrics, METRIC_COLUMNS, SLIP_VELOCITY_FACTOR};
 pub use run::{run_batch, CHUNK, LANES};
 pub use points::{PointTables, WaveFamily};
 pub use runner::BatchRunner;
