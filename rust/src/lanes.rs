@@ -526,6 +526,88 @@ mod tests {
         }
     }
 
+    /// Counts the runs that changed method and the steps of each.
+    #[derive(Default)]
+    struct Switches(std::collections::BTreeMap<usize, u64>);
+    impl Observer for Switches {
+        fn start(&mut self, _: usize, _: f64, _: &[f64]) {}
+        fn step(&mut self, _: usize, _: f64, _: f64, _: &[f64], _: f64, _: Option<(f64, f64)>, _: bool) {}
+        fn switched(&mut self, task: usize, accepted: u64) {
+            self.0.insert(task, accepted);
+        }
+    }
+
+    #[test]
+    fn auto_on_vector_lanes_hands_stiff_runs_over_bitwise_as_the_scalar_path() {
+        // the eleven devices, and three whose friction state is far stiffer (a presliding
+        // stiffness 1,000x the paper's, a near-frictionless contact): those switch to Rodas4
+        let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
+        let method = Method::Auto { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        for structure in [Structure::Lps, Structure::Dps(4)] {
+            let mut ms = models(structure);
+            for (alpha, mu) in [(1e3, 1.0), (3e3, 1.0), (1.0, 1e-5)] {
+                let mut p = Params::paper();
+                p.fric_alpha *= alpha;
+                p.mu_k *= mu;
+                p.mu_s *= mu;
+                ms.insert(4, Model::new(p, Effects::default(), structure, false, false).unwrap());
+            }
+            let y0: Vec<Vec<f64>> = ms.iter().map(|m| m.rest_state()).collect();
+            let tasks: Vec<Task> = ms
+                .iter()
+                .zip(&y0)
+                .map(|(m, y)| Task { model: m, wave: &wave, t_start: 0.0, t_end: 2e-3, y0: y })
+                .collect();
+            let cancel = AtomicBool::new(false);
+            let mut seen = Switches::default();
+            let reference = run_tasks_one_by_one(&tasks, &method, &Default::default(), &mut seen, &cancel).unwrap();
+            assert!(seen.0.len() >= 3 && seen.0.len() < tasks.len(), "{structure:?}: switched {:?}", seen.0);
+            for level in ["scalar", "avx2"] {
+                set_simd_level(level);
+                let mut lanes = Switches::default();
+                let ends = run_tasks::<_, 8>(&tasks, &method, &mut lanes, &cancel).unwrap();
+                assert_eq!(ends, reference, "{structure:?} {level}");
+                assert_eq!(lanes.0, seen.0, "{structure:?} {level}: the same runs switch at the same step");
+            }
+            set_simd_level("avx2");
+        }
+    }
+
+    #[test]
+    fn a_crawling_lane_stops_as_on_the_scalar_path_and_its_neighbours_finish() {
+        // a near-frictionless contact (mu 1e-6) holds Dormand-Prince at its stability limit
+        let wave = PiecewiseLinear::triangle(50.0, 0.5e-3, 0.5e-3, 0.0).unwrap();
+        let method = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        let mut ms = models(Structure::Lps);
+        let mut p = Params::paper();
+        p.mu_k = 1e-6;
+        p.mu_s = 1e-6;
+        ms.insert(2, Model::new(p, Effects::default(), Structure::Lps, false, false).unwrap());
+        let y0: Vec<Vec<f64>> = ms.iter().map(|m| m.rest_state()).collect();
+        let tasks: Vec<Task> = ms
+            .iter()
+            .zip(&y0)
+            .map(|(m, y)| Task { model: m, wave: &wave, t_start: 0.0, t_end: 1e-3, y0: y })
+            .collect();
+        let cancel = AtomicBool::new(false);
+        let reference = run_tasks_one_by_one(&tasks, &method, &Default::default(), &mut Nothing, &cancel).unwrap();
+        for (i, (end, _)) in reference.iter().enumerate() {
+            match end {
+                LaneEnd::Diverged { why: Some(why), .. } if i == 2 => {
+                    assert!(why.starts_with(crate::crawl::CRAWL_PREFIX), "{why}")
+                }
+                LaneEnd::Finished { .. } if i != 2 => {}
+                other => panic!("task {i}: {other:?}"),
+            }
+        }
+        for level in ["scalar", "avx2"] {
+            set_simd_level(level);
+            let ends = run_tasks::<_, 8>(&tasks, &method, &mut Nothing, &cancel).unwrap();
+            assert_eq!(ends, reference, "{level}");
+        }
+        set_simd_level("avx2");
+    }
+
     #[test]
     fn a_crawling_lane_stops_as_on_the_scalar_path_and_its_neighbours_finish() {
         // a near-frictionless contact (mu 1e-6) holds Dormand-Prince at its stability limit

@@ -8,6 +8,7 @@ use crate::stepper::Held;
 use crate::drive::{divergence_message, run_tasks, LaneEnd, Method, Observer, SimError, Task};
 use crate::crawl::CRAWL_PREFIX;
 use crate::model::Model;
+use crate::crawl::CRAWL_PREFIX;
 use crate::waveform::PiecewiseLinear;
 
 /// Saved trajectory; each per-time array has one entry per saved time.
@@ -87,6 +88,12 @@ impl Observer for Saver<'_> {
     fn accepted_step(&mut self, _task: usize, step: f64) {
         if self.keep_steps {
             self.out.held.steps.push(step);
+        }
+    }
+
+    fn switched(&mut self, _task: usize, accepted: u64) {
+        if self.keep_steps {
+            self.out.held.switches.push(accepted);
         }
     }
 
@@ -338,6 +345,47 @@ mod tests {
         let ro = steps(Method::Rodas4 { rtol: tol, atol: tol, first_step: h });
         let dp = steps(Method::Dopri5 { rtol: tol, atol: tol, first_step: h });
         assert!(3 * ro < dp, "rodas4 {ro} steps, dopri5 {dp}");
+    }
+
+    /// The near-frictionless device: mu 1e-6, LPS, 1 ms of a 50 V triangle.
+    fn near_frictionless() -> (Model, PiecewiseLinear) {
+        let mut p = Params::paper();
+        p.mu_k = 1e-6;
+        p.mu_s = 1e-6;
+        let m = Model::new(p, Effects::default(), Structure::Lps, true, false).unwrap();
+        (m, PiecewiseLinear::triangle(50.0, 0.5e-3, 0.5e-3, 0.0).unwrap())
+    }
+
+    #[test]
+    fn an_explicit_run_held_at_its_stability_limit_stops_with_a_message_instead_of_crawling() {
+        let (m, w) = near_frictionless();
+        let dp = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        let t0 = std::time::Instant::now();
+        let err = simulate(&m, &w, 0.0, 1e-3, &m.rest_state(), &dp, 100).unwrap_err().to_string();
+        assert!(err.contains("stability limit") && err.contains("'rodas4' or 'auto'"), "{err}");
+        assert!(t0.elapsed().as_secs_f64() < 5.0, "took {:?} to give up", t0.elapsed());
+    }
+
+    #[test]
+    fn auto_changes_a_stiff_run_to_rodas4_and_keeps_a_plain_one_explicit() {
+        let auto = Method::Auto { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        let (m, w) = near_frictionless();
+        let (a, _) = simulate_keeping(&m, &w, 0.0, 1e-3, &m.rest_state(), &auto, 1, true, &AtomicBool::new(false)).unwrap();
+        let at = *a.held.switches.first().expect("the near-frictionless run switches");
+        assert_eq!(a.held.switches.len(), 1, "and stays implicit: {:?}", a.held.switches);
+        assert!(at < 100, "switched after {at} steps");
+        let steps = a.t.len() - 1;
+        assert!(steps < 20_000, "{steps} steps");
+        let tight = Method::Rodas4 { rtol: 1e-9, atol: 1e-9, first_step: 1e-9 };
+        let r = simulate(&m, &w, 0.0, 1e-3, &m.rest_state(), &tight, 1).unwrap();
+        assert!((a.final_state[0] - r.final_state[0]).abs() < 1e-9, "{} vs {}", a.final_state[0], r.final_state[0]);
+        // the paper case never switches: bitwise Dormand-Prince
+        let (m, w) = paper(Structure::Lps, Effects::default());
+        let (a, _) = simulate_keeping(&m, &w, 0.0, 10e-3, &m.rest_state(), &auto, 1, true, &AtomicBool::new(false)).unwrap();
+        assert!(a.held.switches.is_empty(), "{:?}", a.held.switches);
+        let dp = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        let d = simulate(&m, &w, 0.0, 10e-3, &m.rest_state(), &dp, 1).unwrap();
+        assert_eq!(a.final_state, d.final_state);
     }
 
     #[test]
