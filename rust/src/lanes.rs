@@ -609,41 +609,6 @@ mod tests {
     }
 
     #[test]
-    fn a_crawling_lane_stops_as_on_the_scalar_path_and_its_neighbours_finish() {
-        // a near-frictionless contact (mu 1e-6) holds Dormand-Prince at its stability limit
-        let wave = PiecewiseLinear::triangle(50.0, 0.5e-3, 0.5e-3, 0.0).unwrap();
-        let method = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
-        let mut ms = models(Structure::Lps);
-        let mut p = Params::paper();
-        p.mu_k = 1e-6;
-        p.mu_s = 1e-6;
-        ms.insert(2, Model::new(p, Effects::default(), Structure::Lps, false, false).unwrap());
-        let y0: Vec<Vec<f64>> = ms.iter().map(|m| m.rest_state()).collect();
-        let tasks: Vec<Task> = ms
-            .iter()
-            .zip(&y0)
-            .map(|(m, y)| Task { model: m, wave: &wave, t_start: 0.0, t_end: 1e-3, y0: y })
-            .collect();
-        let cancel = AtomicBool::new(false);
-        let reference = run_tasks_one_by_one(&tasks, &method, &Default::default(), &mut Nothing, &cancel).unwrap();
-        for (i, (end, _)) in reference.iter().enumerate() {
-            match end {
-                LaneEnd::Diverged { why: Some(why), .. } if i == 2 => {
-                    assert!(why.starts_with(crate::crawl::CRAWL_PREFIX), "{why}")
-                }
-                LaneEnd::Finished { .. } if i != 2 => {}
-                other => panic!("task {i}: {other:?}"),
-            }
-        }
-        for level in ["scalar", "avx2"] {
-            set_simd_level(level);
-            let ends = run_tasks::<_, 8>(&tasks, &method, &mut Nothing, &cancel).unwrap();
-            assert_eq!(ends, reference, "{level}");
-        }
-        set_simd_level("avx2");
-    }
-
-    #[test]
     fn groups_the_vector_path_cannot_compute_exactly_run_lane_by_lane() {
         let mut p = Params::paper();
         p.stribeck_exponent = 1.5;

@@ -6,7 +6,6 @@ use std::sync::atomic::AtomicBool;
 
 use crate::stepper::Held;
 use crate::drive::{divergence_message, run_tasks, LaneEnd, Method, Observer, SimError, Task};
-use crate::crawl::CRAWL_PREFIX;
 use crate::model::Model;
 use crate::crawl::CRAWL_PREFIX;
 use crate::waveform::PiecewiseLinear;
@@ -345,25 +344,6 @@ mod tests {
         let ro = steps(Method::Rodas4 { rtol: tol, atol: tol, first_step: h });
         let dp = steps(Method::Dopri5 { rtol: tol, atol: tol, first_step: h });
         assert!(3 * ro < dp, "rodas4 {ro} steps, dopri5 {dp}");
-    }
-
-    /// The near-frictionless device: mu 1e-6, LPS, 1 ms of a 50 V triangle.
-    fn near_frictionless() -> (Model, PiecewiseLinear) {
-        let mut p = Params::paper();
-        p.mu_k = 1e-6;
-        p.mu_s = 1e-6;
-        let m = Model::new(p, Effects::default(), Structure::Lps, true, false).unwrap();
-        (m, PiecewiseLinear::triangle(50.0, 0.5e-3, 0.5e-3, 0.0).unwrap())
-    }
-
-    #[test]
-    fn an_explicit_run_held_at_its_stability_limit_stops_with_a_message_instead_of_crawling() {
-        let (m, w) = near_frictionless();
-        let dp = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
-        let t0 = std::time::Instant::now();
-        let err = simulate(&m, &w, 0.0, 1e-3, &m.rest_state(), &dp, 100).unwrap_err().to_string();
-        assert!(err.contains("stability limit") && err.contains("'rodas4' or 'auto'"), "{err}");
-        assert!(t0.elapsed().as_secs_f64() < 5.0, "took {:?} to give up", t0.elapsed());
     }
 
     #[test]
