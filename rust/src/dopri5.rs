@@ -73,7 +73,6 @@ pub struct Dopri5<S, const L: usize = 1> {
     pub h_lambda: [f64; L],
 }
 
-
 impl<S: State, const L: usize> Dopri5<S, L> {
     /// Buffers shaped like `zero` (all zeros), one set of options per lane.
     pub fn new(opts: [AdaptiveOptions; L], zero: S) -> Self {
@@ -136,10 +135,6 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
 
     fn restart(&mut self, lane: usize) {
         self.fresh[lane] = true;
-    }
-
-    fn crawl_hint(&self, _lane: usize) -> &'static str {
-        EXPLICIT_CRAWL_HINT
     }
 
     #[inline(always)]

@@ -114,10 +114,6 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
     /// Nothing is carried between steps (the Jacobian is evaluated afresh every step).
     fn restart(&mut self, _lane: usize) {}
 
-    fn crawl_hint(&self, _lane: usize) -> &'static str {
-        IMPLICIT_CRAWL_HINT
-    }
-
     #[inline(always)]
     fn attempt<F: Rhs<S::Elem>>(
         &mut self,
@@ -240,6 +236,11 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
 impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
     /// Continue lane `i` from another method's run: its next step `h` [s] and the number of
     /// steps that run accepted (held steps are counted from the run's start).
+    /// Accepted steps of lane `i` so far.
+    pub fn accepted(&self, i: usize) -> u64 {
+        self.stats[i].accepted
+    }
+
     pub fn take_over(&mut self, i: usize, h: f64, accepted: u64) {
         self.h[i] = h.min(self.opts[i].h_max);
         self.stats[i].accepted = accepted;
