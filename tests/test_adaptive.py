@@ -152,10 +152,10 @@ def test_auto_hands_only_the_stiff_points_of_a_sweep_to_rodas4():
     ref = idm_rs.sweep(P, PAPER_WAVE, grid, method="rodas4", rtol=1e-9, atol=1e-9, **kw)
     assert (auto.status.values == 1).all()
     assert np.abs(auto.final_position.values - ref.final_position.values).max() < 1e-9
-    # the paper's friction: bitwise Dormand-Prince; ten times stiffer: Rodas4's step count
+    # the paper's friction: Dormand-Prince's step count (stiff for a moment at most, then back);
+    # ten times stiffer: Rodas4's
     paper, stiff = auto.steps.values[0], auto.steps.values[1]
-    assert (paper == dp.steps.values[0]).all()
-    assert auto.final_position.values[0].tobytes() == dp.final_position.values[0].tobytes()
+    assert (paper <= 1.2 * dp.steps.values[0]).all(), (paper, dp.steps.values[0])
     assert (stiff < 1.5 * ro.steps.values[1] + 100).all(), (stiff, ro.steps.values[1])
     assert (stiff < dp.steps.values[1] / 3).all(), (stiff, dp.steps.values[1])
 

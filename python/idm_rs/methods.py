@@ -14,7 +14,10 @@ changes between its methods: when Dormand-Prince's steps are held at its stabili
 (Hairer's test: h|lambda| at the limit for 15 accepted steps in a row), one Rodas4 step 20
 times as long is tried, then 8 Rodas4 steps whose mean must be 10 times the explicit step (a
 Rodas4 step costs ~3.3 Dormand-Prince steps). Passed, the point stays on Rodas4; failed, it
-goes back to Dormand-Prince and tries again only after twice as many stiff steps. Each point
+goes back to Dormand-Prince and tries again only after twice as many stiff steps. A point on
+Rodas4 runs 8 Dormand-Prince steps every 32 implicit steps (doubling while it stays) and goes
+back when they have become the cheaper (their mean step times 3.3 reaches Rodas4's): a
+stiff phase ends when a sliding phase does. Each point
 decides from its own run only, so its result never depends on its neighbours, the thread
 count or the lane width. Rust: ``stiffness.rs``, ``switching.rs``.
 """

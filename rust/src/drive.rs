@@ -197,8 +197,8 @@ pub trait Observer<T: Scalar = f64> {
     /// (called before [`Observer::step`]; the span there is the difference of two times).
     fn accepted_step(&mut self, _task: usize, _step: f64) {}
 
-    /// Task `task` (a `method="auto"` run) changed to the implicit method after `accepted`
-    /// accepted steps.
+    /// Task `task` (a `method="auto"` run) changed method after `accepted` accepted steps: to
+    /// the implicit one, or back after a failed probation (the calls alternate).
     fn switched(&mut self, _task: usize, _accepted: u64) {}
 }
 

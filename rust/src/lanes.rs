@@ -526,14 +526,14 @@ mod tests {
         }
     }
 
-    /// Counts the runs that changed method and the steps of each.
+    /// The accepted steps after which each run changed method (to Rodas4, back, ...).
     #[derive(Default)]
-    struct Switches(std::collections::BTreeMap<usize, u64>);
+    struct Switches(std::collections::BTreeMap<usize, Vec<u64>>);
     impl Observer for Switches {
         fn start(&mut self, _: usize, _: f64, _: &[f64]) {}
         fn step(&mut self, _: usize, _: f64, _: f64, _: &[f64], _: f64, _: Option<(f64, f64)>, _: bool) {}
         fn switched(&mut self, task: usize, accepted: u64) {
-            self.0.insert(task, accepted);
+            self.0.entry(task).or_default().push(accepted);
         }
     }
 
@@ -561,7 +561,11 @@ mod tests {
             let cancel = AtomicBool::new(false);
             let mut seen = Switches::default();
             let reference = run_tasks_one_by_one(&tasks, &method, &Default::default(), &mut seen, &cancel).unwrap();
-            assert!(seen.0.len() >= 3 && seen.0.len() < tasks.len(), "{structure:?}: switched {:?}", seen.0);
+            // the three stiff devices (inserted at 4: tasks 4-6) change to Rodas4 early
+            for i in 4..7 {
+                let at = &seen.0[&i];
+                assert!(at[0] < 500, "{structure:?} task {i}: switches {at:?}");
+            }
             for level in ["scalar", "avx2"] {
                 set_simd_level(level);
                 let mut lanes = Switches::default();

@@ -241,6 +241,11 @@ impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
         self.stats[i].accepted
     }
 
+    /// The step [s] lane `i` tries next.
+    pub fn proposed_step(&self, i: usize) -> f64 {
+        self.h[i]
+    }
+
     pub fn take_over(&mut self, i: usize, h: f64, accepted: u64) {
         self.h[i] = h.min(self.opts[i].h_max);
         self.stats[i].accepted = accepted;

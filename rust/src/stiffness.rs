@@ -17,6 +17,11 @@
 //! where the solution is smooth for a moment); the probation's mean is the run's own measure.
 //! A failed trial or probation sends the lane back to Dormand-Prince, and the next trial needs
 //! twice as many stiff steps in a row (so a moderately stiff run pays a few trials at most).
+//! A stiff phase ends (a sliding phase stops): a lane on Rodas4 runs [`PROBATION_STEPS`]
+//! Dormand-Prince steps every [`RECHECK_STEPS`] implicit steps (doubling while it stays) and
+//! goes back for good when their mean step, times [`IMPLICIT_STEP_COST`], reaches Rodas4's
+//! (the paper case turns stiff for a moment: without the check it ran 2.7x slower than
+//! Dormand-Prince alone on Rodas4 steps no longer than the explicit ones).
 
 /// Dormand-Prince's stability boundary used by the test (h|λ| above it: at the limit).
 pub const STIFF_H_LAMBDA: f64 = 3.25;
@@ -31,6 +36,11 @@ pub const PROBATION_STEPS: u32 = 8;
 /// The mean Rodas4 step over the probation, in units of the explicit step, at which the lane
 /// stays implicit: three times the cost ratio of the two methods' steps (~3.3).
 pub const SWITCH_GAIN: f64 = 10.0;
+/// A Rodas4 step's cost in Dormand-Prince steps (1,118 against 339 ns, benches/RESULTS.md §4).
+pub const IMPLICIT_STEP_COST: f64 = 3.3;
+/// Implicit steps after which a lane on Rodas4 checks whether Dormand-Prince would now be
+/// cheaper (doubling after each check that keeps it implicit, as the trials back off).
+pub const RECHECK_STEPS: u32 = 32;
 /// Failed trials after which the number of stiff steps a new trial needs stops doubling.
 pub const MAX_TRIAL_BACKOFF: u32 = 6;
 

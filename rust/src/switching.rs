@@ -14,7 +14,10 @@
 use crate::dopri5::{Dopri5, EXPLICIT_CRAWL_HINT};
 use crate::rodas4::{Rodas4, IMPLICIT_CRAWL_HINT};
 use crate::stepper::{AdaptiveOptions, Attempt, Rhs, State, Stepper};
-use crate::stiffness::{StiffnessTest, MAX_TRIAL_BACKOFF, PROBATION_STEPS, STIFF_STEPS, SWITCH_GAIN, TRIAL_FACTOR};
+use crate::stiffness::{
+    StiffnessTest, IMPLICIT_STEP_COST, STIFF_H_LAMBDA, MAX_TRIAL_BACKOFF, PROBATION_STEPS, RECHECK_STEPS, STIFF_STEPS, SWITCH_GAIN,
+    TRIAL_FACTOR,
+};
 
 /// Tolerance of the implicit part relative to the explicit one: Rodas4 at rtol = atol = 1e-6
 /// kept every point within 1 nm where Dormand-Prince needed 3e-7 (benches/RESULTS.md §4).
@@ -28,7 +31,19 @@ enum Mode {
     Trial { h_explicit: f64 },
     /// on Rodas4 since time `since` [s], `steps` accepted steps so far, on probation
     Probation { h_explicit: f64, since: f64, steps: u32 },
-    Implicit,
+    /// on Rodas4 for good since time `since` [s], `steps` accepted steps in this window
+    Implicit { since: f64, steps: u32 },
+    /// Dormand-Prince steps since `since` [s] (`steps` accepted), checking whether they are now
+    /// cheaper than Rodas4's mean step `h_implicit` [s] of the window before; `lambda` the
+    /// largest |λ| [1/s] Hairer's estimate saw on them
+    Recheck { h_implicit: f64, since: f64, steps: u32, lambda: f64 },
+}
+
+impl Mode {
+    /// Whether the lane's next attempt is a Dormand-Prince step.
+    fn explicit(&self) -> bool {
+        matches!(self, Mode::Explicit | Mode::Recheck { .. })
+    }
 }
 
 /// Two steppers per lane group and which one each lane is on.
@@ -39,6 +54,8 @@ pub struct Switching<S: State, const L: usize, const D: usize> {
     test: [StiffnessTest; L],
     /// failed trials and probations so far (each doubles the stiff steps the next trial needs)
     fails: [u32; L],
+    /// rechecks that kept the lane on Rodas4 (each doubles the steps to the next)
+    kept: [u32; L],
     /// held runs: the accepted steps after which the recorded run changed method, and how
     /// many of them this run has passed
     switches: [Vec<u64>; L],
@@ -67,6 +84,7 @@ impl<S: State, const L: usize, const D: usize> Switching<S, L, D> {
             mode: [Mode::Explicit; L],
             test: [StiffnessTest::default(); L],
             fails: [0; L],
+            kept: [0; L],
             just_switched: [None; L],
         }
     }
@@ -81,7 +99,7 @@ impl<S: State, const L: usize, const D: usize> Switching<S, L, D> {
 
     /// Whether lane `i` runs the implicit method (on probation or for good).
     pub fn on_implicit(&self, i: usize) -> bool {
-        matches!(self.mode[i], Mode::Implicit | Mode::Probation { .. })
+        matches!(self.mode[i], Mode::Implicit { .. } | Mode::Probation { .. })
     }
 
     /// Lane `i` goes on with Dormand-Prince afresh from step `h` [s] after `accepted` steps;
@@ -138,8 +156,8 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Switching<S, L,
         end: &[f64; L],
         active: &[bool; L],
     ) -> [Attempt; L] {
-        let on_exp: [bool; L] = std::array::from_fn(|i| active[i] && self.mode[i] == Mode::Explicit);
-        let on_imp: [bool; L] = std::array::from_fn(|i| active[i] && self.mode[i] != Mode::Explicit);
+        let on_exp: [bool; L] = std::array::from_fn(|i| active[i] && self.mode[i].explicit());
+        let on_imp: [bool; L] = std::array::from_fn(|i| active[i] && !self.mode[i].explicit());
         let mut out = if on_exp.iter().any(|a| *a) {
             self.explicit.attempt(f, ys, t, end, &on_exp)
         } else {
@@ -169,14 +187,15 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Switching<S, L,
                             // the mean implicit step against the explicit one it replaced
                             let mean = (t[i] + step - since) / steps as f64;
                             if mean >= SWITCH_GAIN * h_explicit {
-                                self.mode[i] = Mode::Implicit;
+                                self.mode[i] = Mode::Implicit { since: t[i] + step, steps: 0 };
+                                self.kept[i] = 0;
                             } else {
                                 self.back_to_explicit(i, h_explicit, self.implicit.accepted(i), true);
                             }
                         }
                         r
                     }
-                    (Mode::Implicit, r @ Attempt::Accepted { .. }) if self.held[i] => {
+                    (Mode::Implicit { .. }, r @ Attempt::Accepted { .. }) if self.held[i] => {
                         let n = self.implicit.accepted(i);
                         if self.switches[i].get(self.passed[i]) == Some(&n) {
                             // the recorded run went back to the explicit method here
@@ -186,18 +205,57 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Switching<S, L,
                         }
                         r
                     }
+                    (Mode::Implicit { since, steps }, r @ Attempt::Accepted { step, last }) => {
+                        let steps = steps + 1;
+                        self.mode[i] = Mode::Implicit { since, steps };
+                        if steps >= RECHECK_STEPS << self.kept[i] && !last {
+                            // has the stiff phase ended? Dormand-Prince from Rodas4's mean step
+                            let h_implicit = (t[i] + step - since) / steps as f64;
+                            let n = self.implicit.accepted(i);
+                            self.mode[i] = Mode::Recheck { h_implicit, since: t[i] + step, steps: 0, lambda: 0.0 };
+                            self.explicit.take_over(i, h_implicit, n);
+                            self.just_switched[i] = Some(n);
+                        }
+                        r
+                    }
                     (_, r) => r,
                 };
             }
         }
         for i in 0..L {
+            if let (true, Mode::Recheck { h_implicit, since, steps, lambda }, Attempt::Accepted { step, last }) =
+                (on_exp[i], self.mode[i], &out[i])
+            {
+                let steps = steps + 1;
+                let lambda = lambda.max(self.explicit.h_lambda[i] / step);
+                self.mode[i] = Mode::Recheck { h_implicit, since, steps, lambda };
+                if steps >= PROBATION_STEPS && !*last {
+                    let n = self.explicit.accepted(i);
+                    // the explicit step: its mean, but no longer than its stability allows (the
+                    // first steps past the limit are accepted while the unstable mode grows)
+                    let mean = (t[i] + step - since) / steps as f64;
+                    let h_explicit = if lambda > 0.0 { mean.min(STIFF_H_LAMBDA / lambda) } else { mean };
+                    if h_explicit * IMPLICIT_STEP_COST >= h_implicit {
+                        // the explicit steps are now the cheaper: back for good
+                        self.mode[i] = Mode::Explicit;
+                        self.test[i] = StiffnessTest::default();
+                    } else {
+                        // still stiff: Rodas4 again from its own step, the next check later
+                        self.mode[i] = Mode::Implicit { since: t[i] + step, steps: 0 };
+                        self.implicit.take_over(i, h_implicit, n);
+                        self.kept[i] = (self.kept[i] + 1).min(MAX_TRIAL_BACKOFF);
+                        self.just_switched[i] = Some(n);
+                    }
+                }
+                continue;
+            }
             if on_exp[i] && matches!(out[i], Attempt::Accepted { .. }) {
                 let n = self.explicit.accepted(i);
                 if self.held[i] {
                     if self.switches[i].get(self.passed[i]) == Some(&n) {
                         // the recorded run changed to the implicit method here
                         self.passed[i] += 1;
-                        self.mode[i] = Mode::Implicit;
+                        self.mode[i] = Mode::Implicit { since: t[i], steps: 0 };
                         self.implicit.take_over(i, 0.0, n);
                     }
                 } else if self.test[i].observe(self.explicit.h_lambda[i], STIFF_STEPS << self.fails[i]) {
