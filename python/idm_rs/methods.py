@@ -12,12 +12,13 @@ setting that kept every point within 1 nm of RK4 at dt = 1e-8 s where it was mea
 Rodas4 (rtol = atol = 1e-6, which kept the same grids within 1 nm) where that pays, as LSODA
 changes between its methods: when Dormand-Prince's steps are held at its stability limit
 (Hairer's test: h|lambda| at the limit for 15 accepted steps in a row), one Rodas4 step 20
-times as long is tried, then 8 Rodas4 steps whose mean must be 10 times the explicit step (a
-Rodas4 step costs ~3.3 Dormand-Prince steps). Passed, the point stays on Rodas4; failed, it
-goes back to Dormand-Prince and tries again only after twice as many stiff steps. A point on
-Rodas4 runs 8 Dormand-Prince steps every 32 implicit steps (doubling while it stays) and goes
-back when they have become the cheaper (their mean step times 3.3 reaches Rodas4's): a
-stiff phase ends when a sliding phase does. Each point
+times as long is tried, then 8 Rodas4 steps whose mean must be three times the cost ratio of
+the two methods' steps times the explicit step (a Rodas4 step costs ~5 Dormand-Prince steps on
+the vector lanes for the LPS, ~7.7 for the DPS with 4 elements). Passed, the point stays on
+Rodas4; failed, it goes back to Dormand-Prince and tries again only after twice as many stiff
+steps. A point on Rodas4 runs 8 Dormand-Prince steps every 32 implicit steps (64, then 128
+while it stays) and goes back when they have become the cheaper (their mean step times the
+cost ratio reaches Rodas4's): a stiff phase ends when a sliding phase does. Each point
 decides from its own run only, so its result never depends on its neighbours, the thread
 count or the lane width. Rust: ``stiffness.rs``, ``switching.rs``.
 """

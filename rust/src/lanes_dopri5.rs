@@ -11,7 +11,7 @@ use crate::crawl::CrawlWatch;
 use crate::dopri5::{A2, A3, A4, A5, A6, B, C, CONTROL, E, EXPLICIT_CRAWL_HINT};
 use crate::drive::{adaptive_options, LaneEnd, Observer, Resume, Task};
 use crate::lanes::{refill_lanes, LaneExp, PlainLanes, Queue};
-use crate::stiffness::{h_lambda, StiffnessTest, STIFF_STEPS};
+use crate::stiffness::{h_lambda, StiffnessTest, TRY_IMPLICIT_AFTER};
 use crate::stepper::{AdaptiveOptions, Attempt, Held};
 use crate::waveform::Cursor;
 
@@ -151,7 +151,7 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
                 if auto {
                     let hl = h_lambda(step[i], D, |c| scale[c][i], |c| tmp[c][i], |c| k[5][c][i], |c| y_new[c][i],
                                       |c| k[6][c][i]);
-                    stiff = s.test.observe(hl, STIFF_STEPS);
+                    stiff = s.test.observe(hl, TRY_IMPLICIT_AFTER);
                 }
                 for j in 0..D {
                     y[j][i] = y_new[j][i];

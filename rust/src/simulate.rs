@@ -353,14 +353,14 @@ mod tests {
         let (a, _) = simulate_keeping(&m, &w, 0.0, 1e-3, &m.rest_state(), &auto, 1, true, &AtomicBool::new(false)).unwrap();
         let at = *a.held.switches.first().expect("the near-frictionless run switches");
         assert!(a.held.switches.len() % 2 == 1, "and ends implicit: {:?}", a.held.switches);
-        assert!(at < 100, "switched after {at} steps");
+        assert!(at < 400, "switched after {at} steps");
         let steps = a.t.len() - 1;
         assert!(steps < 20_000, "{steps} steps");
         let tight = Method::Rodas4 { rtol: 1e-9, atol: 1e-9, first_step: 1e-9 };
         let r = simulate(&m, &w, 0.0, 1e-3, &m.rest_state(), &tight, 1).unwrap();
         assert!((a.final_state[0] - r.final_state[0]).abs() < 1e-9, "{} vs {}", a.final_state[0], r.final_state[0]);
-        // the paper case is stiff for a moment only: Rodas4 there, back to Dormand-Prince after
-        // (without the recheck it stayed on Rodas4 and took 6,160 steps, 2.7x the time)
+        // the paper case is stiff for moments only: it may take Rodas4 for a stretch and must come
+        // back (without the recheck it stayed on Rodas4 and took 6,160 steps, 2.7x the time)
         let (m, w) = paper(Structure::Lps, Effects::default());
         let (a, _) = simulate_keeping(&m, &w, 0.0, 10e-3, &m.rest_state(), &auto, 1, true, &AtomicBool::new(false)).unwrap();
         let dp = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
@@ -370,7 +370,7 @@ mod tests {
         // implicit steps, between each switch to Rodas4 and the next back
         let implicit: u64 = sw.chunks(2).map(|p| p[1] - p[0]).sum();
         let (steps, explicit_steps) = ((a.t.len() - 1) as u64, (d.t.len() - 1) as f64);
-        let cost = (steps - implicit) as f64 + crate::stiffness::IMPLICIT_STEP_COST * implicit as f64;
+        let cost = (steps - implicit) as f64 + crate::stiffness::implicit_step_cost(m.rest_state().len()) * implicit as f64;
         eprintln!("paper auto: switches {sw:?}, {steps} steps ({implicit} implicit), dopri5 {explicit_steps}");
         assert!(cost < 1.2 * explicit_steps, "{cost} Dormand-Prince steps' worth against {explicit_steps}");
         assert!((a.final_state[0] - d.final_state[0]).abs() < 1e-9);

@@ -10,16 +10,16 @@
 //!
 //! `method="auto"` asks, when Dormand-Prince's run of a lane turns stiff, whether the
 //! implicit method pays there (`switching.rs`): one Rodas4 step of [`TRIAL_FACTOR`] times the
-//! explicit step, then [`PROBATION_STEPS`] Rodas4 steps whose mean must be [`SWITCH_GAIN`]
-//! times the explicit step. A Rodas4 step costs ~3.3 scalar Dormand-Prince steps (1,118 against
-//! 339 ns, benches/RESULTS.md §4), so only a stiff phase where Rodas4's accuracy allows steps
-//! that much longer is worth the change. A single long trial step proves little (it can land
+//! explicit step, then [`PROBATION_STEPS`] Rodas4 steps whose mean must be [`switch_gain`]
+//! times the explicit step. A Rodas4 step costs ~5 Dormand-Prince steps as a sweep runs them
+//! (Dormand-Prince on vector lanes, benches/RESULTS.md §4), so only a stiff phase where
+//! Rodas4's accuracy allows steps that much longer is worth the change. A single long trial step proves little (it can land
 //! where the solution is smooth for a moment); the probation's mean is the run's own measure.
 //! A failed trial or probation sends the lane back to Dormand-Prince, and the next trial needs
 //! twice as many stiff steps in a row (so a moderately stiff run pays a few trials at most).
 //! A stiff phase ends (a sliding phase stops): a lane on Rodas4 runs [`PROBATION_STEPS`]
-//! Dormand-Prince steps every [`RECHECK_STEPS`] implicit steps (doubling while it stays) and
-//! goes back for good when their mean step, times [`IMPLICIT_STEP_COST`], reaches Rodas4's
+//! Dormand-Prince steps every [`RECHECK_STEPS`] implicit steps (doubling, twice at most, while it stays) and
+//! goes back for good when their mean step, times [`implicit_step_cost`], reaches Rodas4's
 //! (the paper case turns stiff for a moment: without the check it ran 2.7x slower than
 //! Dormand-Prince alone on Rodas4 steps no longer than the explicit ones).
 
@@ -27,20 +27,38 @@
 pub const STIFF_H_LAMBDA: f64 = 3.25;
 /// Accepted steps in a row at the limit that make a run stiff.
 pub const STIFF_STEPS: u32 = 15;
+/// Accepted steps in a row at the limit after which `method="auto"` tries Rodas4 (Hairer's
+/// 15 marks a run stiff; a stiff burst that short does not pay for leaving the vector lanes: at
+/// 15 the 256-point DPS4 grid ran 0.88x Dormand-Prince's speed, benches/RESULTS.md §4; a run
+/// held at the limit for good, as a near-frictionless contact is, still changes within a few
+/// hundred steps).
+pub const TRY_IMPLICIT_AFTER: u32 = 256;
 /// Accepted steps in a row below the limit that reset the count.
 pub const NONSTIFF_STEPS: u32 = 6;
 /// The trial Rodas4 step of a stiff lane, in units of its explicit step (see above).
 pub const TRIAL_FACTOR: f64 = 20.0;
 /// Rodas4 steps on probation after an accepted trial (the trial among them).
 pub const PROBATION_STEPS: u32 = 8;
-/// The mean Rodas4 step over the probation, in units of the explicit step, at which the lane
-/// stays implicit: three times the cost ratio of the two methods' steps (~3.3).
-pub const SWITCH_GAIN: f64 = 10.0;
-/// A Rodas4 step's cost in Dormand-Prince steps (1,118 against 339 ns, benches/RESULTS.md §4).
-pub const IMPLICIT_STEP_COST: f64 = 3.3;
+/// A Rodas4 step's cost in Dormand-Prince steps for a state of `dim` components, as a sweep runs
+/// them (Dormand-Prince on the vector lanes): measured 5.0 for the LPS (7 components: 1,362
+/// points/s x 8,513 steps against 935 x 2,512 on the 256-point grid, benches/RESULTS.md §4) and
+/// 7.7 for the DPS with 4 elements (13: 885 x 8,790 against 439 x 2,290); the LU and the solves
+/// grow faster with the state than the right-hand side does. Linear through both, at least 3.
+pub fn implicit_step_cost(dim: usize) -> f64 {
+    (5.0 + 0.45 * (dim as f64 - 7.0)).max(3.0)
+}
+
+/// The mean Rodas4 step over the probation, in units of the explicit step, at which a lane of
+/// `dim` components stays implicit: three times [`implicit_step_cost`].
+pub fn switch_gain(dim: usize) -> f64 {
+    3.0 * implicit_step_cost(dim)
+}
 /// Implicit steps after which a lane on Rodas4 checks whether Dormand-Prince would now be
-/// cheaper (doubling after each check that keeps it implicit, as the trials back off).
+/// cheaper (doubling after each check that keeps it implicit, up to [`MAX_RECHECK_BACKOFF`]
+/// doublings: a stiff phase that ends is noticed within 128 implicit steps).
 pub const RECHECK_STEPS: u32 = 32;
+/// Doublings of [`RECHECK_STEPS`] at most.
+pub const MAX_RECHECK_BACKOFF: u32 = 2;
 /// Failed trials after which the number of stiff steps a new trial needs stops doubling.
 pub const MAX_TRIAL_BACKOFF: u32 = 6;
 

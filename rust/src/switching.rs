@@ -1,7 +1,7 @@
 //! `method="auto"`: Dormand-Prince on every lane; when a lane's run turns stiff (Hairer's test,
 //! `stiffness.rs`), a trial Rodas4 step of `TRIAL_FACTOR` times the explicit step, then a
 //! probation of `PROBATION_STEPS` Rodas4 steps, decide whether the implicit method pays there:
-//! it stays when its mean step over the probation is at least `SWITCH_GAIN` times the explicit
+//! it stays when its mean step over the probation is at least `switch_gain` times the explicit
 //! step it replaced (the cost of a Rodas4 step in Dormand-Prince steps, with a margin);
 //! otherwise the lane goes back to Dormand-Prince and the next trial needs twice as many stiff
 //! steps in a row. Every decision comes from the lane's own run only, so a point's result does
@@ -15,7 +15,7 @@ use crate::dopri5::{Dopri5, EXPLICIT_CRAWL_HINT};
 use crate::rodas4::{Rodas4, IMPLICIT_CRAWL_HINT};
 use crate::stepper::{AdaptiveOptions, Attempt, Rhs, State, Stepper};
 use crate::stiffness::{
-    StiffnessTest, IMPLICIT_STEP_COST, STIFF_H_LAMBDA, MAX_TRIAL_BACKOFF, PROBATION_STEPS, RECHECK_STEPS, STIFF_STEPS, SWITCH_GAIN,
+    StiffnessTest, implicit_step_cost, switch_gain, STIFF_H_LAMBDA, MAX_RECHECK_BACKOFF, MAX_TRIAL_BACKOFF, PROBATION_STEPS, RECHECK_STEPS, TRY_IMPLICIT_AFTER,
     TRIAL_FACTOR,
 };
 
@@ -186,7 +186,7 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Switching<S, L,
                         if steps >= PROBATION_STEPS && !last {
                             // the mean implicit step against the explicit one it replaced
                             let mean = (t[i] + step - since) / steps as f64;
-                            if mean >= SWITCH_GAIN * h_explicit {
+                            if mean >= switch_gain(ys[i].as_ref().len()) * h_explicit {
                                 self.mode[i] = Mode::Implicit { since: t[i] + step, steps: 0 };
                                 self.kept[i] = 0;
                             } else {
@@ -235,7 +235,7 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Switching<S, L,
                     // first steps past the limit are accepted while the unstable mode grows)
                     let mean = (t[i] + step - since) / steps as f64;
                     let h_explicit = if lambda > 0.0 { mean.min(STIFF_H_LAMBDA / lambda) } else { mean };
-                    if h_explicit * IMPLICIT_STEP_COST >= h_implicit {
+                    if h_explicit * implicit_step_cost(ys[i].as_ref().len()) >= h_implicit {
                         // the explicit steps are now the cheaper: back for good
                         self.mode[i] = Mode::Explicit;
                         self.test[i] = StiffnessTest::default();
@@ -243,7 +243,7 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Switching<S, L,
                         // still stiff: Rodas4 again from its own step, the next check later
                         self.mode[i] = Mode::Implicit { since: t[i] + step, steps: 0 };
                         self.implicit.take_over(i, h_implicit, n);
-                        self.kept[i] = (self.kept[i] + 1).min(MAX_TRIAL_BACKOFF);
+                        self.kept[i] = (self.kept[i] + 1).min(MAX_RECHECK_BACKOFF);
                         self.just_switched[i] = Some(n);
                     }
                 }
@@ -258,7 +258,7 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Switching<S, L,
                         self.mode[i] = Mode::Implicit { since: t[i], steps: 0 };
                         self.implicit.take_over(i, 0.0, n);
                     }
-                } else if self.test[i].observe(self.explicit.h_lambda[i], STIFF_STEPS << self.fails[i]) {
+                } else if self.test[i].observe(self.explicit.h_lambda[i], TRY_IMPLICIT_AFTER << self.fails[i]) {
                     self.start_trial(i, self.explicit.proposed_step(i), n);
                 }
             }
