@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+import time
 
 import numpy as np
 import pytest
@@ -112,23 +113,51 @@ def test_auto_resolves_to_the_measured_setting(rk4):
     assert abs(r.final_position - rk4.final_position) < 1e-9
 
 
-# --- a collapsed step stops the run with a message instead of crawling -------------------------
+# --- stiffness: "auto" notices it, "dopri5" says so instead of crawling ------------------------
 
 NEAR_FRICTIONLESS = idm_rs.Params(mu_k=1e-6, mu_s=1e-6)
 SMALL_TRIANGLE = idm_rs.Triangle(50.0, 0.5e-3, 0.5e-3)
 
 
-@pytest.mark.parametrize("method", ["dopri5", "auto"])
-def test_a_near_frictionless_device_stops_the_explicit_method_with_a_hint(method):
+def test_a_near_frictionless_device_stops_dopri5_with_a_hint_instead_of_crawling():
+    method = "dopri5"
     # the issue's case: it ran for more than a minute without a word (2e8 steps); now it stops once
     # its pace projects more than 1e8 (after 0.74 M steps); Rodas4 takes milliseconds
     with pytest.raises(idm_rs.DivergenceError, match=r"integration stopped at t = .*the step fell to .*stability "
-                                                     r"limit .*use method 'rodas4'") as e:
+                                                     r"limit .*use method 'rodas4' or 'auto'") as e:
         idm_rs.simulate(NEAR_FRICTIONLESS, SMALL_TRIANGLE, t_end=1e-3, model="lps", method=method)
     so_far = int(re.search(r"(\d+) steps so far", str(e.value)).group(1))
     assert so_far < 2_000_000, str(e.value)
     r = idm_rs.simulate(NEAR_FRICTIONLESS, SMALL_TRIANGLE, t_end=1e-3, model="lps", method="rodas4")
     assert r.complete and math.isfinite(r.final_position)
+
+
+def test_auto_runs_a_near_frictionless_device_as_fast_as_rodas4_and_as_accurately():
+    kw = dict(t_end=1e-3, model="lps", save_every=1)
+    auto = idm_rs.simulate(NEAR_FRICTIONLESS, SMALL_TRIANGLE, method="auto", **kw)
+    ref = idm_rs.simulate(NEAR_FRICTIONLESS, SMALL_TRIANGLE, method="rodas4", rtol=1e-9, atol=1e-9, **kw)
+    ro = idm_rs.simulate(NEAR_FRICTIONLESS, SMALL_TRIANGLE, method="rodas4", rtol=1e-6, atol=1e-6, **kw)
+    assert abs(auto.final_position - ref.final_position) < 1e-9
+    # a few explicit steps before the switch, then Rodas4's own
+    assert len(auto.t) < 1.5 * len(ro.t) + 100, (len(auto.t), len(ro.t))
+
+
+def test_auto_hands_only_the_stiff_points_of_a_sweep_to_rodas4():
+    # the issue's stiff grid, smaller: presliding stiffness up to 10x the paper's 2e10 N/m
+    grid = {"fric_alpha": [2e10, 2e11], "voltage": [60.0, 100.0]}
+    kw = dict(t_end=2e-3, model="lps", progress=False)
+    auto = idm_rs.sweep(P, PAPER_WAVE, grid, method="auto", **kw)
+    dp = idm_rs.sweep(P, PAPER_WAVE, grid, method="dopri5", rtol=3e-7, atol=3e-7, **kw)
+    ro = idm_rs.sweep(P, PAPER_WAVE, grid, method="rodas4", rtol=1e-6, atol=1e-6, **kw)
+    ref = idm_rs.sweep(P, PAPER_WAVE, grid, method="rodas4", rtol=1e-9, atol=1e-9, **kw)
+    assert (auto.status.values == 1).all()
+    assert np.abs(auto.final_position.values - ref.final_position.values).max() < 1e-9
+    # the paper's friction: Dormand-Prince's step count (stiff for a moment at most, then back);
+    # ten times stiffer: Rodas4's
+    paper, stiff = auto.steps.values[0], auto.steps.values[1]
+    assert (paper <= 1.2 * dp.steps.values[0]).all(), (paper, dp.steps.values[0])
+    assert (stiff < 1.5 * ro.steps.values[1] + 100).all(), (stiff, ro.steps.values[1])
+    assert (stiff < dp.steps.values[1] / 3).all(), (stiff, dp.steps.values[1])
 
 
 def test_a_crawling_sweep_point_is_diverged_with_the_method_s_reason():

@@ -4,15 +4,23 @@
 ``"rodas4"`` (linearly implicit Rosenbrock, order 4(3), L-stable, with the model's analytic
 Jacobian) choose their own steps from ``rtol``/``atol`` and need no ``dt``.
 
-``"auto"`` is the fastest adaptive setting that kept every point within 1 nm of RK4 at
-dt = 1e-8 s where it was measured (``benches/bench_sweep.py`` and ``benches/bench_auto_corners.py``,
-recorded in ``benches/RESULTS.md``): the 16 x 16 grid of mass ratio 0.25-2 x voltage 40-120 V
-(paper case, 10 ms) for the LPS and the DPS with n = 4, and 12 x 12 grids in each of its four
-corners (light or heavy weight, low or high voltage). There, Dormand-Prince at rtol = atol =
-1e-6 missed 1 nm at one point, at 3e-7 at none. Rodas4 takes 2-10x fewer steps (most in the
-high-voltage corners, where friction is stiff) but each step costs ~3.5x more (an LU
-factorisation and six solves), so on these grids it is slower; "auto" will follow the
-measurement when that changes.
+``"auto"`` runs each point with Dormand-Prince at rtol = atol = 3e-7, the fastest explicit
+setting that kept every point within 1 nm of RK4 at dt = 1e-8 s where it was measured
+(``benches/bench_sweep.py`` and ``benches/bench_auto_corners.py``, recorded in
+``benches/RESULTS.md``: the 16 x 16 grid of mass ratio 0.25-2 x voltage 40-120 V, paper case,
+10 ms, LPS and DPS n = 4, and 12 x 12 grids in each of its corners), and changes a point to
+Rodas4 (rtol = atol = 1e-6, which kept the same grids within 1 nm) where that pays, as LSODA
+changes between its methods: when Dormand-Prince's steps are held at its stability limit
+(Hairer's test: h|lambda| at the limit for 15 accepted steps in a row), one Rodas4 step 20
+times as long is tried, then 8 Rodas4 steps whose mean must be three times the cost ratio of
+the two methods' steps times the explicit step (a Rodas4 step costs ~5 Dormand-Prince steps on
+the vector lanes for the LPS, ~7.7 for the DPS with 4 elements). Passed, the point stays on
+Rodas4; failed, it goes back to Dormand-Prince and tries again only after twice as many stiff
+steps. A point on Rodas4 runs 8 Dormand-Prince steps every 32 implicit steps (64, then 128
+while it stays) and goes back when they have become the cheaper (their mean step times the
+cost ratio reaches Rodas4's): a stiff phase ends when a sliding phase does. Each point
+decides from its own run only, so its result never depends on its neighbours, the thread
+count or the lane width. Rust: ``stiffness.rs``, ``switching.rs``.
 """
 
 from __future__ import annotations
@@ -24,10 +32,11 @@ MethodName = Literal["rk4", "dopri5", "rodas4", "auto"]
 #: every method name the engine and the Python API accept
 METHODS: tuple[str, ...] = ("rk4", "dopri5", "rodas4", "auto")
 #: the methods that choose their own step
-ADAPTIVE: tuple[str, ...] = ("dopri5", "rodas4")
+ADAPTIVE: tuple[str, ...] = ("dopri5", "rodas4", "auto")
 
-#: what "auto" resolves to: (method, rtol, atol), from the measurement described above
-AUTO: tuple[str, float, float] = ("dopri5", 3e-7, 3e-7)
+#: what "auto" resolves to: (engine method, rtol, atol) of its explicit part, from the measurement
+#: described above (the implicit part's tolerances are 10/3 of these)
+AUTO: tuple[str, float, float] = ("auto", 3e-7, 3e-7)
 
 
 def check(method: object) -> str:

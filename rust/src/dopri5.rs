@@ -5,6 +5,7 @@
 
 use crate::scalar::Scalar;
 use crate::stepper::{AdaptiveOptions, AdaptiveStats, Attempt, Controller, Rhs, State, Stepper, HELD_EXHAUSTED};
+use crate::stiffness::h_lambda;
 #[cfg(test)]
 use crate::stepper::Held;
 
@@ -50,7 +51,7 @@ pub(crate) const E: [f64; 7] = [
 
 /// What a crawling explicit run is told (`crawl.rs`).
 pub(crate) const EXPLICIT_CRAWL_HINT: &str =
-    "the explicit method is held at its stability limit (the run is stiff): use method 'rodas4'";
+    "the explicit method is held at its stability limit (the run is stiff): use method 'rodas4' or 'auto'";
 
 /// Stages, step sizes and options of `L` lanes; each lane keeps its own step size.
 pub struct Dopri5<S, const L: usize = 1> {
@@ -65,8 +66,12 @@ pub struct Dopri5<S, const L: usize = 1> {
     /// number of components in each lane's error norm
     in_norm: [f64; L],
     pub stats: [AdaptiveStats; L],
+    /// estimate h|λ| on accepted steps for Hairer's stiffness test (`stiffness.rs`); off: not
+    /// even computed
+    detect: bool,
+    /// each lane's h|λ| at its last accepted step
+    pub h_lambda: [f64; L],
 }
-
 
 impl<S: State, const L: usize> Dopri5<S, L> {
     /// Buffers shaped like `zero` (all zeros), one set of options per lane.
@@ -84,7 +89,33 @@ impl<S: State, const L: usize> Dopri5<S, L> {
             in_norm,
             stats: [AdaptiveStats::default(); L],
             opts,
+            detect: false,
+            h_lambda: [0.0; L],
         }
+    }
+
+    /// The same, estimating h|λ| on every accepted step (`h_lambda`).
+    pub fn with_stiffness_test(mut self) -> Self {
+        self.detect = true;
+        self
+    }
+
+    /// The step lane `i` tries next [s].
+    pub fn proposed_step(&self, i: usize) -> f64 {
+        self.h[i]
+    }
+
+    /// Accepted steps of lane `i` so far.
+    pub fn accepted(&self, i: usize) -> u64 {
+        self.stats[i].accepted
+    }
+
+    /// Go on with lane `i` afresh (first stage evaluated anew) from step `h` [s], `accepted`
+    /// steps taken so far.
+    pub fn take_over(&mut self, i: usize, h: f64, accepted: u64) {
+        self.fresh[i] = true;
+        self.h[i] = h.min(self.opts[i].h_max);
+        self.stats[i].accepted = accepted;
     }
 }
 
@@ -168,6 +199,12 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
             let err = self.error_norm(i, ys[i].as_ref(), step[i]); // NaN when the state blew up
             let o = &self.opts[i];
             if err <= 1.0 || !o.held.is_empty() {
+                if self.detect {
+                    let (y6, k6, y7, k7) = (self.tmp[i].as_ref(), self.k[5][i].as_ref(), self.y_new[i].as_ref(), self.k[6][i].as_ref());
+                    let hl = h_lambda(step[i], y7.len(), |c| o.scale[c], |c| y6[c].value(), |c| k6[c].value(),
+                                      |c| y7[c].value(), |c| k7[c].value());
+                    self.h_lambda[i] = hl;
+                }
                 ys[i].as_mut().copy_from_slice(self.y_new[i].as_ref());
                 let (first, rest) = self.k.split_at_mut(6);
                 std::mem::swap(&mut first[0][i], &mut rest[0][i]); // first same as last

@@ -22,6 +22,7 @@ use crate::rodas4::Rodas4;
 use crate::scalar::Scalar;
 use crate::crawl::CrawlWatch;
 use crate::stepper::{Attempt, Rhs, State, Stepper};
+use crate::switching::Switching;
 use crate::waveform::{Cursor, PiecewiseLinear};
 
 /// RK4's stability limit on the imaginary axis is 2 sqrt 2; keep a margin.
@@ -42,6 +43,10 @@ pub enum Method {
     /// Adaptive Rodas4 (linearly implicit, L-stable: steps set by accuracy in the stiff sliding
     /// phases); tolerances and first step as for `Dopri5`.
     Rodas4 { rtol: f64, atol: f64, first_step: f64 },
+    /// Dormand-Prince at `rtol`, `atol`; a run that turns stiff tries a Rodas4 step (tolerances
+    /// `switching::IMPLICIT_TOL_FACTOR` times looser) and goes on with Rodas4 if it pays
+    /// (`stiffness.rs`, `switching.rs`).
+    Auto { rtol: f64, atol: f64, first_step: f64 },
 }
 
 impl Method {
@@ -59,9 +64,10 @@ impl Method {
                 atol,
                 first_step,
             },
+            "auto" => Method::Auto { rtol, atol, first_step },
             other => {
                 return Err(format!(
-                    "parameter 'method' must be 'rk4', 'dopri5' or 'rodas4', got '{other}'"
+                    "parameter 'method' must be 'rk4', 'dopri5', 'rodas4' or 'auto', got '{other}'"
                 ))
             }
         };
@@ -73,7 +79,7 @@ impl Method {
     pub fn fixed_step(&self) -> Option<f64> {
         match *self {
             Method::Rk4 { dt } => Some(dt),
-            Method::Dopri5 { .. } | Method::Rodas4 { .. } => None,
+            Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => None,
         }
     }
 
@@ -86,7 +92,9 @@ impl Method {
     pub fn first_step(&self) -> f64 {
         match *self {
             Method::Rk4 { dt } => dt,
-            Method::Dopri5 { first_step, .. } | Method::Rodas4 { first_step, .. } => first_step,
+            Method::Dopri5 { first_step, .. } | Method::Rodas4 { first_step, .. } | Method::Auto { first_step, .. } => {
+                first_step
+            }
         }
     }
 
@@ -107,7 +115,8 @@ impl Method {
                 rtol,
                 atol,
                 first_step,
-            } => {
+            }
+            | Method::Auto { rtol, atol, first_step } => {
                 if !(rtol > 0.0 && atol > 0.0 && rtol.is_finite() && atol.is_finite()) {
                     return Err(format!(
                         "'rtol' and 'atol' must be positive, got {rtol}, {atol}"
@@ -187,6 +196,10 @@ pub trait Observer<T: Scalar = f64> {
     /// An adaptive method's accepted step [s] for task `task`, exactly as the method took it
     /// (called before [`Observer::step`]; the span there is the difference of two times).
     fn accepted_step(&mut self, _task: usize, _step: f64) {}
+
+    /// Task `task` (a `method="auto"` run) changed method after `accepted` accepted steps: to
+    /// the implicit one, or back after a failed probation (the calls alternate).
+    fn switched(&mut self, _task: usize, _accepted: u64) {}
 }
 
 /// Number of RK4 steps of `dt` from `t_start` to `t_end`, refusing a `dt` that does not divide
@@ -305,7 +318,7 @@ pub fn check_task(task: &Task, method: &Method) -> Result<(), SimError> {
         .map_err(SimError::Input)?;
     match *method {
         Method::Rk4 { dt } => plan_steps(task.model, task.wave, task.t_start, task.t_end, dt).map(|_| ()),
-        Method::Dopri5 { .. } | Method::Rodas4 { .. } => check_span(task.t_start, task.t_end),
+        Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => check_span(task.t_start, task.t_end),
     }
 }
 
@@ -427,11 +440,28 @@ impl<T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> Rhs<T> for M
     }
 }
 
+/// Where a run handed over by the vector path (`method="auto"`, a lane whose run turned stiff)
+/// continues: its task starts at the hand-over time and state, and these carry
+/// what the run had counted so far.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Resume {
+    /// accepted steps so far, and the smallest [s]
+    pub steps: u64,
+    pub min_step: f64,
+    /// the main body's velocity at the last state [m/s]
+    pub v_last: f64,
+    /// the explicit step the run had proposed next [s] (its trial step is a multiple)
+    pub h: f64,
+    /// the run's watch on its pace (`crawl.rs`)
+    pub watch: CrawlWatch,
+}
+
 /// Advance up to `L` tasks of one state layout together (`tasks[i]` on lane i; unused lanes idle)
 /// from their initial states in `ys`, which end holding the final states, with `rhs` their
 /// right-hand side (see [`ModelRhs::for_tasks`]). `first` is the index the observer sees for
-/// lane 0; `dt` [s] the step of a fixed-step stepper. `None` if cancelled. Always inlined: the
-/// caller may compile it for the processor's vector width (`run_tasks`).
+/// lane 0; `dt` [s] the step of a fixed-step stepper; `resume`: tasks that continue a run
+/// (their observer was started already, their counts go on). `None` if cancelled. Always
+/// inlined: the caller may compile it for the processor's vector width (`run_tasks`).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn drive_lanes<S, St, O, R, const L: usize>(
@@ -443,6 +473,7 @@ fn drive_lanes<S, St, O, R, const L: usize>(
     ys: &mut [S; L],
     observer: &mut O,
     cancel: &AtomicBool,
+    resume: Option<&[Resume]>,
 ) -> Option<Vec<LaneEnd>>
 where
     S: State,
@@ -480,7 +511,10 @@ where
         }
         stepper.restart(i);
         v_last[i] = ys[i].as_ref()[task.model.layout.dof].value();
-        observer.start(first + i, task.t_start, ys[i].as_ref());
+        match resume {
+            Some(r) => (steps[i], min_step[i], v_last[i], watch[i]) = (r[i].steps, r[i].min_step, r[i].v_last, r[i].watch),
+            None => observer.start(first + i, task.t_start, ys[i].as_ref()),
+        }
     }
     let mut attempts = 0usize;
     loop {
@@ -551,6 +585,9 @@ where
             v_last[i] = y[tasks[i].model.layout.dof].value();
             steps[i] += 1;
             min_step[i] = min_step[i].min(span);
+            if let Some(n) = stepper.take_switch(i) {
+                observer.switched(first + i, n);
+            }
             if !St::FIXED_STEP && !done {
                 if let Some(why) = watch[i].observe(steps[i], t_new, tasks[i].t_end, stepper.crawl_hint(i)) {
                     active[i] = false;
@@ -612,6 +649,7 @@ fn run_group<'a, S, O, R, const D: usize, const L: usize>(
     observer: &mut O,
     cancel: &AtomicBool,
     out: &mut Vec<(LaneEnd, Vec<S::Elem>)>,
+    resume: Option<&[Resume]>,
 ) -> Option<()>
 where
     S: State,
@@ -627,26 +665,62 @@ where
     let ends = match *method {
         Method::Rk4 { dt } => {
             let mut st: Rk4<S, L> = Rk4::new(dt, zero);
-            let mut rhs = rhs_for(chunk, st.bound_slack());
-            drive_lanes(chunk, first, dt, &mut st, &mut rhs, &mut ys, observer, cancel)?
+            let mut rhs = rhs_for(chunk, st.admissible_slack());
+            drive_lanes(chunk, first, dt, &mut st, &mut rhs, &mut ys, observer, cancel, resume)?
         }
         Method::Dopri5 { rtol, atol, first_step } => {
             let opts = std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
             let mut st: Dopri5<S, L> = Dopri5::new(opts, zero);
-            let mut rhs = rhs_for(chunk, st.bound_slack());
-            drive_lanes(chunk, first, 0.0, &mut st, &mut rhs, &mut ys, observer, cancel)?
+            let mut rhs = rhs_for(chunk, st.admissible_slack());
+            drive_lanes(chunk, first, 0.0, &mut st, &mut rhs, &mut ys, observer, cancel, resume)?
         }
         Method::Rodas4 { rtol, atol, first_step } => {
             let opts = std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
             let mut st: Rodas4<S, L, D> = Rodas4::new(opts, zero);
-            let mut rhs = rhs_for(chunk, st.bound_slack());
-            drive_lanes(chunk, first, 0.0, &mut st, &mut rhs, &mut ys, observer, cancel)?
+            let mut rhs = rhs_for(chunk, st.admissible_slack());
+            drive_lanes(chunk, first, 0.0, &mut st, &mut rhs, &mut ys, observer, cancel, resume)?
+        }
+        Method::Auto { rtol, atol, first_step } => {
+            let opts = std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
+            let mut st: Switching<S, L, D> = Switching::new(opts, zero);
+            if let Some(r) = resume {
+                for (i, r) in r.iter().enumerate() {
+                    st.start_trial(i, r.h, r.steps);
+                }
+            }
+            let mut rhs = rhs_for(chunk, st.admissible_slack());
+            drive_lanes(chunk, first, 0.0, &mut st, &mut rhs, &mut ys, observer, cancel, resume)?
         }
     };
     for (e, y) in ends.into_iter().zip(ys.iter()) {
         out.push((e, y.as_ref().to_vec()));
     }
     Some(())
+}
+
+/// An observer that sees task `i` of a list as task `index[i]` of another.
+struct Renumbered<'o, 'i, O> {
+    inner: &'o mut O,
+    index: &'i [usize],
+}
+
+impl<T: Scalar, O: Observer<T>> Observer<T> for Renumbered<'_, '_, O> {
+    #[inline(always)]
+    fn start(&mut self, task: usize, t: f64, y: &[T]) {
+        self.inner.start(self.index[task], t, y)
+    }
+    #[inline(always)]
+    fn step(&mut self, task: usize, t: f64, span: f64, y: &[T], v_cmd: f64, start: Option<(T, T)>, last: bool) {
+        self.inner.step(self.index[task], t, span, y, v_cmd, start, last)
+    }
+    #[inline(always)]
+    fn accepted_step(&mut self, task: usize, step: f64) {
+        self.inner.accepted_step(self.index[task], step)
+    }
+    #[inline(always)]
+    fn switched(&mut self, task: usize, accepted: u64) {
+        self.inner.switched(self.index[task], accepted)
+    }
 }
 
 /// Every lane group of plain f64 tasks with `N` nodes and `D` state components, as one
@@ -673,9 +747,39 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pu
             // the state stored component by component, lanes refilled from the queue
             let ends = match *self.method {
                 Method::Rk4 { dt } => Some(run_rk4_lanes::<O, E, N, D, L>(self.tasks, dt, self.observer, self.cancel)?),
-                Method::Dopri5 { rtol, atol, first_step } => Some(run_dopri5_lanes::<O, E, N, D, L>(
-                    self.tasks, rtol, atol, first_step, self.observer, self.cancel,
-                )?),
+                Method::Dopri5 { rtol, atol, first_step } | Method::Auto { rtol, atol, first_step } => {
+                    let auto = matches!(self.method, Method::Auto { .. });
+                    let mut handoffs = Vec::new();
+                    let mut ends = run_dopri5_lanes::<O, E, N, D, L>(
+                        self.tasks, rtol, atol, first_step, self.observer, self.cancel, auto, &mut handoffs,
+                    )?;
+                    // lanes that turned stiff go on with the implicit method, L at a time
+                    for group in handoffs.chunks(L) {
+                        let chunk: Vec<Task> = group
+                            .iter()
+                            .map(|h| Task { t_start: h.t, y0: &h.y, ..self.tasks[h.task] })
+                            .collect();
+                        let resume: Vec<Resume> = group.iter().map(|h| h.resume).collect();
+                        let index: Vec<usize> = group.iter().map(|h| h.task).collect();
+                        let mut done = Vec::with_capacity(group.len());
+                        run_group::<[f64; D], _, _, D, L>(
+                            &chunk,
+                            0,
+                            self.method,
+                            &Held::default(),
+                            [0.0; D],
+                            |c, slack| LanesRhs::<E, N, D, L>::new(ModelRhs::for_tasks(c, slack)),
+                            &mut Renumbered { inner: &mut *self.observer, index: &index },
+                            self.cancel,
+                            &mut done,
+                            Some(&resume),
+                        )?;
+                        for (h, end) in group.iter().zip(done) {
+                            ends[h.task] = Some(end);
+                        }
+                    }
+                    Some(ends.into_iter().map(|o| o.expect("every task ends")).collect::<Vec<_>>())
+                }
                 Method::Rodas4 { .. } => None,
             };
             if let Some(ends) = ends {
@@ -694,6 +798,7 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pu
                 self.observer,
                 self.cancel,
                 self.out,
+                None,
             )?;
         }
         Some(())
@@ -756,7 +861,7 @@ pub fn run_tasks_one_by_one<T: Scalar, O: Observer<T>>(
         run_group::<Vec<T>, O, _, 0, 1>(
             std::slice::from_ref(task), c, method, held, zero,
             |c, slack| ModelRhs::<T, 0, true, 1>::for_tasks(c, slack),
-            observer, cancel, &mut out,
+            observer, cancel, &mut out, None,
         )?;
     }
     Some(out)

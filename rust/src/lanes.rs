@@ -526,6 +526,57 @@ mod tests {
         }
     }
 
+    /// The accepted steps after which each run changed method (to Rodas4, back, ...).
+    #[derive(Default)]
+    struct Switches(std::collections::BTreeMap<usize, Vec<u64>>);
+    impl Observer for Switches {
+        fn start(&mut self, _: usize, _: f64, _: &[f64]) {}
+        fn step(&mut self, _: usize, _: f64, _: f64, _: &[f64], _: f64, _: Option<(f64, f64)>, _: bool) {}
+        fn switched(&mut self, task: usize, accepted: u64) {
+            self.0.entry(task).or_default().push(accepted);
+        }
+    }
+
+    #[test]
+    fn auto_on_vector_lanes_hands_stiff_runs_over_bitwise_as_the_scalar_path() {
+        // the eleven devices, and three whose friction state is far stiffer (a presliding
+        // stiffness 1,000x the paper's, a near-frictionless contact): those switch to Rodas4
+        let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
+        let method = Method::Auto { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        for structure in [Structure::Lps, Structure::Dps(4)] {
+            let mut ms = models(structure);
+            for (alpha, mu) in [(1e3, 1.0), (3e3, 1.0), (1.0, 1e-5)] {
+                let mut p = Params::paper();
+                p.fric_alpha *= alpha;
+                p.mu_k *= mu;
+                p.mu_s *= mu;
+                ms.insert(4, Model::new(p, Effects::default(), structure, false, false).unwrap());
+            }
+            let y0: Vec<Vec<f64>> = ms.iter().map(|m| m.rest_state()).collect();
+            let tasks: Vec<Task> = ms
+                .iter()
+                .zip(&y0)
+                .map(|(m, y)| Task { model: m, wave: &wave, t_start: 0.0, t_end: 2e-3, y0: y })
+                .collect();
+            let cancel = AtomicBool::new(false);
+            let mut seen = Switches::default();
+            let reference = run_tasks_one_by_one(&tasks, &method, &Default::default(), &mut seen, &cancel).unwrap();
+            // the three stiff devices (inserted at 4: tasks 4-6) change to Rodas4 early
+            for i in 4..7 {
+                let at = &seen.0[&i];
+                assert!(at[0] < 500, "{structure:?} task {i}: switches {at:?}");
+            }
+            for level in ["scalar", "avx2"] {
+                set_simd_level(level);
+                let mut lanes = Switches::default();
+                let ends = run_tasks::<_, 8>(&tasks, &method, &mut lanes, &cancel).unwrap();
+                assert_eq!(ends, reference, "{structure:?} {level}");
+                assert_eq!(lanes.0, seen.0, "{structure:?} {level}: the same runs switch at the same step");
+            }
+            set_simd_level("avx2");
+        }
+    }
+
     #[test]
     fn a_crawling_lane_stops_as_on_the_scalar_path_and_its_neighbours_finish() {
         // a near-frictionless contact (mu 1e-6) holds Dormand-Prince at its stability limit

@@ -9,8 +9,9 @@ use std::sync::atomic::AtomicBool;
 
 use crate::crawl::CrawlWatch;
 use crate::dopri5::{A2, A3, A4, A5, A6, B, C, CONTROL, E, EXPLICIT_CRAWL_HINT};
-use crate::drive::{adaptive_options, LaneEnd, Observer, Task};
+use crate::drive::{adaptive_options, LaneEnd, Observer, Resume, Task};
 use crate::lanes::{refill_lanes, LaneExp, PlainLanes, Queue};
+use crate::stiffness::{h_lambda, StiffnessTest, TRY_IMPLICIT_AFTER};
 use crate::stepper::{AdaptiveOptions, Attempt, Held};
 use crate::waveform::Cursor;
 
@@ -31,12 +32,24 @@ struct Slot {
     min_step: f64,
     /// the pace of its last steps (`crawl.rs`)
     watch: CrawlWatch,
+    test: StiffnessTest,
+}
+
+/// A lane of `method="auto"` that turned stiff: its task, state and what its run counted, to
+/// be continued by `switching::Switching` from there, its trial step first.
+pub struct Handoff {
+    pub task: usize,
+    pub t: f64,
+    pub y: Vec<f64>,
+    pub resume: Resume,
 }
 
 /// Run `tasks` (each accepted by [`PlainLanes::accepts`], `N` nodes, `D` = 2 N + 3 components)
 /// with Dormand-Prince at tolerances `rtol`, `atol` from a first step `first_step` [s], `L`
 /// lanes at a time, refilling lanes from the queue. Returns each task's end and final state in
-/// task order; `None` if cancelled. Always inlined: the caller compiles it for the processor's
+/// task order; `None` if cancelled. With `auto`, Hairer's stiffness test runs on every
+/// accepted step and a lane that switches (as `switching::Switching` decides) is not finished
+/// here: its task's entry is `None` and it is listed in `handoffs`. Always inlined: the caller compiles it for the processor's
 /// vector width.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
@@ -47,7 +60,9 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
     first_step: f64,
     observer: &mut O,
     cancel: &AtomicBool,
-) -> Option<Vec<(LaneEnd, Vec<f64>)>> {
+    auto: bool,
+    handoffs: &mut Vec<Handoff>,
+) -> Option<Vec<Option<(LaneEnd, Vec<f64>)>>> {
     let mut out: Vec<Option<(LaneEnd, Vec<f64>)>> = vec![None; tasks.len()];
     if tasks.is_empty() {
         return Some(Vec::new());
@@ -81,6 +96,7 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
                 steps: 0,
                 min_step: f64::INFINITY,
                 watch: CrawlWatch::new(task.t_start),
+                test: StiffnessTest::default(),
             }
         });
         match queue {
@@ -130,7 +146,13 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
             let Some(s) = &mut slots[i] else { continue };
             let err = err[i] / s.in_norm;
             let err = err.sqrt();
+            let mut stiff = false;
             let attempt = if err <= 1.0 {
+                if auto {
+                    let hl = h_lambda(step[i], D, |c| scale[c][i], |c| tmp[c][i], |c| k[5][c][i], |c| y_new[c][i],
+                                      |c| k[6][c][i]);
+                    stiff = s.test.observe(hl, TRY_IMPLICIT_AFTER);
+                }
                 for j in 0..D {
                     y[j][i] = y_new[j][i];
                     k[0][j][i] = k[6][j][i]; // first same as last
@@ -173,6 +195,10 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
                     if done {
                         out[s.task] = Some((LaneEnd::Finished { steps: s.steps, min_step: s.min_step }, lane_state.to_vec()));
                         slots[i] = None;
+                    } else if stiff {
+                        let resume = Resume { steps: s.steps, min_step: s.min_step, v_last: s.v_last, h: s.h, watch: s.watch };
+                        handoffs.push(Handoff { task: s.task, t: t_new, y: lane_state.to_vec(), resume });
+                        slots[i] = None;
                     }
                 }
                 Attempt::Failed(why) => {
@@ -183,7 +209,7 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
             }
         }
     }
-    Some(out.into_iter().map(|o| o.expect("every task ends")).collect())
+    Some(out)
 }
 
 /// out = y + step sum_j a_j k_j, per lane (as `dopri5::combine`).

@@ -27,6 +27,8 @@ pub mod scalar;
 pub mod sensitivity;
 pub mod simulate;
 pub mod stepper;
+pub mod stiffness;
+pub mod switching;
 pub mod waveform;
 
 #[cfg(test)]

@@ -234,6 +234,23 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
 }
 
 impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
+    /// Continue lane `i` from another method's run: its next step `h` [s] and the number of
+    /// steps that run accepted (held steps are counted from the run's start).
+    /// Accepted steps of lane `i` so far.
+    pub fn accepted(&self, i: usize) -> u64 {
+        self.stats[i].accepted
+    }
+
+    /// The step [s] lane `i` tries next.
+    pub fn proposed_step(&self, i: usize) -> f64 {
+        self.h[i]
+    }
+
+    pub fn take_over(&mut self, i: usize, h: f64, accepted: u64) {
+        self.h[i] = h.min(self.opts[i].h_max);
+        self.stats[i].accepted = accepted;
+    }
+
     /// Put the new state y + sum a_5j u_j + u_5 + u_6 in `y_stage[i]` and return the scaled
     /// RMS of the embedded error estimate (the last increment) [-].
     #[inline(always)]

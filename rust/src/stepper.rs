@@ -115,6 +115,9 @@ pub struct AdaptiveOptions {
 pub struct Held {
     pub steps: Vec<f64>,
     pub states: Vec<f64>,
+    /// `method="auto"`: the numbers of accepted steps after which the run changed method
+    /// (explicit to implicit, then back, ...; empty: it never did)
+    pub switches: Vec<u64>,
 }
 
 impl Held {
@@ -239,7 +242,17 @@ pub trait Stepper<S: State, const L: usize> {
     /// Relative slack on the presliding-force bound before a state counts as diverged: the
     /// method's local error may overshoot the bound by this much.
     fn bound_slack(&self) -> f64;
-    /// What to do instead when `lane`'s run crawls (`crawl::crawling`; adaptive steppers only).
+    /// Relative slack of the bound the right-hand side's `admissible` checks (implicit steps
+    /// reject a step beyond it); by default the same as [`Stepper::bound_slack`].
+    fn admissible_slack(&self) -> f64 {
+        self.bound_slack()
+    }
+    /// `Some(accepted)` once, right after the attempt in which `lane` changed method (after
+    /// `accepted` accepted steps; `method="auto"`); `None` otherwise.
+    fn take_switch(&mut self, _lane: usize) -> Option<u64> {
+        None
+    }
+    /// What to do instead when `lane`'s run crawls (`crawl::CrawlWatch`; adaptive steppers only).
     fn crawl_hint(&self, _lane: usize) -> &'static str {
         ""
     }
