@@ -6,7 +6,9 @@ voltage barely moves). Each corner is a 12 x 12 grid; paper case, 10 ms.
     python benches/bench_auto_corners.py [--models lps,dps] [--json PATH]
 
 Prints, per model, corner and candidate: the largest |x1 - x1_RK4| [m], the number of points
-beyond 1 nm, and the median steps per point. (Together with the 16 x 16 grid of
+beyond 1 nm, the median steps per point and the points per second (2 threads). A fifth corner
+is a stiff contact (presliding stiffness up to 1,000x the paper's), where ``auto`` should change
+to Rodas4. (Together with the 16 x 16 grid of
 ``bench_sweep.py``, this is the measurement ``idm_rs.methods.AUTO`` follows.)
 """
 
@@ -14,42 +16,57 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 from pathlib import Path
 
 import numpy as np
 
 import idm_rs
 
+#: name -> (first axis, its range, log-spaced?, voltage range)
 CORNERS = {
-    "light weight, high voltage": ((0.25, 0.40), (105.0, 120.0)),
-    "heavy weight, low voltage": ((1.8, 2.0), (40.0, 55.0)),
-    "light weight, low voltage": ((0.25, 0.40), (40.0, 55.0)),
-    "heavy weight, high voltage": ((1.8, 2.0), (105.0, 120.0)),
+    "light weight, high voltage": ("mass_ratio", (0.25, 0.40), False, (105.0, 120.0)),
+    "heavy weight, low voltage": ("mass_ratio", (1.8, 2.0), False, (40.0, 55.0)),
+    "light weight, low voltage": ("mass_ratio", (0.25, 0.40), False, (40.0, 55.0)),
+    "heavy weight, high voltage": ("mass_ratio", (1.8, 2.0), False, (105.0, 120.0)),
+    # a stiff contact: the presliding stiffness 10-1,000x the paper's, where the explicit method
+    # is held at its stability limit through every sliding phase (the issue's 192-point sweep)
+    "stiff contact (fric_alpha 2e9-2e11)": ("fric_alpha", (2e9, 2e11), True, (40.0, 120.0)),
 }
-CANDIDATES = (("dopri5", 1e-6), ("dopri5", 3e-7), ("dopri5", 1e-7), ("rodas4", 1e-5), ("rodas4", 3e-6))
+#: (method, rtol = atol); None: the method's own setting ("auto": idm_rs.methods.AUTO)
+CANDIDATES = (("dopri5", 1e-6), ("dopri5", 3e-7), ("dopri5", 1e-7), ("rodas4", 1e-5), ("rodas4", 3e-6),
+              ("auto", None))
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", default="lps,dps")
     ap.add_argument("--size", type=int, default=12, help="points per corner axis (default 12)")
+    ap.add_argument("--corners", default="", help="comma-separated name fragments (default: all)")
     ap.add_argument("--json", metavar="PATH")
     a = ap.parse_args(argv)
     p, w = idm_rs.Params(), idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
     out = []
     for model in a.models.split(","):
         kw = dict(t_end=10e-3, model=model, n_elements=4, progress=False, threads=2)
-        for name, ((m0, m1), (v0, v1)) in CORNERS.items():
-            g = {"mass_ratio": np.linspace(m0, m1, a.size), "voltage": np.linspace(v0, v1, a.size)}
+        for name, (axis, (a0, a1), log, (v0, v1)) in CORNERS.items():
+            if a.corners and not any(c in name for c in a.corners.split(",")):
+                continue
+            first = np.geomspace(a0, a1, a.size) if log else np.linspace(a0, a1, a.size)
+            g = {axis: first, "voltage": np.linspace(v0, v1, a.size)}
             ref = idm_rs.sweep(p, w, g, dt=1e-8, **kw)["final_position"].values
             for method, tol in CANDIDATES:
-                ds = idm_rs.sweep(p, w, g, method=method, rtol=tol, atol=tol, **kw)
+                t0 = time.perf_counter()
+                ds = idm_rs.sweep(p, w, g, method=method, **(dict(rtol=tol, atol=tol) if tol else {}), **kw)
+                wall = time.perf_counter() - t0
                 e = np.abs(ds["final_position"].values - ref)
                 row = dict(model=model, corner=name, method=method, tol=tol, max_err_m=float(e.max()),
-                           points_over_1nm=int((e > 1e-9).sum()), median_steps=float(np.median(ds.steps.values)))
+                           points_over_1nm=int((e > 1e-9).sum()), median_steps=float(np.median(ds.steps.values)),
+                           wall_s=wall, points_per_s=e.size / wall, statuses=np.bincount(ds.status.values.ravel()).tolist())
                 out.append(row)
-                print(f"{model} | {name} | {method} {tol:g}: max |dx1| {e.max():.2e} m, > 1 nm: "
-                      f"{row['points_over_1nm']}, median steps {row['median_steps']:.0f}", flush=True)
+                print(f"{model} | {name} | {method} {tol if tol else '(own)'}: max |dx1| {e.max():.2e} m, > 1 nm: "
+                      f"{row['points_over_1nm']}, median steps {row['median_steps']:.0f}, {row['points_per_s']:.0f} "
+                      "points/s", flush=True)
     if a.json:
         Path(a.json).write_text(json.dumps(out, indent=2) + "\n")
     return 0

@@ -204,14 +204,17 @@ def test_report_shows_unsupported_candidates_as_such(spring_diagnosis):
 def test_progress_advances_by_stage_to_the_end():
     from idm_rs.diagnosis.diagnose import STAGES, _Progress
 
-    p = _Progress("test")
+    runs = [0]
+    p = _Progress("test", lambda: runs[0])  # the bar shows the simulator's count of runs
+    runs[0] = 40_000  # 10,000 model evaluations of 4 experiments
     p.update(10_000)  # far beyond the stage's typical count: approaches, never passes, its share
     assert STAGES[0][1] * 0.99 < p.bar.n <= STAGES[0][1]
     p.stage_done("calibration")
     assert p.bar.n == pytest.approx(STAGES[0][1])
     p.stage_done("candidate fits")  # a skipped stage's share is passed over
     assert p.bar.n == pytest.approx(sum(s[1] for s in STAGES[:3]))
-    assert "null refits" in p.bar.postfix and "10000 simulations" in p.bar.postfix
+    assert "null refits" in p.bar.postfix and "40000 simulated runs" in p.bar.postfix
+    assert p.bar.smoothing == 0  # the ETA from the whole run's rate
     p.close()
     assert p.bar.n == pytest.approx(100.0)
 

@@ -129,7 +129,17 @@ def test_stub_function_signature_matches_the_extension(fn):
 def test_stub_run_config_constructor_matches_the_extension():
     cls = next(n for n in _stub().body if isinstance(n, ast.ClassDef) and n.name == "RunConfig")
     init = next(n for n in cls.body if isinstance(n, ast.FunctionDef) and n.name == "__init__")
-    assert _stub_params(init, drop_self=True) == _runtime_params(_core.RunConfig)
+    # the extension's constructor takes keywords (its fields are declared once in bindings.rs:
+    # the struct, its defaults and the keyword parsing come from one list); the stub names each,
+    # keyword-only, and the extension refuses any other by name
+    stub = _stub_params(init, drop_self=True)
+    assert all(kind == "KEYWORD_ONLY" and has_default for _, kind, has_default in stub)
+    fields = {n for n, v in vars(_core.RunConfig).items() if type(v).__name__ == "getset_descriptor"}
+    assert {name for name, _, _ in stub} == fields
+    with pytest.raises(TypeError, match="unexpected keyword argument 'bogus'"):
+        _core.RunConfig(bogus=1)
+    with pytest.raises(TypeError):
+        _core.RunConfig("lps")  # keywords only
     # every constructor keyword is a read-only attribute, declared as a property
     props = {n.name for n in cls.body if isinstance(n, ast.FunctionDef)
              and any(isinstance(d, ast.Name) and d.id == "property" for d in n.decorator_list)}

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs.cli import _waveform_title, main
+from idm_rs.cli import main
+from idm_rs.cli_figures import _waveform_title
 
 from conftest import interrupt_main_when
 

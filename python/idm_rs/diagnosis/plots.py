@@ -126,7 +126,7 @@ def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
         r_cal = r_cal * 1e9 if r_cal.size == x.size else (x - cal_aligned) * 1e9
         r_ref = r_ref * 1e9 if r_ref.size == x.size else (x - ref_aligned) * 1e9
         per_cycle = d.recording.sample_rate_Hz / e.frequency_Hz if e.frequency_Hz > 0 else x.size
-        w = max(1, int(round(SMOOTH_CYCLE_SHARE * per_cycle)))
+        span = max(1, int(round(SMOOTH_CYCLE_SHARE * per_cycle)))  # samples of the moving mean
 
         fig, (ax_v, ax_x, ax_r) = plt.subplots(3, 1, figsize=(10, 7.5), sharex=True,
                                                gridspec_kw={"height_ratios": [1, 3, 2]}, constrained_layout=True)
@@ -150,14 +150,14 @@ def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
                 for ax in (ax_x, ax_r):
                     ax.axvspan(w.t_start * 1e3, w.t_end * 1e3, color=C_WINDOW, alpha=0.12, lw=0)
         ax_r.axhspan(-sigma_nm, sigma_nm, color="0.85", alpha=0.6, lw=0, label=f"±1σ noise ({sigma_nm:.2f} nm)")
-        band = sigma_nm / math.sqrt(w)
+        band = sigma_nm / math.sqrt(span)
         ax_r.axhspan(-band, band, color="0.6", alpha=0.5, lw=0, label=f"±1σ of the moving mean ({band:.2f} nm)")
         ax_r.plot(t_ms, r_cal, color=C_CALIBRATED, lw=0.5, alpha=0.35)
-        ax_r.plot(t_ms, _moving_mean(r_cal, w), color=C_CALIBRATED, lw=1.6,
+        ax_r.plot(t_ms, _moving_mean(r_cal, span), color=C_CALIBRATED, lw=1.6,
                   label=f"calibrated nominal (RMS {np.sqrt(np.nanmean(r_cal ** 2)):.2f} nm; bold: systematic part)")
         if cand is not None:
             ax_r.plot(t_ms, r_ref, color=C_REFIT, lw=0.5, alpha=0.35)
-            ax_r.plot(t_ms, _moving_mean(r_ref, w), color=C_REFIT, lw=1.6,
+            ax_r.plot(t_ms, _moving_mean(r_ref, span), color=C_REFIT, lw=1.6,
                       label=f"{refit_label} (RMS {np.sqrt(np.nanmean(r_ref ** 2)):.2f} nm)")
         if any(w.experiment == e.name for w in d.windows):
             ax_r.axvspan(np.nan, np.nan, color=C_WINDOW, alpha=0.12, lw=0, label="systematic windows (calibrated)")
