@@ -247,8 +247,8 @@ pub fn simulate_with_derivatives(
 }
 
 /// Run from rest over [0, `t_end`] with RK4 of step `dt` [s], saving every `save_every` steps:
-/// the paper's setting (the Rust tests' shorthand; the bindings call `simulate`).
-#[cfg(test)]
+/// the paper's setting (the shorthand of the Rust tests and `examples/paper_case.rs`; the
+/// bindings call `simulate`).
 pub fn simulate_from_rest(
     model: &Model,
     wave: &PiecewiseLinear,

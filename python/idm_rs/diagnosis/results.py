@@ -119,7 +119,8 @@ class Diagnosis:
     leaves noise and no effect is supported); "unexplained" (a systematic residual remains that
     no catalogue effect explains, although the calibration converged); or "not_converged" (the
     calibration's independent searches did not agree and the residual is not noise: the tool's
-    own fit failed, which says nothing about missing physics)."""
+    own fit failed, which says nothing about missing physics); or "interrupted" (Ctrl-C stopped it:
+``complete`` is False and the result holds what was finished)."""
 
     case: str
     verdict: str
