@@ -50,6 +50,14 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 def pytest_configure(config):
+    # A shell starts background jobs with SIGINT ignored, and Python then keeps it ignored: the
+    # Ctrl-C tests' `_thread.interrupt_main()` would do nothing (measured: `bash -c 'pytest ... &'`
+    # failed all three, in the foreground they pass). Give such a run Python's usual handler.
+    import signal
+
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
     # pyproject turns every warning into an error. When a hypothesis test fails, hypothesis'
     # failure report imports code that trips a third-party DeprecationWarning, and the error
     # turns the readable failure into an INTERNALERROR. Ignore exactly that warning.
