@@ -46,11 +46,7 @@ def plot_rig_fit(fit: RigFit, directory: Any) -> list[Any]:
         m = fit.metrics
         ax.set_title(f"{fit.name}: mu_s = {fit.params['mu_s']:.4f}, mu_k = {fit.params['mu_k']:.4f}; period measured "
                      f"{m['period_s']:.3g} s, simulated {m.get('simulated_period_s', math.nan):.3g} s", fontsize=9)
-        _judgement(fig, fit)
-        path = out / f"rig_fit_{fit.name}.png"
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return [path]
+        return [_save_fit(fig, fit, out)]
     if "force" not in a:  # a displacement record (frame)
         fig, (ax, axr) = plt.subplots(2, 1, figsize=(10, 6), sharex=True, constrained_layout=True)
         ax.plot(a["t"], a["drive"] * 1e3, color="0.6", lw=0.8, label="base (drive)")
@@ -67,11 +63,7 @@ def plot_rig_fit(fit: RigFit, directory: Any) -> list[Any]:
         ax.set_title(f"{fit.name}: f0 = {p['f0_Hz']:.3g} Hz, zeta = {p['zeta']:.3g}, Fc/k = {p['fc_over_k_m'] * 1e3:.3g} mm;"
                      f" simulated position error {fit.metrics.get('position_relative_error_pct', math.nan):.3g} %",
                      fontsize=9)
-        _judgement(fig, fit)
-        path = out / f"rig_fit_{fit.name}.png"
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-        return [path]
+        return [_save_fit(fig, fit, out)]
     fig, axes = plt.subplots(4, 1, figsize=(10, 9), sharex=True, constrained_layout=True)
     axes[0].plot(a["t"], a["q"] * 1e3, color="0.3", lw=2, alpha=0.5, label="measured")
     axes[0].plot(a["t"], a["q_sim"] * 1e3, color="C3", lw=0.9, label="simulated (closed loop)")
@@ -93,11 +85,18 @@ def plot_rig_fit(fit: RigFit, directory: Any) -> list[Any]:
                       f"fv = {fit.params['fv']:.1f} N s/m, offset = {fit.params['offset']:.2f} N; relative error "
                       f"position {m.get('position_relative_error_pct', math.nan):.3g} %, "
                       f"force {m.get('force_relative_error_pct', math.nan):.3g} %", fontsize=9)
+    return [_save_fit(fig, fit, out)]
+
+
+def _save_fit(fig: Any, fit: RigFit, out: Path) -> Path:
+    """The fit figure with its judgement on top, written as ``rig_fit_<name>.png`` in ``out``."""
+    import matplotlib.pyplot as plt
+
     _judgement(fig, fit)
     path = out / f"rig_fit_{fit.name}.png"
     fig.savefig(path, dpi=120)
     plt.close(fig)
-    return [path]
+    return path
 
 
 def _judgement(fig: Any, fit: RigFit) -> None:
