@@ -71,7 +71,7 @@ fn rhs_only(models: &[Model]) {
         }
     }
     let mut r = LanesRhs::<PolyExp, 2, 7, 8>::new(ModelRhs::for_tasks(&tasks, 0.0));
-    for i in 0..8 { r.set_input(i, 10.0, 1e5); }
+    for i in 0..8 { r.set_input(i, 0.0, 10.0, 1e5); }
     let _ = active;
     {
         use idm_rs::lanes::PlainLanes;

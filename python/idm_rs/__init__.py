@@ -13,6 +13,7 @@ typed Python API. Quick start::
 from .engine import __version__
 from . import methods
 from .effects import Effects
+from .external_force import ExternalForce
 from .params import Params
 from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate
 from .state import State
@@ -28,6 +29,7 @@ __all__ = [
     "DivergenceError",
     "Effects",
     "EnergyBudget",
+    "ExternalForce",
     "Params",
     "Recording",
     "RecordingError",

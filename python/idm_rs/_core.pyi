@@ -155,6 +155,7 @@ def simulate(
     energy: bool,
     initial_state: Optional[NDArray[np.float64]] = None,
     sensitivities: Optional[list[str]] = None,
+    external_force: Optional[tuple[NDArray[np.float64], NDArray[np.float64], str]] = None,
 ) -> dict[str, Any]:
     """Simulate one run over [``t_start``, ``t_end``] [s] under the piecewise-linear input
     (``wave_t`` [s], ``wave_v`` [V]), from rest or from ``initial_state`` (the model's state
@@ -170,7 +171,8 @@ def simulate(
     friction, Rayleigh, external), ``kinetic`` [J], ``strain`` [J], ``momentum`` [kg m/s].
     With ``sensitivities`` (names), also ``sensitivity_names``, ``sensitivities`` (time x
     names: d reading / d name, exact for the discrete run) and ``final_state_sensitivities``
-    (state components x names).
+    (state components x names). ``external_force``: (times [s], forces [N], "main" or
+    "weight"), a sampled force on that body; its samples are the sensitivity names ``f_ext[k]``.
 
     Raises ValueError for invalid settings (see ``check_run``) and DivergenceError when the
     integration leaves its bounds."""
@@ -190,7 +192,7 @@ def start_batch(
 ) -> BatchRun:
     """Start a batch on a background thread. One row per point: ``params`` (P, 24) in
     ``param_names()`` order (NaN ``normal_force`` = derived from the masses), ``effects``
-    (P, 9) in ``effect_names()`` order, ``wave_fields`` (P, k) in ``wave_fields(wave_kind)``
+    (P, E) in ``effect_names()`` order, ``wave_fields`` (P, k) in ``wave_fields(wave_kind)``
     order; ``wave_kind`` "triangle", "sawtooth" or "sampled" (then ``sampled`` = the shared
     samples (t [s], V [V])). Optional per point: ``t_ends`` and ``t_starts`` [s] (P,) and
     ``initial_states`` (P, state size). ``t_end`` [s] is the span of points without their own.
@@ -208,6 +210,7 @@ def check_run(
     t_end: float,
     config: RunConfig,
     initial_state: Optional[NDArray[np.float64]] = None,
+    external_force: Optional[tuple[NDArray[np.float64], NDArray[np.float64], str]] = None,
 ) -> None:
     """Raise ValueError if a run with these settings would be refused: the parameters or
     effects, the input, the span, the method's settings, the RK4 step plan (breakpoints on the

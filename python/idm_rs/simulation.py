@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import engine, methods
 from .effects import Effects
+from .external_force import ExternalForce
 from .methods import MethodName
 from .params import PARAM_INFO, Params
 from .state import State
@@ -246,6 +247,7 @@ def simulate(
     t_start: Optional[float] = None,
     initial_state: Optional[ArrayLike] = None,
     sensitivities: Optional[Sequence[str]] = None,
+    external_force: Optional[ExternalForce] = None,
 ) -> SimulationResult:
     """Simulate the IDM over [``t_start``, ``t_end``] s, from rest or from ``initial_state``.
 
@@ -286,9 +288,15 @@ def simulate(
     it). At the friction law's kinks (v1 = 0, dg/dt = 0) the derivative is the one-sided one of
     the branch the run took. Cost: about 2-3 plain runs for one name, 6-9 for four to eight
     (docs/SENSITIVITIES.md).
+
+    ``external_force``: an :class:`idm_rs.ExternalForce`, a sampled force [N] on the main body or
+    the weight added to the model's forces (an unknown load, a disturbance, a force a test puts
+    on the device); its samples are differentiable as ``"f_ext[k]"`` (``force.knot_names()``).
     """
     if not isinstance(params, Params):
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
+    if external_force is not None and not isinstance(external_force, ExternalForce):
+        raise TypeError(f"external_force must be idm_rs.ExternalForce, got {type(external_force).__name__}")
     effects = effects or Effects()
     for name, value in (("n_elements", n_elements), ("save_every", save_every)):
         if isinstance(value, bool) or int(value) != value or value < 1:
@@ -325,6 +333,7 @@ def simulate(
         bool(energy),
         y0,
         names or None,
+        None if external_force is None else external_force.engine_arg(),
     )
     complete = bool(out["complete"])
     if not complete:

@@ -21,6 +21,7 @@ use pyo3::types::{PyDict, PyList};
 use crate::batch::{BatchConfig, BatchRunner, PointMetrics, PointTables, WaveFamily, METRIC_COLUMNS};
 use crate::drive::{check_task, Method, SimError, Task};
 use crate::effects::{Effects, EFFECT_NAMES};
+use crate::external_force::{Body, ExternalForce};
 use crate::mechanics::Structure;
 use crate::model::{Model, N_ACCOUNTING};
 use crate::params::{Params, PARAM_NAMES};
@@ -331,9 +332,20 @@ fn state_components(
     Ok(m.layout.components())
 }
 
+/// A sampled external force as Python passes it: (times [s], forces [N], body name).
+type ExternalForceArg<'a> = (PyReadonlyArray1<'a, f64>, PyReadonlyArray1<'a, f64>, String);
+
+/// `m` with the sampled external force, if one is given.
+fn with_external(m: Model, force: Option<ExternalForceArg<'_>>) -> PyResult<Model> {
+    let Some((t, f, body)) = force else { return Ok(m) };
+    let body = Body::from_name(&body).map_err(value_error)?;
+    let force = ExternalForce::new(body, slice1(&t).into_owned(), slice1(&f).into_owned()).map_err(value_error)?;
+    m.with_external_force(force).map_err(value_error)
+}
+
 /// Raise ValueError if a run with these settings would be refused (span, step, model, state).
 #[pyfunction]
-#[pyo3(signature = (params, effects, wave_t, wave_v, t_start, t_end, config, initial_state=None))]
+#[pyo3(signature = (params, effects, wave_t, wave_v, t_start, t_end, config, initial_state=None, external_force=None))]
 #[allow(clippy::too_many_arguments)]
 fn check_run(
     params: HashMap<String, f64>,
@@ -344,8 +356,9 @@ fn check_run(
     t_end: f64,
     config: &RunConfig,
     initial_state: Option<PyReadonlyArray1<'_, f64>>,
+    external_force: Option<ExternalForceArg<'_>>,
 ) -> PyResult<()> {
-    let m = config.model(parse_params(&params)?, parse_effects(&effects)?, false)?;
+    let m = with_external(config.model(parse_params(&params)?, parse_effects(&effects)?, false)?, external_force)?;
     let wave = PiecewiseLinear::new(slice1(&wave_t).into_owned(), slice1(&wave_v).into_owned())
         .map_err(value_error)?;
     let y0 = initial_state.as_ref().map(slice1);
@@ -364,7 +377,7 @@ fn check_run(
 /// `sensitivities` (names), also `sensitivities` (saved times x names): d reading / d name,
 /// and `final_state_sensitivities` (state components x names).
 #[pyfunction]
-#[pyo3(signature = (params, effects, wave_t, wave_v, t_start, t_end, config, save_every, energy, initial_state=None, sensitivities=None))]
+#[pyo3(signature = (params, effects, wave_t, wave_v, t_start, t_end, config, save_every, energy, initial_state=None, sensitivities=None, external_force=None))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
@@ -379,8 +392,9 @@ fn simulate<'py>(
     energy: bool,
     initial_state: Option<PyReadonlyArray1<'_, f64>>,
     sensitivities: Option<Vec<String>>,
+    external_force: Option<ExternalForceArg<'_>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let m = config.model(parse_params(&params)?, parse_effects(&effects)?, energy)?;
+    let m = with_external(config.model(parse_params(&params)?, parse_effects(&effects)?, energy)?, external_force)?;
     let names = sensitivities.unwrap_or_default();
     let normal_force_derived = !params.contains_key("normal_force");
     let seeds = parse_seeds(&m, &names, normal_force_derived).map_err(value_error)?;

@@ -239,6 +239,13 @@ pub fn plan_steps(
             suggestion()
         )));
     }
+    if let Some(ti) = model.external.as_ref().and_then(|x| x.knots.misaligned(dt, t_end)) {
+        return Err(SimError::Input(format!(
+            "dt = {dt:e} s does not divide the external force's sample at t = {ti:e} s (its samples \
+             must fall on step boundaries with RK4); sample the force on a multiple of dt, or use an \
+             adaptive method"
+        )));
+    }
     let steps = ((t_end - t_start) / dt).round();
     if (steps * dt - (t_end - t_start)).abs() > 1e-6 * dt || steps < 1.0 {
         return Err(SimError::Input(format!(
@@ -362,8 +369,9 @@ pub fn divergence_message(
 /// What the driver needs of a lane group's right-hand side besides evaluating it: each lane's
 /// input over the step (V = v0 + slope tau) and what the evaluation at the step's start found.
 pub trait LaneInputs<T: Scalar, const L: usize>: Rhs<T> {
-    /// Set lane `i`'s input for the next attempt: `v0` [V] at the step's start, `slope` [V/s].
-    fn set_input(&mut self, i: usize, v0: f64, slope: f64);
+    /// Set lane `i`'s input for the next attempt from time `t0` [s]: `v0` [V] at the step's
+    /// start, `slope` [V/s].
+    fn set_input(&mut self, i: usize, t0: f64, v0: f64, slope: f64);
     /// Lane `i`'s input as set: (v0 [V], slope [V/s]).
     fn input(&self, i: usize) -> (f64, f64);
     /// Lane `i`'s (Ff [N], dg/dt [m/s]) at the state its last step started from.
@@ -372,7 +380,8 @@ pub trait LaneInputs<T: Scalar, const L: usize>: Rhs<T> {
 
 impl<T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> LaneInputs<T, L> for ModelRhs<'_, T, N, EXTRAS, L> {
     #[inline(always)]
-    fn set_input(&mut self, i: usize, v0: f64, slope: f64) {
+    fn set_input(&mut self, i: usize, t0: f64, v0: f64, slope: f64) {
+        self.t0[i] = t0;
         self.v0[i] = v0;
         self.slope[i] = slope;
     }
@@ -395,6 +404,7 @@ impl<'a, T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> ModelRhs
         let zero = T::from(0.0);
         ModelRhs {
             models: std::array::from_fn(|i| tasks[lane(i)].model),
+            t0: [0.0; L],
             v0: [0.0; L],
             slope: [0.0; L],
             at_start: [(zero, zero); L],
@@ -407,6 +417,8 @@ impl<'a, T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> ModelRhs
 /// lane's (Ff, dg/dt) from its evaluation at tau = 0, i.e. at the state the step starts from.
 pub struct ModelRhs<'a, T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> {
     pub models: [&'a Model<T>; L],
+    /// the step's start [s] (the sampled force and the library read absolute time)
+    pub t0: [f64; L],
     pub v0: [f64; L],
     pub slope: [f64; L],
     pub at_start: [(T, T); L],
@@ -418,6 +430,7 @@ impl<T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> Rhs<T> for M
     #[inline(always)]
     fn eval(&mut self, lane: usize, tau: f64, y: &[T], dy: &mut [T]) {
         let out = self.models[lane].rhs_impl::<N, EXTRAS>(
+            self.t0[lane] + tau,
             T::from(self.v0[lane] + self.slope[lane] * tau),
             self.slope[lane],
             y,
@@ -436,7 +449,7 @@ impl<T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> Rhs<T> for M
     #[inline(always)]
     fn jacobian(&mut self, lane: usize, tau: f64, y: &[T], jac: &mut [T], dfdt: &mut [T]) {
         let (v0, s) = (self.v0[lane], self.slope[lane]);
-        self.models[lane].jacobian(v0 + s * tau, s, y, jac, dfdt);
+        self.models[lane].jacobian(self.t0[lane] + tau, v0 + s * tau, s, y, jac, dfdt);
     }
 }
 
@@ -541,9 +554,17 @@ where
                     stepper.restart(i); // the input's slope changed
                 }
                 end[i] = cursor[i].next_breakpoint(wave, t[i]).min(tasks[i].t_end);
+                if let Some(x) = &tasks[i].model.external {
+                    // a knot of the sampled force ends a step too (its slope changes there)
+                    let knot = x.next_knot(t[i]);
+                    // (the force is continuous there, so the method need not restart)
+                    if knot < end[i] {
+                        end[i] = knot;
+                    }
+                }
                 cursor[i].input(wave, t[i], t[i])
             };
-            rhs.set_input(i, v0, s);
+            rhs.set_input(i, t[i], v0, s);
             any = true;
         }
         if !any {

@@ -208,6 +208,44 @@ effects! {
                 tau_sensor: "tau_sensor", "s", Domain::NonNegative, "sensor lag: the reading follows x1 through a first-order low-pass; 0 = off";
             },
         }
+        library_force {
+            physics: "a force on the main body made of library terms (what `discover` found; off at all zeros)",
+            term: "m1 x1'' += lib_x1 x1 + lib_v1 v1 + lib_dx (x1 - x2) + lib_dv (v1 - v2) + lib_sgn tanh(v1/v_s) + lib_abs |v1| + lib_vv v1|v1| + lib_volt V + lib_dvolt V' + lib_t t + lib_x1sq x1^2 + lib_x1cube x1^3 + lib_sin sin(2 pi x1/lib_wavelength) + lib_cos cos(..) + Ff (lib_ff + lib_ff_sin sin(..) + lib_ff_cos cos(..))",
+            params: {
+                lib_x1: "a_x1", "N/m", Domain::Finite, "library force: coefficient of x1";
+                lib_v1: "a_v1", "N s/m", Domain::Finite, "library force: coefficient of v1";
+                lib_dx: "a_dx", "N/m", Domain::Finite, "library force: coefficient of x1 - x2 (the PE's shortening)";
+                lib_dv: "a_dv", "N s/m", Domain::Finite, "library force: coefficient of v1 - v2";
+                lib_sgn: "a_sgn", "N", Domain::Finite, "library force: coefficient of sgn v1 (smoothed: tanh(v1/v_s), v_s the Stribeck velocity)";
+                lib_abs: "a_abs", "N s/m", Domain::Finite, "library force: coefficient of |v1|";
+                lib_vv: "a_vv", "N s^2/m^2", Domain::Finite, "library force: coefficient of v1|v1| (quadratic drag)";
+                lib_volt: "a_V", "N/V", Domain::Finite, "library force: coefficient of the PE voltage V";
+                lib_dvolt: "a_dV", "N s/V", Domain::Finite, "library force: coefficient of the PE voltage's rate dV/dt";
+                lib_t: "a_t", "N/s", Domain::Finite, "library force: coefficient of the time t";
+                lib_x1sq: "a_x1^2", "N/m^2", Domain::Finite, "library force: coefficient of x1^2";
+                lib_x1cube: "a_x1^3", "N/m^3", Domain::Finite, "library force: coefficient of x1^3 (a cubic spring)";
+                lib_sin: "a_sin", "N", Domain::Finite, "library force: coefficient of sin(2 pi x1 / lib_wavelength)";
+                lib_cos: "a_cos", "N", Domain::Finite, "library force: coefficient of cos(2 pi x1 / lib_wavelength)";
+                lib_ff: "b_ff", "1", Domain::Finite, "library force: coefficient of the friction force Ff (friction scaled by 1 - b_ff)";
+                lib_ff_sin: "b_sin", "1", Domain::Finite, "library force: coefficient of Ff sin(2 pi x1 / lib_wavelength) (friction varying with position)";
+                lib_ff_cos: "b_cos", "1", Domain::Finite, "library force: coefficient of Ff cos(2 pi x1 / lib_wavelength)";
+                lib_wavelength: "lambda", "m", Domain::NonNegative, "library force: the wavelength of its periodic terms in x1; 0 = those terms off";
+            },
+        }
+        library_force_weight {
+            physics: "a force on the weight made of library terms (what `discover` found on the weight; off at all zeros)",
+            term: "m2 x2'' += libw_x2 x2 + libw_v2 v2 + libw_dx (x2 - x1) + libw_dv (v2 - v1) + libw_sgn tanh(v2/v_s) + libw_vv v2|v2| + libw_volt V + libw_dvolt V'",
+            params: {
+                libw_x2: "c_x2", "N/m", Domain::Finite, "library force on the weight: coefficient of x2";
+                libw_v2: "c_v2", "N s/m", Domain::Finite, "library force on the weight: coefficient of v2";
+                libw_dx: "c_dx", "N/m", Domain::Finite, "library force on the weight: coefficient of x2 - x1 (the PE's extension)";
+                libw_dv: "c_dv", "N s/m", Domain::Finite, "library force on the weight: coefficient of v2 - v1";
+                libw_sgn: "c_sgn", "N", Domain::Finite, "library force on the weight: coefficient of sgn v2 (smoothed: tanh(v2/v_s))";
+                libw_vv: "c_vv", "N s^2/m^2", Domain::Finite, "library force on the weight: coefficient of v2|v2|";
+                libw_volt: "c_V", "N/V", Domain::Finite, "library force on the weight: coefficient of the PE voltage V";
+                libw_dvolt: "c_dV", "N s/V", Domain::Finite, "library force on the weight: coefficient of dV/dt";
+            },
+        }
         thermal_drift {
             physics: "the reading drifts linearly in time (drift_rate)",
             term: "x = x1 + drift_rate t (the reading)",
@@ -273,6 +311,108 @@ impl<T: Scalar> Effects<T> {
     /// Factor on the normal force from the tilt.
     pub fn normal_scale(&self) -> T {
         self.theta_rad.cos()
+    }
+}
+
+/// What the library forces read: the states they are functions of, at one instant.
+#[derive(Clone, Copy, Debug)]
+pub struct LibraryStates<T> {
+    /// main body and weight position [m] and velocity [m/s]
+    pub x1: T,
+    pub v1: T,
+    pub x2: T,
+    pub v2: T,
+    /// PE voltage [V] and its rate [V/s]
+    pub volt: T,
+    pub dvolt: T,
+    /// the friction force on the main body [N]
+    pub ff: T,
+    /// time [s]
+    pub t: f64,
+    /// the velocity over which sgn v is smoothed (the Stribeck velocity) [m/s]
+    pub vs: T,
+}
+
+/// |x| deciding the branch on the value (one-sided derivative at 0, as the friction law).
+#[inline(always)]
+fn magnitude<T: Scalar>(x: T) -> T {
+    if x.value() < 0.0 { -x } else { x }
+}
+
+impl<T: Scalar> Effects<T> {
+    /// Whether any library coefficient on the main body, and on the weight, is non-zero (the
+    /// wavelength alone switches nothing on).
+    pub fn library_on(&self) -> (bool, bool) {
+        let main = [
+            self.lib_x1, self.lib_v1, self.lib_dx, self.lib_dv, self.lib_sgn, self.lib_abs, self.lib_vv,
+            self.lib_volt, self.lib_dvolt, self.lib_t, self.lib_x1sq, self.lib_x1cube, self.lib_sin, self.lib_cos,
+            self.lib_ff, self.lib_ff_sin, self.lib_ff_cos,
+        ];
+        let weight = [
+            self.libw_x2, self.libw_v2, self.libw_dx, self.libw_dv, self.libw_sgn, self.libw_vv, self.libw_volt,
+            self.libw_dvolt,
+        ];
+        let on = |c: &[T]| c.iter().any(|x| !x.is_exactly(0.0));
+        (on(&main), on(&weight))
+    }
+
+    /// The library force on the main body [N] (`library_force`'s term) and its partials with
+    /// respect to [x1, v1, x2, v2, volt, dvolt, ff, t] (for the Jacobian).
+    #[inline(always)]
+    pub fn library_force_main(&self, s: &LibraryStates<T>) -> (T, [T; 8]) {
+        let z = T::zero();
+        let (x1, v1) = (s.x1, s.v1);
+        let th = (v1 / s.vs).tanh();
+        let av = magnitude(v1);
+        let sg = if v1.value() < 0.0 { -T::one() } else { T::one() };
+        let (mut per, mut dper, mut modf) = (z, z, T::one() * self.lib_ff);
+        let mut dmod = z;
+        if self.lib_wavelength.value() > 0.0 {
+            let k = T::from(2.0 * std::f64::consts::PI) / self.lib_wavelength;
+            let (sn, cs) = ((k * x1).sin(), (k * x1).cos());
+            per = self.lib_sin * sn + self.lib_cos * cs;
+            dper = k * (self.lib_sin * cs - self.lib_cos * sn);
+            modf = modf + self.lib_ff_sin * sn + self.lib_ff_cos * cs;
+            dmod = k * (self.lib_ff_sin * cs - self.lib_ff_cos * sn);
+        }
+        let f = self.lib_x1 * x1
+            + self.lib_v1 * v1
+            + self.lib_dx * (x1 - s.x2)
+            + self.lib_dv * (v1 - s.v2)
+            + self.lib_sgn * th
+            + self.lib_abs * av
+            + self.lib_vv * v1 * av
+            + self.lib_volt * s.volt
+            + self.lib_dvolt * s.dvolt
+            + self.lib_t * s.t
+            + self.lib_x1sq * x1 * x1
+            + self.lib_x1cube * x1 * x1 * x1
+            + per
+            + s.ff * modf;
+        let d_x1 = self.lib_x1 + self.lib_dx + self.lib_x1sq * x1 * 2.0 + self.lib_x1cube * x1 * x1 * 3.0 + dper + s.ff * dmod;
+        let d_v1 = self.lib_v1 + self.lib_dv + self.lib_sgn * (T::one() - th * th) / s.vs + self.lib_abs * sg
+            + self.lib_vv * av * 2.0;
+        (f, [d_x1, d_v1, -self.lib_dx, -self.lib_dv, self.lib_volt, self.lib_dvolt, modf, self.lib_t])
+    }
+
+    /// The library force on the weight [N] (`library_force_weight`'s term) and its partials as
+    /// [`Effects::library_force_main`]'s.
+    #[inline(always)]
+    pub fn library_force_weight(&self, s: &LibraryStates<T>) -> (T, [T; 8]) {
+        let z = T::zero();
+        let v2 = s.v2;
+        let th = (v2 / s.vs).tanh();
+        let av = magnitude(v2);
+        let f = self.libw_x2 * s.x2
+            + self.libw_v2 * v2
+            + self.libw_dx * (s.x2 - s.x1)
+            + self.libw_dv * (v2 - s.v1)
+            + self.libw_sgn * th
+            + self.libw_vv * v2 * av
+            + self.libw_volt * s.volt
+            + self.libw_dvolt * s.dvolt;
+        let d_v2 = self.libw_v2 + self.libw_dv + self.libw_sgn * (T::one() - th * th) / s.vs + self.libw_vv * av * 2.0;
+        (f, [-self.libw_dx, -self.libw_dv, self.libw_x2 + self.libw_dx, d_v2, self.libw_volt, self.libw_dvolt, z, z])
     }
 }
 

@@ -13,9 +13,9 @@ use crate::model::Model;
 use crate::scalar::{Scalar, Seedable};
 
 impl<T: Scalar> Model<T> {
-    /// Fill `jac` (dim x dim, row-major) with df/dy and `dfdt` (dim) with df/dt at state `y`,
-    /// commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s] (constant over the step).
-    pub fn jacobian(&self, v_cmd: f64, dv_cmd: f64, y: &[T], jac: &mut [T], dfdt: &mut [T]) {
+    /// Fill `jac` (dim x dim, row-major) with df/dy and `dfdt` (dim) with df/dt at time `t` [s],
+    /// state `y`, commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s] (constant over the step).
+    pub fn jacobian(&self, t: f64, v_cmd: f64, dv_cmd: f64, y: &[T], jac: &mut [T], dfdt: &mut [T]) {
         let l = &self.layout;
         let (n, dim) = (l.dof, l.dim);
         let (ig, ifh, ih) = (l.g, l.fh, l.h);
@@ -79,6 +79,42 @@ impl<T: Scalar> Model<T> {
         let (kg, cw) = (self.effect_values.k_ground, self.effect_values.c_weight);
         let last = n + n - 1;
 
+        // forces only some runs have (the sampled force, the library forces): their values on
+        // the main body and the weight, their partials by state component, their rates
+        let mut extra_f = (T::zero(), T::zero());
+        let mut extra_d: Vec<(usize, T, T)> = Vec::new();
+        let mut extra_t = (T::zero(), T::zero());
+        if let Some(x) = &self.external {
+            let (f, slope) = x.at(t);
+            match x.body {
+                crate::external_force::Body::Main => (extra_f.0, extra_t.0) = (f, slope),
+                crate::external_force::Body::Weight => (extra_f.1, extra_t.1) = (f, slope),
+            }
+        }
+        if self.library.0 || self.library.1 {
+            let st = self.library_states(t, q, v, v_pe, dv_pe, ff);
+            let zero = (T::zero(), [T::zero(); 8]);
+            let (fm, dm) = if self.library.0 { self.effect_values.library_force_main(&st) } else { zero };
+            let (fw, dw) = if self.library.1 { self.effect_values.library_force_weight(&st) } else { zero };
+            extra_f = (extra_f.0 + fm, extra_f.1 + fw);
+            // [x1, v1, x2, v2, volt, dvolt, ff, t] -> state components and df/dt
+            for (c, k) in [(0, 0), (n, 1), (n - 1, 2), (last, 3)] {
+                extra_d.push((c, dm[k], dw[k]));
+            }
+            for &(c, d) in &ff_d {
+                extra_d.push((c, dm[6] * d, dw[6] * d));
+            }
+            extra_t = (extra_t.0 + dm[7], extra_t.1 + dw[7]);
+            match amp {
+                Some(i) => {
+                    let inv = self.inv_tau[AMPLIFIER];
+                    extra_d.push((i, dm[4] - dm[5] * inv, dw[4] - dw[5] * inv));
+                    extra_t = (extra_t.0 + dm[5] * inv * dv_cmd, extra_t.1 + dw[5] * inv * dv_cmd);
+                }
+                None => extra_t = (extra_t.0 + dm[4] * vpe_t, extra_t.1 + dw[4] * vpe_t),
+            }
+        }
+
         // mechanics: dv/dt = -M^-1 K q - M^-1 C v + m0 F_main + ml F_weight
         let mech = &self.mech;
         let [dm_dfp, dl_dfp, dm_du, dm_dx, dm_dv] = self.actuator.force_partials(v_pe, q[0], v[0]);
@@ -104,7 +140,10 @@ impl<T: Scalar> Model<T> {
             }
             set(r, 0, m0 * dm_dx);
             set(r, n, m0 * dm_dv);
-            dfdt[r] = via_fp * fp_t + m0 * dm_du * dv_cmd;
+            dfdt[r] = via_fp * fp_t + m0 * dm_du * dv_cmd + m0 * extra_t.0 + ml * extra_t.1;
+            for &(c, dfm, dfw) in &extra_d {
+                set(r, c, m0 * dfm + ml * dfw);
+            }
         }
 
         if let Some(a) = l.accounting {
@@ -134,10 +173,16 @@ impl<T: Scalar> Model<T> {
                 set(a + 2, n + j, s);
             }
             // external work and impulse
-            let f_main = self.f_constant - kg * q[0];
+            let f_main = self.f_constant - kg * q[0] + extra_f.0;
             set(a + 3, 0, -kg * v[0]);
             set(a + 3, n, f_main);
-            set(a + 3, last, -(cw * 2.0) * v[n - 1]);
+            set(a + 3, last, -(cw * 2.0) * v[n - 1] + extra_f.1);
+            for &(c, dfm, dfw) in &extra_d {
+                set(a + 3, c, dfm * v[0] + dfw * v[n - 1]);
+                set(a + 6, c, dfm + dfw);
+            }
+            dfdt[a + 3] = extra_t.0 * v[0] + extra_t.1 * v[n - 1];
+            dfdt[a + 6] = extra_t.0 + extra_t.1;
             for j in 0..n {
                 set(a + 5, n + j, self.values.rayleigh_alpha * self.pe_mass_sums[j]);
             }
@@ -160,6 +205,10 @@ impl Model {
             |_, v| Dual64::from(v),
             false,
         )
+        .map(|mut m| {
+            m.external = self.external.as_ref().map(|x| x.lift(|_, v| Dual64::from(v)));
+            m
+        })
         .expect("a model that was built once builds again")
     }
 }
@@ -171,7 +220,9 @@ impl Model<Dual64> {
     /// No hand-derived term: the reference the analytic Jacobian is tested against, and the
     /// Jacobian an implicit method could use for any new term (at `dim + 1` evaluations of the
     /// right-hand side on dual numbers; see benches/RESULTS.md for its cost).
-    pub fn derived_jacobian(&self, v_cmd: f64, dv_cmd: f64, y: &[f64], jac: &mut [f64], dfdt: &mut [f64]) {
+    /// The explicit time dependence (a sampled force, the library's time term) is taken by a
+    /// central difference in `t`: the one term not carried by a dual number.
+    pub fn derived_jacobian(&self, t: f64, v_cmd: f64, dv_cmd: f64, y: &[f64], jac: &mut [f64], dfdt: &mut [f64]) {
         let d = y.len();
         let mut yd: Vec<Dual64> = y.iter().map(|&x| Dual64::from(x)).collect();
         let mut f = vec![Dual64::from(0.0); d];
@@ -179,17 +230,24 @@ impl Model<Dual64> {
         let v = Dual64::from(v_cmd);
         for c in 0..d {
             yd[c] = Dual64::seed(y[c], 0);
-            self.rhs_impl::<0, true>(v, dv_cmd, &yd, &mut f);
+            self.rhs_impl::<0, true>(t, v, dv_cmd, &yd, &mut f);
             for r in 0..d {
                 f[r].derivatives(&mut col);
                 jac[r * d + c] = col[0];
             }
             yd[c] = Dual64::from(y[c]);
         }
-        self.rhs_impl::<0, true>(Dual64::seed(v_cmd, 0), dv_cmd, &yd, &mut f);
+        self.rhs_impl::<0, true>(t, Dual64::seed(v_cmd, 0), dv_cmd, &yd, &mut f);
         for r in 0..d {
             f[r].derivatives(&mut col);
             dfdt[r] = col[0] * dv_cmd;
+        }
+        let h = 1e-9 * t.abs().max(1e-3);
+        let (mut fp, mut fm) = (f.clone(), f.clone());
+        self.rhs_impl::<0, true>(t + h, v, dv_cmd, &yd, &mut fp);
+        self.rhs_impl::<0, true>(t - h, v, dv_cmd, &yd, &mut fm);
+        for r in 0..d {
+            dfdt[r] += (fp[r].re - fm[r].re) / (2.0 * h);
         }
     }
 }
@@ -197,17 +255,21 @@ impl Model<Dual64> {
 #[cfg(test)]
 mod tests {
     use crate::effects::Effects;
+    use crate::external_force::{Body, ExternalForce};
     use crate::mechanics::Structure;
     use crate::model::Model;
     use crate::params::Params;
     use crate::rig::RigDrive;
 
+    /// The time the Jacobians are compared at [s] (between two samples of the test's force).
+    const T_CHECK: f64 = 1.3e-3;
+
     fn check(m: &Model, y: &[f64], v: f64, dv: f64) {
         let d = y.len();
         let (mut jac, mut ft) = (vec![0.0; d * d], vec![0.0; d]);
-        m.jacobian(v, dv, y, &mut jac, &mut ft);
+        m.jacobian(T_CHECK, v, dv, y, &mut jac, &mut ft);
         let (mut nj, mut nt) = (vec![0.0; d * d], vec![0.0; d]);
-        m.dual().derived_jacobian(v, dv, y, &mut nj, &mut nt);
+        m.dual().derived_jacobian(T_CHECK, v, dv, y, &mut nj, &mut nt);
         let names = m.layout.components();
         for r in 0..d {
             // each row compared at the scale of its largest entry times the column's magnitude
@@ -272,6 +334,15 @@ mod tests {
             theta_rad: 0.1,
             ..Effects::default()
         };
+        // every library term on at once, on the main body and on the weight
+        let library = Effects {
+            lib_x1: 3e3, lib_v1: 0.2, lib_dx: -1e3, lib_dv: 0.1, lib_sgn: 0.05, lib_abs: 0.3, lib_vv: 20.0,
+            lib_volt: 1e-3, lib_dvolt: 2e-7, lib_t: 5.0, lib_x1sq: 1e8, lib_x1cube: 1e13, lib_sin: 0.02,
+            lib_cos: -0.01, lib_ff: 0.03, lib_ff_sin: 0.05, lib_ff_cos: 0.02, lib_wavelength: 12e-6,
+            libw_x2: 2e3, libw_v2: 0.1, libw_dx: 500.0, libw_dv: 0.05, libw_sgn: 0.01, libw_vv: 5.0,
+            libw_volt: 1e-3, libw_dvolt: 1e-7,
+            ..Effects::default()
+        };
         let mut odd = p;
         odd.fric_n = 1.6;
         odd.stribeck_exponent = 1.3;
@@ -295,8 +366,16 @@ mod tests {
                 true,
             ),
             (p, Effects { eps: 0.05, ..Effects::default() }, Structure::Rig(RigDrive::Force), false, true),
+            (p, library, Structure::Lps, true, true),
+            (p, Effects { tau_amp: 2e-5, ..library }, Structure::Dps(3), true, true),
+            (p, Effects { lib_wavelength: 0.0, ..library }, Structure::Lps, false, false),
         ] {
-            let m = Model::new(params, effects, structure, hyst, acc).unwrap();
+            let mut m = Model::new(params, effects, structure, hyst, acc).unwrap();
+            if effects.library_on().0 {
+                // with a sampled force on the weight (main-body forces are the library's)
+                let f = ExternalForce::new(Body::Weight, vec![0.0, 1e-3, 2e-3], vec![0.0, 0.4, -0.3]).unwrap();
+                m = m.with_external_force(f).unwrap();
+            }
             let y = state(&m);
             // the same state with the hysteresis state, the presliding force and the main body's
             // velocity on the other side of their kinks (h < 0: the |h| branch of dh/dt)

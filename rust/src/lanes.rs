@@ -82,6 +82,8 @@ impl<const N: usize, const L: usize> PlainLanes<N, L> {
         let f = m.friction.constants();
         let (fs_fc, delta, n) = (f[1], f[3], f[4]);
         m.is_plain()
+            && m.external.is_none()
+            && m.library == (false, false)
             && m.layout.dof == N
             && matches!(m.actuator, Actuator::Piezo(_))
             && n == 1.0
@@ -319,8 +321,8 @@ impl<E: LaneExp, const N: usize, const D: usize, const L: usize> Rhs<f64> for La
 
 impl<E: LaneExp, const N: usize, const D: usize, const L: usize> LaneInputs<f64, L> for LanesRhs<'_, E, N, D, L> {
     #[inline(always)]
-    fn set_input(&mut self, i: usize, v0: f64, slope: f64) {
-        self.inner.set_input(i, v0, slope)
+    fn set_input(&mut self, i: usize, t0: f64, v0: f64, slope: f64) {
+        self.inner.set_input(i, t0, v0, slope)
     }
     #[inline(always)]
     fn input(&self, i: usize) -> (f64, f64) {

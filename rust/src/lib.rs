@@ -9,6 +9,7 @@ pub mod declare;
 pub mod dopri5;
 pub mod drive;
 pub mod effects;
+pub mod external_force;
 pub mod friction;
 pub mod jacobian;
 pub mod fast_exp;

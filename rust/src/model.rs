@@ -4,9 +4,10 @@
 use nalgebra::ComplexField;
 
 use crate::effects::{
-    first_order_rate, ground_spring_force, weight_drag, Effects, LagInput, LagScale, AMPLIFIER, CREEP, LAGS, N_LAGS,
-    SENSOR,
+    first_order_rate, ground_spring_force, weight_drag, Effects, LagInput, LagScale, LibraryStates, AMPLIFIER, CREEP,
+    LAGS, N_LAGS, SENSOR,
 };
+use crate::external_force::{Body, ExternalForce};
 use crate::friction::Leuven;
 use crate::mechanics::{Actuation, Actuator, Mechanics, Structure};
 use crate::params::Params;
@@ -131,6 +132,10 @@ pub struct Model<T: Scalar = f64> {
     /// 1 / tau of each lag (`effects::LAGS`; 0 where off) [1/s]
     pub(crate) inv_tau: [T; N_LAGS],
     pub(crate) pe_mass_sums: Vec<T>,
+    /// a sampled external force on a body (`Model::with_external_force`), or none
+    pub external: Option<ExternalForce<T>>,
+    /// whether the library force on the main body, and on the weight, is on
+    pub(crate) library: (bool, bool),
 }
 
 impl Model {
@@ -182,6 +187,8 @@ impl<T: Scalar + ComplexField> Model<T> {
             f_constant: e.incline_force(total_mass) + p.load_force,
             inv_tau: std::array::from_fn(|k| inv(e.value_of(LAGS[k].tau).unwrap_or(T::zero()))),
             pe_mass_sums: mech.pe_mass_column_sums(),
+            external: None,
+            library: e.library_on(),
             values: p,
             effect_values: e,
             params,
@@ -194,6 +201,30 @@ impl<T: Scalar + ComplexField> Model<T> {
 }
 
 impl<T: Scalar> Model<T> {
+    /// This model with a sampled external force on one of its bodies (see `external_force.rs`).
+    /// A rig has one body: only `Body::Main` there.
+    pub fn with_external_force(mut self, force: ExternalForce<T>) -> Result<Self, String> {
+        if force.body == Body::Weight && self.layout.dof < 2 {
+            return Err("external force on the weight: this mechanism has one body; use body 'main'".into());
+        }
+        self.external = Some(force);
+        Ok(self)
+    }
+
+    /// The sampled external force [N] on the main body and on the last node at time `t` [s].
+    #[inline(always)]
+    fn timed_forces(&self, t: f64) -> (T, T) {
+        let mut f = (T::zero(), T::zero());
+        if let Some(x) = &self.external {
+            let (v, _) = x.at(t);
+            match x.body {
+                Body::Main => f.0 = v,
+                Body::Weight => f.1 = v,
+            }
+        }
+        f
+    }
+
     /// Bound on |Fh| [N] (MODEL.md invariant), with the effective normal force and asymmetry.
     pub fn presliding_bound(&self) -> f64 {
         let p = &self.params;
@@ -307,16 +338,33 @@ impl<T: Scalar> Model<T> {
         x + self.effect_values.drift_rate * t
     }
 
+    /// What the library forces read at time `t` [s].
+    #[inline(always)]
+    pub(crate) fn library_states(&self, t: f64, q: &[T], v: &[T], volt: T, dvolt: T, ff: T) -> LibraryStates<T> {
+        let n = q.len();
+        LibraryStates {
+            x1: q[0],
+            v1: v[0],
+            x2: q[n - 1],
+            v2: v[n - 1],
+            volt,
+            dvolt,
+            ff,
+            t,
+            vs: self.values.stribeck_velocity,
+        }
+    }
+
     /// True when the state is just nodes, g, Fh and h (no lagged effects, no accounting): the
     /// driver then runs a fixed-size, register-resident path.
     pub fn is_plain(&self) -> bool {
         self.layout.dim == 2 * self.layout.dof + 3
     }
 
-    /// dy/dt at commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s].
+    /// dy/dt at time `t` [s] and commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s].
     #[inline(always)]
-    pub fn rhs(&self, v_cmd: f64, dv_cmd: f64, y: &[T], dy: &mut [T]) {
-        self.rhs_impl::<0, true>(T::from(v_cmd), dv_cmd, y, dy);
+    pub fn rhs(&self, t: f64, v_cmd: f64, dv_cmd: f64, y: &[T], dy: &mut [T]) {
+        self.rhs_impl::<0, true>(t, T::from(v_cmd), dv_cmd, y, dy);
     }
 
     /// The right-hand side. `N` > 0 fixes the node count at compile time; `EXTRAS = false`
@@ -326,6 +374,7 @@ impl<T: Scalar> Model<T> {
     #[inline(always)]
     pub fn rhs_impl<const N: usize, const EXTRAS: bool>(
         &self,
+        t: f64,
         v_cmd: T,
         dv_cmd: f64,
         y: &[T],
@@ -365,8 +414,24 @@ impl<T: Scalar> Model<T> {
         dy[ig] = gdot;
         dy[ifh] = fhdot;
 
-        let f_ext_main = self.f_constant + ground_spring_force(self.effect_values.k_ground, q[0]);
-        let f_ext_weight = weight_drag(self.effect_values.c_weight, v[n - 1]);
+        let mut f_ext_main = self.f_constant + ground_spring_force(self.effect_values.k_ground, q[0]);
+        let mut f_ext_weight = weight_drag(self.effect_values.c_weight, v[n - 1]);
+        // what only some runs have: a sampled force, library forces (skipped when off, so
+        // a run without them keeps its bits)
+        if self.external.is_some() {
+            let (a, b) = self.timed_forces(t);
+            f_ext_main += a;
+            f_ext_weight += b;
+        }
+        if self.library.0 || self.library.1 {
+            let s = self.library_states(t, q, v, v_pe, dv_pe, ff);
+            if self.library.0 {
+                f_ext_main += self.effect_values.library_force_main(&s).0;
+            }
+            if self.library.1 {
+                f_ext_weight += self.effect_values.library_force_weight(&s).0;
+            }
+        }
         for i in 0..n {
             dy[i] = v[i];
         }

@@ -37,6 +37,14 @@ pub enum Seed {
     Effect(&'static str),
     /// a component of the initial state (its index in the layout)
     State(usize),
+    /// the sampled external force at its knot k (`f_ext[k]`)
+    ForceKnot(usize),
+}
+
+/// The knot `k` a name `f_ext[k]` asks for, if it is one.
+fn force_knot(name: &str) -> Option<Result<usize, String>> {
+    let inner = name.strip_prefix("f_ext[")?.strip_suffix(']')?;
+    Some(inner.parse::<usize>().map_err(|_| format!("sensitivity '{name}': the knot must be a whole number, as f_ext[12]")))
 }
 
 impl Seed {
@@ -77,10 +85,21 @@ pub fn parse_seeds(model: &Model, names: &[String], normal_force_derived: bool) 
             Seed::Effect(n)
         } else if let Some(c) = components.iter().position(|(n, _)| n == name) {
             Seed::State(c)
+        } else if let Some(k) = force_knot(name) {
+            let k = k?;
+            let knots = model.external.as_ref().map_or(0, |x| x.len());
+            if k >= knots {
+                return Err(if knots == 0 {
+                    format!("sensitivity '{name}': the run has no external force; give one to take derivatives with respect to its samples")
+                } else {
+                    format!("sensitivity '{name}': the external force has {knots} samples (f_ext[0] .. f_ext[{}])", knots - 1)
+                });
+            }
+            Seed::ForceKnot(k)
         } else {
             return Err(format!(
-                "unknown sensitivity '{name}': name a Table 1 parameter ({}), an effect parameter ({}) or a \
-                 component of the initial state ({})",
+                "unknown sensitivity '{name}': name a Table 1 parameter ({}), an effect parameter ({}), a \
+                 component of the initial state ({}) or a sample of the external force (f_ext[k])",
                 PARAM_NAMES.join(", "),
                 EFFECT_NAMES.join(", "),
                 components.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", ")
@@ -200,7 +219,7 @@ impl Pass<'_> {
             Some(j) => D::seed(v, j),
             None => D::from(v),
         };
-        let dual = match Model::build(
+        let mut dual = match Model::build(
             m.params,
             m.effects,
             m.structure,
@@ -212,6 +231,12 @@ impl Pass<'_> {
             Ok(d) => d,
             Err(e) => return Some(Err(SimError::Input(e))),
         };
+        dual.external = m.external.as_ref().map(|x| {
+            x.lift(|k, v| match seeds.iter().position(|s| *s == Seed::ForceKnot(k)) {
+                Some(j) => D::seed(v, j),
+                None => D::from(v),
+            })
+        });
         let y0: Vec<D> = self
             .y0
             .iter()
@@ -522,6 +547,12 @@ mod tests {
             eps: 0.05,
             tau_sensor: 1e-5,
             drift_rate: 1e-4,
+            // the library at small values (its derivatives are what discovery screens with)
+            lib_x1: 1e3, lib_v1: 0.1, lib_dx: 100.0, lib_dv: 0.05, lib_sgn: 0.01, lib_abs: 0.05, lib_vv: 2.0,
+            lib_volt: 1e-4, lib_dvolt: 1e-8, lib_t: 0.5, lib_x1sq: 1e6, lib_x1cube: 1e10, lib_sin: 0.01,
+            lib_cos: 0.01, lib_ff: 0.01, lib_ff_sin: 0.02, lib_ff_cos: 0.01, lib_wavelength: 20e-6,
+            libw_x2: 100.0, libw_v2: 0.05, libw_dx: 100.0, libw_dv: 0.05, libw_sgn: 0.01, libw_vv: 1.0,
+            libw_volt: 1e-4, libw_dvolt: 1e-8,
         };
         let c = paper(Structure::Lps, e);
         let names = EFFECT_NAMES;

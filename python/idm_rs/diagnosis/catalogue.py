@@ -187,7 +187,11 @@ def _entry(e: EffectDecl) -> Effect:
                   p.reported)
 
 
-CATALOGUE: tuple[Effect, ...] = tuple(_entry(e) for e in EFFECTS)
+#: the library forces are declared as effects (the engine runs them like any other) but are not
+#: catalogue entries: their terms are what discovery (`discovery.py`) finds and fits
+LIBRARY_IDS = frozenset({"library_force", "library_force_weight"})
+
+CATALOGUE: tuple[Effect, ...] = tuple(_entry(e) for e in EFFECTS if e.id not in LIBRARY_IDS)
 
 #: The nominal parameters calibrated before any physics is blamed: the ones a lab knows least
 #: well (friction levels and damping, the piezo constant, the masses).

@@ -22,6 +22,8 @@ from ..recording import Recording, load_case
 from .case_model import FIT_DT, CaseSimulator, ModelSpec, Structure
 from .calibration import Calibration, search
 from .calibration import calibrate as global_calibration
+from .discovery import Discovery
+from .discovery import discover as run_discovery
 from .catalogue import CALIBRATED, CALIBRATION_RANGE, CALIBRATION_SCALE, CATALOGUE, Effect, EffectParam
 from .fitting import FitResult, FreeParam, Objective, apply, fit, set_effect, set_param
 from .locate import Location, locate, merge_windows
@@ -533,10 +535,13 @@ class _Run:
 
 
 def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: float = FIT_DT,
-             threads: Optional[int] = None, refit_top: int = REFIT_TOP) -> Diagnosis:
+             threads: Optional[int] = None, refit_top: int = REFIT_TOP, discover: bool = True) -> Diagnosis:
     """Diagnose a recorded case (a directory in the `idm-recording/1` format, or a Recording).
-    Ctrl-C (KeyboardInterrupt) returns what was finished — the calibration and the candidates
-    fitted so far — as a Diagnosis with verdict "interrupted" and ``complete`` False."""
+    With `discover` (the default), a case no catalogue effect explains goes on to discovery
+    (:mod:`.discovery`): the missing force inferred, its form found in a library, modelled and
+    refitted; verdict "discovered" when it stands. Ctrl-C (KeyboardInterrupt) returns what was
+    finished — the calibration and the candidates fitted so far — as a Diagnosis with verdict
+    "interrupted" and ``complete`` False."""
     t_start = time.perf_counter()
     rec = case if isinstance(case, Recording) else load_case(case)
     noise = estimate_noise(rec)
@@ -544,7 +549,7 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     bar = _bar(progress, rec.name, lambda: sim.evaluations)
     run = _Run()
     try:
-        d = _diagnose(rec, noise, sim, bar, run, refit_top, t_start)
+        d = _diagnose(rec, noise, sim, bar, run, refit_top, t_start, discover)
     except KeyboardInterrupt:
         if bar is not None:
             bar.close(done=False)
@@ -591,7 +596,7 @@ def _interrupted(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, run: 
 
 
 def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Optional[_Progress], run: _Run,
-              refit_top: int, t_start: float) -> Diagnosis:
+              refit_top: int, t_start: float, discover: bool = True) -> Diagnosis:
     pb = _Problem(rec, noise, sim, Objective(rec, sim, noise.sigma), bar.update if bar is not None else None)
     run.pb = pb
     nominal = run.nominal = _nominal(pb)
@@ -656,6 +661,18 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
     spans = merge_windows(windows, pb.sigma)
 
     verdict, reason, rms_after = _verdict(ranking, cal, noise, ho_cal, searched_wide)
+    found: Optional[Discovery] = None
+    if discover and verdict == "unexplained":
+        # beyond the catalogue: only where every catalogue effect left a systematic residual
+        run.stage = "discovery"
+        if not _finite(ho_cal):
+            ho_cal = heldout.rms(cal.fit.spec, cal.at)
+        found = run_discovery(rec, cal.fit.spec, cal.at, pb.obj, heldout, ho_cal, progress=pb.tick)
+        if found.discovered:
+            verdict, reason, rms_after = "discovered", found.reason, found.rms_after
+        else:
+            reason += f"; discovery: {found.reason}"
+        clock.lap("discovery")
     degenerate = near_degenerate(list(screened.values()))
     alternatives = _alternatives(ranking, verdict, degenerate)
     if alternatives:
@@ -676,6 +693,7 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
         screening={k: v.delta_chi2 for k, v in sorted(screened.items(), key=lambda kv: -kv[1].delta_chi2)},
         degenerate_pairs=[list(p) for p in degenerate], searched_wide=searched_wide,
         calibration_multistart=cal.search.multistart.to_dict() if cal.search.multistart is not None else {},
+        discovery=found,
     )
 
 
@@ -775,6 +793,7 @@ STAGES: tuple[tuple[str, float, float], ...] = (
     ("polish", 6.0, 30.0),
     ("wider search", 4.0, 300.0),
     ("held-out", 4.0, 10.0),
+    ("discovery", 0.0, 100.0),
 )
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional, Union
+from typing import TYPE_CHECKING, Any, Optional, Union
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,6 +19,9 @@ from .locate import Location
 from .noise import NoiseEstimate
 
 from .thresholds import LR_ALPHA
+
+if TYPE_CHECKING:
+    from .discovery import Discovery
 
 
 @dataclass
@@ -117,7 +120,10 @@ class Alternative:
 class Diagnosis:
     """What `diagnose` found. `verdict` is a catalogue id; "none" (the calibrated nominal model
     leaves noise and no effect is supported); "unexplained" (a systematic residual remains that
-    no catalogue effect explains, although the calibration converged); or "not_converged" (the
+    no catalogue effect explains, although the calibration converged, and discovery found no term
+that stands); "discovered" (no catalogue effect, but a force of a library form found in the data,
+modelled and refitted, improves BIC by the threshold and the held-out prediction: see
+``discovery``); or "not_converged" (the
     calibration's independent searches did not agree and the residual is not noise: the tool's
     own fit failed, which says nothing about missing physics); or "interrupted" (Ctrl-C stopped it:
 ``complete`` is False and the result holds what was finished)."""
@@ -166,6 +172,9 @@ class Diagnosis:
     calibration_multistart: dict[str, Any] = field(default_factory=dict, repr=False)
     #: False when Ctrl-C stopped the run: verdict "interrupted", what was finished is kept
     complete: bool = True
+    #: discovery beyond the catalogue (run when no catalogue effect explained the residual):
+    #: verdict "discovered" when its found term stood; None when it did not run
+    discovery: Optional["Discovery"] = None
 
     @property
     def best(self) -> Optional[Candidate]:
@@ -200,6 +209,7 @@ class Diagnosis:
             "screening_scores": self.screening,
             "degenerate_pairs": self.degenerate_pairs,
             "searched_wide": self.searched_wide,
+            "discovery": self.discovery.to_dict() if self.discovery is not None else None,
         }
 
     def report(self) -> str:

@@ -1,0 +1,613 @@
+"""Beyond the catalogue: find a force the model lacks in the data, name its form, model it.
+
+When no catalogue effect explains a systematic residual, three steps (docs/DIAGNOSIS.md,
+"Discovery"):
+
+1. **The missing force, inferred** (:func:`infer_force`). With the calibrated model, an additive
+   force on the main body (and, as the second hypothesis, on the weight) as a piecewise-linear
+   function of time (knots every 1/``KNOTS_PER_CYCLE`` of a drive cycle), fitted through the
+   simulator: Gauss-Newton on the engine's exact derivatives of the readings with respect to
+   the force at every knot (``ExternalForce``, sensitivities ``f_ext[k]``), with a penalty on
+   the force's second differences whose weight generalised cross-validation chooses at every
+   iteration.
+2. **Its form, found** (:func:`find_terms`). Sparse regression (scikit-learn's orthogonal
+   matching pursuit) of the inferred force on a library of candidate functions of the
+   simulated states and the input, in the metric of the data: each library function, projected
+   on the force's knots, is pushed through the same derivatives, so a term is judged by the
+   readings it would explain, not by the force where the readings cannot see it (a stuck body
+   hides the force on it). The number of terms and the wavelength of the periodic terms are
+   chosen by cross-validation across experiments (leave one experiment out).
+3. **The term, modelled** (:func:`discover`). The found terms become the engine's
+   ``library_force`` (or ``library_force_weight``) effect with their coefficients free; the
+   whole model (calibrated subset too) is refitted on exact Jacobians; the verdict is
+   ``discovered`` only when the refit improves BIC over the calibrated null by the catalogue's
+   threshold and the held-out experiment's prediction improves.
+"""
+
+from __future__ import annotations
+
+import math
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import engine
+from ..recording import Recording
+from .case_model import FIT_DT, CaseSimulator, ModelSpec
+from .fitting import FitResult, FreeParam, Objective, fit, set_effect
+from .thresholds import BIC_THRESHOLD
+
+#: knots of the inferred force per drive cycle: resolves the slow phase's shape and the fast
+#: edge to its own length (0.5 ms at 100 Hz)
+KNOTS_PER_CYCLE = 20
+#: Gauss-Newton iterations of the force inference (the force enters linearly; what is left is
+#: the stick-slip's own nonlinearity)
+ITERATIONS = 3
+#: smoothing weights tried by generalised cross-validation, relative to tr(J'J)/tr(D'D)
+SMOOTHING_GRID = np.logspace(-8, 2, 41)
+#: most library terms a discovered force may have
+MAX_TERMS = 4
+#: wavelengths [m] of the periodic library terms tried (their fit refines the one chosen)
+WAVELENGTHS = np.geomspace(2e-6, 200e-6, 25)
+#: a periodic term must lower the cross-validated error by this factor below the best
+#: non-periodic form: the wavelength scan is itself a choice the data must pay for
+PERIODIC_GAIN = 0.9
+#: a term is kept only if adding it lowers the cross-validated error by this factor
+TERM_GAIN = 0.97
+
+
+# ---------------------------------------------------------------------------------------------
+# The library
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Term:
+    """One library function: its engine coefficient, its symbol and what it reads."""
+
+    param: str  #: the engine's effect parameter (its coefficient)
+    symbol: str  #: as printed, e.g. "v1|v1|"
+    unit: str  #: the coefficient's unit
+    variable: str  #: the state it depends on, for the report ("x1", "v1", "x1 - x2", ...)
+    periodic: bool = False
+
+
+MAIN_TERMS: tuple[Term, ...] = (
+    Term("lib_x1", "x1", "N/m", "x1"),
+    Term("lib_v1", "v1", "N s/m", "v1"),
+    Term("lib_dx", "x1 - x2", "N/m", "x1 - x2"),
+    Term("lib_dv", "v1 - v2", "N s/m", "v1 - v2"),
+    Term("lib_sgn", "sgn v1", "N", "v1"),
+    Term("lib_abs", "|v1|", "N s/m", "v1"),
+    Term("lib_vv", "v1|v1|", "N s^2/m^2", "v1"),
+    Term("lib_volt", "V", "N/V", "V"),
+    Term("lib_dvolt", "dV/dt", "N s/V", "V"),
+    Term("lib_t", "t", "N/s", "t"),
+    Term("lib_x1sq", "x1^2", "N/m^2", "x1"),
+    Term("lib_x1cube", "x1^3", "N/m^3", "x1"),
+    Term("lib_ff", "Ff", "1", "Ff"),
+    Term("lib_sin", "sin(2 pi x1/lambda)", "N", "x1", True),
+    Term("lib_cos", "cos(2 pi x1/lambda)", "N", "x1", True),
+    Term("lib_ff_sin", "Ff sin(2 pi x1/lambda)", "1", "x1", True),
+    Term("lib_ff_cos", "Ff cos(2 pi x1/lambda)", "1", "x1", True),
+)
+
+WEIGHT_TERMS: tuple[Term, ...] = (
+    Term("libw_x2", "x2", "N/m", "x2"),
+    Term("libw_v2", "v2", "N s/m", "v2"),
+    Term("libw_dx", "x2 - x1", "N/m", "x2 - x1"),
+    Term("libw_dv", "v2 - v1", "N s/m", "v2 - v1"),
+    Term("libw_sgn", "sgn v2", "N", "v2"),
+    Term("libw_vv", "v2|v2|", "N s^2/m^2", "v2"),
+    Term("libw_volt", "V", "N/V", "V"),
+    Term("libw_dvolt", "dV/dt", "N s/V", "V"),
+)
+
+
+@dataclass
+class Trajectory:
+    """What the library reads along one experiment's run, at the sample times."""
+
+    t: NDArray[np.float64]
+    x1: NDArray[np.float64]
+    v1: NDArray[np.float64]
+    x2: NDArray[np.float64]
+    v2: NDArray[np.float64]
+    ff: NDArray[np.float64]
+    volt: NDArray[np.float64]
+    dvolt: NDArray[np.float64]
+    vs: float  #: the Stribeck velocity the smoothed sign uses [m/s]
+
+
+def library_columns(tr: Trajectory, terms: Sequence[Term], wavelength: float) -> NDArray[np.float64]:
+    """Each term's function along the trajectory (samples x terms), as the engine computes it
+    (``effects.rs``: sgn smoothed as tanh(v/v_s); the periodic terms at `wavelength`)."""
+    k = 2.0 * math.pi / wavelength if wavelength > 0 else 0.0
+    s, c = np.sin(k * tr.x1), np.cos(k * tr.x1)
+    f = {
+        "lib_x1": tr.x1, "lib_v1": tr.v1, "lib_dx": tr.x1 - tr.x2, "lib_dv": tr.v1 - tr.v2,
+        "lib_sgn": np.tanh(tr.v1 / tr.vs), "lib_abs": np.abs(tr.v1), "lib_vv": tr.v1 * np.abs(tr.v1),
+        "lib_volt": tr.volt, "lib_dvolt": tr.dvolt, "lib_t": tr.t, "lib_x1sq": tr.x1**2, "lib_x1cube": tr.x1**3,
+        "lib_ff": tr.ff, "lib_sin": s, "lib_cos": c, "lib_ff_sin": tr.ff * s, "lib_ff_cos": tr.ff * c,
+        "libw_x2": tr.x2, "libw_v2": tr.v2, "libw_dx": tr.x2 - tr.x1, "libw_dv": tr.v2 - tr.v1,
+        "libw_sgn": np.tanh(tr.v2 / tr.vs), "libw_vv": tr.v2 * np.abs(tr.v2), "libw_volt": tr.volt,
+        "libw_dvolt": tr.dvolt,
+    }
+    return np.stack([f[t.param] for t in terms], axis=1)
+
+
+# ---------------------------------------------------------------------------------------------
+# Step 1: the inferred force
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class InferredForce:
+    """An additive force on `body` per experiment, piecewise linear through `knots` [s] with
+    `values` [N], that makes the calibrated model reproduce the recording."""
+
+    body: str
+    knots: list[NDArray[np.float64]]
+    values: list[NDArray[np.float64]]
+    smoothing: float  #: the penalty weight GCV chose (relative)
+    chi2_before: float  #: calibrated model, no force (noise units)
+    chi2_after: float  #: with the inferred force
+    dof: float  #: effective number of parameters of the force (trace of the hat matrix)
+    residuals: list[NDArray[np.float64]]  #: per experiment, offsets removed [m]
+    #: d(residual / sigma) / d(force at knot) per experiment (samples x knots): what the data
+    #: sees of the force
+    jacobians: list[NDArray[np.float64]] = field(repr=False, default_factory=list)
+    trajectories: list[Trajectory] = field(repr=False, default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def gain(self) -> float:
+        """chi^2 the force removes, less twice its effective parameters (an AIC-like margin)."""
+        return self.chi2_before - self.chi2_after - 2.0 * self.dof
+
+
+def knot_times(rec: Recording, j: int, dt: float, per_cycle: int = KNOTS_PER_CYCLE) -> NDArray[np.float64]:
+    """Knots of experiment j's force [s]: every 1/`per_cycle` drive cycle (a multiple of the
+    fit step `dt`), from 0 through the end of the record."""
+    e = rec.experiments[j]
+    period = 1.0 / e.frequency_Hz if not e.is_sampled and e.frequency_Hz > 0 else e.duration / 10.0
+    step = max(round(period / per_cycle / dt), 1) * dt
+    n = int(math.ceil(e.duration / step - 1e-9))
+    return np.arange(n + 1) * step
+
+
+def _second_differences(k: int) -> NDArray[np.float64]:
+    d = np.zeros((max(k - 2, 0), k))
+    for i in range(k - 2):
+        d[i, i:i + 3] = (1.0, -2.0, 1.0)
+    return d
+
+
+def _given(params: dict) -> dict[str, float]:
+    return {n: float(v) for n, v in params.items() if v is not None}
+
+
+def run_with_force(rec: Recording, j: int, spec: ModelSpec, body: str, knots: NDArray[np.float64],
+                   values: NDArray[np.float64], dt: float = FIT_DT, derivatives: bool = False
+                   ) -> tuple[dict[str, Any], Trajectory]:
+    """Experiment j under `spec` with the force (knots, values) on `body`: the engine's output
+    (readings at the sample times; with `derivatives`, d reading / d force at every knot) and
+    the library's view of the trajectory."""
+    e = rec.experiments[j]
+    bt, bv = e.waveform.breakpoints()
+    config = spec.structure.config(method="rk4", dt=dt, rtol=1e-7, atol=1e-7, first_step=dt)
+    every = int(round(rec.sample_step / dt))
+    names = [f"f_ext[{k}]" for k in range(knots.size)] if derivatives else None
+    out = engine.simulate(_given(dict(spec.params)), {n: float(v) for n, v in spec.effects.items() if v != 0.0},
+                          np.ascontiguousarray(bt, dtype=float), np.ascontiguousarray(bv, dtype=float), 0.0,
+                          float(e.duration), config, every, False, None, names,
+                          (np.ascontiguousarray(knots), np.ascontiguousarray(values, dtype=float), body))
+    nodes, vel = out["nodes"], out["velocities"]
+    volt = out["voltage"]
+    t = out["t"]
+    vs = float(spec.params.get("stribeck_velocity") or 1e-3)
+    tr = Trajectory(t, nodes[:, 0], vel[:, 0], nodes[:, -1], vel[:, -1], out["friction"], volt,
+                    np.gradient(volt, t), vs)
+    return out, tr
+
+
+def _hat_basis(knots: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Piecewise-linear hat functions of `knots` at times `t` (samples x knots)."""
+    eye = np.eye(knots.size)
+    return np.stack([np.interp(t, knots, eye[k]) for k in range(knots.size)], axis=1)
+
+
+def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main", *, dt: float = FIT_DT,
+                simulator: Optional[CaseSimulator] = None, per_cycle: int = KNOTS_PER_CYCLE,
+                iterations: int = ITERATIONS, threads: int = 2,
+                progress: Optional[Callable[..., Any]] = None) -> InferredForce:
+    """The additive force on `body` ("main" or "weight") that makes `spec` reproduce every
+    experiment of `rec` (module docstring, step 1). `sigma`: the noise RMS [m]."""
+    import time
+
+    t0 = time.perf_counter()
+    sim = simulator or CaseSimulator(rec, dt=dt)
+    n_exp = len(rec.experiments)
+    objs = [Objective(rec, sim, sigma, [j]) for j in range(n_exp)]
+    knots = [knot_times(rec, j, dt, per_cycle) for j in range(n_exp)]
+    values = [np.zeros(k.size) for k in knots]
+    D = [_second_differences(k.size) for k in knots]
+    pool = ThreadPoolExecutor(max(1, threads))
+
+    def evaluate(vals: list[NDArray[np.float64]], derivatives: bool):
+        def one(j: int):
+            out, tr = run_with_force(rec, j, spec, body, knots[j], vals[j], dt, derivatives)
+            if progress:
+                progress()
+            return out, tr
+        return list(pool.map(one, range(n_exp)))
+
+    def residual(runs) -> tuple[list[NDArray[np.float64]], float]:
+        res = []
+        chi2 = 0.0
+        for j, (out, _) in enumerate(runs):
+            preds = [np.zeros(0)] * n_exp
+            preds[j] = out["reading"][: objs[j].samples[j]]
+            r, _ = objs[j].profiled(preds)
+            res.append(r[0])
+            chi2 += float(np.sum(r[0] ** 2)) / sigma**2
+        return res, chi2
+
+    try:
+        runs = evaluate(values, True)
+        res, chi2_0 = residual(runs)
+        chi2 = chi2_0
+        lam_rel, dof = math.nan, 0.0
+        for _ in range(iterations):
+            A = []
+            for j, (out, _) in enumerate(runs):
+                s = np.asarray(out["sensitivities"]).T  # knots x samples
+                dpred = [np.zeros((knots[j].size, 0))] * n_exp
+                dpred[j] = s[:, : objs[j].samples[j]]
+                A.append(objs[j].profiled_columns(dpred))
+            b = [A[j] @ values[j] - res[j] / sigma for j in range(n_exp)]
+            new, lam_rel, dof = _gcv_solve(A, b, D)
+            # a Gauss-Newton step, shortened while it does not lower the penalised misfit
+            step = [new[j] - values[j] for j in range(n_exp)]
+            for shrink in (1.0, 0.5, 0.25):
+                trial = [values[j] + shrink * step[j] for j in range(n_exp)]
+                trial_runs = evaluate(trial, True)
+                trial_res, trial_chi2 = residual(trial_runs)
+                if trial_chi2 < chi2:
+                    values, runs, res, chi2 = trial, trial_runs, trial_res, trial_chi2
+                    break
+            else:
+                break
+        # the data's view of the force at the final values
+        A = []
+        for j, (out, _) in enumerate(runs):
+            s = np.asarray(out["sensitivities"]).T
+            dpred = [np.zeros((knots[j].size, 0))] * n_exp
+            dpred[j] = s[:, : objs[j].samples[j]]
+            A.append(objs[j].profiled_columns(dpred))
+    finally:
+        pool.shutdown()
+    return InferredForce(body, knots, values, lam_rel, chi2_0, chi2, dof, res, A, [tr for _, tr in runs],
+                         time.perf_counter() - t0)
+
+
+def _gcv_solve(A: list[NDArray[np.float64]], b: list[NDArray[np.float64]], D: list[NDArray[np.float64]]
+               ) -> tuple[list[NDArray[np.float64]], float, float]:
+    """argmin sum_j ||A_j c_j - b_j||^2 + lam ||D_j c_j||^2 with lam by generalised
+    cross-validation (one lam for every experiment). Returns (c per experiment, lam relative to
+    tr(A'A)/tr(D'D), the effective parameters tr(H))."""
+    M = [a.T @ a for a in A]
+    g = [a.T @ bb for a, bb in zip(A, b)]
+    P = [d.T @ d for d in D]
+    bb2 = sum(float(x @ x) for x in b)
+    n = sum(x.size for x in b)
+    scale = sum(float(np.trace(m)) for m in M) / max(sum(float(np.trace(p)) for p in P), 1e-300)
+    best: Optional[tuple[float, float, list, float]] = None
+    for rel in SMOOTHING_GRID:
+        lam = rel * scale
+        cs, rss, tr = [], bb2, 0.0
+        for m, gg, p in zip(M, g, P):
+            K = m + lam * p
+            try:
+                c = np.linalg.solve(K, gg)
+                tr += float(np.trace(np.linalg.solve(K, m)))
+            except np.linalg.LinAlgError:
+                c = np.linalg.lstsq(K, gg, rcond=None)[0]
+                tr += float(np.trace(np.linalg.pinv(K) @ m))
+            rss += float(c @ m @ c - 2.0 * c @ gg)
+            cs.append(c)
+        if tr >= n:
+            continue
+        score = n * max(rss, 0.0) / (n - tr) ** 2
+        if best is None or score < best[0]:
+            best = (score, float(rel), cs, tr)
+    assert best is not None
+    return best[2], best[1], best[3]
+
+
+# ---------------------------------------------------------------------------------------------
+# Step 2: the form
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class FoundForm:
+    """The library terms that reproduce the inferred force, chosen by cross-validation."""
+
+    body: str
+    terms: list[Term]
+    coefficients: dict[str, float]  #: engine parameter -> value (regression estimate)
+    wavelength: float  #: [m], 0 when no periodic term
+    cv_error: float  #: leave-one-experiment-out error, relative to the force's own
+    cv_by_size: list[float]  #: the same for 0, 1, 2, ... terms
+    candidates: list[tuple[str, float]] = field(default_factory=list)  #: (form, cv error) tried
+
+    @property
+    def variables(self) -> list[str]:
+        return sorted({t.variable for t in self.terms})
+
+
+def _design(force: InferredForce, terms: Sequence[Term], wavelength: float
+            ) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
+    """Per experiment: the library pushed through the data's view (samples x terms) and the
+    inferred force's own effect on the readings (samples): both in noise units."""
+    X, y = [], []
+    for j, tr in enumerate(force.trajectories):
+        A = force.jacobians[j]
+        n = A.shape[0]
+        B = _hat_basis(force.knots[j], tr.t[:n])
+        theta = library_columns(tr, terms, wavelength)[:n]
+        # the library on the force's knots (least squares), so term and force share a resolution
+        knot_theta = np.linalg.lstsq(B, theta, rcond=None)[0]
+        X.append(A @ knot_theta)
+        y.append(A @ force.values[j])
+    return X, y
+
+
+def _cv_path(X: list[NDArray[np.float64]], y: list[NDArray[np.float64]], max_terms: int
+             ) -> tuple[list[float], NDArray[np.float64]]:
+    """Leave-one-experiment-out error of orthogonal matching pursuit with 0..max_terms terms
+    (relative to the held-out force's own effect), and the column norms used."""
+    from sklearn.linear_model import OrthogonalMatchingPursuit
+
+    Xa = np.concatenate(X)
+    norms = np.sqrt(np.sum(Xa * Xa, axis=0))
+    norms[norms == 0] = 1.0
+    ya = np.concatenate(y)
+    total = float(ya @ ya)
+    errs = [1.0]
+    m = len(X)
+    for k in range(1, max_terms + 1):
+        sse = 0.0
+        for hold in range(m):
+            tr = [i for i in range(m) if i != hold]
+            Xt = np.concatenate([X[i] for i in tr]) / norms
+            yt = np.concatenate([y[i] for i in tr])
+            omp = OrthogonalMatchingPursuit(n_nonzero_coefs=min(k, Xt.shape[1]), fit_intercept=False).fit(Xt, yt)
+            pred = (X[hold] / norms) @ omp.coef_
+            sse += float(np.sum((y[hold] - pred) ** 2))
+        errs.append(sse / max(total, 1e-300))
+    return errs, norms
+
+
+def _choose(errs: list[float]) -> int:
+    """The fewest terms after which one more does not lower the cross-validated error by
+    TERM_GAIN."""
+    k = 0
+    while k + 1 < len(errs) and errs[k + 1] < TERM_GAIN * errs[k]:
+        k += 1
+    return k
+
+
+def find_terms(force: InferredForce, max_terms: int = MAX_TERMS) -> FoundForm:
+    """The library terms (module docstring, step 2) that best reproduce `force`: orthogonal
+    matching pursuit, the number of terms and the wavelength of the periodic ones chosen by
+    leave-one-experiment-out cross-validation."""
+    from sklearn.linear_model import OrthogonalMatchingPursuit
+
+    library = MAIN_TERMS if force.body == "main" else WEIGHT_TERMS
+    plain = [t for t in library if not t.periodic]
+    periodic = [t for t in library if t.periodic]
+    tried: list[tuple[str, float]] = []
+
+    def evaluate(terms: list[Term], wavelength: float):
+        X, y = _design(force, terms, wavelength)
+        errs, norms = _cv_path(X, y, max_terms)
+        k = _choose(errs)
+        return errs, k, X, y, norms
+
+    best = evaluate(plain, 0.0)
+    best_terms, best_wl = plain, 0.0
+    tried.append(("without periodic terms", best[0][best[1]]))
+    if periodic:
+        for wl in WAVELENGTHS:
+            cand = evaluate(plain + periodic, float(wl))
+            tried.append((f"periodic, lambda = {wl * 1e6:.3g} um", cand[0][cand[1]]))
+            if cand[0][cand[1]] < PERIODIC_GAIN * best[0][best[1]] and (
+                    best_wl == 0.0 or cand[0][cand[1]] < best[0][best[1]]):
+                best, best_terms, best_wl = cand, plain + periodic, float(wl)
+    errs, k, X, y, norms = best
+    chosen: list[Term] = []
+    coefs: dict[str, float] = {}
+    if k > 0:
+        Xa = np.concatenate(X) / norms
+        omp = OrthogonalMatchingPursuit(n_nonzero_coefs=k, fit_intercept=False).fit(Xa, np.concatenate(y))
+        for i in np.flatnonzero(omp.coef_):
+            chosen.append(best_terms[i])
+            coefs[best_terms[i].param] = float(omp.coef_[i] / norms[i])
+    wl = best_wl if any(t.periodic for t in chosen) else 0.0
+    return FoundForm(force.body, chosen, coefs, wl, float(errs[k]), [float(e) for e in errs], tried)
+
+
+# ---------------------------------------------------------------------------------------------
+# Step 3: the term, modelled and refitted
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class Discovery:
+    """What discovery found, with the evidence; `discovered` is the verdict's test."""
+
+    discovered: bool
+    reason: str
+    body: str
+    form: Optional[FoundForm]
+    forces: dict[str, InferredForce]  #: per body tried
+    refit: Optional[FitResult] = None
+    #: the refitted library coefficients and their 1-sigma, engine parameter -> (value, std)
+    values: dict[str, tuple[float, Optional[float]]] = field(default_factory=dict)
+    delta_bic: float = math.nan
+    rms_before: float = math.nan  #: the calibrated null's residual RMS [m]
+    rms_after: float = math.nan
+    heldout_rms_before: float = math.nan
+    heldout_rms_after: float = math.nan
+    heldout_experiment: str = ""
+    description: str = ""  #: the term in words
+    equation: str = ""  #: the term in symbols
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "discovered": self.discovered, "reason": self.reason, "body": self.body,
+            "terms": [t.symbol for t in self.form.terms] if self.form else [],
+            "variables": self.form.variables if self.form else [],
+            "wavelength_m": self.form.wavelength if self.form else 0.0,
+            "cv_error": self.form.cv_error if self.form else math.nan,
+            "values": {k: list(v) for k, v in self.values.items()},
+            "delta_bic": self.delta_bic, "rms_before": self.rms_before, "rms_after": self.rms_after,
+            "heldout_rms_before": self.heldout_rms_before, "heldout_rms_after": self.heldout_rms_after,
+            "heldout_experiment": self.heldout_experiment, "description": self.description,
+            "equation": self.equation, "seconds": self.seconds,
+            "inferred_force": {b: {"chi2_before": f.chi2_before, "chi2_after": f.chi2_after, "dof": f.dof,
+                                   "smoothing": f.smoothing} for b, f in self.forces.items()},
+        }
+
+
+def _free_library(form: FoundForm) -> list[FreeParam]:
+    """The found coefficients as free parameters (and the wavelength when a periodic term was
+    found), started at the regression's values."""
+    free = []
+    for t in form.terms:
+        v = form.coefficients[t.param]
+        s = max(abs(v), 1e-30)
+        free.append(FreeParam(t.param, v, v - 20.0 * s, v + 20.0 * s, 0.1 * s, set_effect(t.param), unit=t.unit))
+    if form.wavelength > 0:
+        wl = form.wavelength
+        free.append(FreeParam("lib_wavelength", wl, wl / 1.6, wl * 1.6, 0.02, set_effect("lib_wavelength"), log=True,
+                              unit="m"))
+    return free
+
+
+def _equation(form: FoundForm, values: dict[str, float]) -> str:
+    lhs = "m1 x1'' +=" if form.body == "main" else "m2 x2'' +="
+    parts = []
+    for t in form.terms:
+        sym = t.symbol.replace("lambda", f"{values.get('lib_wavelength', form.wavelength) * 1e6:.3g} um")
+        parts.append(f"{values[t.param]:+.4g} {t.unit} x {sym}")
+    return f"{lhs} " + " ".join(parts)
+
+
+def describe(form: FoundForm, values: dict[str, float], force: InferredForce) -> str:
+    """The found term in words, with its size along the recorded motion."""
+    wl = values.get("lib_wavelength", form.wavelength)
+    where = "on the main body" if form.body == "main" else "on the weight"
+    trs = force.trajectories
+    ff = np.concatenate([np.abs(t.ff) for t in trs]) if trs else np.zeros(1)
+    ff_level = float(np.percentile(ff, 90)) if ff.size else 0.0
+    words = []
+    names = {t.param for t in form.terms}
+    if names & {"lib_ff_sin", "lib_ff_cos"}:
+        amp = math.hypot(values.get("lib_ff_sin", 0.0), values.get("lib_ff_cos", 0.0))
+        words.append(f"friction varies with position: about ±{100 * amp:.2g} % with a period of {wl * 1e6:.3g} µm")
+    if names & {"lib_sin", "lib_cos"}:
+        amp = math.hypot(values.get("lib_sin", 0.0), values.get("lib_cos", 0.0))
+        words.append(f"a force periodic in position {where}: ±{amp * 1e3:.3g} mN with a period of {wl * 1e6:.3g} µm")
+    if "lib_vv" in names:
+        v = float(np.percentile(np.concatenate([np.abs(t.v1) for t in trs]), 99)) if trs else 0.0
+        words.append(f"quadratic drag {where}: F = {values['lib_vv']:.3g} N s²/m² · v1|v1| "
+                     f"({abs(values['lib_vv']) * v * v * 1e3:.3g} mN at {v * 1e3:.3g} mm/s)")
+    if "lib_x1cube" in names:
+        x = float(np.max(np.concatenate([np.abs(t.x1) for t in trs]))) if trs else 0.0
+        kind = "stiffening spring to ground" if values["lib_x1cube"] < 0 else "softening (negative) cubic force"
+        words.append(f"a cubic {kind} {where}: F = {values['lib_x1cube']:.3g} N/m³ · x1³ "
+                     f"({abs(values['lib_x1cube']) * x**3 * 1e3:.3g} mN at {x * 1e6:.3g} µm)")
+    if "lib_x1sq" in names:
+        words.append(f"a force quadratic in position {where} ({values['lib_x1sq']:.3g} N/m² · x1²)")
+    if "lib_x1" in names:
+        words.append(f"a linear spring to ground {where} (k = {-values['lib_x1']:.3g} N/m)")
+    if "lib_ff" in names:
+        words.append(f"friction {100 * values['lib_ff']:+.2g} % off its calibrated level")
+    rest = [t for t in form.terms if t.param not in {"lib_ff_sin", "lib_ff_cos", "lib_sin", "lib_cos", "lib_vv",
+                                                      "lib_x1cube", "lib_x1sq", "lib_x1", "lib_ff"}]
+    for t in rest:
+        words.append(f"a force {values[t.param]:+.3g} {t.unit} · {t.symbol} {where}")
+    if ff_level > 0 and not words:
+        words.append("no term")
+    return "; ".join(words)
+
+
+def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreeParam], objective: Objective,
+             heldout: Any, heldout_rms_null: float, *, bodies: Sequence[str] = ("main", "weight"),
+             dt: float = FIT_DT, progress: Optional[Callable[..., Any]] = None) -> Discovery:
+    """Discovery (module docstring) from the calibrated model `spec` with its calibrated subset
+    `calibrated_free` (centred on the calibration's optimum) on `objective` (the diagnosis's
+    segmented objective); `heldout` the diagnosis's held-out predictor (``rms(spec, free)``)
+    and `heldout_rms_null` the null's held-out RMS [m]."""
+    import time
+
+    t0 = time.perf_counter()
+    sigma = objective.sigma
+    forces: dict[str, InferredForce] = {}
+    for body in bodies:
+        forces[body] = infer_force(rec, spec, sigma, body, dt=dt, simulator=objective.sim, progress=progress)
+    # the body whose force explains more, for its effective parameters
+    body = max(forces, key=lambda b: forces[b].gain)
+    force = forces[body]
+    null_chi2 = float(sum(np.sum(r * r) for r in objective.profiled(objective.predict([spec])[0])[0])) / sigma**2
+    rms_null = math.sqrt(null_chi2 * sigma**2 / objective.n)
+    out = Discovery(False, "", body, None, forces, rms_before=rms_null, heldout_rms_before=heldout_rms_null,
+                    heldout_experiment=rec.experiments[heldout.index].name if heldout is not None else "")
+    if force.gain <= BIC_THRESHOLD:
+        out.reason = (f"no force on {body} explains the residual (it lowers chi² by "
+                      f"{force.chi2_before - force.chi2_after:.0f} with {force.dof:.1f} effective parameters)")
+        out.seconds = time.perf_counter() - t0
+        return out
+    form = find_terms(force)
+    out.form = form
+    if not form.terms:
+        out.reason = (f"a force on the {body} explains the residual (chi² {force.chi2_before:.0f} → "
+                      f"{force.chi2_after:.0f}), but no library term reproduces it across experiments "
+                      f"(cross-validated error {form.cv_by_size[-1]:.2f} of the force's own with {MAX_TERMS} terms)")
+        out.seconds = time.perf_counter() - t0
+        return out
+    lib = _free_library(form)
+    base = ModelSpec(spec.structure, dict(spec.params), dict(spec.effects))
+    if form.wavelength > 0:
+        base.effects["lib_wavelength"] = form.wavelength  # type: ignore[index]
+    free = list(calibrated_free) + lib
+    r = fit(objective, base, free, max_nfev=25, progress=progress)
+    out.refit = r
+    k = len(lib)
+    out.delta_bic = null_chi2 - r.chi2 - k * math.log(objective.n)
+    out.rms_after = r.rms
+    vals = {f.name: r.values[f.name] for f in lib}
+    out.values = {n: (v, r.std.get(n)) for n, v in vals.items()}
+    if heldout is not None:
+        out.heldout_rms_after = heldout.rms(r.spec, [f.at(r.values[f.name]) for f in free])
+    out.equation = _equation(form, vals)
+    out.description = describe(form, vals, force)
+    improves = not (math.isfinite(out.heldout_rms_after) and math.isfinite(heldout_rms_null)
+                    and out.heldout_rms_after >= heldout_rms_null)
+    out.discovered = out.delta_bic >= BIC_THRESHOLD and improves
+    terms = ", ".join(t.symbol for t in form.terms)
+    if out.discovered:
+        out.reason = (f"a force on the {body} of the form {terms} ({out.description}) improves BIC by "
+                      f"{out.delta_bic:.0f} over the calibrated model (RMS {rms_null / sigma:.2f} → "
+                      f"{out.rms_after / sigma:.2f} x noise) and predicts the held-out experiment better "
+                      f"({heldout_rms_null * 1e9:.2f} → {out.heldout_rms_after * 1e9:.2f} nm)")
+    else:
+        why = (f"ΔBIC {out.delta_bic:.0f} < {BIC_THRESHOLD:g}" if out.delta_bic < BIC_THRESHOLD
+               else f"the held-out prediction does not improve ({heldout_rms_null * 1e9:.2f} → "
+                    f"{out.heldout_rms_after * 1e9:.2f} nm)")
+        out.reason = f"the found form ({terms}) does not stand: {why}"
+    out.seconds = time.perf_counter() - t0
+    return out
