@@ -61,16 +61,21 @@ def run_case(case: Path, key: dict[str, Any]) -> dict[str, Any]:
         "calibrated": d["rms_calibrated"] / sigma, "after": d["rms_after"] / sigma, "key_parameter": text,
         "worst_parameter_error": worst, "seconds": seconds, "converged": d["calibration"]["converged"],
         "reason": d["reason"], "timings": d["timings"],
+        # discovery ran (the catalogue left a systematic residual) and what it concluded
+        "discovery_ran": d.get("discovery") is not None,
+        "discovered": bool(d.get("discovery") and d["discovery"]["discovered"]),
+        "discovery_seconds": (d.get("discovery") or {}).get("seconds", 0.0),
     }
 
 
 def table(rows: list[dict[str, Any]]) -> str:
-    head = ("| set | case | key | verdict | right | RMS before / calibrated / after (× noise) | key parameter "
-            "(fitted vs true) | s |\n|---|---|---|---|---|---|---|---|")
+    head = ("| set | case | key | verdict | right | discovered | RMS before / calibrated / after (× noise) | "
+            "key parameter (fitted vs true) | s |\n|---|---|---|---|---|---|---|---|---|")
     lines = [head]
     for r in rows:
+        disc = ("yes" if r.get("discovered") else "ran, no" if r.get("discovery_ran") else "–")
         lines.append(f"| {r['set']} | {r['case']} | {r['key']} | {r['verdict']} | {'✓' if r['right'] else '✗'} | "
-                     f"{r['before']:.2f} / {r['calibrated']:.2f} / {r['after']:.2f} | {r['key_parameter']} | "
+                     f"{disc} | {r['before']:.2f} / {r['calibrated']:.2f} / {r['after']:.2f} | {r['key_parameter']} | "
                      f"{r['seconds']:.0f} |")
     right = sum(r["right"] for r in rows)
     healthy = [r for r in rows if r["key"] == "none"]
@@ -80,7 +85,8 @@ def table(rows: list[dict[str, Any]]) -> str:
     lines.append("")
     lines.append(f"{right} of {len(rows)} right; healthy devices: {len(healthy)}, false alarms (an effect named on a "
                  f"healthy device) {sum(r['verdict'] not in ('none', 'unexplained', 'not_converged') for r in healthy)}, "
-                 f"not 'none' {false_alarms}; time median {med:.0f} s, max {max(times) if times else math.nan:.0f} s")
+                 f"not 'none' {false_alarms}; discovered on {sum(bool(r.get('discovered')) for r in rows)} "
+                 f"(on a healthy device {sum(bool(r.get('discovered')) for r in healthy)}); time median {med:.0f} s, max {max(times) if times else math.nan:.0f} s")
     return "\n".join(lines)
 
 

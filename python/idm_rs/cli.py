@@ -211,8 +211,10 @@ def _add_diagnose_parser(sub: "argparse._SubParsersAction") -> None:
         description=(
             "Compare the recordings of CASE_DIR (format idm-recording/1: meta.json and one CSV per "
             "experiment) with their nominal model: calibrate the plausibly-off parameters, locate the "
-            "residual, try every catalogue effect, and print the verdict (a catalogue id, 'none' or "
-            "'unexplained') with the evidence. Given a measured rig data file instead (see docs/REALDATA.md), "
+            "residual, try every catalogue effect, and print the verdict (a catalogue id, 'none', "
+            "'discovered' or 'unexplained') with the evidence. When no catalogue effect explains the residual, "
+            "discovery infers the missing force from the data, finds its form in a library of terms, refits "
+            "it, and names it when it stands ('discovered'). Given a measured rig data file instead (see docs/REALDATA.md), "
             "diagnose the rig's identified friction model against the rig-effect catalogue."
         ),
     )
@@ -224,6 +226,9 @@ def _add_diagnose_parser(sub: "argparse._SubParsersAction") -> None:
     dp.add_argument("--no-progress", action="store_true", help="no progress bar")
     dp.add_argument("--threads", type=_positive_int, default=None, metavar="N",
                     help="threads of the batch simulations (default: all cores)")
+    dp.add_argument("--no-discover", action="store_true",
+                    help="stop at the catalogue: no discovery of off-catalogue physics (verdict 'unexplained' "
+                         "where no catalogue effect explains the residual)")
 
 
 def _add_method_arguments(sp: argparse.ArgumentParser) -> None:
@@ -751,7 +756,7 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
             paths = plot_rig_diagnosis(rd, a.plots)
             print(f"wrote {len(paths)} figures in {a.plots}: " + ", ".join(p.name for p in paths))
         return 0
-    d = diagnose(a.case_dir, progress=not a.no_progress, threads=a.threads)
+    d = diagnose(a.case_dir, progress=not a.no_progress, threads=a.threads, discover=not a.no_discover)
     print(d.report())
     if not d.complete:
         print("interrupted: the report above and the JSON (\"complete\": false) hold what was finished",

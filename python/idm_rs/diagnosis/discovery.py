@@ -188,21 +188,41 @@ def _given(params: dict) -> dict[str, float]:
     return {n: float(v) for n, v in params.items() if v is not None}
 
 
+#: the integrator of the force inference: Dormand-Prince, landing on every sample time. RK4 at
+#: the fit step lets the derivatives grow without bound in fast slips (the friction state's
+#: stability limit); the adaptive step keeps both the run and its derivatives stable. Its knot
+#: derivatives agree with RK4's at dt = 1e-8 s (where RK4's are stable) to 3 % on the test
+#: cases, in 0.06 s per 8 knots of a 42 ms record (Rodas4's did not, through the kinks).
+INFER_METHOD = dict(method="dopri5", rtol=1e-8, atol=1e-8)
+#: the force the inference starts from [N], everywhere: not exactly zero, so a body at rest is
+#: not exactly on the friction law's kinks (v1 = 0, Fh = 0), where a derivative is one-sided and
+#: the side the value picks may be the wrong one for the perturbation (docs/SENSITIVITIES.md);
+#: a micronewton moves the body by ~1e-16 m
+START_FORCE = 1e-6
+
+
 def run_with_force(rec: Recording, j: int, spec: ModelSpec, body: str, knots: NDArray[np.float64],
-                   values: NDArray[np.float64], dt: float = FIT_DT, derivatives: bool = False
+                   values: NDArray[np.float64], derivatives: bool = False
                    ) -> tuple[dict[str, Any], Trajectory]:
     """Experiment j under `spec` with the force (knots, values) on `body`: the engine's output
-    (readings at the sample times; with `derivatives`, d reading / d force at every knot) and
-    the library's view of the trajectory."""
+    at the sample times (``reading``; with `derivatives`, ``sensitivities``: d reading / d force
+    at every knot, samples x knots) and the library's view of the trajectory."""
     e = rec.experiments[j]
     bt, bv = e.waveform.breakpoints()
-    config = spec.structure.config(method="rk4", dt=dt, rtol=1e-7, atol=1e-7, first_step=dt)
-    every = int(round(rec.sample_step / dt))
+    # the drive with a breakpoint at every sample (the same function): the adaptive method
+    # lands on each sample time
+    tt = np.union1d(bt, e.t)
+    tt = tt[tt <= e.duration * (1 + 1e-12)]
+    vv = np.interp(tt, bt, bv)
+    config = spec.structure.config(first_step=1e-8, dt=1e-8, **INFER_METHOD)
     names = [f"f_ext[{k}]" for k in range(knots.size)] if derivatives else None
-    out = engine.simulate(_given(dict(spec.params)), {n: float(v) for n, v in spec.effects.items() if v != 0.0},
-                          np.ascontiguousarray(bt, dtype=float), np.ascontiguousarray(bv, dtype=float), 0.0,
-                          float(e.duration), config, every, False, None, names,
+    raw = engine.simulate(_given(dict(spec.params)), {n: float(v) for n, v in spec.effects.items() if v != 0.0},
+                          tt, vv, 0.0, float(e.duration), config, 1, False, None, names,
                           (np.ascontiguousarray(knots), np.ascontiguousarray(values, dtype=float), body))
+    idx = np.minimum(np.searchsorted(raw["t"], e.t - 1e-12), raw["t"].size - 1)
+    out = {k: raw[k][idx] for k in ("t", "reading", "nodes", "velocities", "friction", "voltage")}
+    if derivatives:
+        out["sensitivities"] = raw["sensitivities"][idx]
     nodes, vel = out["nodes"], out["velocities"]
     volt = out["voltage"]
     t = out["t"]
@@ -231,13 +251,16 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
     n_exp = len(rec.experiments)
     objs = [Objective(rec, sim, sigma, [j]) for j in range(n_exp)]
     knots = [knot_times(rec, j, dt, per_cycle) for j in range(n_exp)]
-    values = [np.zeros(k.size) for k in knots]
+    values = [np.full(k.size, START_FORCE) for k in knots]
     D = [_second_differences(k.size) for k in knots]
     pool = ThreadPoolExecutor(max(1, threads))
 
     def evaluate(vals: list[NDArray[np.float64]], derivatives: bool):
         def one(j: int):
-            out, tr = run_with_force(rec, j, spec, body, knots[j], vals[j], dt, derivatives)
+            out, tr = run_with_force(rec, j, spec, body, knots[j], vals[j], derivatives)
+            if derivatives:
+                _repair_columns(out, lambda v: run_with_force(rec, j, spec, body, knots[j], v)[0]["reading"],
+                                vals[j])
             if progress:
                 progress()
             return out, tr
@@ -254,42 +277,67 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
             chi2 += float(np.sum(r[0] ** 2)) / sigma**2
         return res, chi2
 
-    try:
-        runs = evaluate(values, True)
-        res, chi2_0 = residual(runs)
-        chi2 = chi2_0
-        lam_rel, dof = math.nan, 0.0
-        for _ in range(iterations):
-            A = []
-            for j, (out, _) in enumerate(runs):
-                s = np.asarray(out["sensitivities"]).T  # knots x samples
-                dpred = [np.zeros((knots[j].size, 0))] * n_exp
-                dpred[j] = s[:, : objs[j].samples[j]]
-                A.append(objs[j].profiled_columns(dpred))
-            b = [A[j] @ values[j] - res[j] / sigma for j in range(n_exp)]
-            new, lam_rel, dof = _gcv_solve(A, b, D)
-            # a Gauss-Newton step, shortened while it does not lower the penalised misfit
-            step = [new[j] - values[j] for j in range(n_exp)]
-            for shrink in (1.0, 0.5, 0.25):
-                trial = [values[j] + shrink * step[j] for j in range(n_exp)]
-                trial_runs = evaluate(trial, True)
-                trial_res, trial_chi2 = residual(trial_runs)
-                if trial_chi2 < chi2:
-                    values, runs, res, chi2 = trial, trial_runs, trial_res, trial_chi2
-                    break
-            else:
-                break
-        # the data's view of the force at the final values
+    def view(runs) -> list[NDArray[np.float64]]:
+        """d(residual / sigma) / d(force at each knot), per experiment (samples x knots)."""
         A = []
         for j, (out, _) in enumerate(runs):
-            s = np.asarray(out["sensitivities"]).T
+            s = np.asarray(out["sensitivities"]).T  # knots x samples
             dpred = [np.zeros((knots[j].size, 0))] * n_exp
             dpred[j] = s[:, : objs[j].samples[j]]
             A.append(objs[j].profiled_columns(dpred))
+        return A
+
+    try:
+        runs = evaluate(values, True)
+        A = view(runs)
+        res, chi2_0 = residual(runs)
+        chi2 = chi2_0
+        lam_rel, dof = math.nan, 0.0
+        for it in range(iterations):
+            b = [A[j] @ values[j] - res[j] / sigma for j in range(n_exp)]
+            new, lam_rel, dof = _gcv_solve(A, b, D)
+            # a Gauss-Newton step, shortened while it does not lower the misfit (tried on
+            # plain runs; the derivatives are taken where a step is accepted)
+            step = [new[j] - values[j] for j in range(n_exp)]
+            for shrink in (1.0, 0.5, 0.25):
+                trial = [values[j] + shrink * step[j] for j in range(n_exp)]
+                trial_res, trial_chi2 = residual(evaluate(trial, False))
+                if trial_chi2 < chi2:
+                    values, res, chi2 = trial, trial_res, trial_chi2
+                    runs = evaluate(values, True)
+                    A = view(runs)
+                    break
+            else:
+                break
     finally:
         pool.shutdown()
     return InferredForce(body, knots, values, lam_rel, chi2_0, chi2, dof, res, A, [tr for _, tr in runs],
                          time.perf_counter() - t0)
+
+
+#: step [N] of the forward differences that replace a knot's derivative which blew up
+FD_FORCE_STEP = 1e-4
+
+
+def _repair_columns(out: dict[str, Any], reading: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+                    values: NDArray[np.float64]) -> int:
+    """Replace, in place, each knot's derivative that blew up by a forward difference of
+    runs; returns how many. A derivative through a state that sits exactly on a kink of the
+    friction law (a body at rest, v1 = 0 exactly) follows the branch the value decided, which may
+    be the wrong side for the perturbation and grow without bound (docs/SENSITIVITIES.md); a
+    force of 1 N cannot move the reading by more than a few times the whole record's travel
+    (the same test as the fits' :func:`~idm_rs.diagnosis.fitting.usable_derivative`)."""
+    from .fitting import BLOWN_UP
+
+    S = out["sensitivities"]  # samples x knots [m/N]
+    pred = out["reading"]
+    limit = BLOWN_UP * (float(np.ptp(pred)) + 1e-6)
+    bad = [k for k in range(S.shape[1]) if not np.all(np.isfinite(S[:, k])) or np.max(np.abs(S[:, k])) > limit]
+    for k in bad:
+        v = values.copy()
+        v[k] += FD_FORCE_STEP
+        S[:, k] = (reading(v) - pred) / FD_FORCE_STEP
+    return len(bad)
 
 
 def _gcv_solve(A: list[NDArray[np.float64]], b: list[NDArray[np.float64]], D: list[NDArray[np.float64]]
@@ -368,14 +416,14 @@ def _cv_path(X: list[NDArray[np.float64]], y: list[NDArray[np.float64]], max_ter
              ) -> tuple[list[float], NDArray[np.float64]]:
     """Leave-one-experiment-out error of orthogonal matching pursuit with 0..max_terms terms
     (relative to the held-out force's own effect), and the column norms used."""
-    from sklearn.linear_model import OrthogonalMatchingPursuit
-
     Xa = np.concatenate(X)
     norms = np.sqrt(np.sum(Xa * Xa, axis=0))
     norms[norms == 0] = 1.0
     ya = np.concatenate(y)
     total = float(ya @ ya)
     errs = [1.0]
+    if total <= 0.0:
+        return errs, norms
     m = len(X)
     for k in range(1, max_terms + 1):
         sse = 0.0
@@ -383,11 +431,23 @@ def _cv_path(X: list[NDArray[np.float64]], y: list[NDArray[np.float64]], max_ter
             tr = [i for i in range(m) if i != hold]
             Xt = np.concatenate([X[i] for i in tr]) / norms
             yt = np.concatenate([y[i] for i in tr])
-            omp = OrthogonalMatchingPursuit(n_nonzero_coefs=min(k, Xt.shape[1]), fit_intercept=False).fit(Xt, yt)
-            pred = (X[hold] / norms) @ omp.coef_
+            pred = (X[hold] / norms) @ _omp(Xt, yt, k)
             sse += float(np.sum((y[hold] - pred) ** 2))
-        errs.append(sse / max(total, 1e-300))
+        errs.append(sse / total)
     return errs, norms
+
+
+def _omp(X: NDArray[np.float64], y: NDArray[np.float64], k: int) -> NDArray[np.float64]:
+    """Orthogonal matching pursuit with at most `k` terms (scikit-learn); a library whose
+    columns are linearly dependent (V and x1 - x2 follow each other) simply stops early."""
+    import warnings
+
+    from sklearn.linear_model import OrthogonalMatchingPursuit
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        omp = OrthogonalMatchingPursuit(n_nonzero_coefs=min(k, X.shape[1]), fit_intercept=False).fit(X, y)
+    return np.asarray(omp.coef_)
 
 
 def _choose(errs: list[float]) -> int:
@@ -403,8 +463,6 @@ def find_terms(force: InferredForce, max_terms: int = MAX_TERMS) -> FoundForm:
     """The library terms (module docstring, step 2) that best reproduce `force`: orthogonal
     matching pursuit, the number of terms and the wavelength of the periodic ones chosen by
     leave-one-experiment-out cross-validation."""
-    from sklearn.linear_model import OrthogonalMatchingPursuit
-
     library = MAIN_TERMS if force.body == "main" else WEIGHT_TERMS
     plain = [t for t in library if not t.periodic]
     periodic = [t for t in library if t.periodic]
@@ -430,11 +488,10 @@ def find_terms(force: InferredForce, max_terms: int = MAX_TERMS) -> FoundForm:
     chosen: list[Term] = []
     coefs: dict[str, float] = {}
     if k > 0:
-        Xa = np.concatenate(X) / norms
-        omp = OrthogonalMatchingPursuit(n_nonzero_coefs=k, fit_intercept=False).fit(Xa, np.concatenate(y))
-        for i in np.flatnonzero(omp.coef_):
+        coef = _omp(np.concatenate(X) / norms, np.concatenate(y), k)
+        for i in np.flatnonzero(coef):
             chosen.append(best_terms[i])
-            coefs[best_terms[i].param] = float(omp.coef_[i] / norms[i])
+            coefs[best_terms[i].param] = float(coef[i] / norms[i])
     wl = best_wl if any(t.periodic for t in chosen) else 0.0
     return FoundForm(force.body, chosen, coefs, wl, float(errs[k]), [float(e) for e in errs], tried)
 

@@ -89,8 +89,17 @@ def report_residuals(d: Diagnosis, j: int) -> tuple[np.ndarray, np.ndarray]:
     calibrated one again when no effect is named). Empty where the result kept none."""
     cal = np.asarray(d.calibrated_residuals[j]) if j < len(d.calibrated_residuals) else np.zeros(0)
     cand = refit_candidate(d)
+    found = _discovered_refit(d)
+    if found is not None:
+        return cal, np.asarray(found.residuals[j]) if j < len(found.residuals) else cal
     ref = np.asarray(cand.residuals[j]) if cand is not None and j < len(cand.residuals) else cal
     return cal, ref
+
+
+def _discovered_refit(d: Diagnosis):
+    """The refit of a discovered term (verdict "discovered"), else None."""
+    f = getattr(d, "discovery", None)
+    return f.refit if d.verdict == "discovered" and f is not None and f.refit is not None else None
 
 
 def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
@@ -104,16 +113,19 @@ def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
     if d.simulator is None or d.nominal_spec is None or d.calibrated_spec is None:
         return []
     cand = refit_candidate(d)
-    specs = [d.nominal_spec, d.calibrated_spec] + ([cand.spec] if cand is not None else [])
+    found = _discovered_refit(d)
+    refit_spec = found.spec if found is not None else cand.spec if cand is not None else None
+    specs = [d.nominal_spec, d.calibrated_spec] + ([refit_spec] if refit_spec is not None else [])
     preds = d.simulator.predict(specs)
-    refit_label = f"with {cand.effect} (refit)" if cand is not None else "calibrated nominal"
+    refit_label = ("with the discovered term (refit)" if found is not None
+                   else f"with {cand.effect} (refit)" if cand is not None else "calibrated nominal")
     sigma_nm = d.noise.sigma * 1e9
     paths = []
     for j, e in enumerate(d.recording.experiments):
         t_ms = e.t * 1e3
         x = e.x
         p_nom, p_cal = preds[0][j], preds[1][j]
-        p_ref = preds[2][j] if cand is not None else p_cal
+        p_ref = preds[2][j] if refit_spec is not None else p_cal
         rest = _rest_before_drive(np.asarray(e.voltage))
         ref_aligned, off_ref = _aligned(x, p_ref, rest)
         if not math.isfinite(off_ref):
@@ -311,4 +323,52 @@ def plot_diagnosis(d: Diagnosis, directory: Path) -> list[Path]:
     paths.append(plot_residual_phases(d, directory))
     paths.append(plot_ranking(d, directory))
     paths.append(plot_rms_story(d, directory))
+    if getattr(d, "discovery", None) is not None and d.discovery.form is not None:
+        paths.append(plot_discovery(d, directory))
     return paths
+
+
+def plot_discovery(d: Diagnosis, directory: Path) -> Path:
+    """``discovery.png``: per experiment, the force inferred through the simulator (knots) against
+    the found term at its refitted coefficients, both on the knots (the term projected there, as
+    the regression compared them), with the share of the force the data can see (the force's
+    knots weighted by what their derivatives move) as the band's shade."""
+    import matplotlib.pyplot as plt
+
+    from .discovery import _hat_basis, library_columns
+
+    f = d.discovery
+    force = f.forces[f.body]
+    form = f.form
+    values = {n: v for n, (v, _) in f.values.items()} if f.values else dict(form.coefficients)
+    wl = values.get("lib_wavelength", form.wavelength)
+    n_exp = len(force.values)
+    fig, axes = plt.subplots(n_exp, 1, figsize=(9.5, 2.2 * n_exp + 0.8), sharex=False, squeeze=False)
+    for j in range(n_exp):
+        ax = axes[j, 0]
+        tr = force.trajectories[j]
+        k = force.knots[j]
+        A = force.jacobians[j]
+        n = A.shape[0]
+        seen = np.sqrt(np.sum(A * A, axis=0))
+        seen = seen / max(float(seen.max()), 1e-300)
+        theta = library_columns(tr, form.terms, wl)[:n]
+        term = theta @ np.array([values.get(t.param, 0.0) for t in form.terms])
+        knot_term = np.linalg.lstsq(_hat_basis(k, tr.t[:n]), term, rcond=None)[0]
+        ax.plot(k * 1e3, force.values[j] * 1e3, "o-", ms=2.5, lw=1.0, color="0.3", label="inferred force")
+        ax.plot(k * 1e3, knot_term * 1e3, "-", lw=1.6, color=C_REFIT, label="found term (refitted), on the knots")
+        ax.plot(tr.t[:n] * 1e3, term * 1e3, "-", lw=0.6, color=C_REFIT, alpha=0.35, label="found term, every sample")
+        lo, hi = ax.get_ylim()
+        for a, b, w in zip(k[:-1], k[1:], seen[:-1]):
+            ax.axvspan(a * 1e3, b * 1e3, color="tab:green", alpha=0.18 * float(w), lw=0)
+        ax.set_ylim(lo, hi)
+        ax.set_ylabel("force [mN]")
+        ax.set_title(d.recording.experiments[j].name, fontsize=9, loc="left")
+        if j == 0:
+            ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("time [ms]  (green: where the readings see the force)")
+    title = (f"{d.case}: force on the {'main body' if f.body == 'main' else 'weight'} inferred from the data, "
+             f"against the found term ({', '.join(t.symbol for t in form.terms) or 'none'})")
+    fig.suptitle(title if len(title) <= 95 else title[:92] + "...", fontsize=9)
+    fig.tight_layout()
+    return _save(fig, directory / "discovery.png")

@@ -107,6 +107,9 @@ def refit_model_line(d: Diagnosis) -> str:
     base += ", piezo hysteresis" if nom.piezo_hysteresis else ""
     eq = "m1 x1'' = Fpe(V, x1 - x2, x1' - x2') - Ff(x1', g, Fh)"
     cand = next((c for c in d.ranking if c.effect == d.verdict), None)
+    found = getattr(d, "discovery", None)
+    if d.verdict == "discovered" and found is not None:
+        return f"{eq} + [{found.equation}]   [{base}, calibrated; a library force found in the data]"
     if cand is None:
         tail = "nothing added" if d.verdict == "none" else "missing term not in the catalogue (unexplained)"
         return f"{eq}   [{base}, calibrated; {tail}]"
@@ -174,6 +177,19 @@ def plain_summary(d: Diagnosis) -> list[str]:
                         if top is not None and _finite(top.delta_bic) else "") + ".")
         lines.append("  What to do: use the re-fitted values below; where one moved far from meta.json, check that "
                      "setting of the device.")
+    elif d.verdict == "discovered" and getattr(d, "discovery", None) is not None:
+        f = d.discovery
+        lines.append(f"  Found: physics the catalogue does not list — {f.description}. Inferred from the data as a "
+                     f"force on the {'main body' if f.body == 'main' else 'weight'}, its form found in a library of "
+                     f"terms and refitted with the nominal values: the model now matches the recordings to "
+                     f"{ratio(f.rms_after):.2f} × their noise, against {ratio(d.rms_calibrated):.2f} × without it.")
+        lines.append(f"  How sure: {_evidence(f.delta_bic)} evidence against \"nothing missing\" (ΔBIC "
+                     f"{f.delta_bic:.0f}), and the model refitted without one experiment predicts it better "
+                     f"({ratio(f.heldout_rms_before):.2f} → {ratio(f.heldout_rms_after):.2f} × noise). The form is "
+                     "the simplest library combination that reproduces the force across experiments; a different "
+                     "mechanism with the same signature on these experiments cannot be excluded.")
+        lines.append("  What to do: add the term (the refit model below) and look for its physical cause (the "
+                     "variable it depends on says where); confirm with experiments that excite it differently.")
     elif d.verdict == "unexplained":
         lines.append(f"  Found: the recordings disagree with the model in a way no catalogue effect explains: "
                      f"{ratio(d.rms_after):.2f} × the noise remains"
@@ -311,6 +327,29 @@ def text_report(d: Diagnosis) -> str:
                      "beyond first order): " + "; ".join(f"{a} ~ {b} (|cos| = {c:.3f})" for a, b, c in pairs))
     if getattr(d, "searched_wide", False):
         lines.append("  the wider search ran: every candidate got a population search of its own")
+
+    found = getattr(d, "discovery", None)
+    if found is not None:
+        lines += ["", "Discovery beyond the catalogue (a force inferred through the simulator, its form by sparse "
+                      "regression on a library, cross-validated across experiments, then refitted)"]
+        rows = []
+        for body, f in found.forces.items():
+            rows.append([body, f"{f.chi2_before:.0f}", f"{f.chi2_after:.0f}", f"{f.dof:.1f}",
+                         f"{f.smoothing:.2g}", f"{f.seconds:.0f} s"])
+        lines += _table(["force on", "chi² before", "with force", "eff. params", "smoothing (GCV)", "time"],
+                        rows, "lrrrrr")
+        if found.form is not None:
+            form = found.form
+            lines.append(f"  form on the {found.body}: " + (", ".join(t.symbol for t in form.terms) or "no term")
+                         + (f" (lambda scanned, chosen {form.wavelength * 1e6:.3g} µm)" if form.wavelength > 0 else "")
+                         + f"; leave-one-experiment-out error by number of terms: "
+                         + ", ".join(f"{e:.3f}" for e in form.cv_by_size))
+        if found.values:
+            lines.append("  refitted: " + ", ".join(f"{n} = {pm(v, sd)}" for n, (v, sd) in found.values.items()))
+            lines.append(f"  ΔBIC {found.delta_bic:.0f}; RMS {_nm(found.rms_before)} → {_nm(found.rms_after)} "
+                         f"({_ratio(found.rms_before, sigma)} → {_ratio(found.rms_after, sigma)}); held-out "
+                         f"{found.heldout_experiment}: {_nm(found.heldout_rms_before)} → {_nm(found.heldout_rms_after)}")
+        lines.append(f"  {'DISCOVERED' if found.discovered else 'not discovered'}: {found.reason}")
 
     lines += ["", "Refit model:", "  " + refit_model_line(d)]
     return "\n".join(lines) + "\n"
