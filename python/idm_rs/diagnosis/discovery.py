@@ -43,9 +43,14 @@ from .thresholds import BIC_THRESHOLD
 #: knots of the inferred force per drive cycle: resolves the slow phase's shape and the fast
 #: edge to its own length (0.5 ms at 100 Hz)
 KNOTS_PER_CYCLE = 20
-#: Gauss-Newton iterations of the force inference (the force enters linearly; what is left is
-#: the stick-slip's own nonlinearity)
-ITERATIONS = 3
+#: accepted Levenberg-Marquardt steps of the force inference, at most (the force enters
+#: linearly; what is left is the stick-slip's own nonlinearity), and trial steps in all
+ITERATIONS = 8
+MAX_TRIALS = 16
+#: the first damping (relative to the diagonal of J'J), and the relative chi^2 gain below which
+#: the inference has converged
+LM_START = 1.0
+CONVERGED_GAIN = 0.01
 #: smoothing weights tried by generalised cross-validation, relative to tr(J'J)/tr(D'D)
 SMOOTHING_GRID = np.logspace(-8, 2, 41)
 #: most library terms a discovered force may have
@@ -293,22 +298,34 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
         res, chi2_0 = residual(runs)
         chi2 = chi2_0
         lam_rel, dof = math.nan, 0.0
-        for it in range(iterations):
+        # Levenberg-Marquardt on the penalised misfit: the smoothing weight chosen by GCV on
+        # each linearisation, the damping (toward the current force) raised after a step that
+        # does not lower the misfit and lowered after one that does; trials are plain runs,
+        # derivatives are taken where a step is accepted
+        mu = LM_START
+        accepted = tries = 0
+        while accepted < iterations and tries < MAX_TRIALS:
             b = [A[j] @ values[j] - res[j] / sigma for j in range(n_exp)]
-            new, lam_rel, dof = _gcv_solve(A, b, D)
-            # a Gauss-Newton step, shortened while it does not lower the misfit (tried on
-            # plain runs; the derivatives are taken where a step is accepted)
-            step = [new[j] - values[j] for j in range(n_exp)]
-            for shrink in (1.0, 0.5, 0.25):
-                trial = [values[j] + shrink * step[j] for j in range(n_exp)]
-                trial_res, trial_chi2 = residual(evaluate(trial, False))
-                if trial_chi2 < chi2:
-                    values, res, chi2 = trial, trial_res, trial_chi2
-                    runs = evaluate(values, True)
-                    A = view(runs)
+            trial, lam_rel, dof = _gcv_solve(A, b, D, mu, values)
+            trial_res, trial_chi2 = residual(evaluate(trial, False))
+            tries += 1
+            if _DEBUG:
+                print(f"  try {tries} mu {mu:.2g} chi2 {chi2:.0f} -> {trial_chi2:.0f} lam {lam_rel:.2g} dof {dof:.1f}")
+            if trial_chi2 < chi2:
+                gain = (chi2 - trial_chi2) / chi2
+                values, res, chi2 = trial, trial_res, trial_chi2
+                accepted += 1
+                mu /= 4.0
+                if gain < CONVERGED_GAIN:
                     break
+                runs = evaluate(values, True)
+                A = view(runs)
             else:
-                break
+                mu = max(mu, 1e-3) * 8.0
+        if accepted and gain < CONVERGED_GAIN:
+            # the derivatives at the final force (for the form's regression)
+            runs = evaluate(values, True)
+            A = view(runs)
     finally:
         pool.shutdown()
     return InferredForce(body, knots, values, lam_rel, chi2_0, chi2, dof, res, A, [tr for _, tr in runs],
@@ -317,6 +334,7 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
 
 #: step [N] of the forward differences that replace a knot's derivative which blew up
 FD_FORCE_STEP = 1e-4
+_DEBUG = bool(__import__("os").environ.get("IDM_DISCOVERY_DEBUG"))
 
 
 def _repair_columns(out: dict[str, Any], reading: Callable[[NDArray[np.float64]], NDArray[np.float64]],
@@ -340,11 +358,13 @@ def _repair_columns(out: dict[str, Any], reading: Callable[[NDArray[np.float64]]
     return len(bad)
 
 
-def _gcv_solve(A: list[NDArray[np.float64]], b: list[NDArray[np.float64]], D: list[NDArray[np.float64]]
+def _gcv_solve(A: list[NDArray[np.float64]], b: list[NDArray[np.float64]], D: list[NDArray[np.float64]],
+               mu: float = 0.0, current: Optional[list[NDArray[np.float64]]] = None
                ) -> tuple[list[NDArray[np.float64]], float, float]:
-    """argmin sum_j ||A_j c_j - b_j||^2 + lam ||D_j c_j||^2 with lam by generalised
-    cross-validation (one lam for every experiment). Returns (c per experiment, lam relative to
-    tr(A'A)/tr(D'D), the effective parameters tr(H))."""
+    """argmin sum_j ||A_j c_j - b_j||^2 + lam ||D_j c_j||^2 + mu ||S_j (c_j - current_j)||^2
+    (S_j^2 the diagonal of A_j'A_j: Levenberg-Marquardt's damping) with lam by generalised
+    cross-validation of the undamped problem (one lam for every experiment). Returns (c per
+    experiment, lam relative to tr(A'A)/tr(D'D), the effective parameters tr(H))."""
     M = [a.T @ a for a in A]
     g = [a.T @ bb for a, bb in zip(A, b)]
     P = [d.T @ d for d in D]
@@ -371,6 +391,16 @@ def _gcv_solve(A: list[NDArray[np.float64]], b: list[NDArray[np.float64]], D: li
         if best is None or score < best[0]:
             best = (score, float(rel), cs, tr)
     assert best is not None
+    if mu > 0.0 and current is not None:
+        lam = best[1] * scale
+        cs = []
+        for m, gg, p, c0 in zip(M, g, P, current):
+            # Marquardt's diagonal with a floor at its mean: a knot the readings barely see (a
+            # stuck body) stays where it is unless the data ask
+            dm = np.diag(m)
+            damp = mu * np.diag(dm + float(np.mean(dm)) + 1e-300)
+            cs.append(np.linalg.lstsq(m + lam * p + damp, gg + damp @ c0, rcond=None)[0])
+        return cs, best[1], best[3]
     return best[2], best[1], best[3]
 
 
