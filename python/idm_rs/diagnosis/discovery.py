@@ -61,7 +61,12 @@ WAVELENGTHS = np.geomspace(2e-6, 200e-6, 25)
 #: non-periodic form: the wavelength scan is itself a choice the data must pay for
 PERIODIC_GAIN = 0.9
 #: a term is kept only if adding it lowers the cross-validated error by this factor
-TERM_GAIN = 0.97
+TERM_GAIN = 0.9
+#: a found term whose refitted coefficient is within this many standard deviations of zero is
+#: dropped unless the model without it is worse by BIC_THRESHOLD
+PRUNE_Z = 5.0
+#: evaluations of the refit with the found terms
+REFIT_NFEV = 25
 
 
 # ---------------------------------------------------------------------------------------------
@@ -632,69 +637,107 @@ def describe(form: FoundForm, values: dict[str, float], force: InferredForce) ->
     return "; ".join(words)
 
 
+def _refit(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[FreeParam], form: FoundForm,
+           progress: Optional[Callable[..., Any]]) -> tuple[FitResult, list[FreeParam]]:
+    """The whole model refitted with the form's coefficients (and wavelength) free."""
+    lib = _free_library(form)
+    base = ModelSpec(spec.structure, dict(spec.params), dict(spec.effects))
+    if form.wavelength > 0:
+        base.effects["lib_wavelength"] = form.wavelength  # type: ignore[index]
+    r = fit(objective, base, list(calibrated_free) + lib, max_nfev=REFIT_NFEV, progress=progress)
+    return r, lib
+
+
+def _pruned(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[FreeParam], form: FoundForm,
+            r: FitResult, lib: list[FreeParam], progress: Optional[Callable[..., Any]]
+            ) -> tuple[FoundForm, FitResult, list[FreeParam]]:
+    """The form without its terms the refit does not support (|value| < PRUNE_Z sigma), when
+    that lowers BIC: the regression picks terms greedily, and a second term may only mop up what
+    the first left on the way."""
+    weak = [t for t in form.terms
+            if not (r.std.get(t.param) and abs(r.values[t.param]) > PRUNE_Z * r.std[t.param])]
+    if not weak or len(weak) == len(form.terms):
+        return form, r, lib
+    keep = [t for t in form.terms if t not in weak]
+    coefs = {t.param: r.values[t.param] for t in keep}
+    periodic = any(t.periodic for t in keep)
+    wl = r.values.get("lib_wavelength", form.wavelength) if periodic else 0.0
+    smaller = FoundForm(form.body, keep, coefs, wl, form.cv_error, form.cv_by_size, form.candidates)
+    free = [f.at(r.values[f.name]) for f in calibrated_free]
+    r2, lib2 = _refit(objective, spec, free, smaller, progress)
+    ln_n = math.log(objective.n)
+    # each term claimed must pay for itself as a catalogue effect does: by BIC_THRESHOLD
+    if r2.chi2 + len(lib2) * ln_n < r.chi2 + len(lib) * ln_n + BIC_THRESHOLD:
+        return smaller, r2, lib2
+    return form, r, lib
+
+
 def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreeParam], objective: Objective,
              heldout: Any, heldout_rms_null: float, *, bodies: Sequence[str] = ("main", "weight"),
-             dt: float = FIT_DT, progress: Optional[Callable[..., Any]] = None) -> Discovery:
+             progress: Optional[Callable[..., Any]] = None) -> Discovery:
     """Discovery (module docstring) from the calibrated model `spec` with its calibrated subset
     `calibrated_free` (centred on the calibration's optimum) on `objective` (the diagnosis's
     segmented objective); `heldout` the diagnosis's held-out predictor (``rms(spec, free)``)
-    and `heldout_rms_null` the null's held-out RMS [m]."""
+    and `heldout_rms_null` the null's held-out RMS [m]. A force is inferred on each of `bodies`;
+    their forms are tried in the order of how much of the residual each force explains."""
     import time
 
     t0 = time.perf_counter()
     sigma = objective.sigma
     forces: dict[str, InferredForce] = {}
     for body in bodies:
-        forces[body] = infer_force(rec, spec, sigma, body, dt=dt, simulator=objective.sim, progress=progress)
-    # the body whose force explains more, for its effective parameters
-    body = max(forces, key=lambda b: forces[b].gain)
-    force = forces[body]
+        forces[body] = infer_force(rec, spec, sigma, body, simulator=objective.sim, progress=progress)
     null_chi2 = float(sum(np.sum(r * r) for r in objective.profiled(objective.predict([spec])[0])[0])) / sigma**2
     rms_null = math.sqrt(null_chi2 * sigma**2 / objective.n)
-    out = Discovery(False, "", body, None, forces, rms_before=rms_null, heldout_rms_before=heldout_rms_null,
+    order = sorted(forces, key=lambda b: -forces[b].gain)
+    out = Discovery(False, "", order[0], None, forces, rms_before=rms_null, heldout_rms_before=heldout_rms_null,
                     heldout_experiment=rec.experiments[heldout.index].name if heldout is not None else "")
-    if force.gain <= BIC_THRESHOLD:
-        out.reason = (f"no force on {body} explains the residual (it lowers chi² by "
-                      f"{force.chi2_before - force.chi2_after:.0f} with {force.dof:.1f} effective parameters)")
-        out.seconds = time.perf_counter() - t0
-        return out
-    form = find_terms(force)
-    out.form = form
-    if not form.terms:
-        out.reason = (f"a force on the {body} explains the residual (chi² {force.chi2_before:.0f} → "
-                      f"{force.chi2_after:.0f}), but no library term reproduces it across experiments "
-                      f"(cross-validated error {form.cv_by_size[-1]:.2f} of the force's own with {MAX_TERMS} terms)")
-        out.seconds = time.perf_counter() - t0
-        return out
-    lib = _free_library(form)
-    base = ModelSpec(spec.structure, dict(spec.params), dict(spec.effects))
-    if form.wavelength > 0:
-        base.effects["lib_wavelength"] = form.wavelength  # type: ignore[index]
-    free = list(calibrated_free) + lib
-    r = fit(objective, base, free, max_nfev=25, progress=progress)
-    out.refit = r
-    k = len(lib)
-    out.delta_bic = null_chi2 - r.chi2 - k * math.log(objective.n)
-    out.rms_after = r.rms
-    vals = {f.name: r.values[f.name] for f in lib}
-    out.values = {n: (v, r.std.get(n)) for n, v in vals.items()}
-    if heldout is not None:
-        out.heldout_rms_after = heldout.rms(r.spec, [f.at(r.values[f.name]) for f in free])
-    out.equation = _equation(form, vals)
-    out.description = describe(form, vals, force)
-    improves = not (math.isfinite(out.heldout_rms_after) and math.isfinite(heldout_rms_null)
-                    and out.heldout_rms_after >= heldout_rms_null)
-    out.discovered = out.delta_bic >= BIC_THRESHOLD and improves
-    terms = ", ".join(t.symbol for t in form.terms)
-    if out.discovered:
-        out.reason = (f"a force on the {body} of the form {terms} ({out.description}) improves BIC by "
-                      f"{out.delta_bic:.0f} over the calibrated model (RMS {rms_null / sigma:.2f} → "
-                      f"{out.rms_after / sigma:.2f} x noise) and predicts the held-out experiment better "
-                      f"({heldout_rms_null * 1e9:.2f} → {out.heldout_rms_after * 1e9:.2f} nm)")
-    else:
-        why = (f"ΔBIC {out.delta_bic:.0f} < {BIC_THRESHOLD:g}" if out.delta_bic < BIC_THRESHOLD
+    reasons = []
+    for body in order:
+        force = forces[body]
+        if force.gain <= BIC_THRESHOLD:
+            reasons.append(f"no force on the {body} explains the residual (it lowers chi² by "
+                           f"{force.chi2_before - force.chi2_after:.0f} with {force.dof:.1f} effective parameters)")
+            continue
+        form = find_terms(force)
+        if not form.terms:
+            reasons.append(f"a force on the {body} explains the residual (chi² {force.chi2_before:.0f} → "
+                           f"{force.chi2_after:.0f}), but no library term reproduces it across experiments "
+                           f"(cross-validated error {min(form.cv_by_size):.2f} of the force's own at best)")
+            if out.form is None:
+                out.body, out.form = body, form
+            continue
+        r, lib = _refit(objective, spec, calibrated_free, form, progress)
+        form, r, lib = _pruned(objective, spec, calibrated_free, form, r, lib, progress)
+        trial = Discovery(False, "", body, form, forces, refit=r, rms_before=rms_null,
+                          heldout_rms_before=heldout_rms_null, heldout_experiment=out.heldout_experiment)
+        trial.delta_bic = null_chi2 - r.chi2 - len(lib) * math.log(objective.n)
+        trial.rms_after = r.rms
+        vals = {f.name: r.values[f.name] for f in lib}
+        trial.values = {n: (v, r.std.get(n)) for n, v in vals.items()}
+        if heldout is not None:
+            trial.heldout_rms_after = heldout.rms(r.spec, [f.at(r.values[f.name]) for f in
+                                                            list(calibrated_free) + lib])
+        trial.equation = _equation(form, vals)
+        trial.description = describe(form, vals, force)
+        improves = not (math.isfinite(trial.heldout_rms_after) and math.isfinite(heldout_rms_null)
+                        and trial.heldout_rms_after >= heldout_rms_null)
+        trial.discovered = trial.delta_bic >= BIC_THRESHOLD and improves
+        terms = ", ".join(t.symbol for t in form.terms)
+        where = "main body" if body == "main" else "weight"
+        if trial.discovered:
+            trial.reason = (f"a force on the {where} of the form {terms} ({trial.description}) improves BIC by "
+                            f"{trial.delta_bic:.0f} over the calibrated model (RMS {rms_null / sigma:.2f} → "
+                            f"{trial.rms_after / sigma:.2f} x noise) and predicts the held-out experiment better "
+                            f"({heldout_rms_null * 1e9:.2f} → {trial.heldout_rms_after * 1e9:.2f} nm)")
+            trial.seconds = time.perf_counter() - t0
+            return trial
+        why = (f"ΔBIC {trial.delta_bic:.0f} < {BIC_THRESHOLD:g}" if trial.delta_bic < BIC_THRESHOLD
                else f"the held-out prediction does not improve ({heldout_rms_null * 1e9:.2f} → "
-                    f"{out.heldout_rms_after * 1e9:.2f} nm)")
-        out.reason = f"the found form ({terms}) does not stand: {why}"
+                    f"{trial.heldout_rms_after * 1e9:.2f} nm)")
+        reasons.append(f"the form found on the {where} ({terms}) does not stand: {why}")
+        if out.refit is None:
+            out = trial
+    out.reason = "; ".join(reasons)
     out.seconds = time.perf_counter() - t0
     return out
