@@ -65,6 +65,8 @@ TERM_GAIN = 0.9
 #: a found term whose refitted coefficient is within this many standard deviations of zero is
 #: dropped unless the model without it is worse by BIC_THRESHOLD
 PRUNE_Z = 5.0
+#: rounds of pruning (each drops every weak term at once and refits)
+PRUNE_ROUNDS = 3
 #: evaluations of the refit with the found terms
 REFIT_NFEV = 25
 
@@ -666,6 +668,8 @@ def _pruned(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[Fre
     free = [f.at(r.values[f.name]) for f in calibrated_free]
     r2, lib2 = _refit(objective, spec, free, smaller, progress)
     ln_n = math.log(objective.n)
+    if _DEBUG:
+        print(f"  pruning {[t.symbol for t in weak]}: chi2 {r.chi2:.1f} -> {r2.chi2:.1f} ({r2.message})")
     # each term claimed must pay for itself as a catalogue effect does: by BIC_THRESHOLD
     if r2.chi2 + len(lib2) * ln_n < r.chi2 + len(lib) * ln_n + BIC_THRESHOLD:
         return smaller, r2, lib2
@@ -708,7 +712,11 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
                 out.body, out.form = body, form
             continue
         r, lib = _refit(objective, spec, calibrated_free, form, progress)
-        form, r, lib = _pruned(objective, spec, calibrated_free, form, r, lib, progress)
+        for _ in range(PRUNE_ROUNDS):
+            smaller, r, lib = _pruned(objective, spec, calibrated_free, form, r, lib, progress)
+            if smaller is form:
+                break
+            form = smaller
         trial = Discovery(False, "", body, form, forces, refit=r, rms_before=rms_null,
                           heldout_rms_before=heldout_rms_null, heldout_experiment=out.heldout_experiment)
         trial.delta_bic = null_chi2 - r.chi2 - len(lib) * math.log(objective.n)

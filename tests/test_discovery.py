@@ -1,0 +1,127 @@
+"""Discovery beyond the catalogue (diagnosis/discovery.py), on recordings written by an
+independent simulator (scipy solve_ivp, tests/offcatalogue.py: not the engine's library force,
+so the tests do not assume their answer): the inferred force, the form found, the refit; and
+nothing found on a healthy device. The whole diagnosis on the four full cases is `-m slow`
+(and benches/bench_discovery.py)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
+from idm_rs.diagnosis.diagnose import _HeldOut, _Problem, _calibration_params
+from idm_rs.diagnosis.discovery import (MAIN_TERMS, InferredForce, Trajectory, _gcv_solve,
+                                        _second_differences, discover, find_terms)
+from idm_rs.diagnosis.fitting import Objective
+from idm_rs.diagnosis.noise import estimate_noise
+from idm_rs.recording import load_case
+
+from offcatalogue import make_offcatalogue_case
+
+
+def _discover(case: Path, bodies=("main", "weight")):
+    """Discovery from the nominal model (here the true one but for the extra mechanism), as the
+    diagnosis runs it after a converged calibration."""
+    rec = load_case(case)
+    nom = rec.nominal
+    p0 = nom.params.to_dict(resolved=False)
+    spec = ModelSpec(Structure(nom.model, nom.n_elements, nom.piezo_hysteresis), p0, {})
+    noise = estimate_noise(rec)
+    sim = CaseSimulator(rec)
+    obj = Objective(rec, sim, noise.sigma)
+    ho = _HeldOut(_Problem(rec, noise, sim, obj, None))
+    free = _calibration_params(p0)
+    return discover(rec, spec, free, obj, ho, ho.rms(spec, free), bodies=bodies), noise.sigma
+
+
+@pytest.fixture(scope="module")
+def cases(tmp_path_factory):
+    root = tmp_path_factory.mktemp("offcatalogue")
+    return {name: make_offcatalogue_case(name, root / name, seed=3, short=True)
+            for name in ("quadratic_drag", "periodic_friction", "none")}
+
+
+def test_quadratic_drag_is_found_as_a_function_of_v1(cases):
+    d, sigma = _discover(cases["quadratic_drag"], bodies=("main",))
+    assert d.discovered, d.reason
+    assert d.form.variables == ["v1"]
+    assert [t.param for t in d.form.terms] == ["lib_vv"]
+    c2, sd = d.values["lib_vv"]
+    assert abs(c2 / -1e3 - 1.0) < 0.05 and sd < 0.05 * abs(c2)  # the truth: -1e3 N s^2/m^2
+    assert d.rms_after / sigma <= 1.2 < d.rms_before / sigma
+    assert d.heldout_rms_after < 0.5 * d.heldout_rms_before
+    assert "quadratic drag" in d.description
+    # the inferred force explains the residual before any term is named
+    f = d.forces["main"]
+    assert f.chi2_after < 0.1 * f.chi2_before and f.gain > 100
+
+
+def test_position_periodic_friction_is_found_with_its_period(cases):
+    d, sigma = _discover(cases["periodic_friction"], bodies=("main",))
+    assert d.discovered, d.reason
+    assert d.form.variables == ["x1"]
+    names = {t.param for t in d.form.terms}
+    assert names <= {"lib_ff_sin", "lib_ff_cos", "lib_sin", "lib_cos"} and names & {"lib_ff_sin", "lib_ff_cos"}
+    wl, _ = d.values["lib_wavelength"]
+    assert abs(wl / 12e-6 - 1.0) < 0.02
+    amp = math.hypot(d.values.get("lib_ff_sin", (0.0,))[0], d.values.get("lib_ff_cos", (0.0,))[0])
+    assert abs(amp / 0.05 - 1.0) < 0.05
+    assert d.rms_after / sigma <= 1.2
+    assert "period of 12" in d.description
+
+
+def test_nothing_is_discovered_on_a_healthy_device(cases):
+    d, sigma = _discover(cases["none"])
+    assert not d.discovered
+    for f in d.forces.values():
+        # a force adds nothing its effective parameters do not buy
+        assert f.gain <= 10.0, (f.chi2_before, f.chi2_after, f.dof)
+
+
+def test_gcv_chooses_a_smoothing_between_the_extremes():
+    """A noisy smooth signal seen directly (A = I): the GCV solution is closer to the truth than
+    both no smoothing and the straight line (infinite smoothing)."""
+    rng = np.random.default_rng(4)
+    k = 120
+    x = np.linspace(0, 1, k)
+    truth = np.sin(2 * np.pi * x) + 0.5 * x
+    b = truth + rng.normal(0, 0.3, k)
+    D = _second_differences(k)
+    c, rel, dof = _gcv_solve([np.eye(k)], [b], [D])
+    err = np.sqrt(np.mean((c[0] - truth) ** 2))
+    line = np.polyval(np.polyfit(x, b, 1), x)
+    assert err < 0.5 * np.sqrt(np.mean((b - truth) ** 2))
+    assert err < 0.5 * np.sqrt(np.mean((line - truth) ** 2))
+    assert 3 < dof < 40
+
+
+def test_the_regression_names_the_term_the_force_is_made_of():
+    """An inferred force that is exactly 2 N s/m x v1 plus 3 % of the friction force, seen through
+    random derivatives: the cross-validated pursuit names those two terms and no other."""
+    rng = np.random.default_rng(7)
+    experiments = []
+    for j in range(4):
+        n, k = 400, 40
+        t = np.linspace(0, 0.04, n)
+        knots = np.linspace(0, 0.04, k)
+        v1 = 0.01 * np.sin(2 * np.pi * (j + 2) * t / 0.04) + 0.004 * rng.normal(size=n).cumsum() / 20
+        tr = Trajectory(t, np.cumsum(v1) * 1e-4, v1, 0.3 * np.cumsum(v1) * 1e-4, 0.5 * v1, 3.0 * np.tanh(v1 / 1e-3),
+                        80 * np.abs(np.sin(2 * np.pi * t / 0.01)), np.gradient(80 * np.abs(np.sin(2 * np.pi * t / 0.01)), t),
+                        1e-3)
+        B = np.stack([np.interp(t, knots, np.eye(k)[i]) for i in range(k)], axis=1)
+        force = 2.0 * tr.v1 + 0.03 * tr.ff
+        values = np.linalg.lstsq(B, force, rcond=None)[0]
+        A = rng.normal(size=(n, k))
+        experiments.append((knots, values, A, tr))
+    f = InferredForce("main", [e[0] for e in experiments], [e[1] for e in experiments], 0.0, 1e4, 1e3, 10.0,
+                      [np.zeros(400)] * 4, [e[2] for e in experiments], [e[3] for e in experiments])
+    form = find_terms(f, max_terms=4)
+    assert {t.param for t in form.terms} == {"lib_v1", "lib_ff"}
+    assert abs(form.coefficients["lib_v1"] / 2.0 - 1) < 0.05
+    assert abs(form.coefficients["lib_ff"] / 0.03 - 1) < 0.05
+    assert form.wavelength == 0.0
+    assert all(t in MAIN_TERMS for t in form.terms)
