@@ -100,28 +100,34 @@ def test_gcv_chooses_a_smoothing_between_the_extremes():
 
 
 def test_the_regression_names_the_term_the_force_is_made_of():
-    """An inferred force that is exactly 2 N s/m x v1 plus 3 % of the friction force, seen through
-    random derivatives: the cross-validated pursuit names those two terms and no other."""
+    """An inferred force that is exactly -2e4 N/m x (x1 - x2) plus 3 % of the friction force, seen through
+    random derivatives, on stick-slip motion (slip pulses of different heights): the
+    cross-validated pursuit names those two terms and no other."""
     rng = np.random.default_rng(7)
     experiments = []
     for j in range(4):
         n, k = 400, 40
         t = np.linspace(0, 0.04, n)
         knots = np.linspace(0, 0.04, k)
-        v1 = 0.01 * np.sin(2 * np.pi * (j + 2) * t / 0.04) + 0.004 * rng.normal(size=n).cumsum() / 20
-        tr = Trajectory(t, np.cumsum(v1) * 1e-4, v1, 0.3 * np.cumsum(v1) * 1e-4, 0.5 * v1, 3.0 * np.tanh(v1 / 1e-3),
+        # stick-slip: the main body at rest but for slip pulses of different heights and signs
+        v1 = np.zeros(n)
+        for start in range(10, n - 20, 40):
+            v1[start:start + 12] = rng.uniform(-0.02, 0.03) * np.sin(np.pi * np.arange(12) / 12)
+        v2 = np.roll(v1, 5) * rng.uniform(0.5, 2.0, n)
+        ff = 3.0 * np.tanh(v1 / 1e-3) + 1.5 * np.sin(2 * np.pi * t / 0.013 + j)  # sliding, and presliding in stick
+        tr = Trajectory(t, np.cumsum(v1) * 1e-4, v1, np.cumsum(v2) * 1e-4, v2, ff,
                         80 * np.abs(np.sin(2 * np.pi * t / 0.01)), np.gradient(80 * np.abs(np.sin(2 * np.pi * t / 0.01)), t),
                         1e-3)
         B = np.stack([np.interp(t, knots, np.eye(k)[i]) for i in range(k)], axis=1)
-        force = 2.0 * tr.v1 + 0.03 * tr.ff
+        force = -2e4 * (tr.x1 - tr.x2) + 0.03 * tr.ff
         values = np.linalg.lstsq(B, force, rcond=None)[0]
         A = rng.normal(size=(n, k))
         experiments.append((knots, values, A, tr))
     f = InferredForce("main", [e[0] for e in experiments], [e[1] for e in experiments], 0.0, 1e4, 1e3, 10.0,
                       [np.zeros(400)] * 4, [e[2] for e in experiments], [e[3] for e in experiments])
     form = find_terms(f, max_terms=4)
-    assert {t.param for t in form.terms} == {"lib_v1", "lib_ff"}
-    assert abs(form.coefficients["lib_v1"] / 2.0 - 1) < 0.05
+    assert {t.param for t in form.terms} == {"lib_dx", "lib_ff"}
+    assert abs(form.coefficients["lib_dx"] / -2e4 - 1) < 0.05
     assert abs(form.coefficients["lib_ff"] / 0.03 - 1) < 0.05
     assert form.wavelength == 0.0
     assert all(t in MAIN_TERMS for t in form.terms)
