@@ -60,11 +60,14 @@ WAVELENGTHS = np.geomspace(2e-6, 200e-6, 25)
 #: a periodic term must lower the cross-validated error by this factor below the best
 #: non-periodic form: the wavelength scan is itself a choice the data must pay for
 PERIODIC_GAIN = 0.9
-#: a term is kept only if adding it lowers the cross-validated error by this factor
+#: the number of terms: the fewest within 1/TERM_GAIN of the best cross-validated error
 TERM_GAIN = 0.9
 #: a found term whose refitted coefficient is within this many standard deviations of zero is
 #: dropped unless the model without it is worse by BIC_THRESHOLD
 PRUNE_Z = 5.0
+#: a form must predict the held-out experiments' force effect to within this share of it
+#: (cross-validated error relative to the force's own effect): at least half explained
+FORM_CV_MAX = 0.5
 #: rounds of pruning (each drops every weak term at once and refits)
 PRUNE_ROUNDS = 3
 #: evaluations of the refit with the found terms
@@ -488,12 +491,12 @@ def _omp(X: NDArray[np.float64], y: NDArray[np.float64], k: int) -> NDArray[np.f
 
 
 def _choose(errs: list[float]) -> int:
-    """The fewest terms after which one more does not lower the cross-validated error by
-    TERM_GAIN."""
-    k = 0
-    while k + 1 < len(errs) and errs[k + 1] < TERM_GAIN * errs[k]:
-        k += 1
-    return k
+    """The fewest terms whose cross-validated error is within 1/TERM_GAIN of the best any
+    number reaches (the greedy pursuit may need a second term before the first pays off), and
+    0 unless that error is below TERM_GAIN of the force's own (no form at all)."""
+    best = min(errs)
+    k = next(i for i, e in enumerate(errs) if e <= best / TERM_GAIN)
+    return k if errs[k] < FORM_CV_MAX else 0
 
 
 def find_terms(force: InferredForce, max_terms: int = MAX_TERMS) -> FoundForm:
@@ -683,7 +686,9 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
     `calibrated_free` (centred on the calibration's optimum) on `objective` (the diagnosis's
     segmented objective); `heldout` the diagnosis's held-out predictor (``rms(spec, free)``)
     and `heldout_rms_null` the null's held-out RMS [m]. A force is inferred on each of `bodies`;
-    their forms are tried in the order of how much of the residual each force explains."""
+    the form found for each is refitted, and of those that stand the one with the lowest BIC
+    is the answer (a force on the wrong body may explain the residual as well, and its form
+    stand, while leaving more of it)."""
     import time
 
     t0 = time.perf_counter()
@@ -696,7 +701,8 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
     order = sorted(forces, key=lambda b: -forces[b].gain)
     out = Discovery(False, "", order[0], None, forces, rms_before=rms_null, heldout_rms_before=heldout_rms_null,
                     heldout_experiment=rec.experiments[heldout.index].name if heldout is not None else "")
-    reasons = []
+    reasons: list[str] = []
+    standing: list[Discovery] = []
     for body in order:
         force = forces[body]
         if force.gain <= BIC_THRESHOLD:
@@ -738,14 +744,24 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
                             f"{trial.delta_bic:.0f} over the calibrated model (RMS {rms_null / sigma:.2f} → "
                             f"{trial.rms_after / sigma:.2f} x noise) and predicts the held-out experiment better "
                             f"({heldout_rms_null * 1e9:.2f} → {trial.heldout_rms_after * 1e9:.2f} nm)")
-            trial.seconds = time.perf_counter() - t0
-            return trial
+            standing.append(trial)
+            continue
         why = (f"ΔBIC {trial.delta_bic:.0f} < {BIC_THRESHOLD:g}" if trial.delta_bic < BIC_THRESHOLD
                else f"the held-out prediction does not improve ({heldout_rms_null * 1e9:.2f} → "
                     f"{trial.heldout_rms_after * 1e9:.2f} nm)")
         reasons.append(f"the form found on the {where} ({terms}) does not stand: {why}")
         if out.refit is None:
             out = trial
+    if standing:
+        best = max(standing, key=lambda x: x.delta_bic)
+        others = [x for x in standing if x is not best]
+        if others:
+            best.reason += "; " + "; ".join(
+                f"the form on the {'main body' if x.body == 'main' else 'weight'} "
+                f"({', '.join(t.symbol for t in x.form.terms)}) also stands but gains less (ΔBIC {x.delta_bic:.0f})"
+                for x in others)
+        best.seconds = time.perf_counter() - t0
+        return best
     out.reason = "; ".join(reasons)
     out.seconds = time.perf_counter() - t0
     return out
