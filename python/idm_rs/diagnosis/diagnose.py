@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..declarations import GRAVITY
+from ..engine import DivergenceError
 from ..recording import Recording, load_case
 from .case_model import FIT_DT, CaseSimulator, ModelSpec, Structure
 from .calibration import Calibration, search
@@ -667,11 +668,16 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
         run.stage = "discovery"
         if not _finite(ho_cal):
             ho_cal = heldout.rms(cal.fit.spec, cal.at)
-        found = run_discovery(rec, cal.fit.spec, cal.at, pb.obj, heldout, ho_cal, progress=pb.tick)
-        if found.discovered:
-            verdict, reason, rms_after = "discovered", found.reason, found.rms_after
+        try:
+            found = run_discovery(rec, cal.fit.spec, cal.at, pb.obj, heldout, ho_cal, progress=pb.tick)
+        except (DivergenceError, np.linalg.LinAlgError) as e:
+            # a model the simulator cannot run through the inferred force: no discovery, said so
+            reason += f"; discovery stopped: {e}"
         else:
-            reason += f"; discovery: {found.reason}"
+            if found.discovered:
+                verdict, reason, rms_after = "discovered", found.reason, found.rms_after
+            else:
+                reason += f"; discovery: {found.reason}"
         clock.lap("discovery")
     degenerate = near_degenerate(list(screened.values()))
     alternatives = _alternatives(ranking, verdict, degenerate)

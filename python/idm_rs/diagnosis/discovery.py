@@ -272,7 +272,14 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
 
     def evaluate(vals: list[NDArray[np.float64]], derivatives: bool):
         def one(j: int):
-            out, tr = run_with_force(rec, j, spec, body, knots[j], vals[j], derivatives)
+            try:
+                out, tr = run_with_force(rec, j, spec, body, knots[j], vals[j], derivatives)
+            except engine.DivergenceError:
+                if not derivatives:
+                    return None  # a trial force the device cannot follow: rejected
+                # the run stands but its derivative pass does not: differences for every knot
+                out, tr = run_with_force(rec, j, spec, body, knots[j], vals[j])
+                out["sensitivities"] = np.full((out["reading"].size, knots[j].size), np.nan)
             if derivatives:
                 _repair_columns(out, lambda v: run_with_force(rec, j, spec, body, knots[j], v)[0]["reading"],
                                 vals[j])
@@ -282,6 +289,8 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
         return list(pool.map(one, range(n_exp)))
 
     def residual(runs) -> tuple[list[NDArray[np.float64]], float]:
+        if any(r is None for r in runs):
+            return [], math.inf
         res = []
         chi2 = 0.0
         for j, (out, _) in enumerate(runs):
