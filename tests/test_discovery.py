@@ -45,8 +45,13 @@ def cases(tmp_path_factory):
             for name in ("quadratic_drag", "periodic_friction", "none")}
 
 
-def test_quadratic_drag_is_found_as_a_function_of_v1(cases):
-    d, sigma = _discover(cases["quadratic_drag"], bodies=("main",))
+@pytest.fixture(scope="module")
+def drag(cases):
+    return _discover(cases["quadratic_drag"], bodies=("main",))
+
+
+def test_quadratic_drag_is_found_as_a_function_of_v1(drag):
+    d, sigma = drag
     assert d.discovered, d.reason
     assert d.form.variables == ["v1"]
     assert [t.param for t in d.form.terms] == ["lib_vv"]
@@ -58,6 +63,42 @@ def test_quadratic_drag_is_found_as_a_function_of_v1(cases):
     # the inferred force explains the residual before any term is named
     f = d.forces["main"]
     assert f.chi2_after < 0.1 * f.chi2_before and f.gain > 100
+
+
+def test_the_report_and_the_figures_tell_a_discovery(cases, drag, tmp_path):
+    """A Diagnosis whose verdict is "discovered": the plain words name the term, the numbers
+    section has each body's inferred force and the refit, the refit model line the equation, the
+    JSON the discovery, and discovery.png is written."""
+    import json
+
+    from idm_rs.diagnosis.report import json_safe, text_report
+    from idm_rs.diagnosis.results import Diagnosis
+
+    found, sigma = drag
+    rec = load_case(cases["quadratic_drag"])
+    noise = estimate_noise(rec)
+    sim = CaseSimulator(rec)
+    obj = Objective(rec, sim, noise.sigma)
+    p0 = rec.nominal.params.to_dict(resolved=False)
+    spec = ModelSpec(Structure("lps", 1, False), p0, {})
+    cal_res, _ = obj.profiled(sim.predict([spec])[0])
+    d = Diagnosis(case="drag", verdict="discovered", reason=found.reason, ranking=[], noise=noise,
+                  rms_before=found.rms_before, rms_calibrated=found.rms_before, rms_after=found.rms_after,
+                  calibrated={}, calibrated_std={}, locations=[], windows=[],
+                  heldout_experiment=found.heldout_experiment, heldout_rms_calibrated=found.heldout_rms_before,
+                  whiteness_z_calibrated=50.0, seconds=1.0, timings={}, simulations=1, recording=rec,
+                  nominal_residuals=cal_res, calibrated_residuals=cal_res, nominal_spec=spec, calibrated_spec=spec,
+                  simulator=sim, discovery=found)
+    text = text_report(d)
+    plain = text.split("The numbers behind it")[0]
+    assert "Found: physics the catalogue does not list — quadratic drag on the main body" in plain
+    assert "ΔBIC" in plain and "held-out" not in plain.split("How sure")[0]
+    assert "DISCOVERED" in text and "force on" in text and "lib_vv" in text
+    assert "v1|v1|" in text.split("Refit model:")[1]
+    j = json.loads(json.dumps(json_safe(d.to_dict())))
+    assert j["discovery"]["discovered"] and j["discovery"]["variables"] == ["v1"]
+    paths = d.plot(tmp_path)
+    assert (tmp_path / "discovery.png") in paths and (tmp_path / "discovery.png").stat().st_size > 10_000
 
 
 def test_position_periodic_friction_is_found_with_its_period(cases):
