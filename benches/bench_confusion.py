@@ -233,7 +233,11 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
     return {**c, **info, "truth": truth, "verdict": d.verdict, "right": d.verdict == truth, "seconds": seconds,
             "calibrated_over_noise": d.rms_calibrated / d.noise.sigma, "after_over_noise": d.rms_after / d.noise.sigma,
             "key_error": _key_error(d, c, info), "alternatives": [a.effect for a in d.alternatives],
-            "reason": d.reason, **_margin(d)}
+            "reason": d.reason, **_margin(d),
+            # discovery beyond the catalogue: whether it ran (the catalogue left a systematic
+            # residual) and whether it named a term (a "discovered" verdict)
+            "discovery_ran": d.discovery is not None, "discovered": d.verdict == "discovered",
+            "discovery_seconds": d.discovery.seconds if d.discovery is not None else 0.0}
 
 
 def _margin(d: Any) -> dict[str, Any]:
@@ -251,7 +255,7 @@ def _margin(d: Any) -> dict[str, Any]:
 def table(rows: list[dict[str, Any]]) -> str:
     from scipy.stats import beta
 
-    verdicts = sorted({r["verdict"] for r in rows} | {"none", "unexplained", "not_converged"})
+    verdicts = sorted({r["verdict"] for r in rows} | {"none", "discovered", "unexplained", "not_converged"})
     truths = sorted({r["truth"] for r in rows}, key=lambda t: (t == "none", t))
     lines = []
     for size in ("large", "small", None):
@@ -283,6 +287,12 @@ def table(rows: list[dict[str, Any]]) -> str:
     secs = [r["seconds"] for r in rows]
     lines.append(f"false alarms (an effect named on a healthy device): {alarms} of {n} (95 % upper bound of the "
                  f"rate {upper:.3f}); time per case: median {np.median(secs):.0f} s, max {max(secs):.0f} s")
+    ran = [r for r in rows if r.get("discovery_ran")]
+    lines.append(f"discovery (beyond the catalogue) ran on {len(ran)} of {len(rows)} cases and named a term on "
+                 f"{sum(bool(r.get('discovered')) for r in rows)} (on a healthy device "
+                 f"{sum(bool(r.get('discovered')) for r in healthy)}, on a catalogue case "
+                 f"{sum(bool(r.get('discovered')) for r in rows if r['truth'] != 'none')})"
+                 + (f"; its time: max {max(r.get('discovery_seconds', 0.0) for r in ran):.0f} s" if ran else ""))
     margins = [r["best_other_delta_bic"] for r in healthy if r.get("best_other_delta_bic") is not None]
     if margins:
         from idm_rs.diagnosis.results import BIC_THRESHOLD
@@ -306,7 +316,7 @@ def figure(rows: list[dict[str, Any]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    verdicts = sorted({r["verdict"] for r in rows} | {"none", "unexplained", "not_converged"})
+    verdicts = sorted({r["verdict"] for r in rows} | {"none", "discovered", "unexplained", "not_converged"})
     truths = sorted({r["truth"] for r in rows}, key=lambda t: (t == "none", t))
     M = np.array([[sum(r["verdict"] == v for r in rows if r["truth"] == t) for v in verdicts] for t in truths], float)
     frac = M / np.maximum(M.sum(axis=1, keepdims=True), 1)
