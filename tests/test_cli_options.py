@@ -183,3 +183,23 @@ def test_dask_blocks_follow_block_size_and_run_one_thread_each(monkeypatch):
     assert len(tasks) == 3  # 8 points in blocks of 3
     assert remote.attrs["executor"] == "dask"
     np.testing.assert_array_equal(remote.final_position.values, local.final_position.values)
+
+
+@pytest.mark.parametrize("flag, expected", [([], True), (["--no-discover"], False)])
+def test_diagnose_discovery_option_reaches_the_run(flag, expected, tmp_path, monkeypatch):
+    """`idm-rs diagnose` runs discovery by default; --no-discover stops at the catalogue."""
+    import idm_rs.diagnosis as diagnosis_module
+
+    class Reached(Exception):
+        pass
+
+    seen = {}
+
+    def fake(case, **kw):
+        seen.update(kw)
+        raise Reached
+
+    monkeypatch.setattr(diagnosis_module, "diagnose", fake)
+    with pytest.raises(Reached):
+        main(["diagnose", str(tmp_path), "--no-progress", *flag])
+    assert seen["discover"] is expected
