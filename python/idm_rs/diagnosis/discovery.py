@@ -175,6 +175,12 @@ class InferredForce:
     jacobians: list[NDArray[np.float64]] = field(repr=False, default_factory=list)
     trajectories: list[Trajectory] = field(repr=False, default_factory=list)
     seconds: float = 0.0
+    #: d(residual / sigma) / d(calibrated parameter, fit units) per experiment (samples x
+    #: parameters) at the inferred force: the directions the refit can still move, which the
+    #: form's regression projects out
+    nuisance: list[NDArray[np.float64]] = field(repr=False, default_factory=list)
+    #: the calibrated parameters as fitted jointly with the force
+    parameters: dict[str, float] = field(default_factory=dict)
 
     @property
     def gain(self) -> float:
@@ -217,11 +223,12 @@ START_FORCE = 1e-6
 
 
 def run_with_force(rec: Recording, j: int, spec: ModelSpec, body: str, knots: NDArray[np.float64],
-                   values: NDArray[np.float64], derivatives: bool = False
+                   values: NDArray[np.float64], derivatives: bool = False, names: Optional[list[str]] = None
                    ) -> tuple[dict[str, Any], Trajectory]:
     """Experiment j under `spec` with the force (knots, values) on `body`: the engine's output
     at the sample times (``reading``; with `derivatives`, ``sensitivities``: d reading / d force
-    at every knot, samples x knots) and the library's view of the trajectory."""
+    at every knot, samples x knots; with `names` instead, d reading / d each of those engine
+    parameters) and the library's view of the trajectory."""
     e = rec.experiments[j]
     bt, bv = e.waveform.breakpoints()
     # the drive with a breakpoint at every sample (the same function): the adaptive method
@@ -230,13 +237,14 @@ def run_with_force(rec: Recording, j: int, spec: ModelSpec, body: str, knots: ND
     tt = tt[tt <= e.duration * (1 + 1e-12)]
     vv = np.interp(tt, bt, bv)
     config = spec.structure.config(first_step=1e-8, dt=1e-8, **INFER_METHOD)
-    names = [f"f_ext[{k}]" for k in range(knots.size)] if derivatives else None
+    if derivatives:
+        names = [f"f_ext[{k}]" for k in range(knots.size)]
     raw = engine.simulate(_given(dict(spec.params)), {n: float(v) for n, v in spec.effects.items() if v != 0.0},
                           tt, vv, 0.0, float(e.duration), config, 1, False, None, names,
                           (np.ascontiguousarray(knots), np.ascontiguousarray(values, dtype=float), body))
     idx = np.minimum(np.searchsorted(raw["t"], e.t - 1e-12), raw["t"].size - 1)
     out = {k: raw[k][idx] for k in ("t", "reading", "nodes", "velocities", "friction", "voltage")}
-    if derivatives:
+    if names:
         out["sensitivities"] = raw["sensitivities"][idx]
     nodes, vel = out["nodes"], out["velocities"]
     volt = out["voltage"]
@@ -255,11 +263,17 @@ def _hat_basis(knots: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np
 
 def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main", *, dt: float = FIT_DT,
                 simulator: Optional[CaseSimulator] = None, per_cycle: int = KNOTS_PER_CYCLE,
-                iterations: int = ITERATIONS, threads: int = 2,
+                iterations: int = ITERATIONS, threads: int = 2, nuisance: Sequence[FreeParam] = (),
                 progress: Optional[Callable[..., Any]] = None) -> InferredForce:
     """The additive force on `body` ("main" or "weight") that makes `spec` reproduce every
-    experiment of `rec` (module docstring, step 1). `sigma`: the noise RMS [m]."""
+    experiment of `rec` (module docstring, step 1). `sigma`: the noise RMS [m]. `nuisance`:
+    the calibrated parameters (centred on `spec`'s values), fitted jointly with the force: the
+    calibration moved them to mimic the missing physics, and what they can absorb again is not
+    the force's to explain (the smoothness penalty is on the force only, so a change the
+    parameters can make is made by them)."""
     import time
+
+    from .fitting import apply, engine_chain
 
     t0 = time.perf_counter()
     sim = simulator or CaseSimulator(rec, dt=dt)
@@ -268,21 +282,35 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
     knots = [knot_times(rec, j, dt, per_cycle) for j in range(n_exp)]
     values = [np.full(k.size, START_FORCE) for k in knots]
     D = [_second_differences(k.size) for k in knots]
+    free = list(nuisance)
+    u = np.zeros(len(free))
+    lo = np.array([f.u_bounds()[0] for f in free])
+    hi = np.array([f.u_bounds()[1] for f in free])
     pool = ThreadPoolExecutor(max(1, threads))
 
-    def evaluate(vals: list[NDArray[np.float64]], derivatives: bool):
+    def evaluate(vals: list[NDArray[np.float64]], uu: NDArray[np.float64], derivatives: bool):
+        at = apply(spec, free, uu) if free else spec
+        pnames, chain = engine_chain(spec, free, uu) if (free and derivatives) else ([], None)
+
         def one(j: int):
+            k = knots[j].size
+            names = [f"f_ext[{i}]" for i in range(k)] + list(pnames) if derivatives else None
             try:
-                out, tr = run_with_force(rec, j, spec, body, knots[j], vals[j], derivatives)
+                out, tr = run_with_force(rec, j, at, body, knots[j], vals[j], names=names)
             except engine.DivergenceError:
                 if not derivatives:
-                    return None  # a trial force the device cannot follow: rejected
+                    return None  # a trial the device cannot follow: rejected
                 # the run stands but its derivative pass does not: differences for every knot
-                out, tr = run_with_force(rec, j, spec, body, knots[j], vals[j])
-                out["sensitivities"] = np.full((out["reading"].size, knots[j].size), np.nan)
+                out, tr = run_with_force(rec, j, at, body, knots[j], vals[j])
+                out["sensitivities"] = np.full((out["reading"].size, k + len(pnames)), np.nan)
             if derivatives:
-                _repair_columns(out, lambda v: run_with_force(rec, j, spec, body, knots[j], v)[0]["reading"],
+                sens = np.asarray(out["sensitivities"])
+                out["sensitivities"] = np.ascontiguousarray(sens[:, :k])
+                _repair_columns(out, lambda v: run_with_force(rec, j, at, body, knots[j], v)[0]["reading"],
                                 vals[j])
+                par = sens[:, k:]
+                out["parameters"] = (chain.T @ np.where(np.isfinite(par), par, 0.0).T if free
+                                     else np.zeros((0, sens.shape[0])))
             if progress:
                 progress()
             return out, tr
@@ -301,22 +329,25 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
             chi2 += float(np.sum(r[0] ** 2)) / sigma**2
         return res, chi2
 
-    def view(runs) -> list[NDArray[np.float64]]:
-        """d(residual / sigma) / d(force at each knot), per experiment (samples x knots)."""
-        A = []
+    def view(runs) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
+        """d(residual / sigma) / d(force at each knot) and / d(parameter, fit units), per
+        experiment (samples x knots, samples x parameters)."""
+        A, S = [], []
         for j, (out, _) in enumerate(runs):
-            s = np.asarray(out["sensitivities"]).T  # knots x samples
-            dpred = [np.zeros((knots[j].size, 0))] * n_exp
-            dpred[j] = s[:, : objs[j].samples[j]]
-            A.append(objs[j].profiled_columns(dpred))
-        return A
+            n = objs[j].samples[j]
+            for key, cols, into in (("sensitivities", knots[j].size, A), ("parameters", len(free), S)):
+                d = np.asarray(out[key]).T if key == "sensitivities" else np.asarray(out[key])
+                dpred = [np.zeros((cols, 0))] * n_exp
+                dpred[j] = d[:, :n]
+                into.append(objs[j].profiled_columns(dpred) if cols else np.zeros((n, 0)))
+        return A, S
 
     try:
-        runs = evaluate(values, True)
-        A = view(runs)
+        runs = evaluate(values, u, True)
+        A, S = view(runs)
         res, chi2_0 = residual(runs)
         chi2 = chi2_0
-        lam_rel, dof = math.nan, 0.0
+        lam_rel, dof, gain = math.nan, 0.0, 1.0
         # Levenberg-Marquardt on the penalised misfit: the smoothing weight chosen by GCV on
         # each linearisation, the damping (toward the current force) raised after a step that
         # does not lower the misfit and lowered after one that does; trials are plain runs,
@@ -324,31 +355,34 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
         mu = LM_START
         accepted = tries = 0
         while accepted < iterations and tries < MAX_TRIALS:
-            b = [A[j] @ values[j] - res[j] / sigma for j in range(n_exp)]
-            trial, lam_rel, dof = _gcv_solve(A, b, D, mu, values)
-            trial_res, trial_chi2 = residual(evaluate(trial, False))
+            b = [A[j] @ values[j] + S[j] @ u - res[j] / sigma for j in range(n_exp)]
+            trial, du, lam_rel, dof = _gcv_solve(A, b, D, mu, values, S, u)
+            tu = np.clip(du, lo, hi) if free else u
+            trial_res, trial_chi2 = residual(evaluate(trial, tu, False))
             tries += 1
             if _DEBUG:
-                print(f"  try {tries} mu {mu:.2g} chi2 {chi2:.0f} -> {trial_chi2:.0f} lam {lam_rel:.2g} dof {dof:.1f}")
+                print(f"  try {tries} mu {mu:.2g} chi2 {chi2:.0f} -> {trial_chi2:.0f} lam {lam_rel:.2g} dof {dof:.1f}"
+                      f" u {np.round(tu, 2)}")
             if trial_chi2 < chi2:
                 gain = (chi2 - trial_chi2) / chi2
-                values, res, chi2 = trial, trial_res, trial_chi2
+                values, u, res, chi2 = trial, tu, trial_res, trial_chi2
                 accepted += 1
                 mu /= 4.0
                 if gain < CONVERGED_GAIN:
                     break
-                runs = evaluate(values, True)
-                A = view(runs)
+                runs = evaluate(values, u, True)
+                A, S = view(runs)
             else:
                 mu = max(mu, 1e-3) * 8.0
         if accepted and gain < CONVERGED_GAIN:
             # the derivatives at the final force (for the form's regression)
-            runs = evaluate(values, True)
-            A = view(runs)
+            runs = evaluate(values, u, True)
+            A, S = view(runs)
     finally:
         pool.shutdown()
     return InferredForce(body, knots, values, lam_rel, chi2_0, chi2, dof, res, A, [tr for _, tr in runs],
-                         time.perf_counter() - t0)
+                         time.perf_counter() - t0, S if free else [],
+                         {f.name: f.value(float(x)) for f, x in zip(free, u)})
 
 
 #: step [N] of the forward differences that replace a knot's derivative which blew up
@@ -378,49 +412,65 @@ def _repair_columns(out: dict[str, Any], reading: Callable[[NDArray[np.float64]]
 
 
 def _gcv_solve(A: list[NDArray[np.float64]], b: list[NDArray[np.float64]], D: list[NDArray[np.float64]],
-               mu: float = 0.0, current: Optional[list[NDArray[np.float64]]] = None
-               ) -> tuple[list[NDArray[np.float64]], float, float]:
-    """argmin sum_j ||A_j c_j - b_j||^2 + lam ||D_j c_j||^2 + mu ||S_j (c_j - current_j)||^2
-    (S_j^2 the diagonal of A_j'A_j: Levenberg-Marquardt's damping) with lam by generalised
-    cross-validation of the undamped problem (one lam for every experiment). Returns (c per
-    experiment, lam relative to tr(A'A)/tr(D'D), the effective parameters tr(H))."""
-    M = [a.T @ a for a in A]
-    g = [a.T @ bb for a, bb in zip(A, b)]
-    P = [d.T @ d for d in D]
+               mu: float = 0.0, current: Optional[list[NDArray[np.float64]]] = None,
+               S: Optional[list[NDArray[np.float64]]] = None, u: Optional[NDArray[np.float64]] = None
+               ) -> tuple[list[NDArray[np.float64]], NDArray[np.float64], float, float]:
+    """argmin over the knots c_j and the shared parameters v of
+    sum_j ||A_j c_j + S_j v - b_j||^2 + lam ||D_j c_j||^2 + mu ||W (x - x_current)||^2
+    (W^2 Marquardt's diagonal of the normal matrix, floored at its mean per block: a knot the
+    readings barely see stays where it is unless the data ask), with lam by generalised
+    cross-validation of the undamped problem (one lam for every experiment; the parameters are
+    not penalised). Returns (c per experiment, v, lam relative to tr(A'A)/tr(D'D), the
+    effective parameters tr(H))."""
+    sizes = [a.shape[1] for a in A]
+    kt = sum(sizes)
+    p = 0 if S is None else S[0].shape[1]
+    N = kt + p
+    G = np.zeros((N, N))
+    g = np.zeros(N)
+    P = np.zeros((N, N))
+    off = 0
+    for j, a in enumerate(A):
+        sl = slice(off, off + sizes[j])
+        G[sl, sl] = a.T @ a
+        g[sl] = a.T @ b[j]
+        P[sl, sl] = D[j].T @ D[j]
+        if p:
+            G[sl, kt:] = a.T @ S[j]
+            G[kt:, sl] = G[sl, kt:].T
+            G[kt:, kt:] += S[j].T @ S[j]
+            g[kt:] += S[j].T @ b[j]
+        off += sizes[j]
     bb2 = sum(float(x @ x) for x in b)
     n = sum(x.size for x in b)
-    scale = sum(float(np.trace(m)) for m in M) / max(sum(float(np.trace(p)) for p in P), 1e-300)
-    best: Optional[tuple[float, float, list, float]] = None
+    scale = float(np.trace(G[:kt, :kt])) / max(float(np.trace(P)), 1e-300)
+    best: Optional[tuple[float, float, NDArray[np.float64], float]] = None
     for rel in SMOOTHING_GRID:
-        lam = rel * scale
-        cs, rss, tr = [], bb2, 0.0
-        for m, gg, p in zip(M, g, P):
-            K = m + lam * p
-            try:
-                c = np.linalg.solve(K, gg)
-                tr += float(np.trace(np.linalg.solve(K, m)))
-            except np.linalg.LinAlgError:
-                c = np.linalg.lstsq(K, gg, rcond=None)[0]
-                tr += float(np.trace(np.linalg.pinv(K) @ m))
-            rss += float(c @ m @ c - 2.0 * c @ gg)
-            cs.append(c)
+        K = G + rel * scale * P
+        try:
+            sol = np.linalg.solve(K, np.column_stack([g, G]))
+        except np.linalg.LinAlgError:
+            sol = np.linalg.lstsq(K, np.column_stack([g, G]), rcond=None)[0]
+        x, tr = sol[:, 0], float(np.trace(sol[:, 1:]))
         if tr >= n:
             continue
+        rss = bb2 - 2.0 * float(x @ g) + float(x @ G @ x)
         score = n * max(rss, 0.0) / (n - tr) ** 2
         if best is None or score < best[0]:
-            best = (score, float(rel), cs, tr)
+            best = (score, float(rel), x, tr)
     assert best is not None
+    x = best[2]
     if mu > 0.0 and current is not None:
-        lam = best[1] * scale
-        cs = []
-        for m, gg, p, c0 in zip(M, g, P, current):
-            # Marquardt's diagonal with a floor at its mean: a knot the readings barely see (a
-            # stuck body) stays where it is unless the data ask
-            dm = np.diag(m)
-            damp = mu * np.diag(dm + float(np.mean(dm)) + 1e-300)
-            cs.append(np.linalg.lstsq(m + lam * p + damp, gg + damp @ c0, rcond=None)[0])
-        return cs, best[1], best[3]
-    return best[2], best[1], best[3]
+        dg = np.diag(G).copy()
+        floor = np.empty(N)
+        floor[:kt] = float(np.mean(dg[:kt])) if kt else 0.0
+        if p:
+            floor[kt:] = float(np.mean(dg[kt:]))
+        damp = mu * np.diag(dg + floor + 1e-300)
+        x0 = np.concatenate(list(current) + ([u] if p else []))
+        x = np.linalg.lstsq(G + best[1] * scale * P + damp, g + damp @ x0, rcond=None)[0]
+    cs = np.split(x[:kt], np.cumsum(sizes)[:-1])
+    return list(cs), x[kt:], best[1], best[3]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -458,6 +508,17 @@ def _design(force: InferredForce, terms: Sequence[Term], wavelength: float
         knot_theta = np.linalg.lstsq(B, theta, rcond=None)[0]
         X.append(A @ knot_theta)
         y.append(A @ force.values[j])
+    if force.nuisance:
+        # what the refit's calibrated parameters can absorb is no evidence for a term (the
+        # calibration already moved them to mimic the missing physics): the library's and the
+        # force's effects are compared in the complement of those directions (Frisch-Waugh)
+        S = np.concatenate(force.nuisance)
+        Q, _ = np.linalg.qr(S[:, np.linalg.norm(S, axis=0) > 0])
+        sizes = np.cumsum([x.shape[0] for x in X])[:-1]
+        Xa, ya = np.concatenate(X), np.concatenate(y)
+        Xa = Xa - Q @ (Q.T @ Xa)
+        ya = ya - Q @ (Q.T @ ya)
+        X, y = np.split(Xa, sizes), np.split(ya, sizes)
     return X, y
 
 
@@ -704,7 +765,8 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
     sigma = objective.sigma
     forces: dict[str, InferredForce] = {}
     for body in bodies:
-        forces[body] = infer_force(rec, spec, sigma, body, simulator=objective.sim, progress=progress)
+        forces[body] = infer_force(rec, spec, sigma, body, simulator=objective.sim, nuisance=calibrated_free,
+                                   progress=progress)
     null_chi2 = float(sum(np.sum(r * r) for r in objective.profiled(objective.predict([spec])[0])[0])) / sigma**2
     rms_null = math.sqrt(null_chi2 * sigma**2 / objective.n)
     order = sorted(forces, key=lambda b: -forces[b].gain)
@@ -726,9 +788,11 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
             if out.form is None:
                 out.body, out.form = body, form
             continue
-        r, lib = _refit(objective, spec, calibrated_free, form, progress)
+        # the refit starts where the force's own fit left the calibrated parameters
+        start = [f.at(force.parameters.get(f.name, f.x0)) for f in calibrated_free]
+        r, lib = _refit(objective, spec, start, form, progress)
         for _ in range(PRUNE_ROUNDS):
-            smaller, r, lib = _pruned(objective, spec, calibrated_free, form, r, lib, progress)
+            smaller, r, lib = _pruned(objective, spec, start, form, r, lib, progress)
             if smaller is form:
                 break
             form = smaller
@@ -739,8 +803,7 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
         vals = {f.name: r.values[f.name] for f in lib}
         trial.values = {n: (v, r.std.get(n)) for n, v in vals.items()}
         if heldout is not None:
-            trial.heldout_rms_after = heldout.rms(r.spec, [f.at(r.values[f.name]) for f in
-                                                            list(calibrated_free) + lib])
+            trial.heldout_rms_after = heldout.rms(r.spec, [f.at(r.values[f.name]) for f in list(start) + lib])
         trial.equation = _equation(form, vals)
         trial.description = describe(form, vals, force)
         improves = not (math.isfinite(trial.heldout_rms_after) and math.isfinite(heldout_rms_null)
