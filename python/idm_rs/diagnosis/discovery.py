@@ -38,7 +38,7 @@ from .. import engine
 from ..recording import Recording
 from .case_model import FIT_DT, CaseSimulator, ModelSpec
 from .fitting import FitResult, FreeParam, Objective, fit, set_effect
-from .thresholds import BIC_THRESHOLD
+from .thresholds import BIC_THRESHOLD, NOISE_RATIO_OK
 
 #: knots of the inferred force per drive cycle: resolves the slow phase's shape and the fast
 #: edge to its own length (0.5 ms at 100 Hz)
@@ -756,9 +756,10 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
     `calibrated_free` (centred on the calibration's optimum) on `objective` (the diagnosis's
     segmented objective); `heldout` the diagnosis's held-out predictor (``rms(spec, free)``)
     and `heldout_rms_null` the null's held-out RMS [m]. A force is inferred on each of `bodies`;
-    the form found for each is refitted, and of those that stand the one with the lowest BIC
-    is the answer (a force on the wrong body may explain the residual as well, and its form
-    stand, while leaving more of it)."""
+    the form found for each is refitted (in the order of how much of the residual each force
+    explains; once a standing form leaves noise the others are not tried), and of those that
+    stand the one with the lowest BIC is the answer (a force on the wrong body may explain the
+    residual as well, and its form stand, while leaving more of it)."""
     import time
 
     t0 = time.perf_counter()
@@ -817,6 +818,8 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
                             f"{trial.rms_after / sigma:.2f} x noise) and predicts the held-out experiment better "
                             f"({heldout_rms_null * 1e9:.2f} → {trial.heldout_rms_after * 1e9:.2f} nm)")
             standing.append(trial)
+            if trial.rms_after <= NOISE_RATIO_OK * sigma:
+                break  # it leaves noise: another body's form could at best tie
             continue
         why = (f"ΔBIC {trial.delta_bic:.0f} < {BIC_THRESHOLD:g}" if trial.delta_bic < BIC_THRESHOLD
                else f"the held-out prediction does not improve ({heldout_rms_null * 1e9:.2f} → "
