@@ -669,7 +669,8 @@ def _equation(form: FoundForm, values: dict[str, float]) -> str:
     parts = []
     for t in form.terms:
         sym = t.symbol.replace("lambda", f"{values.get('lib_wavelength', form.wavelength) * 1e6:.3g} um")
-        parts.append(f"{values[t.param]:+.4g} {t.unit} x {sym}")
+        unit = "" if t.unit == "1" else f" {t.unit}"
+        parts.append(f"{values[t.param]:+.4g}{unit} · {sym}")
     return f"{lhs} " + " ".join(parts)
 
 
