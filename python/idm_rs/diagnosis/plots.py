@@ -356,8 +356,9 @@ def plot_discovery(d: Diagnosis, directory: Path) -> Path:
         term = theta @ np.array([values.get(t.param, 0.0) for t in form.terms])
         knot_term = np.linalg.lstsq(_hat_basis(k, tr.t[:n]), term, rcond=None)[0]
         ax.plot(k * 1e3, force.values[j] * 1e3, "o-", ms=2.5, lw=1.0, color="0.3", label="inferred force")
-        ax.plot(k * 1e3, knot_term * 1e3, "-", lw=1.6, color=C_REFIT, label="found term (refitted), on the knots")
-        ax.plot(tr.t[:n] * 1e3, term * 1e3, "-", lw=0.6, color=C_REFIT, alpha=0.35, label="found term, every sample")
+        ax.plot(k * 1e3, knot_term * 1e3, "-", lw=1.6, color=C_REFIT,
+                label=f"found term ({', '.join(t.symbol for t in form.terms)}), refitted, on the knots")
+        ax.plot(tr.t[:n] * 1e3, term * 1e3, "-", lw=0.5, color=C_REFIT, alpha=0.2, label="found term, every sample")
         lo, hi = ax.get_ylim()
         for a, b, w in zip(k[:-1], k[1:], seen[:-1]):
             ax.axvspan(a * 1e3, b * 1e3, color="tab:green", alpha=0.18 * float(w), lw=0)
@@ -367,8 +368,8 @@ def plot_discovery(d: Diagnosis, directory: Path) -> Path:
         if j == 0:
             ax.legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("time [ms]  (green: where the readings see the force)")
-    title = (f"{d.case}: force on the {'main body' if f.body == 'main' else 'weight'} inferred from the data, "
-             f"against the found term ({', '.join(t.symbol for t in form.terms) or 'none'})")
+    title = (f"{d.case}: the force on the {'main body' if f.body == 'main' else 'weight'} inferred from the "
+             f"data, against the found term")
     fig.suptitle(title if len(title) <= 95 else title[:92] + "...", fontsize=9)
     fig.tight_layout()
     return _save(fig, directory / "discovery.png")
