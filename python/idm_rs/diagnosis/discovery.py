@@ -360,9 +360,6 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
             tu = np.clip(du, lo, hi) if free else u
             trial_res, trial_chi2 = residual(evaluate(trial, tu, False))
             tries += 1
-            if _DEBUG:
-                print(f"  try {tries} mu {mu:.2g} chi2 {chi2:.0f} -> {trial_chi2:.0f} lam {lam_rel:.2g} dof {dof:.1f}"
-                      f" u {np.round(tu, 2)}")
             if trial_chi2 < chi2:
                 gain = (chi2 - trial_chi2) / chi2
                 values, u, res, chi2 = trial, tu, trial_res, trial_chi2
@@ -387,7 +384,6 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
 
 #: step [N] of the forward differences that replace a knot's derivative which blew up
 FD_FORCE_STEP = 1e-4
-_DEBUG = bool(__import__("os").environ.get("IDM_DISCOVERY_DEBUG"))
 
 
 def _repair_columns(out: dict[str, Any], reading: Callable[[NDArray[np.float64]], NDArray[np.float64]],
@@ -742,8 +738,6 @@ def _pruned(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[Fre
     free = [f.at(r.values[f.name]) for f in calibrated_free]
     r2, lib2 = _refit(objective, spec, free, smaller, progress)
     ln_n = math.log(objective.n)
-    if _DEBUG:
-        print(f"  pruning {[t.symbol for t in weak]}: chi2 {r.chi2:.1f} -> {r2.chi2:.1f} ({r2.message})")
     # each term claimed must pay for itself as a catalogue effect does: by BIC_THRESHOLD
     if r2.chi2 + len(lib2) * ln_n < r.chi2 + len(lib) * ln_n + BIC_THRESHOLD:
         return smaller, r2, lib2
