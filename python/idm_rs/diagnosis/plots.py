@@ -149,7 +149,7 @@ def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
         scale, unit = (1e6, "µm") if np.ptp(x) > 2e-6 else (1e9, "nm")
         ax_x.plot(t_ms, (x - off_ref) * scale, color=C_DATA, lw=3.0, alpha=0.45, label="data (offset removed)")
         ax_x.plot(t_ms, (nom_aligned - off_ref) * scale, color=C_NOMINAL, lw=1.2, ls="--", label="nominal (meta.json)")
-        if cand is not None:
+        if refit_spec is not None:
             ax_x.plot(t_ms, (cal_aligned - off_ref) * scale, color=C_CALIBRATED, lw=1.0, ls=":",
                       label="calibrated nominal")
         ax_x.plot(t_ms, (ref_aligned - off_ref) * scale, color=C_REFIT, lw=1.2, label=refit_label)
@@ -167,7 +167,7 @@ def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
         ax_r.plot(t_ms, r_cal, color=C_CALIBRATED, lw=0.5, alpha=0.35)
         ax_r.plot(t_ms, _moving_mean(r_cal, span), color=C_CALIBRATED, lw=1.6,
                   label=f"calibrated nominal (RMS {np.sqrt(np.nanmean(r_cal ** 2)):.2f} nm; bold: systematic part)")
-        if cand is not None:
+        if refit_spec is not None:
             ax_r.plot(t_ms, r_ref, color=C_REFIT, lw=0.5, alpha=0.35)
             ax_r.plot(t_ms, _moving_mean(r_ref, span), color=C_REFIT, lw=1.6,
                       label=f"{refit_label} (RMS {np.sqrt(np.nanmean(r_ref ** 2)):.2f} nm)")
