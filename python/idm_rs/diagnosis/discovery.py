@@ -65,6 +65,9 @@ TERM_GAIN = 0.9
 #: a found term whose refitted coefficient is within this many standard deviations of zero is
 #: dropped unless the model without it is worse by BIC_THRESHOLD
 PRUNE_Z = 5.0
+#: a library term whose effect keeps less than this share of its size once the calibrated
+#: parameters' directions are projected out is their alias (left out of the regression)
+ALIAS_SHARE = 0.05
 #: a form must predict the held-out experiments' force effect to within this share of it
 #: (cross-validated error relative to the force's own effect): at least half explained
 FORM_CV_MAX = 0.5
@@ -512,8 +515,13 @@ def _design(force: InferredForce, terms: Sequence[Term], wavelength: float
         Q, _ = np.linalg.qr(S[:, np.linalg.norm(S, axis=0) > 0])
         sizes = np.cumsum([x.shape[0] for x in X])[:-1]
         Xa, ya = np.concatenate(X), np.concatenate(y)
+        before = np.linalg.norm(Xa, axis=0)
         Xa = Xa - Q @ (Q.T @ Xa)
         ya = ya - Q @ (Q.T @ ya)
+        # a term whose effect the parameters make almost entirely (Ff: a friction level, mu_k)
+        # is their alias, not a form: left out rather than scaled up from what remains
+        alias = np.linalg.norm(Xa, axis=0) < ALIAS_SHARE * np.maximum(before, 1e-300)
+        Xa[:, alias] = 0.0
         X, y = np.split(Xa, sizes), np.split(ya, sizes)
     return X, y
 
@@ -726,9 +734,14 @@ def _pruned(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[Fre
     """The form without its terms the refit does not support (|value| < PRUNE_Z sigma), when
     that lowers BIC: the regression picks terms greedily, and a second term may only mop up what
     the first left on the way."""
-    weak = [t for t in form.terms
-            if not (r.std.get(t.param) and abs(r.values[t.param]) > PRUNE_Z * r.std[t.param])]
-    if not weak or len(weak) == len(form.terms):
+    def z(t: Term) -> float:
+        sd = r.std.get(t.param)
+        return abs(r.values[t.param]) / sd if sd else math.inf
+
+    weak = [t for t in form.terms if z(t) <= PRUNE_Z]
+    if len(weak) == len(form.terms):
+        weak.remove(max(weak, key=z))  # all weak (correlated with each other): keep the clearest
+    if not weak:
         return form, r, lib
     keep = [t for t in form.terms if t not in weak]
     coefs = {t.param: r.values[t.param] for t in keep}
