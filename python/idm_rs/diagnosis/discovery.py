@@ -493,10 +493,11 @@ class FoundForm:
         return sorted({t.variable for t in self.terms})
 
 
-def _design(force: InferredForce, terms: Sequence[Term], wavelength: float
+def _design(force: InferredForce, terms: Sequence[Term], wavelength: float, project: bool = False
             ) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
     """Per experiment: the library pushed through the data's view (samples x terms) and the
-    inferred force's own effect on the readings (samples): both in noise units."""
+    inferred force's own effect on the readings (samples): both in noise units; with
+    `project`, in the complement of the calibrated parameters' directions."""
     X, y = [], []
     for j, tr in enumerate(force.trajectories):
         A = force.jacobians[j]
@@ -507,7 +508,7 @@ def _design(force: InferredForce, terms: Sequence[Term], wavelength: float
         knot_theta = np.linalg.lstsq(B, theta, rcond=None)[0]
         X.append(A @ knot_theta)
         y.append(A @ force.values[j])
-    if force.nuisance:
+    if force.nuisance and project:
         # what the refit's calibrated parameters can absorb is no evidence for a term (the
         # calibration already moved them to mimic the missing physics): the library's and the
         # force's effects are compared in the complement of those directions (Frisch-Waugh)
@@ -573,17 +574,18 @@ def _choose(errs: list[float]) -> int:
     return k if errs[k] < FORM_CV_MAX else 0
 
 
-def find_terms(force: InferredForce, max_terms: int = MAX_TERMS) -> FoundForm:
+def find_terms(force: InferredForce, max_terms: int = MAX_TERMS, project: bool = False) -> FoundForm:
     """The library terms (module docstring, step 2) that best reproduce `force`: orthogonal
     matching pursuit, the number of terms and the wavelength of the periodic ones chosen by
-    leave-one-experiment-out cross-validation."""
+    leave-one-experiment-out cross-validation. With `project`, the regression is done in the
+    complement of what the calibrated parameters can move (their aliases left out)."""
     library = MAIN_TERMS if force.body == "main" else WEIGHT_TERMS
     plain = [t for t in library if not t.periodic]
     periodic = [t for t in library if t.periodic]
     tried: list[tuple[str, float]] = []
 
     def evaluate(terms: list[Term], wavelength: float):
-        X, y = _design(force, terms, wavelength)
+        X, y = _design(force, terms, wavelength, project)
         errs, norms = _cv_path(X, y, max_terms)
         k = _choose(errs)
         return errs, k, X, y, norms
@@ -789,7 +791,13 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
             reasons.append(f"no force on the {body} explains the residual (it lowers chi² by "
                            f"{force.chi2_before - force.chi2_after:.0f} with {force.dof:.1f} effective parameters)")
             continue
-        form = find_terms(force)
+        forms = []
+        for project in (False, True) if force.nuisance else (False,):
+            f_ = find_terms(force, project=project)
+            if all({t.param for t in f_.terms} != {t.param for t in g.terms} for g in forms):
+                forms.append(f_)
+        found_any = [f_ for f_ in forms if f_.terms]
+        form = found_any[0] if found_any else forms[0]
         if not form.terms:
             reasons.append(f"a force on the {body} explains the residual (chi² {force.chi2_before:.0f} → "
                            f"{force.chi2_after:.0f}), but no library term reproduces it across experiments "
@@ -797,44 +805,49 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
             if out.form is None:
                 out.body, out.form = body, form
             continue
-        # the refit starts where the force's own fit left the calibrated parameters
-        start = [f.at(force.parameters.get(f.name, f.x0)) for f in calibrated_free]
-        r, lib = _refit(objective, spec, start, form, progress)
-        for _ in range(PRUNE_ROUNDS):
-            smaller, r, lib = _pruned(objective, spec, start, form, r, lib, progress)
-            if smaller is form:
-                break
-            form = smaller
-        trial = Discovery(False, "", body, form, forces, refit=r, rms_before=rms_null,
-                          heldout_rms_before=heldout_rms_null, heldout_experiment=out.heldout_experiment)
-        trial.delta_bic = null_chi2 - r.chi2 - len(lib) * math.log(objective.n)
-        trial.rms_after = r.rms
-        vals = {f.name: r.values[f.name] for f in lib}
-        trial.values = {n: (v, r.std.get(n)) for n, v in vals.items()}
-        if heldout is not None:
-            trial.heldout_rms_after = heldout.rms(r.spec, [f.at(r.values[f.name]) for f in list(start) + lib])
-        trial.equation = _equation(form, vals)
-        trial.description = describe(form, vals, force)
-        improves = not (math.isfinite(trial.heldout_rms_after) and math.isfinite(heldout_rms_null)
-                        and trial.heldout_rms_after >= heldout_rms_null)
-        trial.discovered = trial.delta_bic >= BIC_THRESHOLD and improves
-        terms = ", ".join(t.symbol for t in form.terms)
-        where = "main body" if body == "main" else "weight"
-        if trial.discovered:
-            trial.reason = (f"a force on the {where} of the form {terms} ({trial.description}) improves BIC by "
-                            f"{trial.delta_bic:.0f} over the calibrated model (RMS {rms_null / sigma:.2f} → "
-                            f"{trial.rms_after / sigma:.2f} x noise) and predicts the held-out experiment better "
-                            f"({heldout_rms_null * 1e9:.2f} → {trial.heldout_rms_after * 1e9:.2f} nm)")
-            standing.append(trial)
-            if trial.rms_after <= NOISE_RATIO_OK * sigma:
-                break  # it leaves noise: another body's form could at best tie
-            continue
-        why = (f"ΔBIC {trial.delta_bic:.0f} < {BIC_THRESHOLD:g}" if trial.delta_bic < BIC_THRESHOLD
-               else f"the held-out prediction does not improve ({heldout_rms_null * 1e9:.2f} → "
-                    f"{trial.heldout_rms_after * 1e9:.2f} nm)")
-        reasons.append(f"the form found on the {where} ({terms}) does not stand: {why}")
-        if out.refit is None:
-            out = trial
+        done = False
+        for form in found_any:
+            # the refit starts where the force's own fit left the calibrated parameters
+            start = [f.at(force.parameters.get(f.name, f.x0)) for f in calibrated_free]
+            r, lib = _refit(objective, spec, start, form, progress)
+            for _ in range(PRUNE_ROUNDS):
+                smaller, r, lib = _pruned(objective, spec, start, form, r, lib, progress)
+                if smaller is form:
+                    break
+                form = smaller
+            trial = Discovery(False, "", body, form, forces, refit=r, rms_before=rms_null,
+                              heldout_rms_before=heldout_rms_null, heldout_experiment=out.heldout_experiment)
+            trial.delta_bic = null_chi2 - r.chi2 - len(lib) * math.log(objective.n)
+            trial.rms_after = r.rms
+            vals = {f.name: r.values[f.name] for f in lib}
+            trial.values = {n: (v, r.std.get(n)) for n, v in vals.items()}
+            if heldout is not None:
+                trial.heldout_rms_after = heldout.rms(r.spec, [f.at(r.values[f.name]) for f in list(start) + lib])
+            trial.equation = _equation(form, vals)
+            trial.description = describe(form, vals, force)
+            improves = not (math.isfinite(trial.heldout_rms_after) and math.isfinite(heldout_rms_null)
+                            and trial.heldout_rms_after >= heldout_rms_null)
+            trial.discovered = trial.delta_bic >= BIC_THRESHOLD and improves
+            terms = ", ".join(t.symbol for t in form.terms)
+            where = "main body" if body == "main" else "weight"
+            if trial.discovered:
+                trial.reason = (f"a force on the {where} of the form {terms} ({trial.description}) improves BIC by "
+                                f"{trial.delta_bic:.0f} over the calibrated model (RMS {rms_null / sigma:.2f} → "
+                                f"{trial.rms_after / sigma:.2f} x noise) and predicts the held-out experiment better "
+                                f"({heldout_rms_null * 1e9:.2f} → {trial.heldout_rms_after * 1e9:.2f} nm)")
+                standing.append(trial)
+                if trial.rms_after <= NOISE_RATIO_OK * sigma:
+                    done = True  # it leaves noise: another form could at best tie
+                    break
+                continue
+            why = (f"ΔBIC {trial.delta_bic:.0f} < {BIC_THRESHOLD:g}" if trial.delta_bic < BIC_THRESHOLD
+                   else f"the held-out prediction does not improve ({heldout_rms_null * 1e9:.2f} → "
+                        f"{trial.heldout_rms_after * 1e9:.2f} nm)")
+            reasons.append(f"the form found on the {where} ({terms}) does not stand: {why}")
+            if out.refit is None:
+                out = trial
+        if done:
+            break
     if standing:
         best = max(standing, key=lambda x: x.delta_bic)
         others = [x for x in standing if x is not best]
