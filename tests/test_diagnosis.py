@@ -134,7 +134,7 @@ def test_cli_diagnose_writes_report_json_and_plots(spring_case, spring_diagnosis
     rc = main(["diagnose", str(spring_case), "--json", str(out_json), "--plots", str(plots), "--no-progress",
                "--threads", "1"])
     assert rc == 0
-    assert calls == [(spring_case, {"progress": False, "threads": 1})]
+    assert calls == [(spring_case, {"progress": False, "threads": 1, "discover": True})]
     text = capsys.readouterr().out
     assert "VERDICT:" in text and str(out_json) in text
 
