@@ -221,7 +221,7 @@ impl Model<Dual64> {
     /// Jacobian an implicit method could use for any new term (at `dim + 1` evaluations of the
     /// right-hand side on dual numbers; see benches/RESULTS.md for its cost).
     /// The explicit time dependence (a sampled force, the library's time term) is taken by a
-    /// central difference in `t` over 1 us: the one term not carried by a dual number.
+    /// central difference in `t` over 100 us: the one term not carried by a dual number.
     pub fn derived_jacobian(&self, t: f64, v_cmd: f64, dv_cmd: f64, y: &[f64], jac: &mut [f64], dfdt: &mut [f64]) {
         let d = y.len();
         let mut yd: Vec<Dual64> = y.iter().map(|&x| Dual64::from(x)).collect();
@@ -242,10 +242,11 @@ impl Model<Dual64> {
             f[r].derivatives(&mut col);
             dfdt[r] = col[0] * dv_cmd;
         }
-        // the explicit time dependence is linear within a step (a sampled force's piece, the
-        // library's t), so the central difference is exact up to rounding; 1 us keeps that
-        // rounding at 1e-13 of an acceleration's rate (a knot within 1 us of t mixes its slopes)
-        let h = 1e-6;
+        // the explicit time dependence is linear within a piece of the sampled force (and in the
+        // library's t), so the central difference is exact up to rounding; 100 us keeps that
+        // rounding below 1e-13 of an acceleration's rate (a knot within 100 us of t mixes the
+        // slopes of its two pieces: the reference is for times inside a longer piece)
+        let h = 1e-4;
         let (mut fp, mut fm) = (f.clone(), f.clone());
         self.rhs_impl::<0, true>(t + h, v, dv_cmd, &yd, &mut fp);
         self.rhs_impl::<0, true>(t - h, v, dv_cmd, &yd, &mut fm);

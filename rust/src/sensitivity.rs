@@ -548,10 +548,11 @@ mod tests {
             tau_sensor: 1e-5,
             drift_rate: 1e-4,
             // the library at small values (its derivatives are what discovery screens with)
-            lib_x1: 1e3, lib_v1: 0.1, lib_dx: 100.0, lib_dv: 0.05, lib_sgn: 0.01, lib_abs: 0.05, lib_vv: 2.0,
-            lib_volt: 1e-4, lib_dvolt: 1e-8, lib_t: 0.5, lib_x1sq: 1e9, lib_x1cube: 1e14, lib_sin: 0.01,
+            // each large enough (~1-10 mN along the run) for a central difference to resolve it
+            lib_x1: 1e3, lib_v1: 0.1, lib_dx: 1e3, lib_dv: 0.5, lib_sgn: 0.01, lib_abs: 0.5, lib_vv: 200.0,
+            lib_volt: 1e-4, lib_dvolt: 1e-8, lib_t: 0.5, lib_x1sq: 1e9, lib_x1cube: 1e16, lib_sin: 0.01,
             lib_cos: 0.01, lib_ff: 0.01, lib_ff_sin: 0.02, lib_ff_cos: 0.01, lib_wavelength: 20e-6,
-            libw_x2: 100.0, libw_v2: 0.05, libw_dx: 100.0, libw_dv: 0.05, libw_sgn: 0.01, libw_vv: 1.0,
+            libw_x2: 1e4, libw_v2: 0.5, libw_dx: 1e4, libw_dv: 0.5, libw_sgn: 0.01, libw_vv: 100.0,
             libw_volt: 1e-4, libw_dvolt: 1e-8,
         };
         let c = paper(Structure::Lps, e);
