@@ -184,6 +184,17 @@ class InferredForce:
     nuisance: list[NDArray[np.float64]] = field(repr=False, default_factory=list)
     #: the calibrated parameters as fitted jointly with the force
     parameters: dict[str, float] = field(default_factory=dict)
+    #: per experiment, the least-squares projector of samples onto the knots (made once)
+    _projectors: dict[int, NDArray[np.float64]] = field(default_factory=dict, repr=False, compare=False)
+
+    def on_knots(self, j: int, samples: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Samples of experiment j (samples x ...) as values on its knots, in least squares:
+        a library function at the force's own resolution."""
+        if j not in self._projectors:
+            tr = self.trajectories[j]
+            n = self.jacobians[j].shape[0]
+            self._projectors[j] = np.linalg.pinv(_hat_basis(self.knots[j], tr.t[:n]))
+        return self._projectors[j] @ samples
 
     @property
     def gain(self) -> float:
@@ -502,10 +513,9 @@ def _design(force: InferredForce, terms: Sequence[Term], wavelength: float, proj
     for j, tr in enumerate(force.trajectories):
         A = force.jacobians[j]
         n = A.shape[0]
-        B = _hat_basis(force.knots[j], tr.t[:n])
         theta = library_columns(tr, terms, wavelength)[:n]
-        # the library on the force's knots (least squares), so term and force share a resolution
-        knot_theta = np.linalg.lstsq(B, theta, rcond=None)[0]
+        # the library on the force's knots, so term and force share a resolution
+        knot_theta = force.on_knots(j, theta)
         X.append(A @ knot_theta)
         y.append(A @ force.values[j])
     if force.nuisance and project:

@@ -335,7 +335,7 @@ def plot_discovery(d: Diagnosis, directory: Path) -> Path:
     knots weighted by what their derivatives move) as the band's shade."""
     import matplotlib.pyplot as plt
 
-    from .discovery import _hat_basis, library_columns
+    from .discovery import library_columns
 
     f = d.discovery
     force = f.forces[f.body]
@@ -354,7 +354,7 @@ def plot_discovery(d: Diagnosis, directory: Path) -> Path:
         seen = seen / max(float(seen.max()), 1e-300)
         theta = library_columns(tr, form.terms, wl)[:n]
         term = theta @ np.array([values.get(t.param, 0.0) for t in form.terms])
-        knot_term = np.linalg.lstsq(_hat_basis(k, tr.t[:n]), term, rcond=None)[0]
+        knot_term = force.on_knots(j, term)
         ax.plot(k * 1e3, force.values[j] * 1e3, "o-", ms=2.5, lw=1.0, color="0.3", label="inferred force")
         ax.plot(k * 1e3, knot_term * 1e3, "-", lw=1.6, color=C_REFIT,
                 label=f"found term ({', '.join(t.symbol for t in form.terms)}), refitted, on the knots")
