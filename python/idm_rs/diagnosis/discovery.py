@@ -12,11 +12,14 @@ When no catalogue effect explains a systematic residual, three steps (docs/DIAGN
    iteration.
 2. **Its form, found** (:func:`find_terms`). Sparse regression (scikit-learn's orthogonal
    matching pursuit) of the inferred force on a library of candidate functions of the
-   simulated states and the input, in the metric of the data: each library function, projected
-   on the force's knots, is pushed through the same derivatives, so a term is judged by the
-   readings it would explain, not by the force where the readings cannot see it (a stuck body
-   hides the force on it). The number of terms and the wavelength of the periodic terms are
-   chosen by cross-validation across experiments (leave one experiment out).
+   simulated states and the input, in the metric of the data: the inferred force's effect on
+   the readings against each library term's, both exact derivatives of the readings at the
+   inferred force's run (the term's coefficient seeded in the engine's ``library_force``), so
+   a term is judged by the readings it would explain, at the engine's full resolution (the
+   friction force jumps within a slip, faster than the knots), not by the force where the
+   readings cannot see it (a stuck body hides the force on it). The number of terms and the
+   wavelength of the periodic terms are chosen by cross-validation across experiments (leave
+   one experiment out).
 3. **The term, modelled** (:func:`discover`). The found terms become the engine's
    ``library_force`` (or ``library_force_weight``) effect with their coefficients free; the
    whole model (calibrated subset too) is refitted on exact Jacobians; the verdict is
@@ -60,8 +63,10 @@ WAVELENGTHS = np.geomspace(2e-6, 200e-6, 25)
 #: a periodic term must lower the cross-validated error by this factor below the best
 #: non-periodic form: the wavelength scan is itself a choice the data must pay for
 PERIODIC_GAIN = 0.9
-#: the number of terms: the fewest within 1/TERM_GAIN of the best cross-validated error
+#: a term more must lower the cross-validated error by this factor and by TERM_SHARE of the
+#: force's own effect
 TERM_GAIN = 0.9
+TERM_SHARE = 0.02
 #: a found term whose refitted coefficient is within this many standard deviations of zero is
 #: dropped unless the model without it is worse by BIC_THRESHOLD
 PRUNE_Z = 5.0
@@ -186,6 +191,12 @@ class InferredForce:
     parameters: dict[str, float] = field(default_factory=dict)
     #: per experiment, the least-squares projector of samples onto the knots (made once)
     _projectors: dict[int, NDArray[np.float64]] = field(default_factory=dict, repr=False, compare=False)
+    #: the library terms' exact effect on the readings at the inferred force's run:
+    #: ``(terms, wavelength) -> per experiment (samples x terms)``, in the units of
+    #: `jacobians` (None for a force made without the engine: then the library on the knots,
+    #: pushed through `jacobians`)
+    library_view: Optional[Callable[[Sequence["Term"], float], list[NDArray[np.float64]]]] = field(
+        default=None, repr=False, compare=False)
 
     def on_knots(self, j: int, samples: NDArray[np.float64]) -> NDArray[np.float64]:
         """Samples of experiment j (samples x ...) as values on its knots, in least squares:
@@ -237,12 +248,13 @@ START_FORCE = 1e-6
 
 
 def run_with_force(rec: Recording, j: int, spec: ModelSpec, body: str, knots: NDArray[np.float64],
-                   values: NDArray[np.float64], derivatives: bool = False, names: Optional[list[str]] = None
-                   ) -> tuple[dict[str, Any], Trajectory]:
+                   values: NDArray[np.float64], derivatives: bool = False, names: Optional[list[str]] = None,
+                   effects: Optional[dict[str, float]] = None) -> tuple[dict[str, Any], Trajectory]:
     """Experiment j under `spec` with the force (knots, values) on `body`: the engine's output
     at the sample times (``reading``; with `derivatives`, ``sensitivities``: d reading / d force
     at every knot, samples x knots; with `names` instead, d reading / d each of those engine
-    parameters) and the library's view of the trajectory."""
+    parameters; `effects` switches effects on beside `spec`'s, e.g. the library at zero
+    coefficients for its derivatives) and the library's view of the trajectory."""
     e = rec.experiments[j]
     bt, bv = e.waveform.breakpoints()
     # the drive with a breakpoint at every sample (the same function): the adaptive method
@@ -253,7 +265,9 @@ def run_with_force(rec: Recording, j: int, spec: ModelSpec, body: str, knots: ND
     config = spec.structure.config(first_step=1e-8, dt=1e-8, **INFER_METHOD)
     if derivatives:
         names = [f"f_ext[{k}]" for k in range(knots.size)]
-    raw = engine.simulate(_given(dict(spec.params)), {n: float(v) for n, v in spec.effects.items() if v != 0.0},
+    on = {n: float(v) for n, v in spec.effects.items() if v != 0.0}
+    on.update(effects or {})
+    raw = engine.simulate(_given(dict(spec.params)), on,
                           tt, vv, 0.0, float(e.duration), config, 1, False, None, names,
                           (np.ascontiguousarray(knots), np.ascontiguousarray(values, dtype=float), body))
     idx = np.minimum(np.searchsorted(raw["t"], e.t - 1e-12), raw["t"].size - 1)
@@ -391,9 +405,43 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
             A, S = view(runs)
     finally:
         pool.shutdown()
-    return InferredForce(body, knots, values, lam_rel, chi2_0, chi2, dof, res, A, [tr for _, tr in runs],
-                         time.perf_counter() - t0, S if free else [],
-                         {f.name: f.value(float(x)) for f, x in zip(free, u)})
+    force = InferredForce(body, knots, values, lam_rel, chi2_0, chi2, dof, res, A, [tr for _, tr in runs],
+                          time.perf_counter() - t0, S if free else [],
+                          {f.name: f.value(float(x)) for f, x in zip(free, u)})
+    at = apply(spec, free, u) if free else spec
+    cache: dict[tuple[str, float], NDArray[np.float64]] = {}
+
+    def library_view(terms: Sequence[Term], wavelength: float) -> list[NDArray[np.float64]]:
+        # a term's column depends on the wavelength only when it is periodic: the others are
+        # taken once
+        key = [(t.param, wavelength if t.periodic else 0.0) for t in terms]
+        missing = [t for t, k in zip(terms, key) if k not in cache]
+        if missing:
+            names = [t.param for t in missing]
+            extra = {"lib_wavelength": wavelength} if wavelength > 0 else {}
+
+            def one(j: int) -> NDArray[np.float64]:
+                n = objs[j].samples[j]
+                try:
+                    out, _ = run_with_force(rec, j, at, body, knots[j], values[j], names=names, effects=extra)
+                    d = np.asarray(out["sensitivities"]).T[:, :n]
+                except engine.DivergenceError:
+                    d = np.full((len(names), n), np.nan)
+                if not np.all(np.isfinite(d)):
+                    return _knot_view(force, j, missing, wavelength)
+                dpred = [np.zeros((len(names), 0))] * n_exp
+                dpred[j] = d
+                return objs[j].profiled_columns(dpred)
+
+            with ThreadPoolExecutor(max(1, threads)) as lib_pool:
+                cols = list(lib_pool.map(one, range(n_exp)))
+            for i, t in enumerate(missing):
+                cache[(t.param, wavelength if t.periodic else 0.0)] = np.concatenate([c[:, i] for c in cols])
+        sizes = np.cumsum([objs[j].samples[j] for j in range(n_exp)])[:-1]
+        return np.split(np.stack([cache[k] for k in key], axis=1), sizes)
+
+    force.library_view = library_view
+    return force
 
 
 #: step [N] of the forward differences that replace a knot's derivative which blew up
@@ -509,15 +557,11 @@ def _design(force: InferredForce, terms: Sequence[Term], wavelength: float, proj
     """Per experiment: the library pushed through the data's view (samples x terms) and the
     inferred force's own effect on the readings (samples): both in noise units; with
     `project`, in the complement of the calibrated parameters' directions."""
-    X, y = [], []
-    for j, tr in enumerate(force.trajectories):
-        A = force.jacobians[j]
-        n = A.shape[0]
-        theta = library_columns(tr, terms, wavelength)[:n]
-        # the library on the force's knots, so term and force share a resolution
-        knot_theta = force.on_knots(j, theta)
-        X.append(A @ knot_theta)
-        y.append(A @ force.values[j])
+    y = [A @ v for A, v in zip(force.jacobians, force.values)]
+    if force.library_view is not None:
+        X = force.library_view(terms, wavelength)
+    else:
+        X = [_knot_view(force, j, terms, wavelength) for j in range(len(force.jacobians))]
     if force.nuisance and project:
         # what the refit's calibrated parameters can absorb is no evidence for a term (the
         # calibration already moved them to mimic the missing physics): the library's and the
@@ -537,29 +581,48 @@ def _design(force: InferredForce, terms: Sequence[Term], wavelength: float, proj
     return X, y
 
 
+def _knot_view(force: InferredForce, j: int, terms: Sequence[Term], wavelength: float) -> NDArray[np.float64]:
+    """The library's effect on experiment j's readings through the force's own derivatives:
+    each function projected on the knots (the force's resolution), then pushed through
+    `jacobians` (for a force made without the engine, or an experiment whose library
+    derivatives could not be taken)."""
+    A = force.jacobians[j]
+    theta = library_columns(force.trajectories[j], terms, wavelength)[: A.shape[0]]
+    return A @ force.on_knots(j, theta)
+
+
 def _cv_path(X: list[NDArray[np.float64]], y: list[NDArray[np.float64]], max_terms: int
-             ) -> tuple[list[float], NDArray[np.float64]]:
-    """Leave-one-experiment-out error of orthogonal matching pursuit with 0..max_terms terms
-    (relative to the held-out force's own effect), and the column norms used."""
+             ) -> tuple[list[float], list[NDArray[np.int64]]]:
+    """The supports of orthogonal matching pursuit on all experiments with 1..max_terms terms,
+    and each support's leave-one-experiment-out error (least squares on the others, predicting
+    the one left out), relative to the force's own effect; 0 terms has error 1. The supports are
+    chosen once, on all data: a pursuit run per fold picks among nearly collinear terms (v1,
+    v1|v1|, dV/dt on one-way slips) by the fold's accidents, and its error then measures those
+    accidents, not the form."""
     Xa = np.concatenate(X)
     norms = np.sqrt(np.sum(Xa * Xa, axis=0))
     norms[norms == 0] = 1.0
     ya = np.concatenate(y)
     total = float(ya @ ya)
-    errs = [1.0]
+    errs: list[float] = [1.0]
+    supports: list[NDArray[np.int64]] = [np.zeros(0, dtype=np.int64)]
     if total <= 0.0:
-        return errs, norms
+        return errs, supports
     m = len(X)
     for k in range(1, max_terms + 1):
+        support = np.flatnonzero(_omp(Xa / norms, ya, k))
+        if support.size < k and k > 1:
+            break  # the library has no more independent directions
         sse = 0.0
         for hold in range(m):
-            tr = [i for i in range(m) if i != hold]
-            Xt = np.concatenate([X[i] for i in tr]) / norms
-            yt = np.concatenate([y[i] for i in tr])
-            pred = (X[hold] / norms) @ _omp(Xt, yt, k)
-            sse += float(np.sum((y[hold] - pred) ** 2))
+            rest = [i for i in range(m) if i != hold]
+            c = np.linalg.lstsq(np.concatenate([X[i][:, support] for i in rest]),
+                                np.concatenate([y[i] for i in rest]), rcond=None)[0]
+            r = y[hold] - X[hold][:, support] @ c
+            sse += float(r @ r)
         errs.append(sse / total)
-    return errs, norms
+        supports.append(support)
+    return errs, supports
 
 
 def _omp(X: NDArray[np.float64], y: NDArray[np.float64], k: int) -> NDArray[np.float64]:
@@ -576,11 +639,16 @@ def _omp(X: NDArray[np.float64], y: NDArray[np.float64], k: int) -> NDArray[np.f
 
 
 def _choose(errs: list[float]) -> int:
-    """The fewest terms whose cross-validated error is within 1/TERM_GAIN of the best any
-    number reaches (the greedy pursuit may need a second term before the first pays off), and
-    0 unless that error is below TERM_GAIN of the force's own (no form at all)."""
-    best = min(errs)
-    k = next(i for i, e in enumerate(errs) if e <= best / TERM_GAIN)
+    """The number of terms: each one more must lower the cross-validated error by TERM_GAIN
+    of it and by TERM_SHARE of the force's own effect (the inferred force is itself an
+    estimate, knot-limited and smoothed: a term that explains a percent of it explains its
+    artefacts); 0 unless the form explains more than FORM_CV_MAX of the force out of sample.
+    The greedy pursuit may need a second term before the first pays off, so a size is judged
+    against every smaller one, not only the one before."""
+    k = 0
+    for i in range(1, len(errs)):
+        if errs[i] <= min(TERM_GAIN * errs[k], errs[k] - TERM_SHARE):
+            k = i
     return k if errs[k] < FORM_CV_MAX else 0
 
 
@@ -596,9 +664,9 @@ def find_terms(force: InferredForce, max_terms: int = MAX_TERMS, project: bool =
 
     def evaluate(terms: list[Term], wavelength: float):
         X, y = _design(force, terms, wavelength, project)
-        errs, norms = _cv_path(X, y, max_terms)
+        errs, supports = _cv_path(X, y, max_terms)
         k = _choose(errs)
-        return errs, k, X, y, norms
+        return errs, k, X, y, supports
 
     best = evaluate(plain, 0.0)
     best_terms, best_wl = plain, 0.0
@@ -606,18 +674,22 @@ def find_terms(force: InferredForce, max_terms: int = MAX_TERMS, project: bool =
     if periodic:
         for wl in WAVELENGTHS:
             cand = evaluate(plain + periodic, float(wl))
-            tried.append((f"periodic, lambda = {wl * 1e6:.3g} um", cand[0][cand[1]]))
-            if cand[0][cand[1]] < PERIODIC_GAIN * best[0][best[1]] and (
-                    best_wl == 0.0 or cand[0][cand[1]] < best[0][best[1]]):
+            err, err_best = cand[0][cand[1]], best[0][best[1]]
+            tried.append((f"periodic, lambda = {wl * 1e6:.3g} um", err))
+            # the wavelength is a choice the data must pay for: against the plain form, by the
+            # same margins as a term; against another wavelength, by being lower
+            margin = min(PERIODIC_GAIN * err_best, err_best - TERM_SHARE) if best_wl == 0.0 else err_best
+            if err < margin:
                 best, best_terms, best_wl = cand, plain + periodic, float(wl)
-    errs, k, X, y, norms = best
+    errs, k, X, y, supports = best
     chosen: list[Term] = []
     coefs: dict[str, float] = {}
     if k > 0:
-        coef = _omp(np.concatenate(X) / norms, np.concatenate(y), k)
-        for i in np.flatnonzero(coef):
+        support = supports[k]
+        coef = np.linalg.lstsq(np.concatenate(X)[:, support], np.concatenate(y), rcond=None)[0]
+        for i, c in zip(support, coef):
             chosen.append(best_terms[i])
-            coefs[best_terms[i].param] = float(coef[i] / norms[i])
+            coefs[best_terms[i].param] = float(c)
     wl = best_wl if any(t.periodic for t in chosen) else 0.0
     return FoundForm(force.body, chosen, coefs, wl, float(errs[k]), [float(e) for e in errs], tried)
 
@@ -740,6 +812,24 @@ def _refit(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[Free
     return r, lib
 
 
+def _refit_from(objective: Objective, spec: ModelSpec, starts: Sequence[Sequence[FreeParam]], form: FoundForm,
+                progress: Optional[Callable[..., Any]]) -> tuple[FitResult, list[FreeParam], Sequence[FreeParam]]:
+    """:func:`_refit` from each start of the calibrated parameters in turn, until one leaves
+    noise (RMS within NOISE_RATIO_OK of sigma); the lowest chi^2, its library parameters and
+    its start. The calibration's optimum mimics the missing term and the force's joint fit
+    bends the parameters toward what a smooth force cannot do: either may leave the refit
+    short of its basin in the evaluations it has."""
+    best: Optional[tuple[FitResult, list[FreeParam], Sequence[FreeParam]]] = None
+    for start in starts:
+        r, lib = _refit(objective, spec, start, form, progress)
+        if best is None or r.chi2 < best[0].chi2:
+            best = (r, lib, start)
+        if r.rms <= NOISE_RATIO_OK * objective.sigma:
+            break
+    assert best is not None
+    return best
+
+
 def _pruned(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[FreeParam], form: FoundForm,
             r: FitResult, lib: list[FreeParam], progress: Optional[Callable[..., Any]]
             ) -> tuple[FoundForm, FitResult, list[FreeParam]]:
@@ -817,9 +907,12 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
             continue
         done = False
         for form in found_any:
-            # the refit starts where the force's own fit left the calibrated parameters
-            start = [f.at(force.parameters.get(f.name, f.x0)) for f in calibrated_free]
-            r, lib = _refit(objective, spec, start, form, progress)
+            # the refit starts at the calibration's optimum, then (if that leaves more than
+            # noise) where the force's own fit left the calibrated parameters
+            starts = [list(calibrated_free)]
+            if force.parameters:
+                starts.append([f.at(force.parameters.get(f.name, f.x0)) for f in calibrated_free])
+            r, lib, start = _refit_from(objective, spec, starts, form, progress)
             for _ in range(PRUNE_ROUNDS):
                 smaller, r, lib = _pruned(objective, spec, start, form, r, lib, progress)
                 if smaller is form:
