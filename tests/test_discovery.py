@@ -14,7 +14,7 @@ import pytest
 
 from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
 from idm_rs.diagnosis.diagnose import _HeldOut, _Problem, _calibration_params
-from idm_rs.diagnosis.discovery import (MAIN_TERMS, InferredForce, Trajectory, _gcv_solve,
+from idm_rs.diagnosis.discovery import (MAIN_TERMS, InferredForce, Trajectory, _choose, _gcv_solve,
                                         _second_differences, discover, find_terms)
 from idm_rs.diagnosis.fitting import Objective
 from idm_rs.diagnosis.noise import estimate_noise
@@ -63,6 +63,13 @@ def test_quadratic_drag_is_found_as_a_function_of_v1(drag):
     # the inferred force explains the residual before any term is named
     f = d.forces["main"]
     assert f.chi2_after < 0.1 * f.chi2_before and f.gain > 100
+    # and the true term's exact effect on the readings reproduces the force's: one coefficient
+    # near the truth leaves 2 % of it (the library projected on the knots instead aliased the
+    # slips: -1437 leaving 3.5 %)
+    x = np.concatenate(f.library_view([t for t in MAIN_TERMS if t.param == "lib_vv"], 0.0))[:, 0]
+    y = np.concatenate([A @ v for A, v in zip(f.jacobians, f.values)])
+    c = float(x @ y / (x @ x))
+    assert abs(c / -1e3 - 1.0) < 0.15 and float(np.sum((y - c * x) ** 2)) < 0.02 * float(y @ y)
 
 
 def test_the_report_and_the_figures_tell_a_discovery(cases, drag, tmp_path):
@@ -121,6 +128,16 @@ def test_nothing_is_discovered_on_a_healthy_device(cases):
     for f in d.forces.values():
         # a force adds nothing its effective parameters do not buy
         assert f.gain <= 10.0, (f.chi2_before, f.chi2_after, f.dof)
+
+
+def test_a_term_must_explain_two_percent_of_the_force_out_of_sample():
+    """The number of terms from the cross-validated errors (relative to the force's own effect,
+    0 terms = 1): each term more must lower the error by 10 % of it and by 2 % of the force."""
+    assert _choose([1.0, 0.0086, 0.0059, 0.0151]) == 1  # the drag: a second term explains 0.3 %
+    assert _choose([1.0, 0.20, 0.11, 0.10]) == 2  # 9 % more, then 1 %
+    assert _choose([1.0, 0.95, 0.30]) == 2  # the pursuit's first term pays only with the second
+    assert _choose([1.0, 0.6, 0.55]) == 0  # less than half the force explained out of sample
+    assert _choose([1.0]) == 0
 
 
 def test_gcv_chooses_a_smoothing_between_the_extremes():

@@ -669,7 +669,8 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
         if not _finite(ho_cal):
             ho_cal = heldout.rms(cal.fit.spec, cal.at)
         try:
-            found = run_discovery(rec, cal.fit.spec, cal.at, pb.obj, heldout, ho_cal, progress=pb.tick)
+            found = run_discovery(rec, cal.fit.spec, cal.at, pb.obj, heldout, ho_cal, nominal=nominal.spec,
+                                  progress=pb.tick)
         except (DivergenceError, np.linalg.LinAlgError) as e:
             # a model the simulator cannot run through the inferred force: no discovery, said so
             reason += f"; discovery stopped: {e}"

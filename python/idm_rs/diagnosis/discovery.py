@@ -554,9 +554,10 @@ class FoundForm:
 
 def _design(force: InferredForce, terms: Sequence[Term], wavelength: float, project: bool = False
             ) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
-    """Per experiment: the library pushed through the data's view (samples x terms) and the
-    inferred force's own effect on the readings (samples): both in noise units; with
-    `project`, in the complement of the calibrated parameters' directions."""
+    """Per experiment: the library terms' effect on the readings (samples x terms; the exact
+    derivatives at the inferred force's run, `InferredForce.library_view`, or through the knots
+    for a force made without the engine) and the inferred force's own effect (samples): both in
+    noise units; with `project`, in the complement of the calibrated parameters' directions."""
     y = [A @ v for A, v in zip(force.jacobians, force.values)]
     if force.library_view is not None:
         X = force.library_view(terms, wavelength)
@@ -861,11 +862,12 @@ def _pruned(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[Fre
 
 def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreeParam], objective: Objective,
              heldout: Any, heldout_rms_null: float, *, bodies: Sequence[str] = ("main", "weight"),
-             progress: Optional[Callable[..., Any]] = None) -> Discovery:
+             nominal: Optional[ModelSpec] = None, progress: Optional[Callable[..., Any]] = None) -> Discovery:
     """Discovery (module docstring) from the calibrated model `spec` with its calibrated subset
     `calibrated_free` (centred on the calibration's optimum) on `objective` (the diagnosis's
     segmented objective); `heldout` the diagnosis's held-out predictor (``rms(spec, free)``)
-    and `heldout_rms_null` the null's held-out RMS [m]. A force is inferred on each of `bodies`;
+    and `heldout_rms_null` the null's held-out RMS [m]; `nominal` the recording's nominal
+    model (a start of the refits). A force is inferred on each of `bodies`;
     the form found for each is refitted (in the order of how much of the residual each force
     explains; once a standing form leaves noise the others are not tried), and of those that
     stand the one with the lowest BIC is the answer (a force on the wrong body may explain the
@@ -905,11 +907,21 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
             if out.form is None:
                 out.body, out.form = body, form
             continue
+        # the fewest parameters first: once a form leaves noise, a larger one can at best tie
+        # (a periodic form in x1 whose period is the step length mimics any function of the
+        # drive's phase: on the drag device four periodic terms at 4.2 um reached 1.09 x noise,
+        # v1|v1| alone 1.00)
+        found_any.sort(key=lambda f_: len(f_.terms) + (f_.wavelength > 0))
         done = False
         for form in found_any:
-            # the refit starts at the calibration's optimum, then (if that leaves more than
-            # noise) where the force's own fit left the calibrated parameters
+            # the refit starts at the calibration's optimum, then (while a start leaves more
+            # than noise) at the nominal values (with the missing term found, the calibration's
+            # mimicry of it is no longer needed: on the drag device the calibration had moved
+            # friction and damping to mimic the drag, and the refit from there stopped at
+            # short of noise) and where the force's own fit left the calibrated parameters
             starts = [list(calibrated_free)]
+            if nominal is not None:
+                starts.append([f.at(float(nominal.params.get(f.name) or f.x0)) for f in calibrated_free])
             if force.parameters:
                 starts.append([f.at(force.parameters.get(f.name, f.x0)) for f in calibrated_free])
             r, lib, start = _refit_from(objective, spec, starts, form, progress)
