@@ -163,9 +163,46 @@ class CompliantBase:
         return math.sqrt(self.kb / self.mb) / (2 * math.pi)
 
 
-Extra = Union[PeriodicFriction, CubicSpring, QuadraticDrag, CompliantBase]
+@dataclass(frozen=True)
+class VoltageForce:
+    """Force c V(t) [N] on the main body (an electrostatic or cable force); c [N/V]."""
+
+    c: float
+    name: str = "voltage_force"
+
+
+@dataclass(frozen=True)
+class FrictionGradient:
+    """The friction force on the main body times 1 + slope x1 (wear along the stroke); slope [1/m]."""
+
+    slope: float
+    name: str = "friction_gradient"
+
+
+@dataclass(frozen=True)
+class WeightFriction:
+    """Dry friction on the weight, -fw tanh(v2 / vs) [N] (vs the Stribeck velocity); fw [N]."""
+
+    fw: float
+    name: str = "weight_friction_dry"
+
+
+@dataclass(frozen=True)
+class Vibration:
+    """A floor vibration: force amplitude sin(2 pi frequency t + phase) [N] on the main body
+    (no library term can represent it)."""
+
+    amplitude: float
+    frequency: float
+    phase: float = 0.0
+    name: str = "vibration"
+
+
+Extra = Union[PeriodicFriction, CubicSpring, QuadraticDrag, CompliantBase, VoltageForce, FrictionGradient,
+              WeightFriction, Vibration]
 _KINDS = {"periodic_friction": PeriodicFriction, "cubic_spring": CubicSpring, "quadratic_drag": QuadraticDrag,
-          "compliant_base": CompliantBase}
+          "compliant_base": CompliantBase, "voltage_force": VoltageForce, "friction_gradient": FrictionGradient,
+          "weight_friction_dry": WeightFriction, "vibration": Vibration}
 
 
 def _as_extras(extra: Any) -> list[Extra]:
@@ -230,6 +267,10 @@ class _Rhs:
         self.periodic: list[PeriodicFriction] = [e for e in extras if isinstance(e, PeriodicFriction)]
         self.k3 = sum(e.k3 for e in extras if isinstance(e, CubicSpring))
         self.c2 = sum(e.c2 for e in extras if isinstance(e, QuadraticDrag))
+        self.cv = sum(e.c for e in extras if isinstance(e, VoltageForce))
+        self.grad = sum(e.slope for e in extras if isinstance(e, FrictionGradient))
+        self.fw = sum(e.fw for e in extras if isinstance(e, WeightFriction))
+        self.vibrations = [e for e in extras if isinstance(e, Vibration)]
         bases = [e for e in extras if isinstance(e, CompliantBase)]
         if len(bases) > 1:
             raise ValueError("at most one CompliantBase")
@@ -254,6 +295,8 @@ class _Rhs:
                 fs, dfs = fs * m, dfs * m + fs * dm
             else:
                 ss, dss = ss * m, dss * m + ss * dm
+        if self.grad:
+            fs, dfs = fs * (1.0 + self.grad * x1), dfs * (1.0 + self.grad * x1) + fs * self.grad
         return fs, dfs, ss, dss
 
     def _stribeck(self, v: float) -> tuple[float, float]:
@@ -292,19 +335,29 @@ class _Rhs:
         dff = (fsc * dff0[0] + dfsc * ff0, fsc * dff0[1], fsc * dff0[2])
         return ff, fhd, dff, dfhd
 
-    def _extra_force(self, x1: float, v1: float) -> tuple[float, float, float]:
+    def _extra_force(self, x1: float, v1: float, t: float = 0.0) -> tuple[float, float, float]:
         """Extra force on the main body and its d/dx1, d/dv1."""
-        f = -self.k3 * x1 ** 3 - self.c2 * v1 * abs(v1)
+        f = -self.k3 * x1 ** 3 - self.c2 * v1 * abs(v1) + self.cv * self.voltage(t)
+        for e in self.vibrations:
+            f += e.amplitude * math.sin(2 * math.pi * e.frequency * t + e.phase)
         return f, -3.0 * self.k3 * x1 * x1, -2.0 * self.c2 * abs(v1)
+
+    def _weight_force(self, v2: float) -> tuple[float, float]:
+        """Extra force on the weight and its d/dv2."""
+        if not self.fw:
+            return 0.0, 0.0
+        th = math.tanh(v2 / self.vs)
+        return -self.fw * th, -self.fw * (1.0 - th * th) / self.vs
 
     def fun(self, t: float, y: np.ndarray) -> list[float]:
         x1, x2, v1, v2, fh = y[0], y[1], y[2], y[3], y[4]
         vb = y[6] if self.base else 0.0
         ff, fhd, _, _ = self._friction(x1, v1 - vb, fh)
-        fe, _, _ = self._extra_force(x1, v1)
+        fe, _, _ = self._extra_force(x1, v1, t)
+        fw, _ = self._weight_force(v2)
         inner = self.kp * (x1 - x2) + self.cp * (v1 - v2)
         fp = self.kp * self.d33 * self.voltage(t)
-        out = [v1, v2, (fp - inner - ff + self.load + fe) / self.m1, (inner - fp) / self.m2, fhd]
+        out = [v1, v2, (fp - inner - ff + self.load + fe) / self.m1, (inner - fp + fw) / self.m2, fhd]
         if self.base:
             b = self.base
             out += [vb, (ff - b.kb * y[5] - b.cb * vb) / b.mb]
@@ -314,12 +367,13 @@ class _Rhs:
         x1, v1, fh = y[0], y[2], y[4]
         vb = y[6] if self.base else 0.0
         _, _, (ffx, ffv, fff), (fhx, fhv, fhf) = self._friction(x1, v1 - vb, fh)
-        _, fex, fev = self._extra_force(x1, v1)
+        _, fex, fev = self._extra_force(x1, v1, t)
+        _, fwv = self._weight_force(y[3])
         kp, cp, m1, m2 = self.kp, self.cp, self.m1, self.m2
         J = np.zeros((self.dim, self.dim))
         J[0, 2] = J[1, 3] = 1.0
         J[2, :5] = [(-kp - ffx + fex) / m1, kp / m1, (-cp - ffv + fev) / m1, cp / m1, -fff / m1]
-        J[3, :4] = [kp / m2, -kp / m2, cp / m2, -cp / m2]
+        J[3, :4] = [kp / m2, -kp / m2, cp / m2, (-cp + fwv) / m2]
         J[4, 0], J[4, 2], J[4, 4] = fhx, fhv, fhf
         if self.base:
             b = self.base
@@ -535,6 +589,42 @@ OFF_CATALOGUE_CASES: dict[str, tuple[Extra, str, str]] = {
         "the guide is a 2 kg mass on a 5e9 N/m spring and 1e4 N s/m damper to ground "
         "(7.96 kHz, damping ratio 0.05); friction acts on v1 - vb, its reaction on the base",
         "base",
+    ),
+    # devices like those on which discovery failed before issue 31 (sizes of that report)
+    "periodic_friction_3um": (
+        PeriodicFriction(amplitude=0.046, wavelength=3e-6, phase=0.4, mode="force"),
+        "friction force times 1 + 0.046 sin(2 pi x1 / 3 um + 0.4): varies within one slip",
+        "x1",
+    ),
+    "periodic_friction_5um": (
+        PeriodicFriction(amplitude=0.011, wavelength=5e-6, phase=1.0, mode="force"),
+        "friction force times 1 + 0.011 sin(2 pi x1 / 5 um + 1.0): small and within one slip",
+        "x1",
+    ),
+    "periodic_friction_60um": (
+        PeriodicFriction(amplitude=0.03, wavelength=60e-6, phase=0.0, mode="force"),
+        "friction force times 1 + 0.03 sin(2 pi x1 / 60 um)",
+        "x1",
+    ),
+    "voltage_force": (
+        VoltageForce(c=1.25e-3),
+        "a force 1.25e-3 N/V x V on the main body (0.1 N = 3 % of mu_k Fn at 80 V)",
+        "V",
+    ),
+    "friction_gradient": (
+        FrictionGradient(slope=2500.0),
+        "friction force times 1 + 2500 /m x1 (+5 % over 20 um of stroke)",
+        "x1",
+    ),
+    "weight_dry_friction": (
+        WeightFriction(fw=0.05),
+        "dry friction 0.05 N tanh(v2 / vs) on the weight",
+        "v2",
+    ),
+    "vibration": (
+        Vibration(amplitude=0.05, frequency=137.0, phase=0.3),
+        "a floor vibration: 0.05 N sin(2 pi 137 Hz t + 0.3) on the main body (no library term)",
+        "t",
     ),
 }
 

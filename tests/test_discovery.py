@@ -149,7 +149,7 @@ def test_gcv_chooses_a_smoothing_between_the_extremes():
     truth = np.sin(2 * np.pi * x) + 0.5 * x
     b = truth + rng.normal(0, 0.3, k)
     D = _second_differences(k)
-    c, _, rel, dof = _gcv_solve([np.eye(k)], [b], [D])
+    c, _, rel, dof, _ = _gcv_solve([np.eye(k)], [b], [D])
     err = np.sqrt(np.mean((c[0] - truth) ** 2))
     line = np.polyval(np.polyfit(x, b, 1), x)
     assert err < 0.5 * np.sqrt(np.mean((b - truth) ** 2))

@@ -23,14 +23,16 @@ from ..recording import Recording, load_case
 from .case_model import FIT_DT, CaseSimulator, ModelSpec, Structure
 from .calibration import Calibration, search
 from .calibration import calibrate as global_calibration
-from .discovery import Discovery
+from .discovery import Discovery, NumericalFailure
 from .discovery import discover as run_discovery
 from .catalogue import CALIBRATED, CALIBRATION_RANGE, CALIBRATION_SCALE, CATALOGUE, Effect, EffectParam
 from .fitting import FitResult, FreeParam, Objective, apply, fit, set_effect, set_param
+from .identifiability import assess
 from .locate import Location, locate, merge_windows
 from .multistart import Start, agree, multistart
+from .next_experiment import Proposal, propose
 from .noise import NoiseEstimate, cross_check, estimate_noise, whiteness_z
-from .results import Alternative, Candidate, Diagnosis
+from .results import Alternative, Candidate, Diagnosis, SecondSearch
 from .thresholds import BIC_THRESHOLD, LR_ALPHA, NOISE_RATIO_OK, REFIT_TOP, SEPARATION, WHITENESS_Z
 from .screening import Screened, near_degenerate, screen
 
@@ -392,7 +394,8 @@ def _candidate(pb: _Problem, cal: _Calibration, eff: Effect, r: FitResult, scree
         {n: r.values[n] for n in CALIBRATED}, r.chi2, k, bic, cal.bic - bic, r.rms, math.nan,
         whiteness_z(r.residuals), screened_only, r.residuals, r.spec,
         reported_std={n: s for n, (_, s) in reported.items() if s is not None},
-        significance=significance, correlation=corr, at_null=at_null, lr_chi2=cal.fit.chi2 - r.chi2)
+        significance=significance, correlation=corr, at_null=at_null, lr_chi2=cal.fit.chi2 - r.chi2,
+        identifiability=assess(r.values, r.std, r.corr, names + [n for n in cal.fit.values if n not in names]))
 
 
 def _at_null(cal: _Calibration, eff: Effect, base: ModelSpec) -> Optional[FitResult]:
@@ -477,6 +480,130 @@ def _polish_leader(pb: _Problem, cal: _Calibration, refits: list[_Refit]) -> Non
             c.score, c.multistart = r0.candidate.score, r0.candidate.multistart
             r0.candidate = c
             r0.free = [p.at(r.values[p.name]) for p in r0.free]
+
+
+#: candidates fitted (multistart) in the search for a second effect, best screened first
+SECOND_TOP = 2
+
+
+def _next_experiment(pb: _Problem, refits: list[_Refit], winner: str, other: str) -> Optional[Proposal]:
+    """The drive that best separates the verdict's refit from its alternative's
+    (:mod:`.next_experiment`), each at its own optimum with its own free parameters."""
+    by_id = {r.candidate.effect: r for r in refits if not r.candidate.screened_only}
+    if winner not in by_id or other not in by_id:
+        return None
+    models = []
+    for r in (by_id[winner], by_id[other]):
+        models.append((apply(r.base, r.free, np.zeros(len(r.free))), list(r.free)))
+    return propose(pb.rec, pb.sigma, (winner, other), models[0], models[1])
+
+
+def _without_lead(pb: _Problem, cal: _Calibration, lead: _Refit, found: Discovery
+                  ) -> tuple[float, FitResult, list[FreeParam]]:
+    """ΔBIC of the discovered term with the first effect (`found`, discovered from the model
+    with it) over the term alone, refitted from the calibrated null: the first effect must pay
+    its own way beside the found term (it may have mimicked part of it). Returns (ΔBIC, the
+    term alone's refit, its library parameters)."""
+    from .discovery import FoundForm, _refit
+
+    assert found.form is not None and found.refit is not None
+    v = found.refit.values
+    form = found.form
+    alone_form = FoundForm(form.body, form.terms, {t.param: v.get(t.param, form.coefficients[t.param]) for t in form.terms},
+                           v.get("lib_wavelength", form.wavelength), form.cv_error, form.cv_by_size, form.candidates,
+                           form.notes, form.source)
+    start = [f.at(v.get(f.name, f.x0)) for f in cal.free]
+    r0, lib = _refit(pb.obj, cal.fit.spec, start, alone_form, pb.tick)
+    n_lib = len(lib)
+    with_lead = found.refit.chi2 + (len(lead.free) + n_lib) * pb.ln_n
+    alone = r0.chi2 + (len(cal.free) + n_lib) * pb.ln_n
+    return alone - with_lead, r0, lib
+
+
+def _partial_leader(pb: _Problem, refits: list[_Refit]) -> Optional[_Refit]:
+    """The leading supported candidate when it does not explain the residual (a first effect
+    that stands but leaves a systematic residual), else None."""
+    eligible = [r for r in _ordered(refits) if _eligible(r.candidate)]
+    if not eligible or _explains(pb, eligible[0].candidate):
+        return None
+    return eligible[0]
+
+
+def _second_effect(pb: _Problem, cal: _Calibration, lead: _Refit, heldout: _HeldOut,
+                   first_round: list[_Refit]) -> SecondSearch:
+    """A second catalogue effect searched from the model *with* the first (`lead`): the first's
+    optimum becomes the null of a second round (screening, multistart fits of the SECOND_TOP
+    best scored, the polish) under the same rules as the first round (likelihood ratio, ΔBIC
+    over the model with the first alone, a residual at noise, the held-out experiment predicted
+    better). The pair is named only when, in addition, the first effect pays its own way beside
+    the second: the second alone, refitted from the pair's values, must be worse than the pair by
+    BIC_THRESHOLD (else the first round's leader only mimicked part of the second)."""
+    first = lead.candidate
+    out = SecondSearch(first=first, first_heldout_rms=first.heldout_rms)
+    r1 = fit(pb.obj, lead.base, lead.free, max_nfev=POLISH_NFEV, progress=pb.tick)
+    at1 = [f.at(r1.values[f.name]) for f in lead.free]
+    bic1 = r1.chi2 + (len(at1) + pb.n_offsets) * pb.ln_n
+    with_first = _Calibration(at1, r1, at1, r1, at1, bic1, whiteness_z(r1.residuals), None)  # type: ignore[arg-type]
+    structure = r1.spec.structure
+    effects = [e for e in CATALOGUE if e.id != first.effect and e.applies(structure, r1.spec.params)]
+    if not effects:
+        out.reason = f"no other catalogue effect applies beside {first.effect}"
+        return out
+    screened = {s.effect.id: s for s in screen(pb.obj, r1, at1, effects, pb.sigma, pb.tick)}
+    order = sorted(effects, key=lambda e: -screened[e.id].delta_chi2)
+    refits = _fit_candidates(pb, with_first, order, screened, SECOND_TOP)
+    _polish_leader(pb, with_first, refits)
+    ranked = _ordered(refits)
+    out.ranking = [r.candidate for r in ranked]
+    best = next((r for r in ranked if _eligible(r.candidate)), None)
+    if best is None:
+        top = ranked[0].candidate if ranked else None
+        out.reason = (f"no second effect is supported beside {first.effect}"
+                      + (f" (best: {top.effect}, ΔBIC {top.delta_bic:.0f} over {first.effect} alone)" if top else ""))
+        return out
+    pair = best.candidate
+    out.pair, out.free, out.base = pair, best.free, best.base
+    out.over_first = pair.delta_bic
+    # the first effect must pay its own way beside the second: the second alone, from the pair's
+    # values with the first at "no effect"
+    second_eff = next(e for e in CATALOGUE if e.id == pair.effect)
+    alone = next((r for r in first_round if r.candidate.effect == pair.effect and not r.candidate.screened_only), None)
+    base2 = ModelSpec(second_eff.structure(cal.fit.spec.structure), dict(cal.fit.spec.params), dict(cal.fit.spec.effects))
+    start2 = [f.at(pair.calibrated.get(f.name, f.x0)) for f in cal.free] + [
+        next(p for p in best.free if p.name == ep.name) for ep in second_eff.params]
+    r2 = fit(pb.obj, base2, start2, max_nfev=POLISH_NFEV, progress=pb.tick)
+    chi2_alone = min(r2.chi2, alone.candidate.chi2) if alone is not None else r2.chi2
+    k2 = len(cal.free) + len(second_eff.params) + pb.n_offsets
+    out.over_second_alone = (chi2_alone + k2 * pb.ln_n) - pair.bic
+    explains = _explains(pb, pair)
+    out.heldout_rms = pair.heldout_rms = heldout.rms(best.base, best.free)
+    improves = not (_finite(out.heldout_rms) and _finite(first.heldout_rms) and out.heldout_rms > first.heldout_rms)
+    total = cal.fit.chi2 - pair.chi2
+    if total > 0:
+        out.shares = {first.effect: max(cal.fit.chi2 - r1.chi2, 0.0) / total,
+                      pair.effect: max(r1.chi2 - pair.chi2, 0.0) / total}
+    sigma = pb.sigma
+    if not explains:
+        out.reason = (f"{pair.effect} beside {first.effect} improves BIC by {pair.delta_bic:.0f} but leaves a "
+                      f"systematic residual (RMS {pair.rms_after / sigma:.2f} x noise, whiteness z = "
+                      f"{pair.whiteness_z:.1f})")
+    elif not improves:
+        out.reason = (f"{pair.effect} beside {first.effect} leaves noise but does not predict the held-out "
+                      f"experiment better ({first.heldout_rms * 1e9:.2f} → {out.heldout_rms * 1e9:.2f} nm)")
+    elif out.over_second_alone < BIC_THRESHOLD:
+        out.reason = (f"{pair.effect} alone explains nearly as much as with {first.effect} (ΔBIC "
+                      f"{out.over_second_alone:.0f} < {BIC_THRESHOLD:g}): {first.effect} does not pay its own way")
+    else:
+        out.named = True
+        share = ", ".join(f"{k} {100 * v:.0f} %" for k, v in out.shares.items())
+        out.reason = (f"two effects: {first.effect} and {pair.effect}. With both the residual is noise (RMS "
+                      f"{pair.rms_after / sigma:.2f} x noise); {pair.effect} improves BIC by {pair.delta_bic:.0f} "
+                      f"over {first.effect} alone (which left RMS {first.rms_after / sigma:.2f} x noise, whiteness "
+                      f"z = {first.whiteness_z:.1f}), the pair beats {pair.effect} alone by ΔBIC "
+                      f"{out.over_second_alone:.0f}, and the held-out experiment is predicted better "
+                      f"({first.heldout_rms * 1e9:.2f} → {out.heldout_rms * 1e9:.2f} nm); share of the improvement: "
+                      f"{share}")
+    return out
 
 
 def _leaves_noise(pb: _Problem, cal: _Calibration) -> bool:
@@ -662,28 +789,68 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
     spans = merge_windows(windows, pb.sigma)
 
     verdict, reason, rms_after = _verdict(ranking, cal, noise, ho_cal, searched_wide)
+    second: Optional[SecondSearch] = None
+    lead = _partial_leader(pb, refits) if verdict in ("unexplained", "not_converged") else None
+    if lead is not None:
+        # one effect stands but leaves a systematic residual: a second one, from the model with it
+        run.stage = "the second effect"
+        second = _second_effect(pb, cal, lead, heldout, refits)
+        if second.named and second.pair is not None:
+            verdict, reason, rms_after = f"{lead.candidate.effect}+{second.pair.effect}", second.reason, \
+                second.pair.rms_after
+        else:
+            reason += f"; second effect: {second.reason}"
+        clock.lap("second effect")
     found: Optional[Discovery] = None
     if discover and verdict == "unexplained":
-        # beyond the catalogue: only where every catalogue effect left a systematic residual
+        # beyond the catalogue: only where every catalogue effect left a systematic residual;
+        # from the model with the first effect when one stands (what it leaves is what is missing)
         run.stage = "discovery"
         if not _finite(ho_cal):
             ho_cal = heldout.rms(cal.fit.spec, cal.at)
+        if lead is not None:
+            d_spec = apply(lead.base, lead.free, np.zeros(len(lead.free)))
+            d_free, d_ho = list(lead.free), lead.candidate.heldout_rms
+        else:
+            d_spec, d_free, d_ho = cal.fit.spec, cal.at, ho_cal
         try:
-            found = run_discovery(rec, cal.fit.spec, cal.at, pb.obj, heldout, ho_cal, nominal=nominal.spec,
+            found = run_discovery(rec, d_spec, d_free, pb.obj, heldout, d_ho, nominal=nominal.spec,
                                   progress=pb.tick)
-        except (DivergenceError, np.linalg.LinAlgError) as e:
+        except DivergenceError as e:
             # a model the simulator cannot run through the inferred force: no discovery, said so
-            reason += f"; discovery stopped: {e}"
+            reason += f"; discovery stopped: the simulator could not follow the inferred force ({e})"
+        except (np.linalg.LinAlgError, NumericalFailure) as e:
+            reason += f"; discovery stopped by a numerical failure, which says nothing about the physics: {e}"
         else:
             if found.discovered:
                 verdict, reason, rms_after = "discovered", found.reason, found.rms_after
+                if lead is not None:
+                    without, r0, lib = _without_lead(pb, cal, lead, found)
+                    if without >= BIC_THRESHOLD:
+                        verdict = f"{lead.candidate.effect}+discovered"
+                        reason = (f"{lead.candidate.effect} stands but leaves a systematic residual; beyond it, "
+                                  f"{reason}; {lead.candidate.effect} pays its own way beside the found term "
+                                  f"(ΔBIC {without:.0f} against the term alone)")
+                    else:
+                        # the term alone is the answer: its own refit from the calibrated null
+                        found.refit, found.rms_after = r0, r0.rms
+                        found.values = {f.name: (r0.values[f.name], r0.std.get(f.name)) for f in lib}
+                        found.delta_bic = cal.fit.chi2 - r0.chi2 - len(lib) * pb.ln_n
+                        rms_after = r0.rms
+                        reason = (f"{reason} (found from the model with {lead.candidate.effect}, which is not needed "
+                                  f"beside it: ΔBIC {without:.0f} < {BIC_THRESHOLD:g} against the term alone, "
+                                  f"refitted from the calibrated model: RMS {r0.rms / pb.sigma:.2f} x noise)")
             else:
                 reason += f"; discovery: {found.reason}"
         clock.lap("discovery")
     degenerate = near_degenerate(list(screened.values()))
     alternatives = _alternatives(ranking, verdict, degenerate)
+    proposal: Optional[Proposal] = None
     if alternatives:
         reason += "; cannot be told apart from " + ", ".join(f"{a.effect} ({a.why})" for a in alternatives)
+        run.stage = "the next experiment"
+        proposal = _next_experiment(pb, refits, verdict, alternatives[0].effect)
+        clock.lap("next experiment")
     n_all = pb.obj.n
     return Diagnosis(
         case=rec.name, verdict=verdict, reason=reason, ranking=ranking, noise=noise,
@@ -700,7 +867,7 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
         screening={k: v.delta_chi2 for k, v in sorted(screened.items(), key=lambda kv: -kv[1].delta_chi2)},
         degenerate_pairs=[list(p) for p in degenerate], searched_wide=searched_wide,
         calibration_multistart=cal.search.multistart.to_dict() if cal.search.multistart is not None else {},
-        discovery=found,
+        discovery=found, second=second, proposal=proposal,
     )
 
 

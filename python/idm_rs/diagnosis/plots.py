@@ -33,7 +33,8 @@ def _safe(name: str) -> str:
 
 def refit_candidate(d: Diagnosis) -> Optional[Candidate]:
     """The candidate the plots show as the refitted model: the verdict's, when it names an effect."""
-    return next((c for c in d.ranking if c.effect == d.verdict and c.spec is not None), None)
+    c = d.verdict_candidate
+    return c if c is not None and c.spec is not None else None
 
 
 #: fewest samples of rest before the drive that pin the sensor offset on their own
@@ -99,7 +100,7 @@ def report_residuals(d: Diagnosis, j: int) -> tuple[np.ndarray, np.ndarray]:
 def _discovered_refit(d: Diagnosis):
     """The refit of a discovered term (verdict "discovered"), else None."""
     f = getattr(d, "discovery", None)
-    return f.refit if d.verdict == "discovered" and f is not None and f.refit is not None else None
+    return f.refit if d.verdict.endswith("discovered") and f is not None and f.refit is not None else None
 
 
 def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:

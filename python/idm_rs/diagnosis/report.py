@@ -106,15 +106,34 @@ def refit_model_line(d: Diagnosis) -> str:
     base = f"{nom.model.upper()}" + (f" (n = {nom.n_elements})" if nom.model == "dps" else "")
     base += ", piezo hysteresis" if nom.piezo_hysteresis else ""
     eq = "m1 x1'' = Fpe(V, x1 - x2, x1' - x2') - Ff(x1', g, Fh)"
-    cand = next((c for c in d.ranking if c.effect == d.verdict), None)
+    cand = d.verdict_candidate
     found = getattr(d, "discovery", None)
-    if d.verdict == "discovered" and found is not None:
+    sec = getattr(d, "second", None)
+    if sec is not None and sec.named and sec.pair is not None:
+        first = by_id(sec.first.effect)
+        term = f"{sec.first.effect}({first_effect_params(d)}) + {sec.pair.effect}({format_params(sec.pair)})"
+        return f"{eq} + {term}   [{base}, calibrated; {first.term}; {by_id(sec.pair.effect).term}]"
+    if d.verdict.endswith("discovered") and found is not None:
         return f"{eq} + [{found.equation}]   [{base}, calibrated; a library force found in the data]"
     if cand is None:
         tail = "nothing added" if d.verdict == "none" else "missing term not in the catalogue (unexplained)"
         return f"{eq}   [{base}, calibrated; {tail}]"
     term = f"{cand.effect}({format_params(cand)})" if candidate_params(cand) else cand.effect
     return f"{eq} + {term}   [{base}, calibrated; {by_id(cand.effect).term}]"
+
+
+def first_effect_params(d: Diagnosis) -> str:
+    """The first effect of a two-effect verdict with its parameters as refitted beside the second
+    (they move when the second is added)."""
+    sec = d.second
+    assert sec is not None and sec.pair is not None and sec.pair.spec is not None
+    spec = sec.pair.spec
+    items = []
+    for ep in by_id(sec.first.effect).params:
+        v = spec.effects.get(ep.name, spec.params.get(ep.name))
+        if v is not None:
+            items.append(f"{ep.name} = {float(v):.4g} {ep.unit}".rstrip())
+    return ", ".join(items) or "structure"
 
 
 def _table(headers: Sequence[str], rows: Sequence[Sequence[str]], align: str) -> list[str]:
@@ -140,7 +159,8 @@ def plain_summary(d: Diagnosis) -> list[str]:
     numbers behind each sentence follow in the report."""
     sigma = d.noise.sigma
     ratio = lambda x: x / sigma if sigma > 0 else math.nan  # noqa: E731
-    best = next((c for c in d.ranking if c.effect == d.verdict), None)
+    best = d.verdict_candidate
+    sec = getattr(d, "second", None)
     p_meta = d.recording.nominal.params.to_dict(resolved=False)
     moved = sorted(((n, v / p_meta[n] - 1.0) for n, v in d.calibrated.items()
                     if _finite(p_meta.get(n)) and p_meta[n]), key=lambda kv: -abs(kv[1]))
@@ -148,7 +168,19 @@ def plain_summary(d: Diagnosis) -> list[str]:
     where = next((l for l in d.locations if l.systematic), None)
     alts = getattr(d, "alternatives", []) or []
     lines = ["In plain words"]
-    if best is not None:
+    if sec is not None and sec.named and best is not None:
+        share = " and ".join(f"{k} {100 * v:.0f} %" for k, v in sec.shares.items())
+        lines.append(f"  Found: two effects the nominal model lacks — {sec.first.description} "
+                     f"({first_effect_params(d)}), and {best.description} ({format_params(best)}). With both added "
+                     f"and the nominal values re-fitted, the model matches the recordings to "
+                     f"{ratio(best.rms_after):.2f} × their noise, against {ratio(sec.first.rms_after):.2f} × with "
+                     f"the first alone and {ratio(d.rms_calibrated):.2f} × with neither (share of the improvement: "
+                     f"{share}).")
+        lines.append(f"  How sure: {_evidence(best.delta_bic)} evidence for the second beside the first (ΔBIC "
+                     f"{best.delta_bic:.0f}) and for the first beside the second (ΔBIC {sec.over_second_alone:.0f}); "
+                     f"the pair predicts an experiment it was not fitted to at {ratio(sec.heldout_rms):.2f} × noise.")
+        lines.append("  What to do: add both effects to your model with the fitted values (the refit model below).")
+    elif best is not None:
         params = format_params(best)
         lines.append(f"  Found: {best.description}"
                      + (f" ({params})" if params not in ("–", "(structure only)") else "")
@@ -162,9 +194,18 @@ def plain_summary(d: Diagnosis) -> list[str]:
         if alts:
             sure += (f". But {', '.join(a.effect for a in alts)} explain{'s' if len(alts) == 1 else ''} these "
                      "recordings about as well: the data cannot tell them apart")
+        weak = [p for p in getattr(best, "identifiability", []) if not p.determined]
+        if weak:
+            sure += (". These experiments do not determine " + ", ".join(
+                f"{p.name} (95 % interval {p.low:.3g} to {p.high:.3g}"
+                + (f", traded off against {p.partner}" if p.partner else "") + ")" for p in weak)
+                + ": the values printed are one point of that range")
         lines.append(sure + ".")
         todo = "  What to do: add this effect to your model with the fitted values (the refit model below)"
-        if alts:
+        prop = getattr(d, "proposal", None)
+        if prop is not None:
+            todo += "; " + prop.words() + ", and diagnose again with it added"
+        elif alts:
             todo += ("; to decide between it and the alternative, record experiments that excite them differently "
                      "(the other drive direction, another amplitude or frequency)")
         lines.append(todo + ".")
@@ -177,7 +218,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
                         if top is not None and _finite(top.delta_bic) else "") + ".")
         lines.append("  What to do: use the re-fitted values below; where one moved far from meta.json, check that "
                      "setting of the device.")
-    elif d.verdict == "discovered" and getattr(d, "discovery", None) is not None:
+    elif d.verdict.endswith("discovered") and getattr(d, "discovery", None) is not None:
         f = d.discovery
         lines.append(f"  Found: physics the catalogue does not list — {f.description}. Inferred from the data as a "
                      f"force on the {'main body' if f.body == 'main' else 'weight'}, its form found in a library of "
@@ -231,9 +272,14 @@ def text_report(d: Diagnosis) -> str:
     lines.append(f"  {d.reason}")
     for a in getattr(d, "alternatives", []) or []:
         lines.append(f"  ALTERNATIVE: {a.effect} (ΔBIC {a.delta_bic:.0f}): {a.why}")
+    prop = getattr(d, "proposal", None)
+    if prop is not None:
+        top = ", ".join(f"{dr.direction} {dr.amplitude_V:.0f} V {dr.frequency_Hz:.0f} Hz: {s:.0f}"
+                        for dr, s in prop.scored[:4])
+        lines.append(f"  NEXT EXPERIMENT: {prop.words()}. Expected ΔBIC of the best drives tried: {top}")
 
     # --- the RMS story
-    best = next((c for c in d.ranking if c.effect == d.verdict), None)
+    best = d.verdict_candidate
     lines += ["", "Residual RMS (a position offset fitted per drive-cycle segment: multiple shooting by translation)"]
     rows = [
         [f"noise floor ({getattr(d.noise, 'source', 'rest')})", _nm(sigma), "1.00 ×",
@@ -243,13 +289,14 @@ def text_report(d: Diagnosis) -> str:
         ["calibrated nominal", _nm(d.rms_calibrated), _ratio(d.rms_calibrated, sigma),
          f"whiteness z = {d.whiteness_z_calibrated:.1f}"],
     ]
+    label = d.verdict.replace("+", " + ") if "+" in d.verdict and best is not None else (best.effect if best else "")
     if best is not None:
-        rows.append([f"with {best.effect}", _nm(best.rms_after), _ratio(best.rms_after, sigma),
+        rows.append([f"with {label}", _nm(best.rms_after), _ratio(best.rms_after, sigma),
                      f"whiteness z = {best.whiteness_z:.1f}" if _finite(best.whiteness_z) else ""])
     rows.append([f"held-out {d.heldout_experiment}: calibrated", _nm(d.heldout_rms_calibrated),
                  _ratio(d.heldout_rms_calibrated, sigma), "fitted on the other experiments"])
     if best is not None and _finite(best.heldout_rms):
-        rows.append([f"held-out {d.heldout_experiment}: with {best.effect}", _nm(best.heldout_rms),
+        rows.append([f"held-out {d.heldout_experiment}: with {label}", _nm(best.heldout_rms),
                      _ratio(best.heldout_rms, sigma), ""])
     lines += _table(["model", "RMS", "/ noise", "note"], rows, "lrrl")
 
@@ -351,8 +398,38 @@ def text_report(d: Diagnosis) -> str:
                          f"{found.heldout_experiment}: {_nm(found.heldout_rms_before)} → {_nm(found.heldout_rms_after)}")
         lines.append(f"  {'DISCOVERED' if found.discovered else 'not discovered'}: {found.reason}")
 
+    sec = getattr(d, "second", None)
+    if sec is not None:
+        lines += ["", f"A second effect, searched from the model with {sec.first.effect} (which left RMS "
+                      f"{_ratio(sec.first.rms_after, sigma)}, whiteness z = {sec.first.whiteness_z:.1f})"]
+        rows = [[c.effect, format_params(c), _ratio(c.rms_after, sigma),
+                 f"{c.delta_bic:.1f}" if c.delta_bic >= 0 else "not supported", c.fit_label] for c in sec.ranking]
+        if rows:
+            lines += _table(["effect (beside the first)", "fitted parameters (±1σ)", "RMS / noise",
+                             "ΔBIC over the first alone", "fit"], rows, "llrrl")
+        if sec.shares:
+            lines.append("  share of the improvement over the calibrated null: "
+                         + ", ".join(f"{k} {100 * v:.0f} %" for k, v in sec.shares.items()))
+        lines.append(f"  {'BOTH NAMED' if sec.named else 'no second effect named'}: {sec.reason}")
+
+    lines += _identifiability_lines(d)
     lines += ["", "Refit model:", "  " + refit_model_line(d)]
     return "\n".join(lines) + "\n"
+
+
+def _identifiability_lines(d: Diagnosis) -> list[str]:
+    """What the experiments determine of the verdict's refit (Fisher matrix: 95 % intervals)."""
+    c = d.verdict_candidate
+    statuses = list(getattr(c, "identifiability", []) or []) if c is not None else []
+    if not statuses:
+        return []
+    out = ["", "What these experiments determine (refit model; 95 % intervals from the Fisher matrix)"]
+    out += ["  " + p.words(_unit(p.name)) for p in statuses]
+    weak = [p.name for p in statuses if not p.determined]
+    out.append("  all determined" if not weak else
+               f"  not determined: {', '.join(weak)} — their values are one point of a range the data allow; "
+               "an experiment that excites them differently would narrow it")
+    return out
 
 
 def json_safe(obj: object) -> object:

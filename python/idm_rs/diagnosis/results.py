@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from ..recording import Recording
 from .case_model import CaseSimulator, ModelSpec
+from .identifiability import ParamStatus
 from .locate import Location
 from .noise import NoiseEstimate
 
@@ -22,6 +23,7 @@ from .thresholds import LR_ALPHA
 
 if TYPE_CHECKING:
     from .discovery import Discovery
+    from .next_experiment import Proposal
 
 
 @dataclass
@@ -58,6 +60,8 @@ class Candidate:
 
     #: likelihood ratio against the null model it contains: null chi^2 minus this fit's chi^2
     lr_chi2: float = math.nan
+    #: which fitted parameters (effect and calibrated) the experiments determine (Fisher matrix)
+    identifiability: list[ParamStatus] = field(default_factory=list, repr=False)
 
     @property
     def fit_label(self) -> str:
@@ -101,6 +105,7 @@ class Candidate:
             "likelihood_ratio_chi2": None if math.isnan(self.lr_chi2) else self.lr_chi2,
             "score": None if math.isnan(self.score) else self.score,
             "multistart": self.multistart,
+            "identifiability": [p.to_dict() for p in self.identifiability],
         }
 
 
@@ -114,6 +119,39 @@ class Alternative:
 
     def to_dict(self) -> dict[str, Any]:
         return {"effect": self.effect, "delta_bic": self.delta_bic, "why": self.why}
+
+
+@dataclass
+class SecondSearch:
+    """The search for a second effect from the model with the first (the leader that is
+    supported but leaves a systematic residual)."""
+
+    first: Candidate  #: the first effect, as fitted in the first round
+    pair: Optional[Candidate] = None  #: the best second effect fitted with the first (its spec holds both)
+    named: bool = False  #: both effects stand: the verdict names them
+    reason: str = ""
+    #: each effect's share of the chi^2 the pair removes from the calibrated null (sums to 1)
+    shares: dict[str, float] = field(default_factory=dict)
+    #: the pair's held-out RMS [m], and the first effect's alone
+    heldout_rms: float = math.nan
+    first_heldout_rms: float = math.nan
+    #: ΔBIC of the pair over each effect alone (each must pay its own way)
+    over_first: float = math.nan
+    over_second_alone: float = math.nan
+    ranking: list[Candidate] = field(default_factory=list)  #: the second round's candidates (with the first)
+    #: the pair's free parameters at its optimum and its model before them (for a refit)
+    free: list[Any] = field(default_factory=list, repr=False)
+    base: Optional[ModelSpec] = field(default=None, repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "first": self.first.effect, "second": self.pair.effect if self.pair else None, "named": self.named,
+            "reason": self.reason, "shares": self.shares, "heldout_rms": self.heldout_rms,
+            "first_heldout_rms": self.first_heldout_rms, "delta_bic_over_first": self.over_first,
+            "delta_bic_over_second_alone": self.over_second_alone,
+            "pair": self.pair.to_dict() if self.pair else None,
+            "ranking": [c.to_dict() for c in self.ranking],
+        }
 
 
 @dataclass
@@ -175,10 +213,30 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
     #: discovery beyond the catalogue (run when no catalogue effect explained the residual):
     #: verdict "discovered" when its found term stood; None when it did not run
     discovery: Optional["Discovery"] = None
+    #: the search for a second effect (run when one effect stood but left a systematic
+    #: residual); verdict "first+second" when both stood
+    second: Optional[SecondSearch] = None
+    #: the drive that would best tell the verdict from its near-parallel alternative (None when
+    #: there is none)
+    proposal: Optional["Proposal"] = None
 
     @property
     def best(self) -> Optional[Candidate]:
         return self.ranking[0] if self.ranking else None
+
+    @property
+    def effects(self) -> list[str]:
+        """The catalogue effects the verdict names (none, one, or two for "first+second")."""
+        ids = {c.effect for c in self.ranking}
+        return [v for v in self.verdict.split("+") if v in ids]
+
+    @property
+    def verdict_candidate(self) -> Optional[Candidate]:
+        """The fitted model of the verdict: the named effect's candidate, or for two effects the
+        second's fitted with the first (its spec holds both); None otherwise."""
+        if "+" in self.verdict and self.second is not None and self.second.named:
+            return self.second.pair
+        return next((c for c in self.ranking if c.effect == self.verdict), None)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -210,6 +268,9 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
             "degenerate_pairs": self.degenerate_pairs,
             "searched_wide": self.searched_wide,
             "discovery": self.discovery.to_dict() if self.discovery is not None else None,
+            "effects": self.effects,
+            "second_effect": self.second.to_dict() if self.second is not None else None,
+            "next_experiment": self.proposal.to_dict() if self.proposal is not None else None,
         }
 
     def report(self) -> str:

@@ -1,0 +1,162 @@
+"""The next experiment: the drive a lab can run that best tells two look-alike models apart.
+
+When the verdict has a near-parallel alternative (two effects that explain the recordings
+about equally well), each sawtooth drive of a grid within the rig's limits (the recorded
+amplitudes at most, frequencies within a factor 2 of the recorded ones, both directions, the
+recorded edge and rest) is scored by the **expected ΔBIC** it would add between the two models
+at their fitted values: the difference of their predicted readings (each segment's offset
+removed, as the diagnosis compares them), less what the other model's fitted parameters could
+absorb by refitting (its exact Jacobian on that experiment, to first order), in noise units
+— taken both ways (either may be the truth) and the smaller kept. The drive with the largest
+score is proposed, with that figure and the same figure for the recordings already made.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any, Optional, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..recording import Experiment, Recording
+from .case_model import FIT_DT, CaseSimulator, ModelSpec
+from .fitting import FreeParam, Objective
+
+#: multiples of the largest recorded amplitude tried (a lab's amplifier reached the largest)
+AMPLITUDE_SHARES = (0.5, 0.75, 1.0)
+#: frequencies tried [Hz]: these within [FREQUENCY_SPAN^-1 x lowest, FREQUENCY_SPAN x highest]
+#: recorded, and the recorded ones themselves
+FREQUENCIES = (25.0, 50.0, 100.0, 200.0, 400.0)
+FREQUENCY_SPAN = 2.0
+#: drive cycles of a proposed experiment
+CYCLES = 4
+
+
+@dataclass(frozen=True)
+class Drive:
+    """A sawtooth experiment a lab can run."""
+
+    direction: str
+    amplitude_V: float
+    frequency_Hz: float
+    cycles: int
+    edge_s: float
+    rest_s: float
+
+    def words(self) -> str:
+        return (f"{self.direction} sawtooth, {self.amplitude_V:.0f} V, {self.frequency_Hz:.0f} Hz, {self.cycles} "
+                f"cycles, {self.edge_s * 1e3:.2g} ms edge, {self.rest_s * 1e3:.2g} ms rest")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"waveform": "sawtooth", "direction": self.direction, "amplitude_V": self.amplitude_V,
+                "frequency_Hz": self.frequency_Hz, "cycles": self.cycles, "edge_s": self.edge_s,
+                "rest_s": self.rest_s}
+
+
+@dataclass
+class Proposal:
+    """The proposed drive and its predicted effect."""
+
+    purpose: str  #: e.g. "tell incline from friction_asymmetry"
+    models: tuple[str, str]
+    drive: Drive
+    predicted_delta_bic: float  #: expected ΔBIC between the two models from this drive alone
+    recorded_delta_bic: float  #: the same figure for the recordings already made
+    scored: list[tuple[Drive, float]] = field(default_factory=list, repr=False)  #: every drive tried
+
+    def words(self) -> str:
+        return (f"to {self.purpose}, record a {self.drive.words()}: it is predicted to separate them by ΔBIC "
+                f"≈ {self.predicted_delta_bic:.0f} on its own (the recordings so far: {self.recorded_delta_bic:.0f}; "
+                f"10 is very strong evidence)")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"purpose": self.purpose, "models": list(self.models), "drive": self.drive.to_dict(),
+                "predicted_delta_bic": self.predicted_delta_bic, "recorded_delta_bic": self.recorded_delta_bic,
+                "scored": [dict(d.to_dict(), delta_bic=s) for d, s in self.scored]}
+
+
+def drives(rec: Recording, cycles: int = CYCLES) -> list[Drive]:
+    """The sawtooth drives within the rig's limits (module docstring)."""
+    saw = [e for e in rec.experiments if not e.is_sampled]
+    if not saw:
+        return []
+    a_max = max(e.amplitude_V for e in saw)
+    f_lo = min(e.frequency_Hz for e in saw) / FREQUENCY_SPAN
+    f_hi = max(e.frequency_Hz for e in saw) * FREQUENCY_SPAN
+    freqs = sorted({f for f in FREQUENCIES if f_lo <= f <= f_hi} | {e.frequency_Hz for e in saw})
+    edge = min(e.edge_s for e in saw)
+    rest = max(e.rest_s for e in saw)
+    out = []
+    for direction in ("forward", "backward"):
+        for share in AMPLITUDE_SHARES:
+            for f in freqs:
+                if edge >= 0.5 / f:
+                    continue  # the edge must fit in the period
+                out.append(Drive(direction, round(share * a_max, 1), f, cycles, edge, rest))
+    return out
+
+
+def virtual_recording(rec: Recording, drive_list: Sequence[Drive]) -> Recording:
+    """`rec`'s device and sensor with the experiments `drive_list` (readings all zero: only
+    their times and drives are used)."""
+    step = rec.sample_step
+    exps = []
+    for i, d in enumerate(drive_list):
+        duration = d.rest_s + d.cycles / d.frequency_Hz
+        n = int(round(duration / step)) + 1
+        t = np.arange(n) * step
+        name = f"proposed{i + 1}_{d.direction}_{d.amplitude_V:g}V_{d.frequency_Hz:g}Hz.csv"
+        exps.append(Experiment(name, rec.path / name, d.amplitude_V, d.frequency_Hz, d.direction, d.cycles, d.rest_s,
+                               d.edge_s, t, np.zeros(n), np.zeros(n)))
+    return replace(rec, experiments=exps)
+
+
+def _unabsorbed(obj: Objective, diff: NDArray[np.float64], spec: ModelSpec, free: Sequence[FreeParam]) -> float:
+    """||diff - J u*||^2 with u* the least-squares step of `free` at `spec` (noise units)."""
+    if not free:
+        return float(diff @ diff)
+    _, J, _ = obj.jacobian(spec, free, np.zeros(len(free)))
+    ok = np.all(np.isfinite(J), axis=0)
+    J = J[:, ok]
+    if J.shape[1] == 0:
+        return float(diff @ diff)
+    u = np.linalg.lstsq(J, diff, rcond=None)[0]
+    r = diff - J @ u
+    return float(r @ r)
+
+
+def separation(rec: Recording, sigma: float, a: tuple[ModelSpec, Sequence[FreeParam]],
+               b: tuple[ModelSpec, Sequence[FreeParam]], dt: float = FIT_DT) -> float:
+    """Expected ΔBIC (chi^2 units) between models a and b on `rec`'s experiments: the
+    offset-profiled difference of their predictions less what each one's parameters absorb,
+    the smaller of the two ways."""
+    sim = CaseSimulator(rec, dt=dt)
+    obj = Objective(rec, sim, sigma)
+    pa, pb = obj.predict([a[0], b[0]])
+    ra = np.concatenate(obj.profiled(pa)[0]) / sigma
+    rb = np.concatenate(obj.profiled(pb)[0]) / sigma
+    if not (np.all(np.isfinite(ra)) and np.all(np.isfinite(rb))):
+        return math.nan
+    diff = ra - rb
+    # residual of "data = a" under b refitted, and of "data = b" under a refitted: the
+    # residual vector's Jacobian is minus the prediction's, so the sign of diff is immaterial
+    return min(_unabsorbed(obj, diff, b[0], b[1]), _unabsorbed(obj, -diff, a[0], a[1]))
+
+
+def propose(rec: Recording, sigma: float, names: tuple[str, str], a: tuple[ModelSpec, Sequence[FreeParam]],
+            b: tuple[ModelSpec, Sequence[FreeParam]], dt: float = FIT_DT) -> Optional[Proposal]:
+    """The drive (of :func:`drives`) that best separates models `a` and `b` (their names in
+    `names`), or None when the recording has no sawtooth drive to take the rig's limits from."""
+    grid = drives(rec)
+    if not grid:
+        return None
+    scored = []
+    for d in grid:
+        s = separation(virtual_recording(rec, [d]), sigma, a, b, dt)
+        scored.append((d, s if math.isfinite(s) else -math.inf))
+    scored.sort(key=lambda x: -x[1])
+    recorded = separation(rec, sigma, a, b, dt)
+    best, score = scored[0]
+    return Proposal(f"tell {names[0]} from {names[1]}", names, best, score, recorded, scored)
