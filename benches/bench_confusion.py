@@ -131,13 +131,74 @@ def _spec_params(p: Any) -> dict[str, Any]:
     return p.to_dict(resolved=False)
 
 
+def _tuned(effect: str, device: str, target: float, noise: float) -> tuple[float, float]:
+    """(magnitude, size reached): the effect's magnitude whose signal, after a linearised refit of
+    the calibrated subset, has RMS `target` x `noise` on the EXPERIMENTS of `device` (secant in
+    log space, within half its fit bounds); (nan, nan) for pe_mass (a structure)."""
+    from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
+    from idm_rs.diagnosis.catalogue import CALIBRATION_SCALE, by_id
+    from idm_rs.diagnosis.fitting import FreeParam, Objective, set_param
+    from idm_rs.recording import load_case
+    from idm_rs.synthetic import make_case
+
+    if effect == "pe_mass":
+        return math.nan, math.nan
+    name, _, guess = MAGNITUDE[effect]
+    # a noise-free null recording of the same experiments, to simulate sizes on
+    with tempfile.TemporaryDirectory() as tmp:
+        null_p, _, model, _ = _true_device(effect, 0.0, device)
+        if effect == "stribeck":
+            null_p = null_p.replace(mu_s=null_p.mu_k)
+        make_case(Path(tmp) / "n", nominal_params=null_p.replace(normal_force=null_p.effective_normal_force),
+                  model=model, experiments=EXPERIMENTS, noise_rms=0.0, resolution=0.0, seed=0, dt=2e-7)
+        rec = load_case(Path(tmp) / "n")
+    sim = CaseSimulator(rec)
+    obj = Objective(rec, sim, noise)
+    spec = ModelSpec(Structure(model, 4 if model == "dps" else 1, False), _spec_params(null_p), {})
+    free = [FreeParam(n, float(getattr(null_p, n)), 0.6 * getattr(null_p, n), 1.5 * getattr(null_p, n),
+                      CALIBRATION_SCALE * getattr(null_p, n), set_param(n)) for n in CALIBRATED]
+    _, J, _ = obj.jacobian(spec, free, np.zeros(len(free)))
+    Q, _ = np.linalg.qr(J)
+    ep = next(p for p in by_id(effect).params if p.name == name)
+    # within the diagnosis's fit bounds (an effect it could not fit says nothing), and within
+    # half of them: a size that needs more is reported at that magnitude, not reached
+    cap = 0.5 * max(abs(ep.lower), abs(ep.upper))
+    magnitude, size = guess, math.nan
+    for _ in range(6):  # secant in log space on size(magnitude) = target
+        size = _size(effect, magnitude, device, sim, obj, Q)
+        if not math.isfinite(size) or size <= 0 or abs(size / target - 1) < 0.05:
+            break
+        new = magnitude * min(max(target / size, 0.1), 10.0)
+        new = math.copysign(min(abs(new), cap), new)
+        if new == magnitude:
+            break  # capped: the size stays below the target
+        magnitude = new
+        size = math.nan
+    if not math.isfinite(size):
+        size = _size(effect, magnitude, device, sim, obj, Q)
+    return magnitude, size
+
+
+def _nominal_of(effects: list[str], p: Any, true0: Any, given: dict[str, float]) -> Any:
+    """meta.json's parameters of a device whose true parameters are `p` with `effects`: the
+    effect's own parameter back at the nominal model's value (no Stribeck peak, the Table 1
+    hysteresis), then the mis-set values `given`."""
+    nominal = p
+    if "stribeck" in effects:
+        nominal = nominal.replace(mu_s=nominal.mu_k)
+    if "piezo_hysteresis" in effects:
+        nominal = nominal.replace(hyst_alpha=true0.hyst_alpha)
+    nominal = nominal.replace(**{k: v for k, v in given.items()})
+    if "mu_k" in given and "stribeck" not in effects:
+        nominal = nominal.replace(mu_k=min(given["mu_k"], 0.99 * p.mu_s))
+    if "stribeck" in effects and "mu_k" in given:
+        nominal = nominal.replace(mu_s=nominal.mu_k)
+    return nominal
+
+
 def effect_case(directory: Path, c: dict[str, Any], rng: np.random.Generator) -> dict[str, Any]:
     """Write one effect case with its size tuned; returns what was set."""
     import idm_rs
-    from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
-    from idm_rs.diagnosis.catalogue import CALIBRATION_SCALE
-    from idm_rs.diagnosis.fitting import FreeParam, Objective, set_param
-    from idm_rs.recording import load_case
     from idm_rs.synthetic import make_case
 
     effect, device = c["effect"], c["device"]
@@ -145,57 +206,15 @@ def effect_case(directory: Path, c: dict[str, Any], rng: np.random.Generator) ->
     seed = int(rng.integers(0, 2**31))
     true0 = idm_rs.Params()
     given, misset = _misset(true0, rng)
-    target = SIZES[c["size"]]
-    name, _, guess = MAGNITUDE.get(effect, ("", {}, 0.0))
-    magnitude, size = math.nan, math.nan
-    if effect != "pe_mass":
-        # a noise-free null recording of the same experiments, to simulate sizes on
-        with tempfile.TemporaryDirectory() as tmp:
-            null_p, _, model, _ = _true_device(effect, 0.0, device)
-            if effect == "stribeck":
-                null_p = null_p.replace(mu_s=null_p.mu_k)
-            make_case(Path(tmp) / "n", nominal_params=null_p.replace(normal_force=null_p.effective_normal_force),
-                      model=model, experiments=EXPERIMENTS, noise_rms=0.0, resolution=0.0, seed=0, dt=2e-7)
-            rec = load_case(Path(tmp) / "n")
-        sim = CaseSimulator(rec)
-        obj = Objective(rec, sim, noise)
-        spec = ModelSpec(Structure(model, 4 if model == "dps" else 1, False), _spec_params(null_p), {})
-        free = [FreeParam(n, float(getattr(null_p, n)), 0.6 * getattr(null_p, n), 1.5 * getattr(null_p, n),
-                          CALIBRATION_SCALE * getattr(null_p, n), set_param(n)) for n in CALIBRATED]
-        _, J, _ = obj.jacobian(spec, free, np.zeros(len(free)))
-        Q, _ = np.linalg.qr(J)
-        from idm_rs.diagnosis.catalogue import by_id
-
-        ep = next(p for p in by_id(effect).params if p.name == name)
-        # within the diagnosis's fit bounds (an effect it could not fit says nothing), and within
-        # half of them: a size that needs more is reported at that magnitude, not reached
-        cap = 0.5 * max(abs(ep.lower), abs(ep.upper))
-        magnitude = guess
-        for _ in range(6):  # secant in log space on size(magnitude) = target
-            size = _size(effect, magnitude, device, sim, obj, Q)
-            if not math.isfinite(size) or size <= 0 or abs(size / target - 1) < 0.05:
-                break
-            new = magnitude * min(max(target / size, 0.1), 10.0)
-            new = math.copysign(min(abs(new), cap), new)
-            if new == magnitude:
-                break  # capped: the size stays below the target
-            magnitude = new
-            size = math.nan
+    name = MAGNITUDE.get(effect, ("", {}, 0.0))[0]
+    magnitude, size = _tuned(effect, device, SIZES[c["size"]], noise)
     p, eff, model, nominal_model = _true_device(effect, magnitude, device)
-    nominal = (p.replace(mu_s=p.mu_k) if effect == "stribeck" else p.replace(hyst_alpha=true0.hyst_alpha)
-               if effect == "piezo_hysteresis" else p)
-    nominal = nominal.replace(**{k: v for k, v in given.items()})
-    if "mu_k" in given and effect != "stribeck":
-        nominal = nominal.replace(mu_k=min(given["mu_k"], 0.99 * p.mu_s))
-    if effect == "stribeck" and "mu_k" in given:
-        nominal = nominal.replace(mu_s=nominal.mu_k)
+    nominal = _nominal_of([effect], p, true0, given)
     true = p.replace(normal_force=p.effective_normal_force)
     make_case(directory, nominal_params=nominal.replace(normal_force=true.normal_force), true_params=true,
               model=nominal_model, n_elements=4, piezo_hysteresis=False, true_model=model,
               true_piezo_hysteresis=effect == "piezo_hysteresis", effects=eff, experiments=EXPERIMENTS,
               noise_rms=noise, seed=seed, dt=2e-8)
-    if effect != "pe_mass" and not math.isfinite(size):
-        size = _size(effect, magnitude, device, sim, obj, Q)
     return {"misset": misset, "magnitude": {name: magnitude} if name else {}, "size_after_refit": size,
             "noise_rms": noise}
 

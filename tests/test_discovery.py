@@ -211,3 +211,38 @@ def test_the_whole_diagnosis_discovers_off_catalogue_physics(tmp_path):
     assert found >= 3
     healthy = idm_rs.diagnose(make_offcatalogue_case("none", tmp_path / "none", seed=1), progress=False)
     assert healthy.verdict == "none" and healthy.discovery is None
+
+
+def test_a_non_finite_or_rank_deficient_system_is_named_not_a_verdict():
+    """Discovery's linear algebra checks its inputs and names the step that failed (the SVD that
+    "did not converge" on a 5 um periodic device was a verdict before); dependent terms are
+    said to be dependent."""
+    from idm_rs.diagnosis.discovery import NumericalFailure, _cv_path, _lstsq
+
+    A = np.ones((6, 2))
+    A[2, 1] = np.nan
+    with pytest.raises(NumericalFailure, match="the form's coefficients: 1 of 12 entries of A"):
+        _lstsq(A, np.ones(6), "the form's coefficients")
+    with pytest.raises(NumericalFailure, match="library's effect on the readings"):
+        _cv_path([np.full((4, 2), np.inf)] * 2, [np.ones(4)] * 2, 2)
+    # two equal columns: least squares by QR with pivoting reports rank 1 (no SVD to fail)
+    x, rank = _lstsq(np.column_stack([np.arange(5.0), np.arange(5.0)]), np.arange(5.0), "dependent")
+    assert rank == 1 and np.allclose(np.column_stack([np.arange(5.0)] * 2) @ x, np.arange(5.0))
+
+
+def test_the_direct_regression_reads_the_residual_net_of_its_noise():
+    """The direct view's target is the residual itself (white noise in it): its cross-validated
+    error counts only what the form leaves of the systematic part, so a form that reproduces
+    the systematic part exactly scores ~0, not the noise's share."""
+    from idm_rs.diagnosis.discovery import _cv_path
+
+    rng = np.random.default_rng(5)
+    X, y = [], []
+    for _ in range(4):
+        x = rng.normal(size=(3000, 3))
+        X.append(x)
+        y.append(2.0 * x[:, 0] + rng.normal(size=3000))  # systematic energy 4 per sample, noise 1
+    plain, _ = _cv_path(X, y, 2)
+    net, supports = _cv_path(X, y, 2, noisy=True)
+    assert plain[1] == pytest.approx(0.2, abs=0.02)  # the noise's share of the energy
+    assert abs(net[1]) < 0.01 and list(supports[1]) == [0]

@@ -100,14 +100,20 @@ def _require_finite(stage: str, **arrays: NDArray[np.float64]) -> None:
             raise NumericalFailure(f"{stage}: {bad} of {a.size} entries of {name} {a.shape} are not finite")
 
 
-def _lstsq(A: NDArray[np.float64], b: NDArray[np.float64], stage: str) -> tuple[NDArray[np.float64], int]:
+#: relative size of a pivot below which a column counts as dependent on the others (the
+#: library's columns and the knots' bases; normal equations are solved at machine precision)
+RANK_TOLERANCE = 1e-12
+
+
+def _lstsq(A: NDArray[np.float64], b: NDArray[np.float64], stage: str, cond: Optional[float] = RANK_TOLERANCE
+           ) -> tuple[NDArray[np.float64], int]:
     """Least squares by QR with column pivoting (LAPACK gelsy: no SVD iteration that can fail to
-    converge), inputs checked finite; returns (solution, numerical rank)."""
+    converge), inputs checked finite; returns (solution, numerical rank at `cond`)."""
     import scipy.linalg
 
     _require_finite(stage, A=A, b=b)
     try:
-        x, _, rank, _ = scipy.linalg.lstsq(A, b, lapack_driver="gelsy")
+        x, _, rank, _ = scipy.linalg.lstsq(A, b, cond=cond, lapack_driver="gelsy")
     except (np.linalg.LinAlgError, ValueError) as e:
         raise NumericalFailure(f"{stage}: {e}") from e
     return x, int(rank)
@@ -591,7 +597,7 @@ def _gcv_solve(A: list[NDArray[np.float64]], b: list[NDArray[np.float64]], D: li
         try:
             sol = np.linalg.solve(K, np.column_stack([g, G]))
         except np.linalg.LinAlgError:
-            sol = _lstsq(K, np.column_stack([g, G]), "the inferred force's normal equations")[0]
+            sol = _lstsq(K, np.column_stack([g, G]), "the inferred force's normal equations", None)[0]
         x, tr = sol[:, 0], float(np.trace(sol[:, 1:]))
         if tr >= n:
             continue
@@ -609,7 +615,7 @@ def _gcv_solve(A: list[NDArray[np.float64]], b: list[NDArray[np.float64]], D: li
             floor[kt:] = float(np.mean(dg[kt:]))
         damp = mu * np.diag(dg + floor + 1e-300)
         x0 = np.concatenate(list(current) + ([u] if p else []))
-        x = _lstsq(G + best[1] * scale * P + damp, g + damp @ x0, "the inferred force's damped step")[0]
+        x = _lstsq(G + best[1] * scale * P + damp, g + damp @ x0, "the inferred force's damped step", None)[0]
     cs = np.split(x[:kt], np.cumsum(sizes)[:-1])
     return list(cs), x[kt:], best[1], best[3], best[4]
 
