@@ -33,9 +33,9 @@ def rec(tmp_path_factory):
 def test_the_drives_stay_within_the_rigs_limits(rec):
     grid = drives(rec)
     assert {d.direction for d in grid} == {"forward", "backward"}
-    assert max(d.amplitude_V for d in grid) == 80.0 and min(d.amplitude_V for d in grid) == 40.0
-    # frequencies within a factor 2 of the recorded 200 Hz, and the edge fits in the period
-    assert {d.frequency_Hz for d in grid} == {100.0, 200.0, 400.0}
+    assert max(d.amplitude_V for d in grid) == 80.0 and min(d.amplitude_V for d in grid) == 8.0
+    # frequencies within a factor 4 of the recorded 200 Hz, and the edge fits in the period
+    assert {d.frequency_Hz for d in grid} == {50.0, 100.0, 200.0, 400.0, 800.0}
     assert all(d.edge_s < 0.5 / d.frequency_Hz for d in grid)
     v = virtual_recording(rec, [Drive("backward", 60.0, 100.0, 4, 5e-4, 2e-3)])
     e = v.experiments[0]
@@ -60,3 +60,17 @@ def test_separation_is_zero_for_one_model_and_large_for_a_missing_spring(rec):
     assert raw > 1e3
     assert 0.0 < absorbed <= raw
     assert math.isfinite(absorbed)
+
+
+def test_separations_per_drive_are_one_batch_and_agree_with_one_at_a_time(rec):
+    from idm_rs.diagnosis.next_experiment import separations
+
+    nom = rec.nominal
+    p0 = nom.params.to_dict(resolved=False)
+    s = Structure(nom.model, nom.n_elements, nom.piezo_hysteresis)
+    a = (ModelSpec(s, p0, {"k_ground": 2e4}), [])
+    b = (ModelSpec(s, p0, {}), [])
+    grid = [Drive("forward", 80.0, 100.0, 2, 5e-4, 2e-3), Drive("backward", 40.0, 200.0, 2, 5e-4, 2e-3)]
+    both = separations(virtual_recording(rec, grid), 1.5e-9, a, b)
+    one = [separation(virtual_recording(rec, [g]), 1.5e-9, a, b) for g in grid]
+    assert both == pytest.approx(one, rel=1e-9)

@@ -24,12 +24,22 @@ from ..recording import Experiment, Recording
 from .case_model import FIT_DT, CaseSimulator, ModelSpec
 from .fitting import FreeParam, Objective
 
-#: multiples of the largest recorded amplitude tried (a lab's amplifier reached the largest)
-AMPLITUDE_SHARES = (0.5, 0.75, 1.0)
+#: multiples of the largest recorded amplitude tried (a lab's amplifier reached the largest;
+#: the smallest leave the body in presliding, where friction's shape shows)
+AMPLITUDE_SHARES = (0.1, 0.25, 0.5, 0.75, 1.0)
 #: frequencies tried [Hz]: these within [FREQUENCY_SPAN^-1 x lowest, FREQUENCY_SPAN x highest]
 #: recorded, and the recorded ones themselves
-FREQUENCIES = (25.0, 50.0, 100.0, 200.0, 400.0)
-FREQUENCY_SPAN = 2.0
+FREQUENCIES = (10.0, 25.0, 50.0, 100.0, 200.0, 400.0, 800.0)
+FREQUENCY_SPAN = 4.0
+#: a predicted ΔBIC below this separates nothing (the verdict's own threshold)
+SEPARATES = 10.0
+#: look-alikes no voltage drive can tell apart, and what can (physics, not a search result)
+NOT_BY_DRIVE: dict[tuple[str, str], str] = {
+    ("incline", "friction_asymmetry"): (
+        "they differ only while the main body is stuck (an incline loads the stuck contact, by "
+        "|m g sin(theta)| / fric_alpha, ~1e-13 m here); turn the rig around on the bench or tilt it by a known "
+        "angle: an incline changes with it, a direction-dependent friction does not"),
+}
 #: drive cycles of a proposed experiment
 CYCLES = 4
 
@@ -65,14 +75,27 @@ class Proposal:
     predicted_delta_bic: float  #: expected ΔBIC between the two models from this drive alone
     recorded_delta_bic: float  #: the same figure for the recordings already made
     scored: list[tuple[Drive, float]] = field(default_factory=list, repr=False)  #: every drive tried
+    #: what separates the pair where no drive does (physics), or ""
+    hint: str = ""
+
+    @property
+    def separates(self) -> bool:
+        """Whether the best drive is predicted to separate the pair (ΔBIC >= SEPARATES)."""
+        return self.predicted_delta_bic >= SEPARATES
 
     def words(self) -> str:
+        if not self.separates:
+            return (f"no drive within the rig's limits tells {self.models[0]} from {self.models[1]}: the best of "
+                    f"{len(self.scored)} tried ({self.drive.words()}) is predicted to separate them by ΔBIC "
+                    f"≈ {self.predicted_delta_bic:.1f} (10 would be very strong evidence; the recordings so far: "
+                    f"{self.recorded_delta_bic:.1f})" + (f"; {self.hint}" if self.hint else ""))
         return (f"to {self.purpose}, record a {self.drive.words()}: it is predicted to separate them by ΔBIC "
                 f"≈ {self.predicted_delta_bic:.0f} on its own (the recordings so far: {self.recorded_delta_bic:.0f}; "
                 f"10 is very strong evidence)")
 
     def to_dict(self) -> dict[str, Any]:
         return {"purpose": self.purpose, "models": list(self.models), "drive": self.drive.to_dict(),
+                "separates": self.separates, "hint": self.hint,
                 "predicted_delta_bic": self.predicted_delta_bic, "recorded_delta_bic": self.recorded_delta_bic,
                 "scored": [dict(d.to_dict(), delta_bic=s) for d, s in self.scored]}
 
@@ -113,13 +136,24 @@ def virtual_recording(rec: Recording, drive_list: Sequence[Drive]) -> Recording:
     return replace(rec, experiments=exps)
 
 
-def _unabsorbed(obj: Objective, diff: NDArray[np.float64], spec: ModelSpec, free: Sequence[FreeParam]) -> float:
-    """||diff - J u*||^2 with u* the least-squares step of `free` at `spec` (noise units)."""
+def _blocks(obj: Objective) -> list[slice]:
+    """Each experiment's rows in the objective's residual vector."""
+    out, a = [], 0
+    for j in obj.experiments:
+        out.append(slice(a, a + obj.samples[j]))
+        a += obj.samples[j]
+    return out
+
+
+def _jacobian(obj: Objective, spec: ModelSpec, free: Sequence[FreeParam]) -> NDArray[np.float64]:
     if not free:
-        return float(diff @ diff)
+        return np.zeros((obj.n, 0))
     _, J, _ = obj.jacobian(spec, free, np.zeros(len(free)))
-    ok = np.all(np.isfinite(J), axis=0)
-    J = J[:, ok]
+    return np.where(np.isfinite(J), J, 0.0)
+
+
+def _unabsorbed(diff: NDArray[np.float64], J: NDArray[np.float64]) -> float:
+    """||diff - J u*||^2 with u* the least-squares step (noise units)."""
     if J.shape[1] == 0:
         return float(diff @ diff)
     u = np.linalg.lstsq(J, diff, rcond=None)[0]
@@ -127,22 +161,36 @@ def _unabsorbed(obj: Objective, diff: NDArray[np.float64], spec: ModelSpec, free
     return float(r @ r)
 
 
-def separation(rec: Recording, sigma: float, a: tuple[ModelSpec, Sequence[FreeParam]],
-               b: tuple[ModelSpec, Sequence[FreeParam]], dt: float = FIT_DT) -> float:
+def separations(rec: Recording, sigma: float, a: tuple[ModelSpec, Sequence[FreeParam]],
+                b: tuple[ModelSpec, Sequence[FreeParam]], dt: float = FIT_DT, each: bool = True) -> list[float]:
     """Expected ΔBIC (chi^2 units) between models a and b on `rec`'s experiments: the
     offset-profiled difference of their predictions less what each one's parameters absorb,
-    the smaller of the two ways."""
+    the smaller of the two ways; per experiment (`each`) or for all together (one value). The
+    predictions and Jacobians of every experiment are one batch call each."""
     sim = CaseSimulator(rec, dt=dt)
     obj = Objective(rec, sim, sigma)
     pa, pb = obj.predict([a[0], b[0]])
     ra = np.concatenate(obj.profiled(pa)[0]) / sigma
     rb = np.concatenate(obj.profiled(pb)[0]) / sigma
-    if not (np.all(np.isfinite(ra)) and np.all(np.isfinite(rb))):
-        return math.nan
     diff = ra - rb
     # residual of "data = a" under b refitted, and of "data = b" under a refitted: the
     # residual vector's Jacobian is minus the prediction's, so the sign of diff is immaterial
-    return min(_unabsorbed(obj, diff, b[0], b[1]), _unabsorbed(obj, -diff, a[0], a[1]))
+    Ja, Jb = _jacobian(obj, a[0], a[1]), _jacobian(obj, b[0], b[1])
+    blocks = _blocks(obj) if each else [slice(0, obj.n)]
+    out = []
+    for sl in blocks:
+        d = diff[sl]
+        if not np.all(np.isfinite(d)):
+            out.append(math.nan)
+            continue
+        out.append(min(_unabsorbed(d, Jb[sl]), _unabsorbed(-d, Ja[sl])))
+    return out
+
+
+def separation(rec: Recording, sigma: float, a: tuple[ModelSpec, Sequence[FreeParam]],
+               b: tuple[ModelSpec, Sequence[FreeParam]], dt: float = FIT_DT) -> float:
+    """:func:`separations` of all `rec`'s experiments together."""
+    return separations(rec, sigma, a, b, dt, each=False)[0]
 
 
 def propose(rec: Recording, sigma: float, names: tuple[str, str], a: tuple[ModelSpec, Sequence[FreeParam]],
@@ -152,11 +200,9 @@ def propose(rec: Recording, sigma: float, names: tuple[str, str], a: tuple[Model
     grid = drives(rec)
     if not grid:
         return None
-    scored = []
-    for d in grid:
-        s = separation(virtual_recording(rec, [d]), sigma, a, b, dt)
-        scored.append((d, s if math.isfinite(s) else -math.inf))
-    scored.sort(key=lambda x: -x[1])
+    scores = separations(virtual_recording(rec, grid), sigma, a, b, dt)
+    scored = sorted(((d, s if math.isfinite(s) else -math.inf) for d, s in zip(grid, scores)), key=lambda x: -x[1])
     recorded = separation(rec, sigma, a, b, dt)
     best, score = scored[0]
-    return Proposal(f"tell {names[0]} from {names[1]}", names, best, score, recorded, scored)
+    hint = NOT_BY_DRIVE.get(names) or NOT_BY_DRIVE.get((names[1], names[0]), "")
+    return Proposal(f"tell {names[0]} from {names[1]}", names, best, score, recorded, scored, hint)

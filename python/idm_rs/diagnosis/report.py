@@ -204,7 +204,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
         todo = "  What to do: add this effect to your model with the fitted values (the refit model below)"
         prop = getattr(d, "proposal", None)
         if prop is not None:
-            todo += "; " + prop.words() + ", and diagnose again with it added"
+            todo += "; " + prop.words() + (", and diagnose again with it added" if prop.separates else "")
         elif alts:
             todo += ("; to decide between it and the alternative, record experiments that excite them differently "
                      "(the other drive direction, another amplitude or frequency)")
