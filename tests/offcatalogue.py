@@ -38,6 +38,10 @@ the engine's effect catalogue (rust/src/effects.rs):
   damper cb to ground, state xb, vb: the friction law sees v1 - vb, and
   mb xb'' = +Ff - kb xb - cb vb (the friction's reaction); the sensor reads x1. The normal
   force is unchanged. Depends on "base" (a hidden state).
+* :class:`VoltageForce` (``"voltage_force"``): c V(t) on m1 (library term V). :class:`FrictionGradient`
+  (``"friction_gradient"``): friction times 1 + slope x1. :class:`WeightFriction`
+  (``"weight_dry_friction"``): -fw tanh(v2/vs) on m2 (library term sgn v2). :class:`Vibration`
+  (``"vibration"``): A sin(2 pi f t + phase) on m1 — no library term represents it.
 
 Numerics: the run is integrated segment by segment between the waveform's breakpoints (the
 input's kinks are never stepped over), in each with ``solve_ivp(method="LSODA")`` (switches to
@@ -590,7 +594,12 @@ OFF_CATALOGUE_CASES: dict[str, tuple[Extra, str, str]] = {
         "(7.96 kHz, damping ratio 0.05); friction acts on v1 - vb, its reaction on the base",
         "base",
     ),
-    # devices like those on which discovery failed before issue 31 (sizes of that report)
+}
+
+#: devices like those on which discovery failed before issue 31 (the sizes of that report):
+#: friction periodic within one slip, a voltage-proportional force, friction growing along the
+#: stroke, dry friction on the weight, and a floor vibration no library term represents
+ISSUE31_CASES: dict[str, tuple[Extra, str, str]] = {
     "periodic_friction_3um": (
         PeriodicFriction(amplitude=0.046, wavelength=3e-6, phase=0.4, mode="force"),
         "friction force times 1 + 0.046 sin(2 pi x1 / 3 um + 0.4): varies within one slip",
@@ -635,14 +644,15 @@ def case_experiments(short: bool = False) -> list[dict[str, Any]]:
 
 
 def make_offcatalogue_case(name: str, out_dir: Union[str, Path], seed: int = 0, short: bool = False) -> Path:
-    """Write the case ``name`` (a key of :data:`OFF_CATALOGUE_CASES`, or "none" for no extra
+    """Write the case ``name`` (a key of :data:`OFF_CATALOGUE_CASES` or :data:`ISSUE31_CASES`, or "none" for no extra
     mechanism) to ``out_dir``: nominal = dev10's parameters with model "lps", true = nominal."""
     if name == "none":
         extra, description, depends = None, "no extra mechanism", ""
-    elif name in OFF_CATALOGUE_CASES:
-        extra, description, depends = OFF_CATALOGUE_CASES[name]
+    elif name in OFF_CATALOGUE_CASES or name in ISSUE31_CASES:
+        extra, description, depends = {**OFF_CATALOGUE_CASES, **ISSUE31_CASES}[name]
     else:
-        raise ValueError(f"unknown off-catalogue case {name!r}; known: {sorted(OFF_CATALOGUE_CASES)} or 'none'")
+        raise ValueError(f"unknown off-catalogue case {name!r}; known: "
+                         f"{sorted(OFF_CATALOGUE_CASES) + sorted(ISSUE31_CASES)} or 'none'")
     nominal = {"model": "lps", "piezo_hysteresis": False, "params": dict(DEV10_PARAMS)}
     return write_case(out_dir, nominal, dict(DEV10_PARAMS), case_experiments(short), extra=extra, seed=seed,
                       truth={"case": name, "description": description, "depends_on": depends})
