@@ -74,3 +74,22 @@ def test_separations_per_drive_are_one_batch_and_agree_with_one_at_a_time(rec):
     both = separations(virtual_recording(rec, grid), 1.5e-9, a, b)
     one = [separation(virtual_recording(rec, [g]), 1.5e-9, a, b) for g in grid]
     assert both == pytest.approx(one, rel=1e-9)
+
+
+def test_the_drive_that_determines_a_parameter_lowers_its_sigma(rec):
+    """A spring to ground fitted with the calibrated subset: adding the proposed drive's
+    Fisher information lowers k_ground's 1-sigma, and no drive of the grid does better."""
+    from idm_rs.diagnosis.catalogue import by_id
+    from idm_rs.diagnosis.next_experiment import propose_for_parameter
+
+    nom = rec.nominal
+    p0 = nom.params.to_dict(resolved=False)
+    s = Structure(nom.model, nom.n_elements, nom.piezo_hysteresis)
+    k = next(ep for ep in by_id("spring_to_ground").params if ep.name == "k_ground").free(2e3)
+    free = _calibration_params(p0)[:3] + [k]
+    spec = ModelSpec(s, p0, {"k_ground": 2e3})
+    pp = propose_for_parameter(rec, 1.5e-9, "k_ground", (spec, free))
+    assert pp is not None and pp.value == pytest.approx(2e3)
+    assert 0 < pp.std_with < pp.std_now
+    assert pp.std_with == min(x for _, x in pp.scored)
+    assert "to determine k_ground" in pp.words()

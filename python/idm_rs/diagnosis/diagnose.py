@@ -30,7 +30,7 @@ from .fitting import FitResult, FreeParam, Objective, apply, fit, set_effect, se
 from .identifiability import assess
 from .locate import Location, locate, merge_windows
 from .multistart import Start, agree, multistart
-from .next_experiment import Proposal, propose
+from .next_experiment import ParameterProposal, Proposal, propose, propose_for_parameter
 from .noise import NoiseEstimate, cross_check, estimate_noise, whiteness_z
 from .results import Alternative, Candidate, Diagnosis, SecondSearch
 from .thresholds import BIC_THRESHOLD, LR_ALPHA, NOISE_RATIO_OK, REFIT_TOP, SEPARATION, WHITENESS_Z
@@ -520,6 +520,21 @@ def _without_lead(pb: _Problem, cal: _Calibration, lead: _Refit, found: Discover
     return alone - with_lead, r0, lib
 
 
+def _determining_experiment(pb: _Problem, refits: list[_Refit], verdict: str) -> Optional[ParameterProposal]:
+    """For a verdict naming one catalogue effect with an effect parameter the experiments do not
+    determine (identifiability), the drive that would best determine it."""
+    r = next((x for x in refits if x.candidate.effect == verdict and not x.candidate.screened_only), None)
+    if r is None:
+        return None
+    eff = next(e for e in CATALOGUE if e.id == verdict)
+    names = {ep.name for ep in eff.params}
+    weak = [p for p in r.candidate.identifiability if p.name in names and not p.determined]
+    if not weak:
+        return None
+    spec = apply(r.base, r.free, np.zeros(len(r.free)))
+    return propose_for_parameter(pb.rec, pb.sigma, weak[0].name, (spec, list(r.free)))
+
+
 def _partial_leader(pb: _Problem, refits: list[_Refit]) -> Optional[_Refit]:
     """The leading supported candidate when it does not explain the residual (a first effect
     that stands but leaves a systematic residual), else None."""
@@ -851,6 +866,9 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
         run.stage = "the next experiment"
         proposal = _next_experiment(pb, refits, verdict, alternatives[0].effect)
         clock.lap("next experiment")
+    parameter_proposal = _determining_experiment(pb, refits, verdict)
+    if parameter_proposal is not None:
+        clock.lap("next experiment (parameter)")
     n_all = pb.obj.n
     return Diagnosis(
         case=rec.name, verdict=verdict, reason=reason, ranking=ranking, noise=noise,
@@ -867,7 +885,7 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
         screening={k: v.delta_chi2 for k, v in sorted(screened.items(), key=lambda kv: -kv[1].delta_chi2)},
         degenerate_pairs=[list(p) for p in degenerate], searched_wide=searched_wide,
         calibration_multistart=cal.search.multistart.to_dict() if cal.search.multistart is not None else {},
-        discovery=found, second=second, proposal=proposal,
+        discovery=found, second=second, proposal=proposal, parameter_proposal=parameter_proposal,
     )
 
 

@@ -206,3 +206,64 @@ def propose(rec: Recording, sigma: float, names: tuple[str, str], a: tuple[Model
     best, score = scored[0]
     hint = NOT_BY_DRIVE.get(names) or NOT_BY_DRIVE.get((names[1], names[0]), "")
     return Proposal(f"tell {names[0]} from {names[1]}", names, best, score, recorded, scored, hint)
+
+
+@dataclass
+class ParameterProposal:
+    """The drive that would best determine a parameter the recordings leave undetermined."""
+
+    parameter: str
+    drive: Drive
+    std_now: float  #: its 1-sigma from the recordings [its unit]
+    std_with: float  #: predicted 1-sigma with the drive added
+    value: float
+    scored: list[tuple[Drive, float]] = field(default_factory=list, repr=False)  #: (drive, std with it)
+
+    def words(self) -> str:
+        return (f"to determine {self.parameter}, record a {self.drive.words()}: its 1-sigma is predicted to fall "
+                f"from {self.std_now:.3g} ({100 * self.std_now / abs(self.value):.0f} % of its value) to "
+                f"{self.std_with:.3g} ({100 * self.std_with / abs(self.value):.0f} %)")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"parameter": self.parameter, "drive": self.drive.to_dict(), "std_now": self.std_now,
+                "std_with": self.std_with, "value": self.value}
+
+
+def propose_for_parameter(rec: Recording, sigma: float, name: str, model: tuple[ModelSpec, Sequence[FreeParam]],
+                          dt: float = FIT_DT) -> Optional[ParameterProposal]:
+    """The drive (of :func:`drives`) whose readings, added to the recordings', most reduce the
+    variance of the fitted parameter `name` (Fisher information of the recordings plus the
+    drive's, from exact Jacobians at the fitted model; the parameter's 1-sigma in its own units
+    through the fit unit's scale at the optimum). None without sawtooth drives or when `name` is
+    not among the model's free parameters."""
+    spec, free = model
+    idx = next((i for i, f in enumerate(free) if f.name == name), None)
+    grid = drives(rec)
+    if idx is None or not grid:
+        return None
+    J0 = _jacobian(Objective(rec, CaseSimulator(rec, dt=dt), sigma), spec, free)
+    F0 = J0.T @ J0
+    virtual = virtual_recording(rec, grid)
+    obj = Objective(virtual, CaseSimulator(virtual, dt=dt), sigma)
+    J = _jacobian(obj, spec, free)
+    # the parameter's value per fit unit at the optimum (log-scaled ones included)
+    f = free[idx]
+    h = 1e-6
+    scale = abs(f.value(h) - f.value(-h)) / (2 * h)
+    value = f.value(0.0)
+
+    def std(F: NDArray[np.float64]) -> float:
+        try:
+            var = float(np.linalg.pinv(F)[idx, idx])
+        except np.linalg.LinAlgError:
+            return math.inf
+        return math.sqrt(max(var, 0.0)) * scale
+
+    now = std(F0)
+    scored = []
+    for d, sl in zip(grid, _blocks(obj)):
+        Jb = J[sl]
+        scored.append((d, std(F0 + Jb.T @ Jb)))
+    scored.sort(key=lambda x: x[1])
+    best, with_ = scored[0]
+    return ParameterProposal(name, best, now, with_, value, scored)

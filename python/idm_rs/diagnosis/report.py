@@ -208,6 +208,9 @@ def plain_summary(d: Diagnosis) -> list[str]:
         elif alts:
             todo += ("; to decide between it and the alternative, record experiments that excite them differently "
                      "(the other drive direction, another amplitude or frequency)")
+        pp = getattr(d, "parameter_proposal", None)
+        if pp is not None:
+            todo += "; " + pp.words()
         lines.append(todo + ".")
     elif d.verdict == "none":
         lines.append(f"  Found: nothing missing. The nominal model with re-fitted values matches the recordings to "

@@ -23,7 +23,7 @@ from .thresholds import LR_ALPHA
 
 if TYPE_CHECKING:
     from .discovery import Discovery
-    from .next_experiment import Proposal
+    from .next_experiment import ParameterProposal, Proposal
 
 
 @dataclass
@@ -219,6 +219,8 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
     #: the drive that would best tell the verdict from its near-parallel alternative (None when
     #: there is none)
     proposal: Optional["Proposal"] = None
+    #: the drive that would best determine an effect parameter the recordings leave undetermined
+    parameter_proposal: Optional["ParameterProposal"] = None
 
     @property
     def best(self) -> Optional[Candidate]:
@@ -271,6 +273,8 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
             "effects": self.effects,
             "second_effect": self.second.to_dict() if self.second is not None else None,
             "next_experiment": self.proposal.to_dict() if self.proposal is not None else None,
+            "determining_experiment": (self.parameter_proposal.to_dict() if self.parameter_proposal is not None
+                                       else None),
         }
 
     def report(self) -> str:
