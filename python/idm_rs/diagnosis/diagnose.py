@@ -1028,7 +1028,12 @@ STAGES: tuple[tuple[str, float, float], ...] = (
     ("polish", 6.0, 30.0),
     ("wider search", 4.0, 300.0),
     ("held-out", 4.0, 10.0),
+    # the stages that run only on some cases (a first effect leaving a systematic residual, an
+    # unexplained residual, an alternative or an undetermined parameter): no share of the bar
+    ("second effect", 0.0, 300.0),
     ("discovery", 0.0, 100.0),
+    ("next experiment", 0.0, 50.0),
+    ("next experiment (parameter)", 0.0, 50.0),
 )
 
 
