@@ -73,3 +73,28 @@ def test_d2_12s_look_alikes_get_an_answer_about_separating_them():
     p = d.proposal
     assert p is not None and not p.separates and p.predicted_delta_bic < 10
     assert "turn the rig around" in d.report()
+
+
+def _candidate(effect: str, delta_bic: float, rms: float, z: float):
+    from idm_rs.diagnosis.results import Candidate
+
+    return Candidate(effect, effect, {}, {}, {}, 1000.0, 10, 0.0, delta_bic, rms, math.nan, z, False,
+                     lr_chi2=delta_bic + 20.0)
+
+
+def test_a_second_effect_is_searched_only_where_the_first_stands_and_leaves_structure():
+    """The second round's trigger: the leading supported candidate (present, ΔBIC >= 10) that
+    does not leave noise; never when it explains the residual (a single-effect device), and
+    never when nothing stands (a healthy device stays 'none')."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis.diagnose import _partial_leader
+
+    pb = SimpleNamespace(sigma=1.0)
+    refit = lambda c: SimpleNamespace(candidate=c)  # noqa: E731
+    leaves_structure = [refit(_candidate("incline", 500.0, 1.5, 20.0)), refit(_candidate("stribeck", 100.0, 1.8, 30.0))]
+    assert _partial_leader(pb, leaves_structure).candidate.effect == "incline"
+    explains = [refit(_candidate("incline", 500.0, 1.02, 1.0))]
+    assert _partial_leader(pb, explains) is None
+    unsupported = [refit(_candidate("incline", 5.0, 1.5, 20.0))]
+    assert _partial_leader(pb, unsupported) is None
