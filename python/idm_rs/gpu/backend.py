@@ -1,10 +1,9 @@
 """Packing sweep points for the kernel, and running it on a GPU (CuPy, NVRTC) or on the CPU (the
 same source compiled by the system C compiler, loaded with ctypes).
 
-The kernel is specialised at compile time (``specialise``: node count, hysteresis on/off,
-waveform family), so its state lives in registers. Its inputs are columns: the per-point
+The kernel is specialised at compile time (``Spec``: node count, hysteresis on/off), so its state lives in registers. Its inputs are columns: the per-point
 constants of each distinct parameter row (the engine packs them: ``engine.kernel_constants``),
-indexed per point by ``rows``, and the wave's five numbers per point; a column equal over the
+indexed per point by ``rows``, and the wave's six numbers per point; a column equal over the
 whole batch is sent once (step 0)."""
 
 from __future__ import annotations
@@ -31,8 +30,6 @@ OUTPUTS = ("final_position", "peak_velocity", "peak_friction", "slip_fraction", 
 ADAPTIVE_EXTRA = 3
 #: CUDA threads per block (the LPS; see Spec.block)
 BLOCK = 128
-#: the kernel's waveform families (IDM_WAVE)
-WAVE_CODES = {"triangle": 1, "sawtooth": 2}
 #: NVRTC options, as the CUDA backend compiles (CuPy adds the architecture)
 NVRTC_OPTIONS = ("--std=c++14",)
 #: kernel entry points by method
@@ -46,11 +43,10 @@ class GpuUnavailable(RuntimeError):
 @dataclass(frozen=True)
 class Spec:
     """A compile-time specialisation of the kernel: ``nodes`` (2 for the LPS, n + 1 for the DPS),
-    piezo hysteresis on/off, the waveform family."""
+    piezo hysteresis on/off."""
 
     nodes: int
     hysteresis: bool
-    wave: str
 
     @property
     def block(self) -> int:
@@ -62,28 +58,29 @@ class Spec:
         nodes read them in place and keep the middle Dormand-Prince stages in shared memory,
         which ptxas -v measured as the way to 0 bytes of stack for every node count."""
         return (f"#define IDM_N {self.nodes}\n#define IDM_HYST {int(self.hysteresis)}\n"
-                f"#define IDM_WAVE {WAVE_CODES[self.wave]}\n#define IDM_BLOCK {self.block}\n"
+                f"#define IDM_BLOCK {self.block}\n"
                 f"#define IDM_MAT_REG {int(self.nodes == 2)}\n#define IDM_SHARED_STAGES {int(self.nodes > 2)}\n")
 
 
 def all_specs() -> list[Spec]:
     """Every specialisation the backend can launch (the NVRTC test compiles each)."""
     max_dof = engine.kernel_constant_count()[2]
-    return [Spec(n, h, w) for n in range(2, max_dof + 1) for h in (True, False) for w in WAVE_CODES]
+    return [Spec(n, h) for n in range(2, max_dof + 1) for h in (True, False)]
 
 
 @dataclass
 class KernelBatch:
-    """The kernel's inputs for P points: ``data`` holds every column, column k of point p is
-    ``data[off[k] + step[k] * i]`` with i = ``rows[p]`` for the constants and i = p for the wave's
-    five columns. ``method`` "rk4" uses ``dt`` and ``steps``; "dopri5" uses ``t_end``, ``rtol``,
-    ``atol`` and ``first_step``."""
+    """The kernel's inputs for P points: ``consts`` (R, scalars + matrices) one row per distinct
+    parameter row, ``rows`` (P,) each point's row; the wave's six columns in ``data``: column k
+    of point p is ``data[off[k] + step[k] * p]`` (step 0: one value for all). ``method`` "rk4"
+    uses ``dt`` and ``steps``; "dopri5" uses ``t_end``, ``rtol``, ``atol`` and ``first_step``."""
 
     spec: Spec
+    consts: NDArray[np.float64]
+    rows: NDArray[np.int32]
     data: NDArray[np.float64]
     off: NDArray[np.int64]
     step: NDArray[np.int64]
-    rows: NDArray[np.int32]
     dt: float
     steps: int
     method: str = "rk4"
@@ -98,18 +95,20 @@ class KernelBatch:
 
 
 def wave_columns(kind: str, fields: dict[str, Any]) -> list[Any]:
-    """The kernel's five wave columns (delay, amplitude, peak time, span, cycles) from the
-    family's batch fields (scalars or per-point arrays): the arithmetic of waveforms.py."""
+    """The kernel's six wave columns (delay [s], amplitude [V], peak time in a cycle [s], span
+    [s]: fall or period, cycles, 1 for a Triangle) from the family's batch fields (scalars or
+    per-point arrays): the arithmetic of waveforms.py."""
     f = {k: np.asarray(v, dtype=float) for k, v in fields.items()}
     if kind == "triangle":
-        return [f["delay"], f["amplitude"], f["rise"], f["fall"], np.float64(1.0)]
+        return [f["delay"], f["amplitude"], f["rise"], f["fall"], np.float64(1.0), np.float64(1.0)]
     period = 1.0 / f["frequency"]
     peak = np.where(f["forward"] != 0.0, f["rise"], period - f["rise"])
-    return [f["delay"], f["amplitude"], peak, period, f["cycles"]]
+    return [f["delay"], f["amplitude"], peak, period, f["cycles"], np.float64(0.0)]
 
 
-def _columns(values: list[NDArray[np.float64]]) -> tuple[list[NDArray[np.float64]], list[int]]:
-    """Each column once where it is uniform (step 0), else whole (step 1)."""
+def _columns(values: list[Any], points: int) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
+    """The columns packed one after another, each once where it is uniform (step 0), else
+    whole (step 1, ``points`` values): (data, off, step)."""
     cols, steps = [], []
     for v in values:
         v = np.atleast_1d(np.asarray(v, dtype=float))
@@ -117,9 +116,13 @@ def _columns(values: list[NDArray[np.float64]]) -> tuple[list[NDArray[np.float64
             cols.append(v[:1])
             steps.append(0)
         else:
+            if v.size != points:
+                raise ValueError(f"a wave column has {v.size} values for {points} points")
             cols.append(v)
             steps.append(1)
-    return cols, steps
+    sizes = np.array([c.size for c in cols])
+    off = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    return np.concatenate(cols), off, np.asarray(steps, dtype=np.int64)
 
 
 def constant_columns(nodes: int) -> NDArray[np.intp]:
@@ -140,15 +143,13 @@ def pack(config: Any, spec: Spec, param_rows: NDArray[np.float64], rows: NDArray
          atol: float = 1e-7, first_step: float = 1e-8) -> KernelBatch:
     """The kernel's inputs: the constants of each distinct parameter row (``param_rows``, (R,
     len(param_names())); the engine refuses what the kernel cannot run), ``rows`` (P,) the row
-    of each point, ``wave`` the five wave columns (scalars or (P,) arrays: ``wave_columns``)."""
+    of each point, ``wave`` the six wave columns (scalars or (P,) arrays: ``wave_columns``)."""
     _check_layout()
     consts = engine.kernel_constants(config, np.ascontiguousarray(param_rows, dtype=float))
-    sel = consts[:, constant_columns(spec.nodes)].T
-    cols, steps = _columns(list(sel) + list(wave))
-    sizes = np.array([c.size for c in cols])
-    off = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-    return KernelBatch(spec, np.concatenate(cols), off, np.asarray(steps, dtype=np.int64),
-                       np.ascontiguousarray(rows, dtype=np.int32), float(dt), int(round(t_end / dt)), method,
+    consts = np.ascontiguousarray(consts[:, constant_columns(spec.nodes)])
+    rows = np.ascontiguousarray(rows, dtype=np.int32)
+    data, off, step = _columns(list(wave), rows.size)
+    return KernelBatch(spec, consts, rows, data, off, step, float(dt), int(round(t_end / dt)), method,
                        float(t_end), float(rtol), float(atol), float(first_step))
 
 
@@ -222,9 +223,9 @@ def _cpu_library(spec: Spec) -> ctypes.CDLL:
     dll = ctypes.CDLL(str(lib))
     dp, lp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_longlong), ctypes.POINTER(ctypes.c_int)
     d, ll = ctypes.c_double, ctypes.c_longlong
-    dll.idm_rk4_sweep.argtypes = [dp, lp, lp, ip, d, ll, ll, ll, dp]
+    dll.idm_rk4_sweep.argtypes = [dp, ip, dp, lp, lp, d, ll, ll, ll, dp]
     dll.idm_rk4_sweep.restype = None
-    dll.idm_dopri5_sweep.argtypes = [dp, lp, lp, ip, d, d, d, d, ll, ll, dp]
+    dll.idm_dopri5_sweep.argtypes = [dp, ip, dp, lp, lp, d, d, d, d, ll, ll, dp]
     dll.idm_dopri5_sweep.restype = None
     _CPU_LIBS[spec] = dll
     return dll
@@ -236,8 +237,8 @@ def run_cpu(batch: KernelBatch) -> dict[str, NDArray[Any]]:
     dll = _cpu_library(batch.spec)
     ptr = lambda a, t: a.ctypes.data_as(ctypes.POINTER(t))  # noqa: E731
     data = np.ascontiguousarray(batch.data)
-    common = (ptr(data, ctypes.c_double), ptr(batch.off, ctypes.c_longlong), ptr(batch.step, ctypes.c_longlong),
-              ptr(batch.rows, ctypes.c_int))
+    common = (ptr(batch.consts, ctypes.c_double), ptr(batch.rows, ctypes.c_int), ptr(data, ctypes.c_double),
+              ptr(batch.off, ctypes.c_longlong), ptr(batch.step, ctypes.c_longlong))
     out = np.zeros((_n_outputs(batch.method), batch.points))
     if batch.method == "dopri5":
         dll.idm_dopri5_sweep(*common, batch.t_end, batch.rtol, batch.atol, batch.first_step, 0, batch.points,
@@ -265,11 +266,28 @@ def _cupy() -> Any:
     return cp
 
 
+class Finished:
+    """A block already run (the CPU build): ``result()`` returns its outputs."""
+
+    def __init__(self, res: dict[str, NDArray[Any]]) -> None:
+        self._res = res
+
+    def done(self) -> bool:
+        return True
+
+    def result(self) -> dict[str, NDArray[Any]]:
+        return self._res
+
+
 class Launched:
     """A block running on the GPU: ``result()`` waits for it and brings its outputs back."""
 
     def __init__(self, out: Any, stream: Any) -> None:
         self._out, self._stream = out, stream
+
+    def done(self) -> bool:
+        """Whether the GPU has finished the block (without waiting)."""
+        return bool(self._stream.done)
 
     def result(self) -> dict[str, NDArray[Any]]:
         self._stream.synchronize()
@@ -286,10 +304,10 @@ def launch_cuda(batch: KernelBatch) -> Launched:
         _MODULES[spec] = cp.RawModule(code=kernel_source(spec), options=NVRTC_OPTIONS)
     stream = cp.cuda.Stream(non_blocking=True)
     with stream:
-        d = {name: cp.asarray(getattr(batch, name)) for name in ("data", "off", "step", "rows")}
+        d = {name: cp.asarray(getattr(batch, name)) for name in ("consts", "rows", "data", "off", "step")}
         out = cp.empty((_n_outputs(batch.method), batch.points), dtype=cp.float64)
         grid = ((batch.points + spec.block - 1) // spec.block,)
-        common = (d["data"], d["off"], d["step"], d["rows"])
+        common = (d["consts"], d["rows"], d["data"], d["off"], d["step"])
         f = _MODULES[spec].get_function(ENTRY[batch.method])
         if batch.method == "dopri5":
             args = common + (np.float64(batch.t_end), np.float64(batch.rtol), np.float64(batch.atol),

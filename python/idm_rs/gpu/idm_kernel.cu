@@ -9,7 +9,6 @@
  * name) and
  *   IDM_N     the number of nodes (2 for the LPS, n + 1 for the DPS with n elements),
  *   IDM_HYST  1 with piezo hysteresis, 0 without,
- *   IDM_WAVE  1 for a Triangle, 2 for a Sawtooth train,
  * so the state and the stages are fixed-size arrays indexed by constants after unrolling: they
  * live in registers (ptxas -v: 0 bytes stack frame), which tests/test_gpu_kernel.py checks.
  *
@@ -30,12 +29,12 @@
 #endif
 
 /* IDM_N_SCALARS and the offset of each scalar by name (IDM_C_KP, ...) come from the engine
- * (rust/src/kernel.rs: kernel_header); IDM_N, IDM_HYST, IDM_WAVE from the backend */
+ * (rust/src/kernel.rs: kernel_header); IDM_N, IDM_HYST from the backend */
 #ifndef IDM_N_SCALARS
 #error "compile with the engine's header in front: idm_rs.engine.kernel_header()"
 #endif
-#if !defined(IDM_N) || !defined(IDM_HYST) || !defined(IDM_WAVE)
-#error "compile with the specialisation in front: IDM_N, IDM_HYST, IDM_WAVE (idm_rs.gpu.backend.specialise)"
+#if !defined(IDM_N) || !defined(IDM_HYST)
+#error "compile with the specialisation in front: IDM_N, IDM_HYST (idm_rs.gpu.backend.Spec.defines)"
 #endif
 #ifndef IDM_BLOCK
 #define IDM_BLOCK 128
@@ -54,7 +53,8 @@
 #define IDM_W_PEAK 2   /* peak time within a cycle: rise (forward), period - rise (backward) [s] */
 #define IDM_W_SPAN 3   /* Triangle: fall [s]; Sawtooth: period [s] */
 #define IDM_W_CYCLES 4
-#define IDM_NW 5
+#define IDM_W_TRIANGLE 5 /* 1 for a Triangle (its end is delay + rise + fall), 0 for a Sawtooth */
+#define IDM_NW 6
 /* the slip threshold of the slip-fraction metric, in units of the Stribeck velocity */
 #define IDM_SLIP_FACTOR 0.1
 
@@ -134,7 +134,7 @@ IDM_HD double idm_rhs(const double *c, const double *m, double volt, double dvol
  * the same arithmetic, so the breakpoints are the engine's to the bit): breakpoint k [s, V]. */
 typedef struct {
     double delay, amp, peak, span;
-    int nb, off; /* breakpoints; 1 when a delay adds one at t = delay */
+    int nb, off, triangle; /* breakpoints; 1 when a delay adds one at t = delay; the family */
 } idm_wave;
 
 IDM_HD idm_wave idm_wave_of(const double *w) {
@@ -144,6 +144,7 @@ IDM_HD idm_wave idm_wave_of(const double *w) {
     r.peak = w[IDM_W_PEAK];
     r.span = w[IDM_W_SPAN];
     r.off = r.delay > 0.0 ? 1 : 0;
+    r.triangle = w[IDM_W_TRIANGLE] != 0.0;
     r.nb = 1 + r.off + 2 * (int)w[IDM_W_CYCLES];
     return r;
 }
@@ -159,11 +160,8 @@ IDM_HD void idm_bp(const idm_wave *w, int k, double *t, double *v) {
         *t = w->delay + (double)cyc * w->span + w->peak;
         *v = w->amp;
     } else {
-#if IDM_WAVE == 1
-        *t = w->delay + w->peak + w->span; /* delay + rise + fall */
-#else
-        *t = w->delay + (double)(cyc + 1) * w->span;
-#endif
+        /* the end of a cycle: delay + rise + fall (Triangle), delay + (cycle + 1) period */
+        *t = w->triangle ? w->delay + w->peak + w->span : w->delay + (double)(cyc + 1) * w->span;
         *v = 0.0;
     }
 }
