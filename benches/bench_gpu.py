@@ -101,6 +101,47 @@ def cpu_rate(model: str, method: str, dt: float, points: int) -> float:
     return side * side / (time.perf_counter() - t0)
 
 
+class HostClock:
+    """Where a kernel sweep's wall time goes: packing (engine constants, wave columns), the
+    launches (uploads), waiting for results (kernel tail + download), the kernels' own time
+    (CUDA events; blocks overlap, so their sum can exceed the wait)."""
+
+    def __init__(self) -> None:
+        import idm_rs.gpu as gpu
+        from idm_rs.gpu import backend
+
+        self.t = {"pack_s": 0.0, "launch_s": 0.0, "wait_s": 0.0, "kernel_s": 0.0}
+        self._saved = (gpu.pack, gpu.launch_cuda, backend.Launched.result)
+
+        def timed(name, f):
+            def wrapper(*args, **kw):
+                t0 = time.perf_counter()
+                r = f(*args, **kw)
+                self.t[name] += time.perf_counter() - t0
+                return r
+            return wrapper
+
+        gpu.pack = timed("pack_s", gpu.pack)
+        gpu.launch_cuda = timed("launch_s", gpu.launch_cuda)
+        result = backend.Launched.result
+
+        def result_timed(launched):
+            t0 = time.perf_counter()
+            r = result(launched)
+            self.t["wait_s"] += time.perf_counter() - t0
+            self.t["kernel_s"] += launched.kernel_s
+            return r
+
+        backend.Launched.result = result_timed
+
+    def close(self) -> dict:
+        import idm_rs.gpu as gpu
+        from idm_rs.gpu import backend
+
+        gpu.pack, gpu.launch_cuda, backend.Launched.result = self._saved
+        return {k: round(v, 3) for k, v in self.t.items()}
+
+
 def gpu_row(backend: str, model: str, method: str, a) -> dict:
     g = _grid(a.size)
     n = a.size * a.size
@@ -110,18 +151,21 @@ def gpu_row(backend: str, model: str, method: str, a) -> dict:
     step = dict(dt=a.dt) if method == "rk4" else {}
     # warm-up: compiles the kernel (NVRTC) once
     idm_rs.sweep(P, W, {"voltage": [80.0]}, backend=backend, method=method, **step, **_kw(model))
+    clock = HostClock() if backend == "cuda" else None
     t0 = time.perf_counter()
     ds = idm_rs.sweep(P, W, g, backend=backend, method=method, block_size=a.block, **step, **_kw(model))
     wall = time.perf_counter() - t0
+    split = clock.close() if clock is not None else {}
     t1 = time.perf_counter()
     ref = reference(model, i, j, g)
     ref_s = time.perf_counter() - t1
     err = np.abs(ds["final_position"].values[i, j] - ref)
     reasons = ds["reason"].values.ravel().astype(str)
     rerun = int(np.count_nonzero(np.char.startswith(reasons, "failed on the kernel")))
-    cpu = cpu_rate(model, method, a.dt, a.cpu_points) if a.cpu_points else float("nan")
+    cpu_points = a.cpu_points // (4 if model == "dps" else 1)
+    cpu = cpu_rate(model, method, a.dt, cpu_points) if cpu_points else float("nan")
     return dict(backend=backend, method=method, model=model, points=n, dt=a.dt if method == "rk4" else None,
-                rtol=ds.attrs["rtol"], wall_s=round(wall, 3), points_per_s=round(n / wall),
+                rtol=ds.attrs["rtol"], wall_s=round(wall, 3), points_per_s=round(n / wall), **split,
                 steps_per_point=float(ds["steps"].values.mean()), rerun_on_cpu=rerun,
                 max_err_m_sampled=float(err.max()), beyond_1nm=int((err > 1e-9).sum()), sample=int(flat.size),
                 statuses=np.bincount(ds.status.values.ravel(), minlength=5).tolist(),

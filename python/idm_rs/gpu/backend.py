@@ -54,12 +54,13 @@ class Spec:
         return BLOCK if self.nodes == 2 else 64
 
     def defines(self) -> str:
-        """The compile-time constants: the LPS (2 nodes) holds its matrices in registers; more
-        nodes read them in place and keep the middle Dormand-Prince stages in shared memory,
-        which ptxas -v measured as the way to 0 bytes of stack for every node count."""
+        """The compile-time constants. The matrices are read in place (IDM_MAT_REG 0: held in
+        registers, the LPS's spilled 16 bytes in RK4 for sm_80, ptxas -v); beyond the LPS the
+        middle Dormand-Prince stages live in shared memory (in registers they spilled from 3
+        nodes on). Measured as the way to 0 bytes of stack for every node count."""
         return (f"#define IDM_N {self.nodes}\n#define IDM_HYST {int(self.hysteresis)}\n"
                 f"#define IDM_BLOCK {self.block}\n"
-                f"#define IDM_MAT_REG {int(self.nodes == 2)}\n#define IDM_SHARED_STAGES {int(self.nodes > 2)}\n")
+                f"#define IDM_MAT_REG 0\n#define IDM_SHARED_STAGES {int(self.nodes > 2)}\n")
 
 
 def all_specs() -> list[Spec]:
@@ -282,15 +283,20 @@ class Finished:
 class Launched:
     """A block running on the GPU: ``result()`` waits for it and brings its outputs back."""
 
-    def __init__(self, out: Any, stream: Any) -> None:
-        self._out, self._stream = out, stream
+    def __init__(self, out: Any, stream: Any, events: tuple[Any, Any]) -> None:
+        self._out, self._stream, self._events = out, stream, events
+        #: the kernel's own time [s] (CUDA events around the launch), known after result()
+        self.kernel_s = float("nan")
 
     def done(self) -> bool:
         """Whether the GPU has finished the block (without waiting)."""
         return bool(self._stream.done)
 
     def result(self) -> dict[str, NDArray[Any]]:
+        import cupy as cp
+
         self._stream.synchronize()
+        self.kernel_s = cp.cuda.get_elapsed_time(*self._events) / 1e3
         return _outputs(self._out.get(stream=self._stream))
 
 
@@ -314,8 +320,11 @@ def launch_cuda(batch: KernelBatch) -> Launched:
                              np.float64(batch.first_step), np.int64(0), np.int64(batch.points), out)
         else:
             args = common + (np.float64(batch.dt), np.int64(batch.steps), np.int64(0), np.int64(batch.points), out)
+        start, end = cp.cuda.Event(), cp.cuda.Event()
+        start.record(stream)
         f(grid, (spec.block,), args)
-    return Launched(out, stream)
+        end.record(stream)
+    return Launched(out, stream, (start, end))
 
 
 def run_cuda(batch: KernelBatch) -> dict[str, NDArray[Any]]:

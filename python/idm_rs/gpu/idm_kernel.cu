@@ -28,7 +28,7 @@
 #define IDM_UNROLL
 #endif
 
-/* IDM_N_SCALARS and the offset of each scalar by name (IDM_C_KP, ...) come from the engine
+/* IDM_N_SCALARS and the offset of each scalar by name come from the engine
  * (rust/src/kernel.rs: kernel_header); IDM_N, IDM_HYST from the backend */
 #ifndef IDM_N_SCALARS
 #error "compile with the engine's header in front: idm_rs.engine.kernel_header()"
