@@ -82,6 +82,45 @@ def kernel_resources() -> list[dict]:
     return rows
 
 
+def kernel_ab(size: int) -> list[dict]:
+    """The kernel alone (CUDA events, no host work) on the LPS grid under ``auto``'s settings,
+    for variants of the compile-time layout: block size, the matrices in registers or read in
+    place. Measured, so the closing note does not guess which is faster."""
+    import cupy as cp
+
+    from idm_rs import methods
+    from idm_rs.batch import Structure, param_row
+    from idm_rs.gpu import Spec, backend, launch_cuda, pack, wave_columns
+
+    g = _grid(size)
+    rows = np.array([param_row(P.replace(m2=float(m) * P.m1)) for m in g["mass_ratio"]])
+    idx = np.repeat(np.arange(size), size)
+    amp = np.tile(g["voltage"], size)
+    _, rtol, atol = methods.resolve("auto", 0.0, 0.0)
+    cfg = Structure("lps", 1, True).config(method="rk4", dt=1e-8)
+    saved_defines, saved_block = backend.Spec.defines, backend.Spec.block
+    out = []
+    for block, mat_reg in ((128, 0), (64, 0), (256, 0), (128, 1)):
+        backend.Spec.block = property(lambda self, b=block: b)
+        backend.Spec.defines = (lambda self, d=saved_defines, r=mat_reg:
+                                d(self).replace("#define IDM_MAT_REG 0", f"#define IDM_MAT_REG {r}"))
+        backend._MODULES.clear()
+        spec = Spec(2, True)
+        b = pack(cfg, spec, rows, idx, wave_columns("triangle", dict(amplitude=amp, rise=0.5e-3, fall=9.5e-3,
+                                                                     delay=0.0)), T_END, 1e-8, method="dopri5",
+                 rtol=rtol, atol=atol, first_step=1e-8)
+        launch_cuda(b).result()  # compile + warm
+        h = launch_cuda(b)
+        res = h.result()
+        out.append(dict(variant=f"block {block}, matrices {'in registers' if mat_reg else 'read in place'}",
+                        points=b.points, kernel_s=round(h.kernel_s, 4), points_per_s=round(b.points / h.kernel_s),
+                        ok=int((res["status"] == 1).sum())))
+        cp.cuda.Device().synchronize()
+    backend.Spec.defines, backend.Spec.block = saved_defines, saved_block
+    backend._MODULES.clear()
+    return out
+
+
 def reference(model: str, i: np.ndarray, j: np.ndarray, g: dict) -> np.ndarray:
     """x1 [m] from the CPU engine's RK4 at dt = 1e-8 s on the sampled points."""
     from idm_rs.batch import Point, Structure, run
@@ -200,27 +239,37 @@ def main(argv=None) -> int:
     ap.add_argument("--cpu-points", type=int, default=16384, help="points of the CPU engine's rate (0: skip)")
     ap.add_argument("--stiff", type=int, default=200, help="side of the stiff grid (0: skip)")
     ap.add_argument("--block", type=int, default=1 << 18, help="points per streamed block")
+    ap.add_argument("--ab", type=int, default=0, help="side of the grid for the kernel-only layout A/B (0: skip)")
     ap.add_argument("--json", metavar="PATH")
     a = ap.parse_args(argv)
     out = {"card": card()}
     print(json.dumps(out["card"]), flush=True)
+
+    def stage(name, f):
+        """One part of the run; a failure is printed and the rest still runs."""
+        try:
+            out[name] = f()
+        except Exception:
+            import traceback
+
+            traceback.print_exc()
+            out[name] = f"failed: {traceback.format_exc(limit=3)}"
+        if a.json:
+            Path(a.json).write_text(json.dumps(out, indent=2, default=str) + "\n")
+        return out[name]
+
     if a.backend == "cuda":
-        out["kernels"] = kernel_resources()
-        for r in out["kernels"]:
+        for r in stage("kernels", kernel_resources) or []:
             print(json.dumps(r), flush=True)
-    out["rows"] = []
+        if a.ab:
+            for r in stage("ab", lambda: kernel_ab(a.ab)) or []:
+                print(json.dumps(r), flush=True)
     for item in a.rows.split(","):
         model, method = item.split(":")
-        row = gpu_row(a.backend, model, method, a)
-        out["rows"].append(row)
+        row = stage(f"row_{model}_{method}", lambda: gpu_row(a.backend, model, method, a))
         print(json.dumps(row), flush=True)
-        if a.json:
-            Path(a.json).write_text(json.dumps(out, indent=2) + "\n")
     if a.stiff:
-        out["stiff"] = stiff_row(a.backend, a.stiff)
-        print(json.dumps(out["stiff"]), flush=True)
-    if a.json:
-        Path(a.json).write_text(json.dumps(out, indent=2) + "\n")
+        print(json.dumps(stage("stiff", lambda: stiff_row(a.backend, a.stiff))), flush=True)
     return 0
 
 

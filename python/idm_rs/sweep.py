@@ -592,16 +592,19 @@ def _finish_kernel_block(plan: _Plan, out: dict[str, NDArray[Any]], handle: Any,
     for k in ("final_position", "peak_velocity", "peak_friction", "slip_fraction", "status", "diverged_at"):
         out[k][sl] = res[k]
     ok = res["status"] == 1
+    out["reason"][sl] = ""
+    failed = np.flatnonzero(~ok) + start  # reasons are set point by point only where one is due
     if adaptive:
         out["dt_used"][sl] = np.where(ok, res["dt_used"], np.nan)
         out["steps"][sl] = np.where(ok, res["steps"], 0)
-        out["reason"][sl] = np.where(ok, "", np.where(
-            res["crawled"], "the step collapsed on the kernel (Dormand-Prince held at its stability limit; "
-            "method='rodas4' or 'auto' on backend='cpu' runs it)", "diverged on the kernel"))
+        crawled = res["crawled"][failed - start]
+        out["reason"][failed[crawled]] = ("the step collapsed on the kernel (Dormand-Prince held at its stability "
+                                          "limit; method='rodas4' or 'auto' on backend='cpu' runs it)")
+        out["reason"][failed[~crawled]] = "diverged on the kernel"
     else:
         out["dt_used"][sl] = np.where(ok, plan.dt, np.nan)
         out["steps"][sl] = np.where(ok, int(round(plan.t_end / plan.dt)), 0)
-        out["reason"][sl] = np.where(ok, "", "diverged on the GPU kernel")
+        out["reason"][failed] = "diverged on the GPU kernel"
     cycles = getattr(plan.waveform, "cycles", None)
     if cycles is not None and "cycles" not in plan.names:
         out["step_per_cycle"][sl] = res["final_position"] / cycles
