@@ -83,42 +83,64 @@ def kernel_resources() -> list[dict]:
     return rows
 
 
-def kernel_ab(size: int) -> list[dict]:
-    """The kernel alone (CUDA events, no host work) on the LPS grid under ``auto``'s settings,
-    for variants of the compile-time layout: block size, the matrices in registers or read in
-    place. Measured, so the closing note does not guess which is faster."""
-    import cupy as cp
+#: layout variants for the A/B: label -> (block for the LPS, block beyond it, extra #defines)
+VARIANTS = {
+    "default": (None, None, ""),
+    "scalars in place": (None, None, "#define IDM_SCAL_REG 0\n"),
+    "scalars in place, block 64": (64, 64, "#define IDM_SCAL_REG 0\n"),
+}
 
+
+def use_variant(label: str) -> None:
+    """Compile the kernels with a layout variant from now on (``"default"``: as shipped)."""
+    from idm_rs.gpu import backend
+
+    if not hasattr(backend, "_shipped"):
+        backend._shipped = (backend.Spec.defines, backend.Spec.block)
+    defines, block = backend._shipped
+    lps_block, dps_block, extra = VARIANTS[label]
+
+    def new_defines(self):
+        d = defines(self)
+        return d.replace("#define IDM_MAT_REG 0\n", "#define IDM_MAT_REG 0\n" + extra)
+
+    def new_block(self):
+        b = lps_block if self.nodes == 2 else dps_block
+        return b if b is not None else block.fget(self)
+
+    backend.Spec.defines = new_defines
+    backend.Spec.block = property(new_block)
+    backend._MODULES.clear()
+
+
+def kernel_ab(size: int) -> list[dict]:
+    """The kernels alone (CUDA events, no host work) on size x size points of the grid, for the
+    layout variants (VARIANTS) of both structures and methods: measured, not guessed."""
     from idm_rs import methods
     from idm_rs.batch import Structure, param_row
-    from idm_rs.gpu import Spec, backend, launch_cuda, pack, wave_columns
+    from idm_rs.gpu import Spec, launch_cuda, pack, wave_columns
 
     g = _grid(size)
     rows = np.array([param_row(P.replace(m2=float(m) * P.m1)) for m in g["mass_ratio"]])
     idx = np.repeat(np.arange(size), size)
-    amp = np.tile(g["voltage"], size)
+    wave = wave_columns("triangle", dict(amplitude=np.tile(g["voltage"], size), rise=0.5e-3, fall=9.5e-3, delay=0.0))
     _, rtol, atol = methods.resolve("auto", 0.0, 0.0)
-    cfg = Structure("lps", 1, True).config(method="rk4", dt=1e-8)
-    saved_defines, saved_block = backend.Spec.defines, backend.Spec.block
     out = []
-    for block, mat_reg in ((128, 0), (64, 0), (256, 0), (128, 1)):
-        backend.Spec.block = property(lambda self, b=block: b)
-        backend.Spec.defines = (lambda self, d=saved_defines, r=mat_reg:
-                                d(self).replace("#define IDM_MAT_REG 0", f"#define IDM_MAT_REG {r}"))
-        backend._MODULES.clear()
-        spec = Spec(2, True)
-        b = pack(cfg, spec, rows, idx, wave_columns("triangle", dict(amplitude=amp, rise=0.5e-3, fall=9.5e-3,
-                                                                     delay=0.0)), T_END, 1e-8, method="dopri5",
-                 rtol=rtol, atol=atol, first_step=1e-8)
-        launch_cuda(b).result()  # compile + warm
-        h = launch_cuda(b)
-        res = h.result()
-        out.append(dict(variant=f"block {block}, matrices {'in registers' if mat_reg else 'read in place'}",
-                        points=b.points, kernel_s=round(h.kernel_s, 4), points_per_s=round(b.points / h.kernel_s),
-                        ok=int((res["status"] == 1).sum())))
-        cp.cuda.Device().synchronize()
-    backend.Spec.defines, backend.Spec.block = saved_defines, saved_block
-    backend._MODULES.clear()
+    for label in VARIANTS:
+        use_variant(label)
+        for model, nodes in (("lps", 2), ("dps", 5)):
+            cfg = Structure(model, nodes - 1 if model == "dps" else 1, True).config(method="rk4", dt=5e-8)
+            for method, t_end in (("rk4", 2e-3), ("dopri5", T_END)):
+                kw = dict(method="dopri5", rtol=rtol, atol=atol, first_step=1e-8) if method == "dopri5" else {}
+                b = pack(cfg, Spec(nodes, True), rows, idx, wave, t_end, 5e-8, **kw)
+                launch_cuda(b).result()  # compile + warm
+                h = launch_cuda(b)
+                res = h.result()
+                out.append(dict(variant=label, model=model, method=method, t_end=t_end, points=b.points,
+                                block=Spec(nodes, True).block, kernel_s=round(h.kernel_s, 4),
+                                points_per_s=round(b.points / h.kernel_s), ok=int((res["status"] == 1).sum())))
+                print(json.dumps(out[-1]), flush=True)
+    use_variant("default")
     return out
 
 
@@ -242,6 +264,7 @@ def main(argv=None) -> int:
     ap.add_argument("--stiff", type=int, default=200, help="side of the stiff grid (0: skip)")
     ap.add_argument("--block", type=int, default=1 << 18, help="points per streamed block")
     ap.add_argument("--ab", type=int, default=0, help="side of the grid for the kernel-only layout A/B (0: skip)")
+    ap.add_argument("--variant-rows", default="", help="LABEL=rows: rows again with a layout variant (VARIANTS)")
     ap.add_argument("--json", metavar="PATH")
     a = ap.parse_args(argv)
     out = {"card": card()}
@@ -260,10 +283,16 @@ def main(argv=None) -> int:
             Path(a.json).write_text(json.dumps(out, indent=2, default=str) + "\n")
         return out[name]
 
-    def rows(spec: str) -> None:
+    def rows(spec: str, variant: str = "default") -> None:
+        if a.backend == "cuda":
+            use_variant(variant)
         for item in filter(None, spec.split(",")):
             model, method = item.split(":")
-            print(json.dumps(stage(f"row_{model}_{method}", lambda: gpu_row(a.backend, model, method, a))), flush=True)
+            key = f"row_{model}_{method}" + ("" if variant == "default" else f" [{variant}]")
+            print(json.dumps(stage(key, lambda: dict(gpu_row(a.backend, model, method, a), variant=variant))),
+                  flush=True)
+        if a.backend == "cuda":
+            use_variant("default")
 
     # in order of what matters most, so a run cut short keeps the main figures
     if a.backend == "cuda":
@@ -273,8 +302,10 @@ def main(argv=None) -> int:
     if a.stiff:
         print(json.dumps(stage("stiff", lambda: stiff_row(a.backend, a.stiff))), flush=True)
     if a.backend == "cuda" and a.ab:
-        for r in stage("ab", lambda: kernel_ab(a.ab)) or []:
-            print(json.dumps(r), flush=True)
+        stage("ab", lambda: kernel_ab(a.ab))
+    if a.backend == "cuda" and a.variant_rows:
+        label, spec = a.variant_rows.split("=")
+        rows(spec, label)
     rows(a.late_rows)
     return 0
 

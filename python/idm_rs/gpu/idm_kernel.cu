@@ -69,27 +69,39 @@
 #undef IDM_SHARED_STAGES
 #define IDM_SHARED_STAGES 0
 #endif
-#if (defined(__CUDACC__) || defined(__CUDACC_RTC__)) && !IDM_MAT_REG
+#if defined(__CUDACC__) || defined(__CUDACC_RTC__)
 IDM_HD double idm_ld(const double *p) {
     double v;
     asm volatile("ld.global.nc.f64 %0, [%1];" : "=d"(v) : "l"(p));
     return v;
 }
+#endif
+#if (defined(__CUDACC__) || defined(__CUDACC_RTC__)) && !IDM_MAT_REG
 #define IDM_M(m, k) idm_ld((m) + (k))
 #else
 #define IDM_M(m, k) ((m)[k])
+#endif
+/* The scalars the right-hand side reads: with IDM_SCAL_REG held in registers (copied once per
+ * point), else read in place at each use as the matrices are */
+#ifndef IDM_SCAL_REG
+#define IDM_SCAL_REG 1
+#endif
+#if (defined(__CUDACC__) || defined(__CUDACC_RTC__)) && !IDM_SCAL_REG
+#define IDM_CS(x) idm_ld(&(x))
+#else
+#define IDM_CS(x) (x)
 #endif
 
 IDM_HD double idm_sign0(double x) { return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0); }
 
 /* Stribeck curve S(v) [N] (friction.rs: Leuven::stribeck) */
 IDM_HD double idm_stribeck(const double *c, double v) {
-    double fc = c[IDM_C_FC], fs_fc = c[IDM_C_FS_FC], delta = c[IDM_C_DELTA], eps = c[IDM_C_EPS];
+    double fc = IDM_CS(c[IDM_C_FC]), fs_fc = IDM_CS(c[IDM_C_FS_FC]), delta = IDM_CS(c[IDM_C_DELTA]), eps = IDM_CS(c[IDM_C_EPS]);
     double s;
     if (fs_fc == 0.0) {
         s = fc;
     } else {
-        double x = fabs(v) * c[IDM_C_INV_VS];
+        double x = fabs(v) * IDM_CS(c[IDM_C_INV_VS]);
         double e = (delta == 2.0) ? x * x : pow(x, delta);
         s = fc + fs_fc * exp(-e);
     }
@@ -103,21 +115,21 @@ IDM_HD double idm_rhs(const double *c, const double *m, double volt, double dvol
     const int n = IDM_N, ig = 2 * IDM_N, ifh = 2 * IDM_N + 1, ih = 2 * IDM_N + 2;
     double h = y[ih];
 #if IDM_HYST
-    dy[ih] = c[IDM_C_HYST_AP_D33] * dvolt - c[IDM_C_HYST_BP] * fabs(dvolt) * h - c[IDM_C_HYST_CP] * dvolt * fabs(h);
+    dy[ih] = IDM_CS(c[IDM_C_HYST_AP_D33]) * dvolt - IDM_CS(c[IDM_C_HYST_BP]) * fabs(dvolt) * h - IDM_CS(c[IDM_C_HYST_CP]) * dvolt * fabs(h);
 #else
     dy[ih] = 0.0;
 #endif
-    double fp = c[IDM_C_KP] * (c[IDM_C_D33] * volt + 0.0 - h);
+    double fp = IDM_CS(c[IDM_C_KP]) * (IDM_CS(c[IDM_C_D33]) * volt + 0.0 - h);
     double v1 = y[n], fh = y[ifh];
     double ratio = fh / idm_stribeck(c, v1);
-    double gdot = (c[IDM_C_FRIC_N] == 1.0) ? v1 - fabs(v1) * ratio
-                                           : v1 - fabs(v1) * idm_sign0(fh) * pow(fabs(ratio), c[IDM_C_FRIC_N]);
-    double fhdot = c[IDM_C_A] * gdot - c[IDM_C_B] * fabs(gdot) * fh - c[IDM_C_C] * gdot * fabs(fh);
-    double ff = (fh + c[IDM_C_SIGMA2] * v1) + c[IDM_C_SIGMA1] * gdot;
+    double gdot = (IDM_CS(c[IDM_C_FRIC_N]) == 1.0) ? v1 - fabs(v1) * ratio
+                                           : v1 - fabs(v1) * idm_sign0(fh) * pow(fabs(ratio), IDM_CS(c[IDM_C_FRIC_N]));
+    double fhdot = IDM_CS(c[IDM_C_A]) * gdot - IDM_CS(c[IDM_C_B]) * fabs(gdot) * fh - IDM_CS(c[IDM_C_C]) * gdot * fabs(fh);
+    double ff = (fh + IDM_CS(c[IDM_C_SIGMA2]) * v1) + IDM_CS(c[IDM_C_SIGMA1]) * gdot;
     dy[ig] = gdot;
     dy[ifh] = fhdot;
     /* the load acts on the main body (model.rs: f_constant), the piezo pushes both ends */
-    double f_main = (fp + c[IDM_C_F_CONST]) - ff, f_weight = 0.0 - fp;
+    double f_main = (fp + IDM_CS(c[IDM_C_F_CONST])) - ff, f_weight = 0.0 - fp;
     IDM_UNROLL
     for (int i = 0; i < IDM_N; i++) dy[i] = y[n + i];
     IDM_UNROLL
@@ -427,12 +439,18 @@ IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc,
 #else
 #define IDM_NREG IDM_N_SCALARS
 #endif
+#if IDM_SCAL_REG || !(defined(__CUDACC__) || defined(__CUDACC_RTC__))
 #define IDM_CONSTS(row)                                                                                              \
     const double *row_ = (row);                                                                                      \
     double cm[IDM_NREG];                                                                                             \
     IDM_UNROLL                                                                                                       \
     for (int k = 0; k < IDM_NREG; k++) cm[k] = row_[k];                                                              \
     const double *mat = IDM_MAT_REG ? cm + IDM_N_SCALARS : row_ + IDM_N_SCALARS;
+#else
+#define IDM_CONSTS(row)                                                                                              \
+    const double *cm = (row);                                                                                        \
+    const double *mat = cm + IDM_N_SCALARS;
+#endif
 
 /* The fixed-step sweep: thread p runs point p (neighbouring grid points share a warp) with the
  * constants of its parameter row (consts + rows[p] * (IDM_N_SCALARS + IDM_NM): the scalars, then
