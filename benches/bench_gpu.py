@@ -58,8 +58,9 @@ def card() -> dict:
 
 
 def kernel_resources() -> list[dict]:
-    """Registers, local (stack) bytes, shared bytes and resident blocks per SM of each kernel as
-    CuPy built it on this card (the LPS and the DPS with 4 elements, hysteresis on)."""
+    """Registers, local (stack) bytes and shared bytes of each kernel as CuPy built it on this
+    card (the LPS and the DPS with 4 elements, hysteresis on). Occupancy, pipes and stalls:
+    benches/ncu_probe.py under Nsight Compute."""
     import cupy as cp
 
     from idm_rs.gpu import Spec
@@ -72,13 +73,6 @@ def kernel_resources() -> list[dict]:
             f = mod.get_function(name)
             row = dict(nodes=spec.nodes, kernel=name, registers=f.num_regs, local_bytes=f.local_size_bytes,
                        shared_bytes=f.shared_size_bytes, block=spec.block)
-            try:
-                from cupy.cuda import driver
-
-                row["blocks_per_sm"] = driver.occupancyMaxActiveBlocksPerMultiprocessor(f.ptr, spec.block, 0)
-                row["warps_per_sm"] = row["blocks_per_sm"] * spec.block // 32
-            except Exception as exc:
-                row["occupancy"] = f"n/a ({exc})"
             rows.append(row)
     return rows
 

@@ -1,13 +1,24 @@
-"""One launch of each kernel the bench measured, small enough for ncu's replays: LPS RK4
-(dt 5e-8, 1 ms), LPS Dormand-Prince (auto's tolerances, 10 ms), DPS n=4 RK4 and Dormand-Prince."""
+"""One launch of each kernel benches/bench_gpu.py measures, for Nsight Compute (occupancy, pipe
+use, stalls): LPS and DPS (n = 4) RK4 (dt = 5e-8 s, 1 ms) and Dormand-Prince (auto's
+tolerances, 10 ms) on SIDE x SIDE points of the bench's grid (default 128; the RESULTS table
+used 512: enough blocks to fill the card).
+
+    SIDE=512 ncu --clock-control none -k regex:idm_ --section SpeedOfLight --section Occupancy \\
+        --section LaunchStats --section ComputeWorkloadAnalysis --section WarpStateStats \\
+        --metrics sm__pipe_fp64_cycles_active.avg.pct_of_peak_sustained_active \\
+        --csv --page details python benches/ncu_probe.py > ncu.csv
+"""
+
+import os
+
 import numpy as np
+
 import idm_rs
 from idm_rs import methods
 from idm_rs.batch import Structure, param_row
 from idm_rs.gpu import Spec, launch_cuda, pack, wave_columns
 
 P = idm_rs.Params()
-import os
 side = int(os.environ.get("SIDE", "128"))
 m = np.linspace(0.25, 2.0, side)
 rows = np.array([param_row(P.replace(m2=float(x) * P.m1)) for x in m])
@@ -23,4 +34,5 @@ for model, nodes in (("lps", 2), ("dps", 5)):
         b = pack(cfg, Spec(nodes, True), rows, idx, wave, t_end, 5e-8, **kw)
         h = launch_cuda(b)
         r = h.result()
-        print(model, method, b.points, "points", round(h.kernel_s, 4), "s", "ok", int((r["status"] == 1).sum()), flush=True)
+        print(model, method, b.points, "points", round(h.kernel_s, 4), "s", "ok", int((r["status"] == 1).sum()),
+              flush=True)
