@@ -38,8 +38,8 @@ def _triangle_fields(w: idm_rs.Triangle) -> tuple[str, dict[str, float]]:
 
 @needs_cc
 def test_the_kernel_builds_for_the_cpu():
-    out = run_cpu(prepare(Structure("lps", 1).config(method="rk4", dt=1e-7), np.array([param_row(P)]), [], 1e-6,
-                          1e-7, spec=Spec(2, True), waves=_triangle_fields(idm_rs.Triangle())))
+    out = run_cpu(prepare(Structure("lps", 1).config(method="rk4", dt=1e-7), np.array([param_row(P)]),
+                          _triangle_fields(idm_rs.Triangle()), 1e-6, 1e-7, spec=Spec(2, True)))
     assert out["status"][0] == 1
 
 
@@ -353,8 +353,8 @@ def test_gpu_equals_the_cpu_build(nodes):
     rows = np.array([param_row(P.replace(m2=m)) for m in np.linspace(0.1, 0.6, 64)])
     st_ = Structure("lps", 1) if nodes == 2 else Structure("dps", nodes - 1)
     for method in ("rk4", "dopri5"):
-        b = prepare(st_.config(method="rk4", dt=5e-8), rows, [], 2e-3, 5e-8, method=method, spec=Spec(nodes, True),
-                    waves=("triangle", dict(amplitude=np.linspace(40, 120, 64), rise=0.5e-3, fall=1.5e-3, delay=0.0)))
+        waves = ("triangle", dict(amplitude=np.linspace(40, 120, 64), rise=0.5e-3, fall=1.5e-3, delay=0.0))
+        b = prepare(st_.config(method="rk4", dt=5e-8), rows, waves, 2e-3, 5e-8, method=method, spec=Spec(nodes, True))
         g, c = run_cuda(b), run_cpu(b)
         np.testing.assert_allclose(g["final_position"], c["final_position"], rtol=0, atol=1e-12 if method == "rk4"
                                    else 1e-10)

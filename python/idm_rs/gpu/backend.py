@@ -154,15 +154,12 @@ def pack(config: Any, spec: Spec, param_rows: NDArray[np.float64], rows: NDArray
                        float(t_end), float(rtol), float(atol), float(first_step))
 
 
-def prepare(config: Any, params_table: NDArray[np.float64], breakpoints: list[tuple[NDArray[np.float64],
-            NDArray[np.float64]]], t_end: float, dt: float, *, method: str = "rk4", rtol: float = 1e-7,
-            atol: float = 1e-7, first_step: float = 1e-8, spec: Optional[Spec] = None,
-            waves: Optional[tuple[str, dict[str, Any]]] = None) -> KernelBatch:
-    """One row of ``params_table`` per point with its wave given as (family, batch fields)
-    (``waves``, fields scalars or per-point arrays); the structure's specialisation ``spec``.
-    For tests and small batches; the sweep packs with ``pack``."""
-    if spec is None or waves is None:
-        raise ValueError("prepare needs spec= and waves=")
+def prepare(config: Any, params_table: NDArray[np.float64], waves: tuple[str, dict[str, Any]], t_end: float,
+            dt: float, *, spec: Spec, method: str = "rk4", rtol: float = 1e-7, atol: float = 1e-7,
+            first_step: float = 1e-8) -> KernelBatch:
+    """One row of ``params_table`` per point, with its wave as (family, batch fields: scalars or
+    per-point arrays), for the specialisation ``spec``. For tests and small batches; the sweep
+    packs with ``pack`` (one row per distinct parameter row)."""
     p = np.asarray(params_table).shape[0]
     return pack(config, spec, params_table, np.arange(p), wave_columns(*waves), t_end, dt, method=method,
                 rtol=rtol, atol=atol, first_step=first_step)
