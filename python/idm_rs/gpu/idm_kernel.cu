@@ -12,10 +12,12 @@
  * so the state and the stages are fixed-size arrays indexed by constants after unrolling: they
  * live in registers (ptxas -v: 0 bytes stack frame), which tests/test_gpu_kernel.py checks.
  *
- * Inputs are columns, one per constant: column k of point p is data[off[k] + step[k] * i], with
- * i = rows[p] (the point's parameter row) for the constants and i = p for the wave's numbers
- * (step 1: one value per row or point, coalesced; step 0: one value for the whole grid). Each
- * point reads its columns once, into registers. Outputs are columns: out[k * points + p]. */
+ * Inputs: the constants of each distinct parameter row (consts, one row of IDM_N_SCALARS +
+ * IDM_NM numbers each; point p reads row rows[p], neighbouring points of one row read the same
+ * address), and the wave's six numbers as columns: column k of point p is data[off[k] +
+ * step[k] * p] (step 1: one value per point, coalesced; step 0: one value for the whole batch).
+ * The right-hand side's scalars are copied into registers once per point; the matrices are read
+ * in place (IDM_M). Outputs are columns: out[k * points + p]. */
 
 #if defined(__CUDACC__) || defined(__CUDACC_RTC__)
 #define IDM_HD __device__ __forceinline__
