@@ -1,21 +1,27 @@
 """GPU sweep throughput: idm-rs's CUDA kernels (one thread per point: RK4 at a fixed step, and
 Dormand-Prince as ``method="auto"`` runs it there) on the 1,000 x 1,000 grid (m2/m1 0.25-2 x
-V 40-120 V, LPS paper case, 10 ms), each with points/s, steps per point, the points rerun on
-the CPU, and the error against idm-rs RK4 at dt = 1e-8 s on a sample of points. (The issue's
-JAX vmap and diffrax comparisons are not in it yet.)
+V 40-120 V, Table 1 device, Triangle 80 V 0.5/9.5 ms, 10 ms), the DPS (n = 4) row, and the
+CPU engine on the same machine's cores for the ratio; each row with points/s, wall time (host
+included: packing, transfers, the Dataset), steps per point, the points rerun on the CPU, and
+the error against idm-rs RK4 at dt = 1e-8 s on a random sample of points. Also: the card, the
+kernels' registers / stack / occupancy as CuPy built them, and the points a stiff grid
+(fric_alpha up to 2e11 N/m) hands back to the CPU under ``auto``.
 
-    python benches/bench_gpu.py [--size 1000] [--dt 5e-8] [--methods rk4,auto] [--sample 256] [--json PATH]
-    python benches/bench_gpu.py --backend kernel-cpu --size 8      # the launch path, on the CPU
+    python benches/bench_gpu.py [--size 1000] [--dt 5e-8] [--rows lps:auto,lps:rk4,dps:auto]
+                                [--late-rows dps:rk4] [--sample 256] [--cpu-points 16384]
+                                [--stiff 200] [--ab 512] [--json PATH]
+    python benches/bench_gpu.py --backend kernel-cpu --size 8 --cpu-points 64 --stiff 4   # the launch path, on the CPU
 
 Runs where CuPy finds a GPU; ``--backend kernel-cpu`` runs the same kernel source compiled for
-the CPU (to check the script and the launch code without a GPU; slow). Not yet run on a GPU:
-this project's sessions so far had none (benches/RESULTS.md says so).
+the CPU (to check the script and the launch code without a GPU; slow).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import platform
 import time
 from pathlib import Path
 
@@ -23,50 +29,278 @@ import numpy as np
 
 import idm_rs
 
+P = idm_rs.Params()
+W = idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
+T_END = 10e-3
 
-def main(argv=None) -> int:
+
+def _grid(size: int) -> dict[str, np.ndarray]:
+    return {"mass_ratio": np.linspace(0.25, 2.0, size), "voltage": np.linspace(40.0, 120.0, size)}
+
+
+def _kw(model: str) -> dict:
+    return dict(t_end=T_END, model=model, n_elements=4, progress=False)
+
+
+def card() -> dict:
+    """The device's name and the host's cores (or the CPU's name for kernel-cpu)."""
+    info = {"host_cores": os.cpu_count(), "host": platform.processor() or platform.machine()}
+    try:
+        import cupy as cp
+
+        props = cp.cuda.runtime.getDeviceProperties(0)
+        info.update(gpu=props["name"].decode(), sms=props["multiProcessorCount"],
+                    cupy=cp.__version__, cuda_runtime=cp.cuda.runtime.runtimeGetVersion(),
+                    driver=cp.cuda.runtime.driverGetVersion())
+    except Exception as exc:  # no GPU: the kernel-cpu run
+        info["gpu"] = f"none ({type(exc).__name__})"
+    return info
+
+
+def kernel_resources() -> list[dict]:
+    """Registers, local (stack) bytes and shared bytes of each kernel as CuPy built it on this
+    card (the LPS and the DPS with 4 elements, hysteresis on). Occupancy, pipes and stalls:
+    benches/ncu_probe.py under Nsight Compute."""
+    import cupy as cp
+
+    from idm_rs.gpu import Spec
+    from idm_rs.gpu.backend import ENTRY, NVRTC_OPTIONS, kernel_source
+
+    rows = []
+    for spec in (Spec(2, True), Spec(5, True)):
+        mod = cp.RawModule(code=kernel_source(spec), options=NVRTC_OPTIONS)
+        for method, name in ENTRY.items():
+            f = mod.get_function(name)
+            row = dict(nodes=spec.nodes, kernel=name, registers=f.num_regs, local_bytes=f.local_size_bytes,
+                       shared_bytes=f.shared_size_bytes, block=spec.block)
+            rows.append(row)
+    return rows
+
+
+#: layout variants for the A/B: label -> (block for the LPS, block beyond it, extra #defines)
+VARIANTS = {
+    "default": (None, None, ""),
+    "scalars in place": (None, None, "#define IDM_SCAL_REG 0\n"),
+    "scalars in place, block 64": (64, 64, "#define IDM_SCAL_REG 0\n"),
+}
+
+
+def use_variant(label: str) -> None:
+    """Compile the kernels with a layout variant from now on (``"default"``: as shipped)."""
+    from idm_rs.gpu import backend
+
+    if not hasattr(backend, "_shipped"):
+        backend._shipped = (backend.Spec.defines, backend.Spec.block)
+    defines, block = backend._shipped
+    lps_block, dps_block, extra = VARIANTS[label]
+
+    def new_defines(self):
+        d = defines(self)
+        return d.replace("#define IDM_MAT_REG 0\n", "#define IDM_MAT_REG 0\n" + extra)
+
+    def new_block(self):
+        b = lps_block if self.nodes == 2 else dps_block
+        return b if b is not None else block.fget(self)
+
+    backend.Spec.defines = new_defines
+    backend.Spec.block = property(new_block)
+    backend._MODULES.clear()
+
+
+def kernel_ab(size: int) -> list[dict]:
+    """The kernels alone (CUDA events, no host work) on size x size points of the grid, for the
+    layout variants (VARIANTS) of both structures and methods: measured, not guessed."""
+    from idm_rs import methods
+    from idm_rs.batch import Structure, param_row
+    from idm_rs.gpu import Spec, launch_cuda, pack, wave_columns
+
+    g = _grid(size)
+    rows = np.array([param_row(P.replace(m2=float(m) * P.m1)) for m in g["mass_ratio"]])
+    idx = np.repeat(np.arange(size), size)
+    wave = wave_columns("triangle", dict(amplitude=np.tile(g["voltage"], size), rise=0.5e-3, fall=9.5e-3, delay=0.0))
+    _, rtol, atol = methods.resolve("auto", 0.0, 0.0)
+    out = []
+    for label in VARIANTS:
+        use_variant(label)
+        for model, nodes in (("lps", 2), ("dps", 5)):
+            cfg = Structure(model, nodes - 1 if model == "dps" else 1, True).config(method="rk4", dt=5e-8)
+            for method, t_end in (("rk4", 2e-3), ("dopri5", T_END)):
+                kw = dict(method="dopri5", rtol=rtol, atol=atol, first_step=1e-8) if method == "dopri5" else {}
+                b = pack(cfg, Spec(nodes, True), rows, idx, wave, t_end, 5e-8, **kw)
+                launch_cuda(b).result()  # compile + warm
+                h = launch_cuda(b)
+                res = h.result()
+                out.append(dict(variant=label, model=model, method=method, t_end=t_end, points=b.points,
+                                block=Spec(nodes, True).block, kernel_s=round(h.kernel_s, 4),
+                                points_per_s=round(b.points / h.kernel_s), ok=int((res["status"] == 1).sum())))
+                print(json.dumps(out[-1]), flush=True)
+    use_variant("default")
+    return out
+
+
+def reference(model: str, i: np.ndarray, j: np.ndarray, g: dict) -> np.ndarray:
+    """x1 [m] from the CPU engine's RK4 at dt = 1e-8 s on the sampled points."""
     from idm_rs.batch import Point, Structure, run
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--size", type=int, default=1000)
-    ap.add_argument("--dt", type=float, default=5e-8, help="RK4 step [s]")
-    ap.add_argument("--methods", default="rk4,auto", help="comma-separated: rk4, dopri5, auto")
-    ap.add_argument("--model", default="lps", choices=("lps", "dps"))
-    ap.add_argument("--backend", default="cuda", choices=("cuda", "kernel-cpu"))
-    ap.add_argument("--sample", type=int, default=256, help="points checked against RK4 dt = 1e-8")
-    ap.add_argument("--json", metavar="PATH")
-    a = ap.parse_args(argv)
-    p, w = idm_rs.Params(), idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
-    g = {"mass_ratio": np.linspace(0.25, 2.0, a.size), "voltage": np.linspace(40.0, 120.0, a.size)}
-    kw = dict(t_end=10e-3, model=a.model, n_elements=4, progress=False)
+    pts = [Point(P.replace(m2=float(g["mass_ratio"][a]) * P.m1),
+                 waveform=idm_rs.Triangle(float(g["voltage"][b]), 0.5e-3, 9.5e-3)) for a, b in zip(i, j)]
+    return run(pts, Structure(model, 4 if model == "dps" else 1, True), t_end=T_END, method="rk4", dt=1e-8)[
+        "final_position"]
+
+
+def cpu_rate(model: str, method: str, dt: float, points: int) -> float:
+    """Points/s of the CPU engine (all cores, rayon) on a sub-grid of the same ranges."""
+    side = max(2, int(round(points ** 0.5)))
+    step = dict(dt=dt) if method == "rk4" else {}
+    t0 = time.perf_counter()
+    idm_rs.sweep(P, W, _grid(side), backend="cpu", method=method, **step, **_kw(model))
+    return side * side / (time.perf_counter() - t0)
+
+
+class HostClock:
+    """Where a kernel sweep's wall time goes: packing (engine constants, wave columns), the
+    launches (uploads), waiting for results (kernel tail + download), the kernels' own time
+    (CUDA events; blocks overlap, so their sum can exceed the wait)."""
+
+    def __init__(self) -> None:
+        import idm_rs.gpu as gpu
+        from idm_rs.gpu import backend
+
+        self.t = {"pack_s": 0.0, "launch_s": 0.0, "wait_s": 0.0, "kernel_s": 0.0}
+        self._saved = (gpu.pack, gpu.launch_cuda, backend.Launched.result)
+
+        def timed(name, f):
+            def wrapper(*args, **kw):
+                t0 = time.perf_counter()
+                r = f(*args, **kw)
+                self.t[name] += time.perf_counter() - t0
+                return r
+            return wrapper
+
+        gpu.pack = timed("pack_s", gpu.pack)
+        gpu.launch_cuda = timed("launch_s", gpu.launch_cuda)
+        result = backend.Launched.result
+
+        def result_timed(launched):
+            t0 = time.perf_counter()
+            r = result(launched)
+            self.t["wait_s"] += time.perf_counter() - t0
+            self.t["kernel_s"] += launched.kernel_s
+            return r
+
+        backend.Launched.result = result_timed
+
+    def close(self) -> dict:
+        import idm_rs.gpu as gpu
+        from idm_rs.gpu import backend
+
+        gpu.pack, gpu.launch_cuda, backend.Launched.result = self._saved
+        return {k: round(v, 3) for k, v in self.t.items()}
+
+
+def gpu_row(backend: str, model: str, method: str, a) -> dict:
+    g = _grid(a.size)
     n = a.size * a.size
     rng = np.random.default_rng(0)
     flat = rng.choice(n, size=min(a.sample, n), replace=False)
     i, j = np.unravel_index(flat, (a.size, a.size))
-    # the reference on the sample: the CPU engine's RK4 at dt = 1e-8 s
-    m1 = p.m1
-    pts = [Point(p.replace(m2=float(g["mass_ratio"][ii]) * m1),
-                 waveform=idm_rs.Triangle(float(g["voltage"][jj]), 0.5e-3, 9.5e-3)) for ii, jj in zip(i, j)]
-    st = Structure(a.model, 4 if a.model == "dps" else 1, True)
-    ref = run(pts, st, t_end=10e-3, method="rk4", dt=1e-8)["final_position"]
-    rows = []
-    for method in a.methods.split(","):
-        step = dict(dt=a.dt) if method == "rk4" else {}
-        # warm-up: compiles the kernel (NVRTC) once
-        idm_rs.sweep(p, w, {"voltage": [80.0]}, backend=a.backend, method=method, **step, **kw)
-        t0 = time.perf_counter()
-        ds = idm_rs.sweep(p, w, g, backend=a.backend, method=method, block_size=1 << 20, **step, **kw)
-        wall = time.perf_counter() - t0
-        err = np.abs(ds["final_position"].values[i, j] - ref)
-        rerun = int(np.count_nonzero(np.char.startswith(ds["reason"].values.ravel().astype(str), "failed on the kernel")))
-        rows.append(dict(backend=a.backend, method=method, model=a.model, points=n, dt=a.dt if method == "rk4" else None,
-                         rtol=ds.attrs["rtol"], wall_s=wall, points_per_s=n / wall,
-                         steps_per_point=float(ds["steps"].values.mean()), rerun_on_cpu=rerun,
-                         max_err_m_sampled=float(err.max()), beyond_1nm=int((err > 1e-9).sum()), sample=int(flat.size),
-                         statuses=np.bincount(ds.status.values.ravel(), minlength=5).tolist()))
-        print(json.dumps(rows[-1]), flush=True)
-    if a.json:
-        Path(a.json).write_text(json.dumps(rows, indent=2) + "\n")
+    step = dict(dt=a.dt) if method == "rk4" else {}
+    # warm-up: compiles the kernel (NVRTC) once
+    idm_rs.sweep(P, W, {"voltage": [80.0]}, backend=backend, method=method, **step, **_kw(model))
+    clock = HostClock() if backend == "cuda" else None
+    t0 = time.perf_counter()
+    ds = idm_rs.sweep(P, W, g, backend=backend, method=method, block_size=a.block, **step, **_kw(model))
+    wall = time.perf_counter() - t0
+    split = clock.close() if clock is not None else {}
+    t1 = time.perf_counter()
+    ref = reference(model, i, j, g)
+    ref_s = time.perf_counter() - t1
+    err = np.abs(ds["final_position"].values[i, j] - ref)
+    reasons = ds["reason"].values.ravel().astype(str)
+    rerun = int(np.count_nonzero(np.char.startswith(reasons, "failed on the kernel")))
+    cpu_points = a.cpu_points // (4 if model == "dps" else 1)
+    cpu = cpu_rate(model, method, a.dt, cpu_points) if cpu_points else float("nan")
+    return dict(backend=backend, method=method, model=model, points=n, dt=a.dt if method == "rk4" else None,
+                rtol=ds.attrs["rtol"], wall_s=round(wall, 3), points_per_s=round(n / wall), **split,
+                steps_per_point=float(ds["steps"].values.mean()), rerun_on_cpu=rerun,
+                max_err_m_sampled=float(err.max()), beyond_1nm=int((err > 1e-9).sum()), sample=int(flat.size),
+                statuses=np.bincount(ds.status.values.ravel(), minlength=5).tolist(),
+                cpu_engine_points_per_s=round(cpu, 1), ratio_to_cpu_engine=round(n / wall / cpu, 2),
+                reference_s=round(ref_s, 1))
+
+
+def stiff_row(backend: str, side: int) -> dict:
+    """``auto`` on a stiff grid: fric_alpha 2e10-2e11 N/m x V 40-120 V (LPS): how many points
+    the kernel hands to the CPU (their step collapsed), and the wall time with them."""
+    g = {"fric_alpha": np.geomspace(2e10, 2e11, side), "voltage": np.linspace(40.0, 120.0, side)}
+    t0 = time.perf_counter()
+    ds = idm_rs.sweep(P, W, g, backend=backend, method="auto", **_kw("lps"))
+    wall = time.perf_counter() - t0
+    reasons = ds["reason"].values.ravel().astype(str)
+    rerun = int(np.count_nonzero(np.char.startswith(reasons, "failed on the kernel")))
+    hi = ds.isel(fric_alpha=slice(side - side // 10, None))
+    hi_rerun = int(np.count_nonzero(np.char.startswith(hi["reason"].values.ravel().astype(str), "failed on the kernel")))
+    return dict(backend=backend, grid=f"stiff {side}x{side}: fric_alpha 2e10-2e11 x V 40-120", points=side * side,
+                wall_s=round(wall, 3), rerun_on_cpu=rerun, rerun_in_top_decile_of_fric_alpha=hi_rerun,
+                statuses=np.bincount(ds.status.values.ravel(), minlength=5).tolist(),
+                steps_per_point=float(ds["steps"].values.mean()))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--size", type=int, default=1000)
+    ap.add_argument("--dt", type=float, default=5e-8, help="RK4 step [s]")
+    ap.add_argument("--rows", default="lps:auto,lps:rk4,dps:auto", help="comma-separated model:method")
+    ap.add_argument("--late-rows", default="dps:rk4", help="rows run after the stiff grid and the A/B")
+    ap.add_argument("--backend", default="cuda", choices=("cuda", "kernel-cpu"))
+    ap.add_argument("--sample", type=int, default=256, help="points checked against RK4 dt = 1e-8")
+    ap.add_argument("--cpu-points", type=int, default=16384, help="points of the CPU engine's rate (0: skip)")
+    ap.add_argument("--stiff", type=int, default=200, help="side of the stiff grid (0: skip)")
+    ap.add_argument("--block", type=int, default=1 << 18, help="points per streamed block")
+    ap.add_argument("--ab", type=int, default=0, help="side of the grid for the kernel-only layout A/B (0: skip)")
+    ap.add_argument("--variant-rows", default="", help="LABEL=rows: rows again with a layout variant (VARIANTS)")
+    ap.add_argument("--json", metavar="PATH")
+    a = ap.parse_args(argv)
+    out = {"card": card()}
+    print(json.dumps(out["card"]), flush=True)
+
+    def stage(name, f):
+        """One part of the run; a failure is printed and the rest still runs."""
+        try:
+            out[name] = f()
+        except Exception:
+            import traceback
+
+            traceback.print_exc()
+            out[name] = f"failed: {traceback.format_exc(limit=3)}"
+        if a.json:
+            Path(a.json).write_text(json.dumps(out, indent=2, default=str) + "\n")
+        return out[name]
+
+    def rows(spec: str, variant: str = "default") -> None:
+        if a.backend == "cuda":
+            use_variant(variant)
+        for item in filter(None, spec.split(",")):
+            model, method = item.split(":")
+            key = f"row_{model}_{method}" + ("" if variant == "default" else f" [{variant}]")
+            print(json.dumps(stage(key, lambda: dict(gpu_row(a.backend, model, method, a), variant=variant))),
+                  flush=True)
+        if a.backend == "cuda":
+            use_variant("default")
+
+    # in order of what matters most, so a run cut short keeps the main figures
+    if a.backend == "cuda":
+        for r in stage("kernels", kernel_resources) or []:
+            print(json.dumps(r), flush=True)
+    rows(a.rows)
+    if a.stiff:
+        print(json.dumps(stage("stiff", lambda: stiff_row(a.backend, a.stiff))), flush=True)
+    if a.backend == "cuda" and a.ab:
+        stage("ab", lambda: kernel_ab(a.ab))
+    if a.backend == "cuda" and a.variant_rows:
+        label, spec = a.variant_rows.split("=")
+        rows(spec, label)
+    rows(a.late_rows)
     return 0
 
 

@@ -28,6 +28,7 @@ highest_frequency = _core.highest_frequency
 kernel_constants = _core.kernel_constants
 kernel_constant_count = _core.kernel_constant_count
 kernel_header = _core.kernel_header
+kernel_accepts = _core.kernel_accepts
 #: the vector lanes' instruction set ("scalar", "avx2", "avx512"): results are bitwise the same
 simd_level = _core.simd_level
 set_simd_level = _core.set_simd_level
@@ -51,6 +52,7 @@ __all__ = [
     "kernel_constants",
     "kernel_constant_count",
     "kernel_header",
+    "kernel_accepts",
     "param_declarations",
     "param_names",
     "metric_columns",

@@ -305,6 +305,25 @@ fn kernel_constant_count() -> (usize, usize, usize) {
     (crate::kernel::N_CONSTANTS, crate::kernel::N_SCALARS, crate::kernel::MAX_DOF)
 }
 
+/// What the GPU kernel implements (`rust/src/kernel.rs`): the Table 1 parameters, effects,
+/// waveform families (with their fields), structures and metrics it admits, and its largest
+/// node count; the kernel backends refuse everything else by name.
+#[pyfunction]
+fn kernel_accepts(py: Python<'_>) -> PyResult<Bound<'_, pyo3::types::PyDict>> {
+    let d = pyo3::types::PyDict::new(py);
+    d.set_item("params", crate::kernel::PARAMS.to_vec())?;
+    d.set_item("effects", crate::kernel::EFFECTS.to_vec())?;
+    let waves = pyo3::types::PyDict::new(py);
+    for (kind, fields) in crate::kernel::WAVES {
+        waves.set_item(kind, fields.to_vec())?;
+    }
+    d.set_item("waves", waves)?;
+    d.set_item("structures", crate::kernel::STRUCTURES.to_vec())?;
+    d.set_item("metrics", crate::kernel::METRICS.to_vec())?;
+    d.set_item("max_dof", crate::kernel::MAX_DOF)?;
+    Ok(d)
+}
+
 /// The C `#define`s of the kernel's constants' layout (`rust/src/kernel.rs`), to put in front
 /// of the kernel source when it is compiled.
 #[pyfunction]
@@ -632,6 +651,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(kernel_constants, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_constant_count, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_header, m)?)?;
+    m.add_function(wrap_pyfunction!(kernel_accepts, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     declarations::register(m)?;
     Ok(())

@@ -11,17 +11,41 @@ use crate::model::Model;
 /// Largest node count the kernel holds (DPS with 5 elements).
 pub const MAX_DOF: usize = 6;
 /// The scalars before the matrices, in order, by the name the kernel reads them with
-/// (`c[IDM_C_<NAME>]`): node count, kp [N/m], d33 [m/V], the 11 friction constants of
-/// `Leuven::constants`, hysteresis on (1) or off (0) and its 3 constants
-/// (`PiezoHysteresis::constants`), the |Fh| bound [N], and the LPS frequency
-/// sqrt(kp (1/m1 + 1/m2)) [rad/s] that scales velocities in the adaptive method's error norm
-/// (`Model::state_scales`).
-pub const SCALARS: [&str; 20] = [
-    "DOF", "KP", "D33", "FC", "FS_FC", "INV_VS", "DELTA", "FRIC_N", "A", "B", "C", "SIGMA1", "SIGMA2", "EPS",
-    "HYST_ON", "HYST_AP_D33", "HYST_BP", "HYST_CP", "FH_BOUND", "OMEGA_LPS",
+/// (`c[IDM_C_<NAME>]`): kp [N/m], d33 [m/V], the 11 friction constants of `Leuven::constants`,
+/// the 3 hysteresis constants (`PiezoHysteresis::constants`; zero when it is off, which the
+/// kernel knows at compile time), the constant force on the main body [N] (`load_force`), the
+/// |Fh| bound [N], and the LPS frequency sqrt(kp (1/m1 + 1/m2)) [rad/s] that scales velocities
+/// in the adaptive method's error norm (`Model::state_scales`). The node count and whether
+/// hysteresis is on are compile-time constants of the kernel (`IDM_N`, `IDM_HYST`).
+pub const SCALARS: [&str; 19] = [
+    "KP", "D33", "FC", "FS_FC", "INV_VS", "DELTA", "FRIC_N", "A", "B", "C", "SIGMA1", "SIGMA2", "EPS",
+    "HYST_AP_D33", "HYST_BP", "HYST_CP", "F_CONST", "FH_BOUND", "OMEGA_LPS",
 ];
 /// Number of scalars before the matrices.
 pub const N_SCALARS: usize = SCALARS.len();
+
+/// What the kernel implements, the list every kernel backend admits work by (a sweep is
+/// refused, naming the field, when anything outside it varies or differs from its default):
+/// the Table 1 parameters it reads (each reaches its constants: a test perturbs every one and
+/// sees them change; a parameter added to Table 1 is refused until it is added here and the
+/// kernel reads it), the effects (none), the waveform families with the fields it evaluates,
+/// the structures and the metrics it computes (`step_per_cycle` is x1 / cycles, on the host).
+pub const PARAMS: [&str; 24] = [
+    "m1", "m2", "pe_area", "pe_youngs", "pe_length", "pe_density", "d33", "rayleigh_alpha", "rayleigh_beta",
+    "hyst_alpha", "hyst_beta", "hyst_gamma", "fric_alpha", "fric_beta", "fric_gamma", "fric_n",
+    "stribeck_velocity", "stribeck_exponent", "mu_k", "mu_s", "sigma1", "sigma2", "load_force", "normal_force",
+];
+/// Effects the kernel implements (none: each must be at its no-effect value).
+pub const EFFECTS: [&str; 0] = [];
+/// Waveform families and the fields the kernel evaluates them from.
+pub const WAVES: [(&str, &[&str]); 2] = [
+    ("triangle", &["amplitude", "rise", "fall", "delay"]),
+    ("sawtooth", &["amplitude", "frequency", "cycles", "rise", "forward", "delay"]),
+];
+/// Metrics the kernel backends return.
+pub const METRICS: [&str; 5] = ["final_position", "step_per_cycle", "peak_velocity", "peak_friction", "slip_fraction"];
+/// Structures: the LPS and the DPS with 1 to MAX_DOF - 1 elements.
+pub const STRUCTURES: [&str; 2] = ["lps", "dps"];
 
 /// The offset of scalar `name` in a point's constants (a panic names an undeclared one).
 fn at(name: &str) -> usize {
@@ -62,7 +86,6 @@ pub fn kernel_constants(model: &Model) -> Result<Vec<f64>, String> {
         return Err("the GPU kernel runs the IDM, not a rig".into());
     }
     let mut c = vec![0.0; N_CONSTANTS];
-    c[at("DOF")] = n as f64;
     c[at("KP")] = model.kp;
     c[at("D33")] = model.d33;
     let friction = ["FC", "FS_FC", "INV_VS", "DELTA", "FRIC_N", "A", "B", "C", "SIGMA1", "SIGMA2", "EPS"];
@@ -70,11 +93,11 @@ pub fn kernel_constants(model: &Model) -> Result<Vec<f64>, String> {
         c[at(name)] = v;
     }
     if let Some(h) = model.hysteresis {
-        c[at("HYST_ON")] = 1.0;
         for (name, v) in ["HYST_AP_D33", "HYST_BP", "HYST_CP"].iter().zip(h.constants()) {
             c[at(name)] = v;
         }
     }
+    c[at("F_CONST")] = model.f_constant;
     c[at("FH_BOUND")] = model.presliding_bound();
     let p = &model.params;
     c[at("OMEGA_LPS")] = (p.kp() * (1.0 / p.m1 + 1.0 / p.m2)).sqrt();
@@ -108,8 +131,41 @@ mod tests {
         }
         assert!(!src.contains("#define IDM_N_SCALARS"), "the layout comes from kernel_header(), not the source");
         let h = kernel_header();
-        assert!(h.contains("#define IDM_C_OMEGA_LPS 19") && h.contains(&format!("#define IDM_N_SCALARS {N_SCALARS}")));
+        assert!(h.contains("#define IDM_C_OMEGA_LPS 18") && h.contains(&format!("#define IDM_N_SCALARS {N_SCALARS}")));
         assert!(h.contains("#define IDM_CRAWL_CHECK_STEPS 4096\n") && h.contains("#define IDM_MAX_ADAPTIVE_STEPS 1e8\n"), "{h}");
         assert!(src.contains("IDM_MAX_ADAPTIVE_STEPS") && src.contains("IDM_CRAWL_CHECK_STEPS"), "the kernel stops crawling runs");
+    }
+
+    /// Every parameter the kernel claims reaches its constants: perturbed alone, it changes
+    /// them (on the DPS with hysteresis, where each one acts), and it is a declared Table 1
+    /// parameter; the waves' fields are the engine's.
+    #[test]
+    fn every_admitted_parameter_reaches_the_kernel_constants() {
+        use crate::batch::WaveFamily;
+        use crate::params::{Params, PARAM_NAMES};
+        let config = |p: Params| {
+            Model::new(p, crate::effects::Effects::default(), crate::mechanics::Structure::Dps(4), true, false)
+                .expect("the paper's device builds")
+        };
+        let base = Params::paper();
+        let c0 = kernel_constants(&config(base)).unwrap();
+        for name in PARAMS {
+            assert!(PARAM_NAMES.contains(&name), "{name} is not a Table 1 parameter");
+            let mut p = base;
+            let v = p.get(name).unwrap();
+            p.set(name, if v == 0.0 { 0.5 } else { v * 1.1 }).unwrap();
+            if name == "mu_s" || name == "mu_k" {
+                p.set(name, v * 0.95).unwrap();
+            }
+            let c = kernel_constants(&config(p)).unwrap();
+            assert!(c != c0, "{name} changes nothing the kernel reads");
+        }
+        for (kind, fields) in WAVES {
+            let fam = WaveFamily::new(kind, None).unwrap();
+            assert_eq!(fam.fields(), fields, "the kernel's {kind} fields are not the engine's");
+        }
+        for m in METRICS {
+            assert!(crate::batch::METRIC_COLUMNS.iter().any(|c| c.0 == m), "{m}");
+        }
     }
 }

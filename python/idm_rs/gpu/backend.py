@@ -1,5 +1,10 @@
-"""Packing sweep points for the kernel, and running it on a GPU (CuPy) or on the CPU (the same
-source compiled by the system C compiler, loaded with ctypes)."""
+"""Packing sweep points for the kernel, and running it on a GPU (CuPy, NVRTC) or on the CPU (the
+same source compiled by the system C compiler, loaded with ctypes).
+
+The kernel is specialised at compile time (``Spec``: node count, hysteresis on/off), so its state lives in registers. Its inputs are columns: the per-point
+constants of each distinct parameter row (the engine packs them: ``engine.kernel_constants``),
+indexed per point by ``rows``, and the wave's six numbers per point; a column equal over the
+whole batch is sent once (step 0)."""
 
 from __future__ import annotations
 
@@ -23,25 +28,62 @@ SOURCE = Path(__file__).with_name("idm_kernel.cu")
 OUTPUTS = ("final_position", "peak_velocity", "peak_friction", "slip_fraction", "status", "diverged_at")
 #: the adaptive kernel's outputs after those: accepted steps, smallest step, crawled (1/0)
 ADAPTIVE_EXTRA = 3
-#: CUDA threads per block
+#: CUDA threads per block (the LPS; see Spec.block)
 BLOCK = 128
+#: NVRTC options, as the CUDA backend compiles (CuPy adds the architecture)
+NVRTC_OPTIONS = ("--std=c++14",)
+#: kernel entry points by method
+ENTRY = {"rk4": "idm_rk4_sweep", "dopri5": "idm_dopri5_sweep"}
 
 
 class GpuUnavailable(RuntimeError):
     """No usable GPU backend here (CuPy missing, no device, or no C compiler for the CPU build)."""
 
 
+@dataclass(frozen=True)
+class Spec:
+    """A compile-time specialisation of the kernel: ``nodes`` (2 for the LPS, n + 1 for the DPS),
+    piezo hysteresis on/off."""
+
+    nodes: int
+    hysteresis: bool
+
+    @property
+    def block(self) -> int:
+        """Threads per CUDA block: 64 where the middle stages live in shared memory (DPS)."""
+        return BLOCK if self.nodes == 2 else 64
+
+    def defines(self) -> str:
+        """The compile-time constants. The matrices are read in place (IDM_MAT_REG 0: held in
+        registers, the LPS's spilled 16 bytes in RK4 for sm_80, ptxas -v); beyond the LPS the
+        middle Dormand-Prince stages live in shared memory (in registers they spilled from 3
+        nodes on). Measured as the way to 0 bytes of stack for every node count."""
+        return (f"#define IDM_N {self.nodes}\n#define IDM_HYST {int(self.hysteresis)}\n"
+                f"#define IDM_BLOCK {self.block}\n"
+                f"#define IDM_MAT_REG 0\n#define IDM_SHARED_STAGES {int(self.nodes > 2)}\n")
+
+
+def all_specs() -> list[Spec]:
+    """Every specialisation the backend can launch (the NVRTC test compiles each)."""
+    max_dof = engine.kernel_constant_count()[2]
+    return [Spec(n, h) for n in range(2, max_dof + 1) for h in (True, False)]
+
+
 @dataclass
 class KernelBatch:
-    """The kernel's inputs for P points (C-contiguous). ``method`` "rk4" uses ``dt`` and
-    ``steps``; "dopri5" uses ``t_end``, ``rtol``, ``atol`` and ``first_step``."""
+    """The kernel's inputs for P points: ``consts`` (R, scalars + matrices) one row per distinct
+    parameter row, ``rows`` (P,) each point's row; the wave's six columns in ``data``: column k
+    of point p is ``data[off[k] + step[k] * p]`` (step 0: one value for all). ``method`` "rk4"
+    uses ``dt`` and ``steps``; "dopri5" uses ``t_end``, ``rtol``, ``atol`` and ``first_step``."""
 
-    consts: NDArray[np.float64]  #: (P, N_CONSTANTS)
-    bt: NDArray[np.float64]  #: (P, max_nb) breakpoint times [s], padded with the last
-    bv: NDArray[np.float64]  #: (P, max_nb) breakpoint values [V]
-    nb: NDArray[np.int32]  #: (P,) breakpoints per point
-    steps: NDArray[np.int64]  #: (P,) RK4 steps
+    spec: Spec
+    consts: NDArray[np.float64]
+    rows: NDArray[np.int32]
+    data: NDArray[np.float64]
+    off: NDArray[np.int64]
+    step: NDArray[np.int64]
     dt: float
+    steps: int
     method: str = "rk4"
     t_end: float = 0.0
     rtol: float = 1e-7
@@ -50,36 +92,83 @@ class KernelBatch:
 
     @property
     def points(self) -> int:
-        return int(self.nb.size)
+        return int(self.rows.size)
 
 
-def prepare(config: Any, params_table: NDArray[np.float64], breakpoints: list[tuple[NDArray[np.float64],
-            NDArray[np.float64]]], t_end: float, dt: float, *, method: str = "rk4", rtol: float = 1e-7,
-            atol: float = 1e-7, first_step: float = 1e-8) -> KernelBatch:
-    """The kernel's inputs: constants from the engine (which refuses what the kernel cannot
-    run), breakpoints padded to a common length, and the step count t_end / dt (RK4) or the
-    tolerances (``method="dopri5"``)."""
+def wave_columns(kind: str, fields: dict[str, Any]) -> list[Any]:
+    """The kernel's six wave columns (delay [s], amplitude [V], peak time in a cycle [s], span
+    [s]: fall or period, cycles, 1 for a Triangle) from the family's batch fields (scalars or
+    per-point arrays): the arithmetic of waveforms.py."""
+    f = {k: np.asarray(v, dtype=float) for k, v in fields.items()}
+    if kind == "triangle":
+        return [f["delay"], f["amplitude"], f["rise"], f["fall"], np.float64(1.0), np.float64(1.0)]
+    period = 1.0 / f["frequency"]
+    peak = np.where(f["forward"] != 0.0, f["rise"], period - f["rise"])
+    return [f["delay"], f["amplitude"], peak, period, f["cycles"], np.float64(0.0)]
+
+
+def _columns(values: list[Any], points: int) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
+    """The columns packed one after another, each once where it is uniform (step 0), else
+    whole (step 1, ``points`` values): (data, off, step)."""
+    cols, steps = [], []
+    for v in values:
+        v = np.atleast_1d(np.asarray(v, dtype=float))
+        if v.size == 1 or (v == v[0]).all():
+            cols.append(v[:1])
+            steps.append(0)
+        else:
+            if v.size != points:
+                raise ValueError(f"a wave column has {v.size} values for {points} points")
+            cols.append(v)
+            steps.append(1)
+    sizes = np.array([c.size for c in cols])
+    off = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    return np.concatenate(cols), off, np.asarray(steps, dtype=np.int64)
+
+
+def constant_columns(nodes: int) -> NDArray[np.intp]:
+    """The engine's constants the kernel reads for ``nodes`` nodes, in its column order: the
+    scalars, M^-1 K and M^-1 C (n x n of the MAX_DOF x MAX_DOF padding), the two force columns."""
+    _, n_scalars, max_dof = engine.kernel_constant_count()
+    n = nodes
+    mat = np.add.outer(np.arange(n) * max_dof, np.arange(n)).ravel()
+    mk = n_scalars + mat
+    mc = n_scalars + max_dof * max_dof + mat
+    m0 = n_scalars + 2 * max_dof * max_dof + np.arange(n)
+    ml = m0 + max_dof
+    return np.concatenate([np.arange(n_scalars), mk, mc, m0, ml])
+
+
+def pack(config: Any, spec: Spec, param_rows: NDArray[np.float64], rows: NDArray[np.integer],
+         wave: list[Any], t_end: float, dt: float, *, method: str = "rk4", rtol: float = 1e-7,
+         atol: float = 1e-7, first_step: float = 1e-8) -> KernelBatch:
+    """The kernel's inputs: the constants of each distinct parameter row (``param_rows``, (R,
+    len(param_names())); the engine refuses what the kernel cannot run), ``rows`` (P,) the row
+    of each point, ``wave`` the six wave columns (scalars or (P,) arrays: ``wave_columns``)."""
     _check_layout()
-    consts = np.ascontiguousarray(engine.kernel_constants(config, np.ascontiguousarray(params_table, dtype=float)))
-    p = consts.shape[0]
-    max_nb = max(len(b[0]) for b in breakpoints)
-    bt = np.empty((p, max_nb))
-    bv = np.empty((p, max_nb))
-    nb = np.empty(p, dtype=np.int32)
-    for i, (t, v) in enumerate(breakpoints):
-        k = len(t)
-        bt[i, :k], bv[i, :k] = t, v
-        bt[i, k:], bv[i, k:] = t[-1], v[-1]
-        nb[i] = k
-    steps = np.full(p, int(round(t_end / dt)), dtype=np.int64)
-    return KernelBatch(consts, bt, bv, nb, steps, float(dt), method, float(t_end), float(rtol), float(atol),
-                       float(first_step))
+    consts = engine.kernel_constants(config, np.ascontiguousarray(param_rows, dtype=float))
+    consts = np.ascontiguousarray(consts[:, constant_columns(spec.nodes)])
+    rows = np.ascontiguousarray(rows, dtype=np.int32)
+    data, off, step = _columns(list(wave), rows.size)
+    return KernelBatch(spec, consts, rows, data, off, step, float(dt), int(round(t_end / dt)), method,
+                       float(t_end), float(rtol), float(atol), float(first_step))
 
 
-def kernel_source() -> str:
+def prepare(config: Any, params_table: NDArray[np.float64], waves: tuple[str, dict[str, Any]], t_end: float,
+            dt: float, *, spec: Spec, method: str = "rk4", rtol: float = 1e-7, atol: float = 1e-7,
+            first_step: float = 1e-8) -> KernelBatch:
+    """One row of ``params_table`` per point, with its wave as (family, batch fields: scalars or
+    per-point arrays), for the specialisation ``spec``. For tests and small batches; the sweep
+    packs with ``pack`` (one row per distinct parameter row)."""
+    p = np.asarray(params_table).shape[0]
+    return pack(config, spec, params_table, np.arange(p), wave_columns(*waves), t_end, dt, method=method,
+                rtol=rtol, atol=atol, first_step=first_step)
+
+
+def kernel_source(spec: Spec) -> str:
     """The kernel as compiled: the engine's layout header (the constants' offsets by name,
-    ``engine.kernel_header()``) in front of ``idm_kernel.cu``."""
-    return engine.kernel_header() + SOURCE.read_text()
+    ``engine.kernel_header()``) and the specialisation in front of ``idm_kernel.cu``."""
+    return engine.kernel_header() + spec.defines() + SOURCE.read_text()
 
 
 def _check_layout() -> None:
@@ -93,24 +182,33 @@ def _check_layout() -> None:
 
 
 def _outputs(raw: NDArray[np.float64]) -> dict[str, NDArray[Any]]:
-    out = {name: raw[:, i].copy() for i, name in enumerate(OUTPUTS)}
+    """The kernel's output columns (rows of ``raw``) by name."""
+    out = {name: raw[i] for i, name in enumerate(OUTPUTS)}
     out["status"] = out["status"].astype(np.uint8)
     out["diverged_at"] = np.where(out["status"] == 3, out["diverged_at"], np.nan)
-    if raw.shape[1] > len(OUTPUTS):  # the adaptive kernel: accepted steps, smallest step, crawled
-        out["steps"] = raw[:, 6].astype(np.uint64)
-        out["dt_used"] = raw[:, 7].copy()
-        out["crawled"] = raw[:, 8] == 1.0
+    if raw.shape[0] > len(OUTPUTS):  # the adaptive kernel: accepted steps, smallest step, crawled
+        out["steps"] = raw[6].astype(np.uint64)
+        out["dt_used"] = raw[7]
+        out["crawled"] = raw[8] == 1.0
     return out
+
+
+def _n_outputs(method: str) -> int:
+    return len(OUTPUTS) + (ADAPTIVE_EXTRA if method == "dopri5" else 0)
 
 
 # --- the CPU build --------------------------------------------------------------------------------
 
+_CPU_LIBS: dict[Spec, ctypes.CDLL] = {}
 
-def _cpu_library() -> ctypes.CDLL:
+
+def _cpu_library(spec: Spec) -> ctypes.CDLL:
+    if spec in _CPU_LIBS:
+        return _CPU_LIBS[spec]
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if cc is None:
         raise GpuUnavailable("no C compiler (cc) to build the kernel for the CPU")
-    source = kernel_source()
+    source = kernel_source(spec)
     tag = hashlib.sha256(source.encode()).hexdigest()[:16]
     lib = Path(tempfile.gettempdir()) / f"idm_kernel_cpu_{tag}.so"
     if not lib.exists():
@@ -121,43 +219,39 @@ def _cpu_library() -> ctypes.CDLL:
             raise GpuUnavailable(f"building the kernel for the CPU failed: {r.stderr.strip()[:500]}")
         os.replace(tmp, lib)
     dll = ctypes.CDLL(str(lib))
-    dp = ctypes.POINTER(ctypes.c_double)
-    dll.idm_rk4_sweep.argtypes = [dp, dp, dp, ctypes.POINTER(ctypes.c_int), ctypes.c_int, ctypes.c_double,
-                                  ctypes.POINTER(ctypes.c_long), ctypes.c_int, dp]
+    dp, lp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_longlong), ctypes.POINTER(ctypes.c_int)
+    d, ll = ctypes.c_double, ctypes.c_longlong
+    dll.idm_rk4_sweep.argtypes = [dp, ip, dp, lp, lp, d, ll, ll, ll, dp]
     dll.idm_rk4_sweep.restype = None
-    d = ctypes.c_double
-    dll.idm_dopri5_sweep.argtypes = [dp, dp, dp, ctypes.POINTER(ctypes.c_int), ctypes.c_int, d, d, d, d,
-                                     ctypes.c_int, dp]
+    dll.idm_dopri5_sweep.argtypes = [dp, ip, dp, lp, lp, d, d, d, d, ll, ll, dp]
     dll.idm_dopri5_sweep.restype = None
+    _CPU_LIBS[spec] = dll
     return dll
 
 
 def run_cpu(batch: KernelBatch) -> dict[str, NDArray[Any]]:
     """The kernel compiled for the CPU (one point after another): the reference the tests hold
     the GPU source to."""
-    dll = _cpu_library()
-    dp = ctypes.POINTER(ctypes.c_double)
-    ptr = lambda a, t=dp: a.ctypes.data_as(t)  # noqa: E731
-    common = (ptr(batch.consts), ptr(batch.bt), ptr(batch.bv), ptr(batch.nb, ctypes.POINTER(ctypes.c_int)),
-              int(batch.bt.shape[1]))
+    dll = _cpu_library(batch.spec)
+    ptr = lambda a, t: a.ctypes.data_as(ctypes.POINTER(t))  # noqa: E731
+    data = np.ascontiguousarray(batch.data)
+    common = (ptr(batch.consts, ctypes.c_double), ptr(batch.rows, ctypes.c_int), ptr(data, ctypes.c_double),
+              ptr(batch.off, ctypes.c_longlong), ptr(batch.step, ctypes.c_longlong))
+    out = np.zeros((_n_outputs(batch.method), batch.points))
     if batch.method == "dopri5":
-        out = np.zeros((batch.points, len(OUTPUTS) + ADAPTIVE_EXTRA))
-        dll.idm_dopri5_sweep(*common, batch.t_end, batch.rtol, batch.atol, batch.first_step, batch.points, ptr(out))
+        dll.idm_dopri5_sweep(*common, batch.t_end, batch.rtol, batch.atol, batch.first_step, 0, batch.points,
+                             ptr(out, ctypes.c_double))
     else:
-        out = np.zeros((batch.points, len(OUTPUTS)))
-        dll.idm_rk4_sweep(*common, batch.dt, ptr(batch.steps, ctypes.POINTER(ctypes.c_long)), batch.points, ptr(out))
+        dll.idm_rk4_sweep(*common, batch.dt, batch.steps, 0, batch.points, ptr(out, ctypes.c_double))
     return _outputs(out)
 
 
 # --- the GPU --------------------------------------------------------------------------------------
 
-_MODULE: Optional[Any] = None
+_MODULES: dict[Spec, Any] = {}
 
 
-def run_cuda(batch: KernelBatch) -> dict[str, NDArray[Any]]:
-    """The kernel on the GPU: one thread per point, in grid order (neighbouring points share a
-    warp), blocks of ``BLOCK`` threads."""
-    global _MODULE
+def _cupy() -> Any:
     try:
         import cupy as cp
     except ImportError:
@@ -167,18 +261,69 @@ def run_cuda(batch: KernelBatch) -> dict[str, NDArray[Any]]:
             raise GpuUnavailable("backend='cuda': no CUDA device found")
     except cp.cuda.runtime.CUDARuntimeError as exc:
         raise GpuUnavailable(f"backend='cuda': no usable CUDA device ({exc})") from None
-    if _MODULE is None:
-        _MODULE = cp.RawModule(code=kernel_source(), options=("--std=c++14",))
-    d = {name: cp.asarray(getattr(batch, name)) for name in ("consts", "bt", "bv", "nb", "steps")}
-    grid = ((batch.points + BLOCK - 1) // BLOCK,)
-    common = (d["consts"], d["bt"], d["bv"], d["nb"], np.int32(batch.bt.shape[1]))
-    if batch.method == "dopri5":
-        out = cp.zeros((batch.points, len(OUTPUTS) + ADAPTIVE_EXTRA), dtype=cp.float64)
-        _MODULE.get_function("idm_dopri5_sweep")(grid, (BLOCK,), common + (
-            np.float64(batch.t_end), np.float64(batch.rtol), np.float64(batch.atol), np.float64(batch.first_step),
-            np.int32(batch.points), out))
-    else:
-        out = cp.zeros((batch.points, len(OUTPUTS)), dtype=cp.float64)
-        _MODULE.get_function("idm_rk4_sweep")(grid, (BLOCK,), common + (
-            np.float64(batch.dt), d["steps"], np.int32(batch.points), out))
-    return _outputs(cp.asnumpy(out))
+    return cp
+
+
+class Finished:
+    """A block already run (the CPU build): ``result()`` returns its outputs."""
+
+    def __init__(self, res: dict[str, NDArray[Any]]) -> None:
+        self._res = res
+
+    def done(self) -> bool:
+        return True
+
+    def result(self) -> dict[str, NDArray[Any]]:
+        return self._res
+
+
+class Launched:
+    """A block running on the GPU: ``result()`` waits for it and brings its outputs back."""
+
+    def __init__(self, out: Any, stream: Any, events: tuple[Any, Any]) -> None:
+        self._out, self._stream, self._events = out, stream, events
+        #: the kernel's own time [s] (CUDA events around the launch), known after result()
+        self.kernel_s = float("nan")
+
+    def done(self) -> bool:
+        """Whether the GPU has finished the block (without waiting)."""
+        return bool(self._stream.done)
+
+    def result(self) -> dict[str, NDArray[Any]]:
+        import cupy as cp
+
+        self._stream.synchronize()
+        self.kernel_s = cp.cuda.get_elapsed_time(*self._events) / 1e3
+        return _outputs(self._out.get(stream=self._stream))
+
+
+def launch_cuda(batch: KernelBatch) -> Launched:
+    """Start the kernel on the GPU on its own stream and return at once (the host packs the
+    next block meanwhile): one thread per point, in grid order (neighbouring points share a
+    warp), blocks of ``BLOCK`` threads."""
+    cp = _cupy()
+    spec = batch.spec
+    if spec not in _MODULES:
+        _MODULES[spec] = cp.RawModule(code=kernel_source(spec), options=NVRTC_OPTIONS)
+    stream = cp.cuda.Stream(non_blocking=True)
+    with stream:
+        d = {name: cp.asarray(getattr(batch, name)) for name in ("consts", "rows", "data", "off", "step")}
+        out = cp.empty((_n_outputs(batch.method), batch.points), dtype=cp.float64)
+        grid = ((batch.points + spec.block - 1) // spec.block,)
+        common = (d["consts"], d["rows"], d["data"], d["off"], d["step"])
+        f = _MODULES[spec].get_function(ENTRY[batch.method])
+        if batch.method == "dopri5":
+            args = common + (np.float64(batch.t_end), np.float64(batch.rtol), np.float64(batch.atol),
+                             np.float64(batch.first_step), np.int64(0), np.int64(batch.points), out)
+        else:
+            args = common + (np.float64(batch.dt), np.int64(batch.steps), np.int64(0), np.int64(batch.points), out)
+        start, end = cp.cuda.Event(), cp.cuda.Event()
+        start.record(stream)
+        f(grid, (spec.block,), args)
+        end.record(stream)
+    return Launched(out, stream, (start, end))
+
+
+def run_cuda(batch: KernelBatch) -> dict[str, NDArray[Any]]:
+    """The kernel on the GPU, waited for."""
+    return launch_cuda(batch).result()

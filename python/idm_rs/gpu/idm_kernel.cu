@@ -2,150 +2,287 @@
  * sweep backend (compiled by NVRTC through CuPy) and, unchanged, of the CPU build the test suite
  * compiles with the system C compiler to check it against the Rust engine.
  *
- * It mirrors rust/src/model.rs for the models the kernel supports: the LPS or the DPS with up
- * to IDM_MAX_DOF nodes, Leuven friction, Bouc-Wen piezo hysteresis on or off, no effects. The
- * per-point constants come from the engine (rust/src/kernel.rs), read by name. */
+ * It mirrors rust/src/model.rs for the models the kernel admits (rust/src/kernel.rs: the LPS or
+ * the DPS, Leuven friction, Bouc-Wen piezo hysteresis on or off, a constant load on the main
+ * body, no effects). It is specialised at compile time, as DiffEqGPU generates one kernel per
+ * ODE: the backend puts in front of it the engine's layout header (the constants' offsets by
+ * name) and
+ *   IDM_N     the number of nodes (2 for the LPS, n + 1 for the DPS with n elements),
+ *   IDM_HYST  1 with piezo hysteresis, 0 without,
+ * so the state and the stages are fixed-size arrays indexed by constants after unrolling: they
+ * live in registers (ptxas -v: 0 bytes stack frame), which tests/test_gpu_kernel.py checks.
+ *
+ * Inputs: the constants of each distinct parameter row (consts, one row of IDM_N_SCALARS +
+ * IDM_NM numbers each; point p reads row rows[p], neighbouring points of one row read the same
+ * address), and the wave's six numbers as columns: column k of point p is data[off[k] +
+ * step[k] * p] (step 1: one value per point, coalesced; step 0: one value for the whole batch).
+ * The right-hand side's scalars are copied into registers once per point; the matrices are read
+ * in place (IDM_M). Outputs are columns: out[k * points + p]. */
 
 #if defined(__CUDACC__) || defined(__CUDACC_RTC__)
 #define IDM_HD __device__ __forceinline__
-#define IDM_KERNEL extern "C" __global__
+#define IDM_KERNEL extern "C" __global__ void __launch_bounds__(IDM_BLOCK)
+#define IDM_UNROLL _Pragma("unroll")
 #else
 #include <math.h>
 #define IDM_HD static inline
-#define IDM_KERNEL
+#define IDM_KERNEL void
+#define IDM_UNROLL
 #endif
 
-/* IDM_MAX_DOF, IDM_N_SCALARS and the offset of each constant by name come from the
- * engine (rust/src/kernel.rs: kernel_header), put in front of this source when it is compiled */
+/* IDM_N_SCALARS and the offset of each scalar by name come from the engine
+ * (rust/src/kernel.rs: kernel_header); IDM_N, IDM_HYST from the backend */
 #ifndef IDM_N_SCALARS
 #error "compile with the engine's header in front: idm_rs.engine.kernel_header()"
 #endif
-#define IDM_N_CONSTANTS (IDM_N_SCALARS + 2 * IDM_MAX_DOF * IDM_MAX_DOF + 2 * IDM_MAX_DOF)
-#define IDM_DIM (2 * IDM_MAX_DOF + 3)
+#if !defined(IDM_N) || !defined(IDM_HYST)
+#error "compile with the specialisation in front: IDM_N, IDM_HYST (idm_rs.gpu.backend.Spec.defines)"
+#endif
+#ifndef IDM_BLOCK
+#define IDM_BLOCK 128
+#endif
+#define IDM_DIM (2 * IDM_N + 3)
+/* the matrix columns after the scalars: M^-1 K and M^-1 C (row-major, n x n), then the force
+ * columns of M^-1 for the main body and the last node (n each) */
+#define IDM_MK 0
+#define IDM_MC (IDM_N * IDM_N)
+#define IDM_M0 (2 * IDM_N * IDM_N)
+#define IDM_ML (2 * IDM_N * IDM_N + IDM_N)
+#define IDM_NM (2 * IDM_N * IDM_N + 2 * IDM_N)
+/* the wave's columns after the matrices (waveforms.py: Triangle, Sawtooth) */
+#define IDM_W_DELAY 0
+#define IDM_W_AMP 1
+#define IDM_W_PEAK 2   /* peak time within a cycle: rise (forward), period - rise (backward) [s] */
+#define IDM_W_SPAN 3   /* Triangle: fall [s]; Sawtooth: period [s] */
+#define IDM_W_CYCLES 4
+#define IDM_W_TRIANGLE 5 /* 1 for a Triangle (its end is delay + rise + fall), 0 for a Sawtooth */
+#define IDM_NW 6
 /* the slip threshold of the slip-fraction metric, in units of the Stribeck velocity */
 #define IDM_SLIP_FACTOR 0.1
+
+/* The matrices: with IDM_MAT_REG (the LPS: 12 numbers) held in registers; otherwise read from
+ * the point's constants row at each use (a volatile load the compiler may not hoist out of the
+ * step loop, where they would crowd the stages out of the registers; the warp's points of one
+ * parameter row read one address: an L1 broadcast). */
+#ifndef IDM_MAT_REG
+#define IDM_MAT_REG 1
+#endif
+#if !(defined(__CUDACC__) || defined(__CUDACC_RTC__)) || !defined(IDM_SHARED_STAGES)
+#undef IDM_SHARED_STAGES
+#define IDM_SHARED_STAGES 0
+#endif
+#if defined(__CUDACC__) || defined(__CUDACC_RTC__)
+IDM_HD double idm_ld(const double *p) {
+    double v;
+    asm volatile("ld.global.nc.f64 %0, [%1];" : "=d"(v) : "l"(p));
+    return v;
+}
+#endif
+#if (defined(__CUDACC__) || defined(__CUDACC_RTC__)) && !IDM_MAT_REG
+#define IDM_M(m, k) idm_ld((m) + (k))
+#else
+#define IDM_M(m, k) ((m)[k])
+#endif
+/* The scalars the right-hand side reads: with IDM_SCAL_REG held in registers (copied once per
+ * point), else read in place at each use as the matrices are */
+#ifndef IDM_SCAL_REG
+#define IDM_SCAL_REG 1
+#endif
+#if (defined(__CUDACC__) || defined(__CUDACC_RTC__)) && !IDM_SCAL_REG
+#define IDM_CS(x) idm_ld(&(x))
+#else
+#define IDM_CS(x) (x)
+#endif
 
 IDM_HD double idm_sign0(double x) { return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0); }
 
 /* Stribeck curve S(v) [N] (friction.rs: Leuven::stribeck) */
 IDM_HD double idm_stribeck(const double *c, double v) {
-    double fc = c[IDM_C_FC], fs_fc = c[IDM_C_FS_FC], inv_vs = c[IDM_C_INV_VS], delta = c[IDM_C_DELTA], eps = c[IDM_C_EPS];
+    double fc = IDM_CS(c[IDM_C_FC]), fs_fc = IDM_CS(c[IDM_C_FS_FC]), delta = IDM_CS(c[IDM_C_DELTA]), eps = IDM_CS(c[IDM_C_EPS]);
     double s;
     if (fs_fc == 0.0) {
         s = fc;
     } else {
-        double x = fabs(v) * inv_vs;
+        double x = fabs(v) * IDM_CS(c[IDM_C_INV_VS]);
         double e = (delta == 2.0) ? x * x : pow(x, delta);
         s = fc + fs_fc * exp(-e);
     }
     return eps == 0.0 ? s : s * (1.0 + eps * idm_sign0(v));
 }
 
-/* dy/dt of the plain state [q (n), v (n), g, Fh, h] at voltage volt rising at dvolt;
- * returns the friction force Ff [N] (model.rs: Model::rhs_impl without effects). */
-IDM_HD double idm_rhs(const double *c, double volt, double dvolt, const double *y, double *dy) {
-    int n = (int)c[IDM_C_DOF];
-    double kp = c[IDM_C_KP], d33 = c[IDM_C_D33];
-    double fric_n = c[IDM_C_FRIC_N], a = c[IDM_C_A], b = c[IDM_C_B], cc = c[IDM_C_C], sigma1 = c[IDM_C_SIGMA1], sigma2 = c[IDM_C_SIGMA2];
-    const double *mk = c + IDM_N_SCALARS;
-    const double *mc = mk + IDM_MAX_DOF * IDM_MAX_DOF;
-    const double *m0 = mc + IDM_MAX_DOF * IDM_MAX_DOF;
-    const double *ml = m0 + IDM_MAX_DOF;
-    int ig = 2 * n, ifh = 2 * n + 1, ih = 2 * n + 2;
+/* dy/dt of the state [q (n), v (n), g, Fh, h] at voltage volt rising at dvolt [V/s]; returns
+ * the friction force Ff [N] (model.rs: Model::rhs_impl with the constant load, no effects).
+ * c: the scalars, m: the matrix columns, both in registers. */
+IDM_HD double idm_rhs(const double *c, const double *m, double volt, double dvolt, const double *y, double *dy) {
+    const int n = IDM_N, ig = 2 * IDM_N, ifh = 2 * IDM_N + 1, ih = 2 * IDM_N + 2;
     double h = y[ih];
-    dy[ih] = (c[IDM_C_HYST_ON] != 0.0) ? c[IDM_C_HYST_AP_D33] * dvolt - c[IDM_C_HYST_BP] * fabs(dvolt) * h - c[IDM_C_HYST_CP] * dvolt * fabs(h) : 0.0;
-    double fp = kp * (d33 * volt + 0.0 - h);
+#if IDM_HYST
+    dy[ih] = IDM_CS(c[IDM_C_HYST_AP_D33]) * dvolt - IDM_CS(c[IDM_C_HYST_BP]) * fabs(dvolt) * h - IDM_CS(c[IDM_C_HYST_CP]) * dvolt * fabs(h);
+#else
+    dy[ih] = 0.0;
+#endif
+    double fp = IDM_CS(c[IDM_C_KP]) * (IDM_CS(c[IDM_C_D33]) * volt + 0.0 - h);
     double v1 = y[n], fh = y[ifh];
     double ratio = fh / idm_stribeck(c, v1);
-    double gdot = (fric_n == 1.0) ? v1 - fabs(v1) * ratio
-                                  : v1 - fabs(v1) * idm_sign0(fh) * pow(fabs(ratio), fric_n);
-    double fhdot = a * gdot - b * fabs(gdot) * fh - cc * gdot * fabs(fh);
-    double ff = (fh + sigma2 * v1) + sigma1 * gdot;
+    double gdot = (IDM_CS(c[IDM_C_FRIC_N]) == 1.0) ? v1 - fabs(v1) * ratio
+                                           : v1 - fabs(v1) * idm_sign0(fh) * pow(fabs(ratio), IDM_CS(c[IDM_C_FRIC_N]));
+    double fhdot = IDM_CS(c[IDM_C_A]) * gdot - IDM_CS(c[IDM_C_B]) * fabs(gdot) * fh - IDM_CS(c[IDM_C_C]) * gdot * fabs(fh);
+    double ff = (fh + IDM_CS(c[IDM_C_SIGMA2]) * v1) + IDM_CS(c[IDM_C_SIGMA1]) * gdot;
     dy[ig] = gdot;
     dy[ifh] = fhdot;
-    double f_main = (fp + 0.0) - ff, f_weight = 0.0 - fp;
-    for (int i = 0; i < n; i++) dy[i] = y[n + i];
-    for (int i = 0; i < n; i++) {
+    /* the load acts on the main body (model.rs: f_constant), the piezo pushes both ends */
+    double f_main = (fp + IDM_CS(c[IDM_C_F_CONST])) - ff, f_weight = 0.0 - fp;
+    IDM_UNROLL
+    for (int i = 0; i < IDM_N; i++) dy[i] = y[n + i];
+    IDM_UNROLL
+    for (int i = 0; i < IDM_N; i++) {
         double acc = 0.0;
-        for (int j = 0; j < n; j++) acc -= mk[i * IDM_MAX_DOF + j] * y[j] + mc[i * IDM_MAX_DOF + j] * y[n + j];
-        dy[n + i] = acc + ml[i] * f_weight + m0[i] * f_main;
+        IDM_UNROLL
+        for (int j = 0; j < IDM_N; j++) acc -= IDM_M(m, IDM_MK + i * IDM_N + j) * y[j] + IDM_M(m, IDM_MC + i * IDM_N + j) * y[n + j];
+        dy[n + i] = acc + IDM_M(m, IDM_ML + i) * f_weight + IDM_M(m, IDM_M0 + i) * f_main;
     }
     return ff;
 }
 
-/* The input at the start of step k (t0 = k dt) and its slope over the step, from the breakpoints
- * (bt, bv; nb of them), which fall on step boundaries; *seg walks forward (drive.rs + Cursor). */
-IDM_HD void idm_input(const double *bt, const double *bv, int nb, int *seg, double t0, double dt,
-                      double *v0, double *slope) {
-    double probe = t0 + 0.5 * dt;
-    while (*seg + 1 < nb && bt[*seg + 1] <= probe) (*seg)++;
-    if (probe < bt[0] || *seg + 1 >= nb) {
-        *v0 = (probe < bt[0]) ? bv[0] : bv[nb - 1];
-        *slope = 0.0;
-        return;
-    }
-    int s = *seg;
-    *slope = (bv[s + 1] - bv[s]) / (bt[s + 1] - bt[s]);
-    *v0 = bv[s] + *slope * (t0 - bt[s]);
+/* The piecewise-linear input, evaluated from its few numbers (waveforms.py / waveform.rs:
+ * the same arithmetic, so the breakpoints are the engine's to the bit): breakpoint k [s, V]. */
+typedef struct {
+    double delay, amp, peak, span;
+    int nb, off, triangle; /* breakpoints; 1 when a delay adds one at t = delay; the family */
+} idm_wave;
+
+IDM_HD idm_wave idm_wave_of(const double *w) {
+    idm_wave r;
+    r.delay = w[IDM_W_DELAY];
+    r.amp = w[IDM_W_AMP];
+    r.peak = w[IDM_W_PEAK];
+    r.span = w[IDM_W_SPAN];
+    r.off = r.delay > 0.0 ? 1 : 0;
+    r.triangle = w[IDM_W_TRIANGLE] != 0.0;
+    r.nb = 1 + r.off + 2 * (int)w[IDM_W_CYCLES];
+    return r;
 }
 
-/* One point: RK4 from rest over `steps` steps of `dt` under the input (bt, bv). out[0..5]:
- * final x1 [m], peak |v1| [m/s], peak |Ff| [N], slip fraction, status (1 ok, 3 diverged),
- * time of divergence [s]. */
-IDM_HD void idm_rk4_point(const double *c, const double *bt, const double *bv, int nb, double dt, long steps,
-                          double *out) {
-    int n = (int)c[IDM_C_DOF];
-    int dim = 2 * n + 3;
-    double y[IDM_DIM], k1[IDM_DIM], k2[IDM_DIM], k3[IDM_DIM], k4[IDM_DIM], tmp[IDM_DIM];
-    for (int i = 0; i < dim; i++) y[i] = 0.0;
+IDM_HD void idm_bp(const idm_wave *w, int k, double *t, double *v) {
+    if (k <= w->off) {
+        *t = k == 0 ? 0.0 : w->delay;
+        *v = 0.0;
+        return;
+    }
+    int j = k - 1 - w->off, cyc = j >> 1;
+    if ((j & 1) == 0) {
+        *t = w->delay + (double)cyc * w->span + w->peak;
+        *v = w->amp;
+    } else {
+        /* the end of a cycle: delay + rise + fall (Triangle), delay + (cycle + 1) period */
+        *t = w->triangle ? w->delay + w->peak + w->span : w->delay + (double)(cyc + 1) * w->span;
+        *v = 0.0;
+    }
+}
+
+/* A cursor on the input: the segment [ta, tb] holding the current time, with its end values. */
+typedef struct {
+    int seg;
+    double ta, va, tb, vb;
+} idm_cursor;
+
+IDM_HD void idm_cursor_start(const idm_wave *w, idm_cursor *cu) {
+    cu->seg = 0;
+    idm_bp(w, 0, &cu->ta, &cu->va);
+    idm_bp(w, 1, &cu->tb, &cu->vb);
+}
+
+/* move on while the next breakpoint is at or before t (the last segment stays open) */
+IDM_HD int idm_cursor_walk(const idm_wave *w, idm_cursor *cu, double t) {
+    int moved = 0;
+    while (cu->seg + 1 < w->nb && cu->tb <= t) {
+        cu->seg++;
+        cu->ta = cu->tb;
+        cu->va = cu->vb;
+        if (cu->seg + 1 < w->nb) idm_bp(w, cu->seg + 1, &cu->tb, &cu->vb);
+        moved = 1;
+    }
+    return moved;
+}
+
+/* point p's wave from its columns (data, off, step) */
+IDM_HD void idm_load_wave(const double *data, const long long *off, const long long *step, long long p, double *w) {
+    IDM_UNROLL
+    for (int k = 0; k < IDM_NW; k++) w[k] = data[off[k] + step[k] * p];
+}
+
+/* One point: RK4 from rest over `steps` steps of `dt` [s]. Outputs (column k of out, stride
+ * `points`): 0 final x1 [m], 1 peak |v1| [m/s], 2 peak |Ff| [N], 3 slip fraction, 4 status (1 ok,
+ * 3 diverged), 5 time of divergence [s]. */
+IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, double dt, long long steps,
+                          double *out, long long points) {
+    const int n = IDM_N;
+    /* four vectors: the state, the stages' running sum (k1 + 2 k2 + 2 k3, added in the order of
+     * rk4.rs), the latest stage and the stage input */
+    double y[IDM_DIM], acc[IDM_DIM], k[IDM_DIM], tmp[IDM_DIM];
+    IDM_UNROLL
+    for (int i = 0; i < IDM_DIM; i++) y[i] = 0.0;
+    idm_wave w = idm_wave_of(wc);
+    idm_cursor cu;
+    idm_cursor_start(&w, &cu);
     double bound = c[IDM_C_FH_BOUND] * (1.0 + 1e-6) + 1e-12;
     double slip_v = IDM_SLIP_FACTOR / c[IDM_C_INV_VS];
-    double peak_v = 0.0, peak_f = 0.0, slip_t = 0.0;
-    int seg = 0;
-    out[4] = 1.0;
-    out[5] = 0.0;
-    for (long k = 0; k < steps; k++) {
-        double t0 = (double)k * dt, v0, s;
-        idm_input(bt, bv, nb, &seg, t0, dt, &v0, &s);
+    double peak_v = 0.0, peak_f = 0.0, slip_t = 0.0, status = 1.0, div_at = 0.0;
+    for (long long kk = 0; kk < steps; kk++) {
+        double t0 = (double)kk * dt, v0, s;
+        /* the segment holding the step's middle; breakpoints fall on step boundaries (drive.rs) */
+        idm_cursor_walk(&w, &cu, t0 + 0.5 * dt);
+        if (cu.seg + 1 >= w.nb) {
+            v0 = cu.va;
+            s = 0.0;
+        } else {
+            s = (cu.vb - cu.va) / (cu.tb - cu.ta);
+            v0 = cu.va + s * (t0 - cu.ta);
+        }
         double h2 = 0.5 * dt;
-        double ff = idm_rhs(c, v0, s, y, k1);
+        double ff = idm_rhs(c, m, v0, s, y, k);
         /* the state at the step's start is held over the step (metrics.rs) */
         if (fabs(y[n]) > peak_v) peak_v = fabs(y[n]);
         if (fabs(ff) > peak_f) peak_f = fabs(ff);
         if (fabs(y[n]) > slip_v) slip_t += dt;
-        for (int i = 0; i < dim; i++) tmp[i] = y[i] + h2 * k1[i];
-        idm_rhs(c, v0 + s * h2, s, tmp, k2);
-        for (int i = 0; i < dim; i++) tmp[i] = y[i] + h2 * k2[i];
-        idm_rhs(c, v0 + s * h2, s, tmp, k3);
-        for (int i = 0; i < dim; i++) tmp[i] = y[i] + dt * k3[i];
-        idm_rhs(c, v0 + s * dt, s, tmp, k4);
-        for (int i = 0; i < dim; i++) y[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + h2 * k[i]; acc[i] = k[i]; }
+        idm_rhs(c, m, v0 + s * h2, s, tmp, k);
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + h2 * k[i]; acc[i] = acc[i] + 2.0 * k[i]; }
+        idm_rhs(c, m, v0 + s * h2, s, tmp, k);
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + dt * k[i]; acc[i] = acc[i] + 2.0 * k[i]; }
+        idm_rhs(c, m, v0 + s * dt, s, tmp, k);
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) y[i] += dt / 6.0 * (acc[i] + k[i]);
         if (!(fabs(y[2 * n + 1]) <= bound) || !isfinite(y[n]) || !isfinite(y[0])) {
-            out[4] = 3.0;
-            out[5] = (double)(k + 1) * dt;
+            status = 3.0;
+            div_at = (double)(kk + 1) * dt;
             break;
         }
     }
-    double yend[IDM_DIM], dummy[IDM_DIM];
-    for (int i = 0; i < dim; i++) yend[i] = y[i];
-    double ff_end = idm_rhs(c, bv[nb - 1], 0.0, yend, dummy);
+    /* the final state's friction, at the input's last value */
+    double ff_end = idm_rhs(c, m, 0.0, 0.0, y, k);
     if (fabs(y[n]) > peak_v) peak_v = fabs(y[n]);
     if (fabs(ff_end) > peak_f) peak_f = fabs(ff_end);
     out[0] = y[0];
-    out[1] = peak_v;
-    out[2] = peak_f;
-    out[3] = slip_t / ((double)steps * dt);
+    out[points] = peak_v;
+    out[2 * points] = peak_f;
+    out[3 * points] = slip_t / ((double)steps * dt);
+    out[4 * points] = status;
+    out[5 * points] = div_at;
 }
 
 /* Dormand-Prince 5(4) with first-same-as-last stages (dopri5.rs), landing on every breakpoint
  * and on t_end (drive.rs), error norm in the model's natural units (model.rs: state_scales:
  * positions and h by the free stroke d33 V_max, velocities by stroke x the LPS frequency, Fh by
- * Fs; g left out). out as idm_rk4_point; out[6] = accepted steps, out[7] = smallest step,
- * out[8] = 1 where the run stopped because its step collapsed (crawl.rs: every
- * IDM_CRAWL_CHECK_STEPS accepted steps, the steps it would need at the pace of the last ones
- * are projected; beyond IDM_MAX_ADAPTIVE_STEPS it stops, status 3 at that time), else 0. */
-IDM_HD void idm_dopri5_point(const double *c, const double *bt, const double *bv, int nb, double t_end,
-                             double rtol, double atol, double first_step, double *out) {
+ * Fs; g left out). Outputs as idm_rk4_point, then 6 accepted steps, 7 smallest step [s], 8 = 1
+ * where the run stopped because its step collapsed (crawl.rs: every IDM_CRAWL_CHECK_STEPS
+ * accepted steps, the steps it would need at the pace of the last ones are projected; beyond
+ * IDM_MAX_ADAPTIVE_STEPS it stops, status 3 at that time), else 0. */
+IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc, double t_end, double rtol,
+                             double atol, double first_step, double *out, long long points) {
     const double C2 = 1.0 / 5.0, C3 = 3.0 / 10.0, C4 = 4.0 / 5.0, C5 = 8.0 / 9.0;
     const double A21 = 1.0 / 5.0, A31 = 3.0 / 40.0, A32 = 9.0 / 40.0, A41 = 44.0 / 45.0, A42 = -56.0 / 15.0,
                  A43 = 32.0 / 9.0, A51 = 19372.0 / 6561.0, A52 = -25360.0 / 2187.0, A53 = 64448.0 / 6561.0,
@@ -154,137 +291,207 @@ IDM_HD void idm_dopri5_point(const double *c, const double *bt, const double *bv
     const double B1 = 35.0 / 384.0, B3 = 500.0 / 1113.0, B4 = 125.0 / 192.0, B5 = -2187.0 / 6784.0, B6 = 11.0 / 84.0;
     const double E1 = 71.0 / 57600.0, E3 = -71.0 / 16695.0, E4 = 71.0 / 1920.0, E5 = -17253.0 / 339200.0,
                  E6 = 22.0 / 525.0, E7 = -1.0 / 40.0;
-    int n = (int)c[IDM_C_DOF];
-    int dim = 2 * n + 3;
-    double y[IDM_DIM], yn[IDM_DIM], tmp[IDM_DIM], k[7][IDM_DIM], scale[IDM_DIM];
-    for (int i = 0; i < dim; i++) y[i] = 0.0;
-    double vmax = 0.0;
-    for (int i = 0; i < nb; i++) vmax = fmax(vmax, fabs(bv[i]));
-    double stroke = fmax(c[IDM_C_D33] * vmax, 1e-9), fs = c[IDM_C_FC] + fmax(c[IDM_C_FS_FC], 0.0);
-    int in_norm = 0;
-    for (int i = 0; i < dim; i++) scale[i] = -1.0; /* out of the norm */
-    for (int i = 0; i < n; i++) { scale[i] = stroke; scale[n + i] = stroke * c[IDM_C_OMEGA_LPS]; }
-    scale[2 * n + 1] = fs;
-    scale[2 * n + 2] = stroke;
-    for (int i = 0; i < dim; i++) in_norm += scale[i] > 0.0;
+    const int n = IDM_N;
+    /* the state, the next state, a stage's input and output, the first and last stages in
+     * registers; the middle stages k2..k6 too with IDM_SHARED_STAGES 0, else in shared memory
+     * (each thread its own column: conflict-free), where many nodes would not fit beside them */
+    double y[IDM_DIM], yn[IDM_DIM], tmp[IDM_DIM], kt[IDM_DIM], k1[IDM_DIM], k7[IDM_DIM];
+#if IDM_SHARED_STAGES
+    __shared__ double idm_ks[5][IDM_DIM][IDM_BLOCK];
+#define KS(s, i) idm_ks[(s) - 2][i][threadIdx.x]
+#else
+    double idm_kr[5][IDM_DIM];
+#define KS(s, i) idm_kr[(s) - 2][i]
+#endif
+    IDM_UNROLL
+    for (int i = 0; i < IDM_DIM; i++) y[i] = 0.0;
+    idm_wave w = idm_wave_of(wc);
+    idm_cursor cu;
+    idm_cursor_start(&w, &cu);
+    /* the error norm's scales: every component but g (IDM_N positions, IDM_N velocities, Fh, h) */
+    double stroke = fmax(c[IDM_C_D33] * fabs(w.amp), 1e-9), fs = c[IDM_C_FC] + fmax(c[IDM_C_FS_FC], 0.0);
+    const double in_norm = (double)(2 * IDM_N + 2);
     double h_max = fmax(t_end / 10.0, first_step), h = fmin(first_step, h_max), h_min = 1e-14;
-    double t = 0.0, peak_v = 0.0, peak_f = 0.0, slip_t = 0.0, min_step = 1e300, slip_v = IDM_SLIP_FACTOR / c[IDM_C_INV_VS];
-    double ydummy[IDM_DIM];
-    double ff_prev = idm_rhs(c, 0.0, 0.0, y, ydummy), v_prev = 0.0;
-    long accepted = 0;
+    double t = 0.0, peak_v = 0.0, peak_f = 0.0, slip_t = 0.0, min_step = 1e300;
+    double slip_v = IDM_SLIP_FACTOR / c[IDM_C_INV_VS];
+    double ff_prev = idm_rhs(c, m, 0.0, 0.0, y, k7), v_prev = 0.0;
+    double status = 1.0, div_at = 0.0, crawled = 0.0;
+    long long accepted = 0;
     double t_check = 0.0; /* the time of the last crawl check */
-    int seg = 0, fresh = 1;
-    out[4] = 1.0;
-    out[5] = 0.0;
-    out[8] = 0.0;
+    int fresh = 1;
     while (t < t_end) {
         /* the segment holding t, its end (the next breakpoint or t_end), the input there */
-        int s0 = seg;
-        while (seg + 1 < nb && bt[seg + 1] <= t) seg++;
-        if (seg != s0) fresh = 1; /* the input's slope changed */
+        if (idm_cursor_walk(&w, &cu, t)) fresh = 1; /* the input's slope changed */
         double end = t_end, v0, slope;
-        if (t < bt[0]) { end = fmin(bt[0], t_end); v0 = bv[0]; slope = 0.0; }
-        else if (seg + 1 < nb) {
-            end = fmin(bt[seg + 1], t_end);
-            slope = (bv[seg + 1] - bv[seg]) / (bt[seg + 1] - bt[seg]);
-            v0 = bv[seg] + slope * (t - bt[seg]);
-        } else { v0 = bv[nb - 1]; slope = 0.0; }
-        if (fresh) { idm_rhs(c, v0, slope, y, k[0]); fresh = 0; }
+        if (cu.seg + 1 < w.nb) {
+            end = fmin(cu.tb, t_end);
+            slope = (cu.vb - cu.va) / (cu.tb - cu.ta);
+            v0 = cu.va + slope * (t - cu.ta);
+        } else {
+            v0 = cu.va;
+            slope = 0.0;
+        }
+        if (fresh) {
+            idm_rhs(c, m, v0, slope, y, k1);
+            fresh = 0;
+        }
         int last = end - (t + h) < 1e-3 * h;
         double st = last ? end - t : h;
-        for (int i = 0; i < dim; i++) tmp[i] = y[i] + st * (A21 * k[0][i]);
-        idm_rhs(c, v0 + slope * C2 * st, slope, tmp, k[1]);
-        for (int i = 0; i < dim; i++) tmp[i] = y[i] + st * (A31 * k[0][i] + A32 * k[1][i]);
-        idm_rhs(c, v0 + slope * C3 * st, slope, tmp, k[2]);
-        for (int i = 0; i < dim; i++) tmp[i] = y[i] + st * (A41 * k[0][i] + A42 * k[1][i] + A43 * k[2][i]);
-        idm_rhs(c, v0 + slope * C4 * st, slope, tmp, k[3]);
-        for (int i = 0; i < dim; i++)
-            tmp[i] = y[i] + st * (A51 * k[0][i] + A52 * k[1][i] + A53 * k[2][i] + A54 * k[3][i]);
-        idm_rhs(c, v0 + slope * C5 * st, slope, tmp, k[4]);
-        for (int i = 0; i < dim; i++)
-            tmp[i] = y[i] + st * (A61 * k[0][i] + A62 * k[1][i] + A63 * k[2][i] + A64 * k[3][i] + A65 * k[4][i]);
-        idm_rhs(c, v0 + slope * st, slope, tmp, k[5]);
-        for (int i = 0; i < dim; i++)
-            yn[i] = y[i] + st * (B1 * k[0][i] + 0.0 * k[1][i] + B3 * k[2][i] + B4 * k[3][i] + B5 * k[4][i] + B6 * k[5][i]);
-        idm_rhs(c, v0 + slope * st, slope, yn, k[6]);
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A21 * k1[i]);
+        idm_rhs(c, m, v0 + slope * C2 * st, slope, tmp, kt);
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) KS(2, i) = kt[i];
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A31 * k1[i] + A32 * KS(2, i));
+        idm_rhs(c, m, v0 + slope * C3 * st, slope, tmp, kt);
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) KS(3, i) = kt[i];
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A41 * k1[i] + A42 * KS(2, i) + A43 * KS(3, i));
+        idm_rhs(c, m, v0 + slope * C4 * st, slope, tmp, kt);
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) KS(4, i) = kt[i];
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A51 * k1[i] + A52 * KS(2, i) + A53 * KS(3, i) + A54 * KS(4, i));
+        idm_rhs(c, m, v0 + slope * C5 * st, slope, tmp, kt);
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) KS(5, i) = kt[i];
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++)
+            tmp[i] = y[i] + st * (A61 * k1[i] + A62 * KS(2, i) + A63 * KS(3, i) + A64 * KS(4, i) + A65 * KS(5, i));
+        idm_rhs(c, m, v0 + slope * st, slope, tmp, kt);
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) KS(6, i) = kt[i];
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++)
+            yn[i] = y[i] + st * (B1 * k1[i] + B3 * KS(3, i) + B4 * KS(4, i) + B5 * KS(5, i) + B6 * KS(6, i));
+        idm_rhs(c, m, v0 + slope * st, slope, yn, k7);
         double err2 = 0.0;
-        for (int i = 0; i < dim; i++) {
-            if (scale[i] > 0.0) {
-                double e = E1 * k[0][i] + 0.0 * k[1][i] + E3 * k[2][i] + E4 * k[3][i] + E5 * k[4][i] + E6 * k[5][i]
-                           + E7 * k[6][i];
-                double tol = atol * scale[i] + rtol * fmax(fabs(y[i]), fabs(yn[i]));
-                err2 += (st * e / tol) * (st * e / tol);
-            }
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) {
+            if (i == 2 * IDM_N) continue; /* g: out of the norm */
+            double sc = i < IDM_N ? stroke : (i < 2 * IDM_N ? stroke * c[IDM_C_OMEGA_LPS] : (i == 2 * IDM_N + 1 ? fs : stroke));
+            double e = E1 * k1[i] + E3 * KS(3, i) + E4 * KS(4, i) + E5 * KS(5, i) + E6 * KS(6, i) + E7 * k7[i];
+            double tol = atol * sc + rtol * fmax(fabs(y[i]), fabs(yn[i]));
+            err2 += (st * e / tol) * (st * e / tol);
         }
-        double err = sqrt(err2 / (in_norm > 0 ? in_norm : 1));
+        double err = sqrt(err2 / in_norm);
         if (err <= 1.0) {
             /* the state at the step's start is held over it (metrics.rs, without a start eval) */
             if (fabs(v_prev) > peak_v) peak_v = fabs(v_prev);
             if (fabs(ff_prev) > peak_f) peak_f = fabs(ff_prev);
-            if (fabs(v_prev) > slip_v) slip_t += (last ? end : t + st) - t;
             double t_new = last ? end : t + st;
+            if (fabs(v_prev) > slip_v) slip_t += t_new - t;
             min_step = fmin(min_step, t_new - t);
             t = t_new;
-            for (int i = 0; i < dim; i++) { y[i] = yn[i]; k[0][i] = k[6][i]; }
+            IDM_UNROLL
+            for (int i = 0; i < IDM_DIM; i++) {
+                y[i] = yn[i];
+                k1[i] = k7[i];
+            }
             accepted++;
             double grow = err == 0.0 ? 5.0 : fmin(fmax(0.9 * pow(err, -0.2), 0.2), 5.0);
             if (!last || grow < 1.0) h = fmin(st * grow, h_max);
-            if (!isfinite(y[n]) || !isfinite(y[0]) || !(fabs(y[2 * n + 1]) <= INFINITY)) {
-                out[4] = 3.0; out[5] = t; break;
+            if (!isfinite(y[n]) || !isfinite(y[0]) || !isfinite(y[2 * n + 1])) {
+                status = 3.0;
+                div_at = t;
+                break;
             }
             v_prev = y[n];
-            ff_prev = idm_rhs(c, v0, slope, y, ydummy);
+            ff_prev = idm_rhs(c, m, v0, slope, y, kt);
             if (accepted % IDM_CRAWL_CHECK_STEPS == 0) {
                 double pace = (t - t_check) / (double)IDM_CRAWL_CHECK_STEPS;
                 t_check = t;
                 /* true too for a pace of 0 (no progress): the comparison fails */
                 if (!((double)accepted + (t_end - t) / pace <= IDM_MAX_ADAPTIVE_STEPS)) {
-                    out[4] = 3.0; out[5] = t; out[8] = 1.0; break;
+                    status = 3.0;
+                    div_at = t;
+                    crawled = 1.0;
+                    break;
                 }
             }
         } else {
             double shrink = isfinite(err) ? fmin(fmax(0.9 * pow(err, -0.2), 0.1), 0.9) : 0.1;
             h = st * shrink;
-            if (h < h_min) { out[4] = 3.0; out[5] = t; break; }
+            if (h < h_min) {
+                status = 3.0;
+                div_at = t;
+                break;
+            }
         }
     }
     if (fabs(y[n]) > peak_v) peak_v = fabs(y[n]);
     if (fabs(ff_prev) > peak_f) peak_f = fabs(ff_prev);
     out[0] = y[0];
-    out[1] = peak_v;
-    out[2] = peak_f;
-    out[3] = slip_t / t_end;
-    out[6] = (double)accepted;
-    out[7] = min_step;
+    out[points] = peak_v;
+    out[2 * points] = peak_f;
+    out[3 * points] = slip_t / t_end;
+    out[4 * points] = status;
+    out[5 * points] = div_at;
+    out[6 * points] = (double)accepted;
+    out[7 * points] = min_step;
+    out[8 * points] = crawled;
 }
 
-/* The adaptive sweep: as idm_rk4_sweep, with t_end, tolerances and the first step; 9 outputs. */
-IDM_KERNEL void idm_dopri5_sweep(const double *consts, const double *bt, const double *bv, const int *nb, int max_nb,
-                                 double t_end, double rtol, double atol, double first_step, int points, double *out) {
-#if defined(__CUDACC__) || defined(__CUDACC_RTC__)
-    int p = blockIdx.x * blockDim.x + threadIdx.x;
-    if (p >= points) return;
-    idm_dopri5_point(consts + (long)p * IDM_N_CONSTANTS, bt + (long)p * max_nb, bv + (long)p * max_nb, nb[p], t_end,
-                     rtol, atol, first_step, out + (long)p * 9);
+/* A thread's constants: the scalars copied once into registers; the matrices too with
+ * IDM_MAT_REG, else read in place (IDM_M) */
+#if IDM_MAT_REG
+#define IDM_NREG (IDM_N_SCALARS + IDM_NM)
 #else
-    for (int p = 0; p < points; p++)
-        idm_dopri5_point(consts + (long)p * IDM_N_CONSTANTS, bt + (long)p * max_nb, bv + (long)p * max_nb, nb[p],
-                         t_end, rtol, atol, first_step, out + (long)p * 9);
+#define IDM_NREG IDM_N_SCALARS
 #endif
+#if IDM_SCAL_REG || !(defined(__CUDACC__) || defined(__CUDACC_RTC__))
+#define IDM_CONSTS(row)                                                                                              \
+    const double *row_ = (row);                                                                                      \
+    double cm[IDM_NREG];                                                                                             \
+    IDM_UNROLL                                                                                                       \
+    for (int k = 0; k < IDM_NREG; k++) cm[k] = row_[k];                                                              \
+    const double *mat = IDM_MAT_REG ? cm + IDM_N_SCALARS : row_ + IDM_N_SCALARS;
+#else
+#define IDM_CONSTS(row)                                                                                              \
+    const double *cm = (row);                                                                                        \
+    const double *mat = cm + IDM_N_SCALARS;
+#endif
+
+/* The fixed-step sweep: thread p runs point p (neighbouring grid points share a warp) with the
+ * constants of its parameter row (consts + rows[p] * (IDM_N_SCALARS + IDM_NM): the scalars, then
+ * the matrices) and its wave (data, off, step: IDM_NW columns), `steps` steps of dt [s]; outputs
+ * column by column in out (6 x points). */
+IDM_KERNEL idm_rk4_sweep(const double *__restrict__ consts, const int *__restrict__ rows,
+                         const double *__restrict__ data, const long long *__restrict__ off,
+                         const long long *__restrict__ step, double dt, long long steps, long long first,
+                         long long points, double *__restrict__ out) {
+#if defined(__CUDACC__) || defined(__CUDACC_RTC__)
+    long long p = first + (long long)blockIdx.x * blockDim.x + threadIdx.x;
+    if (p >= points) return;
+#else
+    for (long long p = first; p < points; p++)
+#endif
+    {
+        double w[IDM_NW];
+        idm_load_wave(data, off, step, p, w);
+        IDM_CONSTS(consts + (long long)rows[p] * (IDM_N_SCALARS + IDM_NM))
+        idm_rk4_point(cm, mat, w, dt, steps, out + p, points);
+    }
 }
 
-/* The sweep: thread p runs point p with its constants (row p of consts), its breakpoints (row
- * p of bt/bv, nb[p] of them, padded to max_nb) and its step count; results in row p of out. */
-IDM_KERNEL void idm_rk4_sweep(const double *consts, const double *bt, const double *bv, const int *nb, int max_nb,
-                              double dt, const long *steps, int points, double *out) {
+/* The adaptive sweep: as idm_rk4_sweep, with t_end [s], the tolerances and the first step [s];
+ * outputs 9 x points. */
+IDM_KERNEL idm_dopri5_sweep(const double *__restrict__ consts, const int *__restrict__ rows,
+                            const double *__restrict__ data, const long long *__restrict__ off,
+                            const long long *__restrict__ step, double t_end, double rtol, double atol,
+                            double first_step, long long first, long long points, double *__restrict__ out) {
 #if defined(__CUDACC__) || defined(__CUDACC_RTC__)
-    int p = blockIdx.x * blockDim.x + threadIdx.x;
+    long long p = first + (long long)blockIdx.x * blockDim.x + threadIdx.x;
     if (p >= points) return;
-    idm_rk4_point(consts + (long)p * IDM_N_CONSTANTS, bt + (long)p * max_nb, bv + (long)p * max_nb, nb[p], dt,
-                  steps[p], out + (long)p * 6);
 #else
-    for (int p = 0; p < points; p++)
-        idm_rk4_point(consts + (long)p * IDM_N_CONSTANTS, bt + (long)p * max_nb, bv + (long)p * max_nb, nb[p], dt,
-                      steps[p], out + (long)p * 6);
+    for (long long p = first; p < points; p++)
 #endif
+    {
+        double w[IDM_NW];
+        idm_load_wave(data, off, step, p, w);
+        IDM_CONSTS(consts + (long long)rows[p] * (IDM_N_SCALARS + IDM_NM))
+        idm_dopri5_point(cm, mat, w, t_end, rtol, atol, first_step, out + p, points);
+    }
 }
