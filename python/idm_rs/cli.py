@@ -211,8 +211,8 @@ def _add_diagnose_parser(sub: "argparse._SubParsersAction") -> None:
         description=(
             "Compare the recordings of CASE_DIR (format idm-recording/1: meta.json and one CSV per "
             "experiment) with their nominal model: calibrate the plausibly-off parameters, locate the "
-            "residual, try every catalogue effect, and print the verdict (a catalogue id, 'none', "
-            "'discovered' or 'unexplained') with the evidence. When no catalogue effect explains the residual, "
+            "residual, try every catalogue effect, and print the verdict (a catalogue id, two of them as "
+            "'first+second', 'none', 'discovered' or 'unexplained') with the evidence. When no catalogue effect explains the residual, "
             "discovery infers the missing force from the data, finds its form in a library of terms, refits "
             "it, and names it when it stands ('discovered'). Given a measured rig data file instead (see docs/REALDATA.md), "
             "diagnose the rig's identified friction model against the rig-effect catalogue."
