@@ -9,6 +9,7 @@
  * name) and
  *   IDM_N     the number of nodes (2 for the LPS, n + 1 for the DPS with n elements),
  *   IDM_HYST  1 with piezo hysteresis, 0 without,
+ *   IDM_LEAN, IDM_WAVE_SHARED, IDM_METRICS_SHARED  1 for the LPS: the lean RK4 step (see there),
  * so the state and the stages are fixed-size arrays indexed by constants after unrolling: they
  * live in registers (ptxas -v: 0 bytes stack frame), which tests/test_gpu_kernel.py checks.
  *
@@ -96,24 +97,73 @@ IDM_HD double idm_ld(const double *p) {
 
 IDM_HD double idm_sign0(double x) { return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0); }
 
+/* The lean step (IDM_LEAN 1, the LPS; the backend's Spec.defines): per-point decisions taken once
+ * per point instead of at each evaluation, the input's slope once per segment, the Stribeck
+ * exponential skipped where it cannot change S, the scalars of the rare branches (pow, eps) read
+ * in place. Each gives the same numbers to the bit. The DPS kernels, at the register limit,
+ * keep the per-evaluation form (IDM_LEAN 0), where these extra live values spilled. */
+#ifndef IDM_LEAN
+#define IDM_LEAN 0
+#endif
+#define IDM_F_STRIBECK 1 /* fs - fc != 0 */
+#define IDM_F_SQUARE 2   /* delta == 2 */
+#define IDM_F_EPS 4      /* eps != 0 */
+#define IDM_F_N1 8       /* n == 1 */
+#define IDM_F_CUT 16     /* e_cut applies */
+typedef struct {
+    int flags;
+    double e_cut; /* with IDM_F_CUT: beyond this exponent fc + (fs - fc) exp(-e) rounds to fc */
+} idm_fric;
+
+/* A point's friction branches (the comparisons idm_stribeck and idm_rhs make, as bits), and
+ * e_cut: fc + d exp(-e) == fc to the bit (rounded once, fused, or twice) where |d| exp(-e) <
+ * fc 2^-56, a quarter of fc's half-ulp: for e > ln(|d| / fc) + 56 ln 2 + 1 (the 1 covers the
+ * rounding of exp and log); only for a positive, finite fc and a finite d of sane ratio. */
+IDM_HD idm_fric idm_fric_of(const double *c) {
+    double fc = c[IDM_C_FC], fs_fc = c[IDM_C_FS_FC];
+    idm_fric f;
+    f.flags = (fs_fc != 0.0 ? IDM_F_STRIBECK : 0) | (c[IDM_C_DELTA] == 2.0 ? IDM_F_SQUARE : 0) |
+              (c[IDM_C_EPS] != 0.0 ? IDM_F_EPS : 0) | (c[IDM_C_FRIC_N] == 1.0 ? IDM_F_N1 : 0);
+    f.e_cut = 0.0;
+    double r = fabs(fs_fc) / fc;
+    if (fc > 0.0 && fc < 1e300 && r > 1e-300 && r < 1e300) {
+        f.flags |= IDM_F_CUT;
+        f.e_cut = log(r) + (56.0 * 0.69314718055994531 + 1.0);
+    }
+    return f;
+}
+#if IDM_LEAN
+#define IDM_FR(fr, c, bit, cmp) (((fr)->flags & (bit)) != 0)
+#define IDM_RARE(c, m, k) IDM_M(m, (k) - IDM_N_SCALARS)
+#else
+#define IDM_FR(fr, c, bit, cmp) (cmp)
+#define IDM_RARE(c, m, k) IDM_CS(c[k])
+#endif
+
 /* Stribeck curve S(v) [N] (friction.rs: Leuven::stribeck) */
-IDM_HD double idm_stribeck(const double *c, double v) {
-    double fc = IDM_CS(c[IDM_C_FC]), fs_fc = IDM_CS(c[IDM_C_FS_FC]), delta = IDM_CS(c[IDM_C_DELTA]), eps = IDM_CS(c[IDM_C_EPS]);
+IDM_HD double idm_stribeck(const double *c, const double *m, const idm_fric *fr, double v) {
+    double fc = IDM_CS(c[IDM_C_FC]);
     double s;
-    if (fs_fc == 0.0) {
+    if (!IDM_FR(fr, c, IDM_F_STRIBECK, IDM_CS(c[IDM_C_FS_FC]) != 0.0)) {
         s = fc;
     } else {
         double x = fabs(v) * IDM_CS(c[IDM_C_INV_VS]);
-        double e = (delta == 2.0) ? x * x : pow(x, delta);
-        s = fc + fs_fc * exp(-e);
+        double e = IDM_FR(fr, c, IDM_F_SQUARE, IDM_CS(c[IDM_C_DELTA]) == 2.0) ? x * x : pow(x, IDM_RARE(c, m, IDM_C_DELTA));
+#if IDM_LEAN
+        if ((fr->flags & IDM_F_CUT) && e > fr->e_cut)
+            s = fc; /* = fc + (fs - fc) exp(-e), to the bit */
+        else
+#endif
+            s = fc + IDM_CS(c[IDM_C_FS_FC]) * exp(-e);
     }
-    return eps == 0.0 ? s : s * (1.0 + eps * idm_sign0(v));
+    return IDM_FR(fr, c, IDM_F_EPS, IDM_CS(c[IDM_C_EPS]) != 0.0) ? s * (1.0 + IDM_RARE(c, m, IDM_C_EPS) * idm_sign0(v)) : s;
 }
 
 /* dy/dt of the state [q (n), v (n), g, Fh, h] at voltage volt rising at dvolt [V/s]; returns
  * the friction force Ff [N] (model.rs: Model::rhs_impl with the constant load, no effects).
  * c: the scalars, m: the matrix columns, both in registers. */
-IDM_HD double idm_rhs(const double *c, const double *m, double volt, double dvolt, const double *y, double *dy) {
+IDM_HD double idm_rhs(const double *c, const idm_fric *fr, const double *m, double volt, double dvolt, const double *y,
+                      double *dy) {
     const int n = IDM_N, ig = 2 * IDM_N, ifh = 2 * IDM_N + 1, ih = 2 * IDM_N + 2;
     double h = y[ih];
 #if IDM_HYST
@@ -123,9 +173,10 @@ IDM_HD double idm_rhs(const double *c, const double *m, double volt, double dvol
 #endif
     double fp = IDM_CS(c[IDM_C_KP]) * (IDM_CS(c[IDM_C_D33]) * volt + 0.0 - h);
     double v1 = y[n], fh = y[ifh];
-    double ratio = fh / idm_stribeck(c, v1);
-    double gdot = (IDM_CS(c[IDM_C_FRIC_N]) == 1.0) ? v1 - fabs(v1) * ratio
-                                           : v1 - fabs(v1) * idm_sign0(fh) * pow(fabs(ratio), IDM_CS(c[IDM_C_FRIC_N]));
+    double ratio = fh / idm_stribeck(c, m, fr, v1);
+    double gdot = IDM_FR(fr, c, IDM_F_N1, IDM_CS(c[IDM_C_FRIC_N]) == 1.0)
+                      ? v1 - fabs(v1) * ratio
+                      : v1 - fabs(v1) * idm_sign0(fh) * pow(fabs(ratio), IDM_RARE(c, m, IDM_C_FRIC_N));
     double fhdot = IDM_CS(c[IDM_C_A]) * gdot - IDM_CS(c[IDM_C_B]) * fabs(gdot) * fh - IDM_CS(c[IDM_C_C]) * gdot * fabs(fh);
     double ff = (fh + IDM_CS(c[IDM_C_SIGMA2]) * v1) + IDM_CS(c[IDM_C_SIGMA1]) * gdot;
     dy[ig] = gdot;
@@ -149,14 +200,40 @@ IDM_HD double idm_rhs(const double *c, const double *m, double volt, double dvol
 typedef struct {
     double delay, amp, peak, span;
     int nb, off, triangle; /* breakpoints; 1 when a delay adds one at t = delay; the family */
+    int sh;                /* the four numbers read from shared memory (IDM_WAVE_SHARED) */
 } idm_wave;
 
-IDM_HD idm_wave idm_wave_of(const double *w) {
+/* With IDM_WAVE_SHARED (GPU only) the fixed-step kernel keeps the four numbers the breakpoints
+ * are computed from in shared memory (each thread its own column) and reads them there when the
+ * cursor moves, a few times per run, instead of holding 8 registers over the whole step loop.
+ * The same values. The adaptive kernel keeps them in registers (sh = 0): shared, it was measured
+ * slower (H200: 378 k against 599 k points/s). */
+#if !(defined(__CUDACC__) || defined(__CUDACC_RTC__)) || !defined(IDM_WAVE_SHARED)
+#undef IDM_WAVE_SHARED
+#define IDM_WAVE_SHARED 0
+#endif
+#if IDM_WAVE_SHARED
+__shared__ double idm_wsh[4][IDM_BLOCK];
+#define IDM_WV(w, f, k) ((w)->sh ? ((volatile double *)idm_wsh[k])[threadIdx.x] : (w)->f)
+#else
+#define IDM_WV(w, f, k) ((w)->f)
+#endif
+
+IDM_HD idm_wave idm_wave_of(const double *w, int sh) {
     idm_wave r;
     r.delay = w[IDM_W_DELAY];
     r.amp = w[IDM_W_AMP];
     r.peak = w[IDM_W_PEAK];
     r.span = w[IDM_W_SPAN];
+    r.sh = sh;
+#if IDM_WAVE_SHARED
+    if (sh) {
+        ((volatile double *)idm_wsh[0])[threadIdx.x] = r.delay;
+        ((volatile double *)idm_wsh[1])[threadIdx.x] = r.amp;
+        ((volatile double *)idm_wsh[2])[threadIdx.x] = r.peak;
+        ((volatile double *)idm_wsh[3])[threadIdx.x] = r.span;
+    }
+#endif
     r.off = r.delay > 0.0 ? 1 : 0;
     r.triangle = w[IDM_W_TRIANGLE] != 0.0;
     r.nb = 1 + r.off + 2 * (int)w[IDM_W_CYCLES];
@@ -165,17 +242,18 @@ IDM_HD idm_wave idm_wave_of(const double *w) {
 
 IDM_HD void idm_bp(const idm_wave *w, int k, double *t, double *v) {
     if (k <= w->off) {
-        *t = k == 0 ? 0.0 : w->delay;
+        *t = k == 0 ? 0.0 : IDM_WV(w, delay, 0);
         *v = 0.0;
         return;
     }
     int j = k - 1 - w->off, cyc = j >> 1;
     if ((j & 1) == 0) {
-        *t = w->delay + (double)cyc * w->span + w->peak;
-        *v = w->amp;
+        *t = IDM_WV(w, delay, 0) + (double)cyc * IDM_WV(w, span, 3) + IDM_WV(w, peak, 2);
+        *v = IDM_WV(w, amp, 1);
     } else {
         /* the end of a cycle: delay + rise + fall (Triangle), delay + (cycle + 1) period */
-        *t = w->triangle ? w->delay + w->peak + w->span : w->delay + (double)(cyc + 1) * w->span;
+        *t = w->triangle ? IDM_WV(w, delay, 0) + IDM_WV(w, peak, 2) + IDM_WV(w, span, 3)
+                         : IDM_WV(w, delay, 0) + (double)(cyc + 1) * IDM_WV(w, span, 3);
         *v = 0.0;
     }
 }
@@ -211,6 +289,25 @@ IDM_HD void idm_load_wave(const double *data, const long long *off, const long l
     for (int k = 0; k < IDM_NW; k++) w[k] = data[off[k] + step[k] * p];
 }
 
+/* With IDM_METRICS_SHARED (GPU only) the step loop's per-point bounds and running metrics live in
+ * shared memory (each thread its own column: a few loads and stores per step, 10 registers
+ * less over the loop); else in registers. The same arithmetic. */
+#if !(defined(__CUDACC__) || defined(__CUDACC_RTC__)) || !defined(IDM_METRICS_SHARED)
+#undef IDM_METRICS_SHARED
+#define IDM_METRICS_SHARED 0
+#endif
+#define IDM_MT_PEAK_V 0
+#define IDM_MT_PEAK_F 1
+#define IDM_MT_SLIP_T 2
+#define IDM_MT_BOUND 3
+#define IDM_MT_SLIP_V 4
+#if IDM_METRICS_SHARED
+__shared__ double idm_msh[5][IDM_BLOCK];
+#define IDM_MT(k) (((volatile double *)idm_msh[k])[threadIdx.x])
+#else
+#define IDM_MT(k) mt[k]
+#endif
+
 /* One point: RK4 from rest over `steps` steps of `dt` [s]. Outputs (column k of out, stride
  * `points`): 0 final x1 [m], 1 peak |v1| [m/s], 2 peak |Ff| [N], 3 slip fraction, 4 status (1 ok,
  * 3 diverged), 5 time of divergence [s]. */
@@ -222,15 +319,31 @@ IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, do
     double y[IDM_DIM], acc[IDM_DIM], k[IDM_DIM], tmp[IDM_DIM];
     IDM_UNROLL
     for (int i = 0; i < IDM_DIM; i++) y[i] = 0.0;
-    idm_wave w = idm_wave_of(wc);
+    idm_wave w = idm_wave_of(wc, 1);
     idm_cursor cu;
     idm_cursor_start(&w, &cu);
-    double bound = c[IDM_C_FH_BOUND] * (1.0 + 1e-6) + 1e-12;
-    double slip_v = IDM_SLIP_FACTOR / c[IDM_C_INV_VS];
-    double peak_v = 0.0, peak_f = 0.0, slip_t = 0.0, status = 1.0, div_at = 0.0;
+    idm_fric fr = idm_fric_of(c);
+#if !IDM_METRICS_SHARED
+    double mt[5];
+#endif
+    IDM_MT(IDM_MT_BOUND) = c[IDM_C_FH_BOUND] * (1.0 + 1e-6) + 1e-12;
+    IDM_MT(IDM_MT_SLIP_V) = IDM_SLIP_FACTOR / c[IDM_C_INV_VS];
+    IDM_MT(IDM_MT_PEAK_V) = 0.0;
+    IDM_MT(IDM_MT_PEAK_F) = 0.0;
+    IDM_MT(IDM_MT_SLIP_T) = 0.0;
+    double status = 1.0, div_at = 0.0;
+#if IDM_LEAN
+    /* the input's slope on the cursor's segment, computed when the cursor moves (0 on the last) */
+    double s = cu.seg + 1 >= w.nb ? 0.0 : (cu.vb - cu.va) / (cu.tb - cu.ta);
+#endif
     for (long long kk = 0; kk < steps; kk++) {
-        double t0 = (double)kk * dt, v0, s;
+        double t0 = (double)kk * dt, v0;
         /* the segment holding the step's middle; breakpoints fall on step boundaries (drive.rs) */
+#if IDM_LEAN
+        if (idm_cursor_walk(&w, &cu, t0 + 0.5 * dt)) s = cu.seg + 1 >= w.nb ? 0.0 : (cu.vb - cu.va) / (cu.tb - cu.ta);
+        v0 = cu.seg + 1 >= w.nb ? cu.va : cu.va + s * (t0 - cu.ta);
+#else
+        double s;
         idm_cursor_walk(&w, &cu, t0 + 0.5 * dt);
         if (cu.seg + 1 >= w.nb) {
             v0 = cu.va;
@@ -239,31 +352,33 @@ IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, do
             s = (cu.vb - cu.va) / (cu.tb - cu.ta);
             v0 = cu.va + s * (t0 - cu.ta);
         }
+#endif
         double h2 = 0.5 * dt;
-        double ff = idm_rhs(c, m, v0, s, y, k);
+        double ff = idm_rhs(c, &fr, m, v0, s, y, k);
         /* the state at the step's start is held over the step (metrics.rs) */
-        if (fabs(y[n]) > peak_v) peak_v = fabs(y[n]);
-        if (fabs(ff) > peak_f) peak_f = fabs(ff);
-        if (fabs(y[n]) > slip_v) slip_t += dt;
+        if (fabs(y[n]) > IDM_MT(IDM_MT_PEAK_V)) IDM_MT(IDM_MT_PEAK_V) = fabs(y[n]);
+        if (fabs(ff) > IDM_MT(IDM_MT_PEAK_F)) IDM_MT(IDM_MT_PEAK_F) = fabs(ff);
+        if (fabs(y[n]) > IDM_MT(IDM_MT_SLIP_V)) IDM_MT(IDM_MT_SLIP_T) = IDM_MT(IDM_MT_SLIP_T) + dt;
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + h2 * k[i]; acc[i] = k[i]; }
-        idm_rhs(c, m, v0 + s * h2, s, tmp, k);
+        idm_rhs(c, &fr, m, v0 + s * h2, s, tmp, k);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + h2 * k[i]; acc[i] = acc[i] + 2.0 * k[i]; }
-        idm_rhs(c, m, v0 + s * h2, s, tmp, k);
+        idm_rhs(c, &fr, m, v0 + s * h2, s, tmp, k);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + dt * k[i]; acc[i] = acc[i] + 2.0 * k[i]; }
-        idm_rhs(c, m, v0 + s * dt, s, tmp, k);
+        idm_rhs(c, &fr, m, v0 + s * dt, s, tmp, k);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) y[i] += dt / 6.0 * (acc[i] + k[i]);
-        if (!(fabs(y[2 * n + 1]) <= bound) || !isfinite(y[n]) || !isfinite(y[0])) {
+        if (!(fabs(y[2 * n + 1]) <= IDM_MT(IDM_MT_BOUND)) || !isfinite(y[n]) || !isfinite(y[0])) {
             status = 3.0;
             div_at = (double)(kk + 1) * dt;
             break;
         }
     }
     /* the final state's friction, at the input's last value */
-    double ff_end = idm_rhs(c, m, 0.0, 0.0, y, k);
+    double ff_end = idm_rhs(c, &fr, m, 0.0, 0.0, y, k);
+    double peak_v = IDM_MT(IDM_MT_PEAK_V), peak_f = IDM_MT(IDM_MT_PEAK_F), slip_t = IDM_MT(IDM_MT_SLIP_T);
     if (fabs(y[n]) > peak_v) peak_v = fabs(y[n]);
     if (fabs(ff_end) > peak_f) peak_f = fabs(ff_end);
     out[0] = y[0];
@@ -305,7 +420,7 @@ IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc,
 #endif
     IDM_UNROLL
     for (int i = 0; i < IDM_DIM; i++) y[i] = 0.0;
-    idm_wave w = idm_wave_of(wc);
+    idm_wave w = idm_wave_of(wc, 0);
     idm_cursor cu;
     idm_cursor_start(&w, &cu);
     /* the error norm's scales: every component but g (IDM_N positions, IDM_N velocities, Fh, h) */
@@ -314,7 +429,8 @@ IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc,
     double h_max = fmax(t_end / 10.0, first_step), h = fmin(first_step, h_max), h_min = 1e-14;
     double t = 0.0, peak_v = 0.0, peak_f = 0.0, slip_t = 0.0, min_step = 1e300;
     double slip_v = IDM_SLIP_FACTOR / c[IDM_C_INV_VS];
-    double ff_prev = idm_rhs(c, m, 0.0, 0.0, y, k7), v_prev = 0.0;
+    idm_fric fr = idm_fric_of(c);
+    double ff_prev = idm_rhs(c, &fr, m, 0.0, 0.0, y, k7), v_prev = 0.0;
     double status = 1.0, div_at = 0.0, crawled = 0.0;
     long long accepted = 0;
     double t_check = 0.0; /* the time of the last crawl check */
@@ -332,41 +448,41 @@ IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc,
             slope = 0.0;
         }
         if (fresh) {
-            idm_rhs(c, m, v0, slope, y, k1);
+            idm_rhs(c, &fr, m, v0, slope, y, k1);
             fresh = 0;
         }
         int last = end - (t + h) < 1e-3 * h;
         double st = last ? end - t : h;
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A21 * k1[i]);
-        idm_rhs(c, m, v0 + slope * C2 * st, slope, tmp, kt);
+        idm_rhs(c, &fr, m, v0 + slope * C2 * st, slope, tmp, kt);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) KS(2, i) = kt[i];
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A31 * k1[i] + A32 * KS(2, i));
-        idm_rhs(c, m, v0 + slope * C3 * st, slope, tmp, kt);
+        idm_rhs(c, &fr, m, v0 + slope * C3 * st, slope, tmp, kt);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) KS(3, i) = kt[i];
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A41 * k1[i] + A42 * KS(2, i) + A43 * KS(3, i));
-        idm_rhs(c, m, v0 + slope * C4 * st, slope, tmp, kt);
+        idm_rhs(c, &fr, m, v0 + slope * C4 * st, slope, tmp, kt);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) KS(4, i) = kt[i];
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A51 * k1[i] + A52 * KS(2, i) + A53 * KS(3, i) + A54 * KS(4, i));
-        idm_rhs(c, m, v0 + slope * C5 * st, slope, tmp, kt);
+        idm_rhs(c, &fr, m, v0 + slope * C5 * st, slope, tmp, kt);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) KS(5, i) = kt[i];
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++)
             tmp[i] = y[i] + st * (A61 * k1[i] + A62 * KS(2, i) + A63 * KS(3, i) + A64 * KS(4, i) + A65 * KS(5, i));
-        idm_rhs(c, m, v0 + slope * st, slope, tmp, kt);
+        idm_rhs(c, &fr, m, v0 + slope * st, slope, tmp, kt);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) KS(6, i) = kt[i];
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++)
             yn[i] = y[i] + st * (B1 * k1[i] + B3 * KS(3, i) + B4 * KS(4, i) + B5 * KS(5, i) + B6 * KS(6, i));
-        idm_rhs(c, m, v0 + slope * st, slope, yn, k7);
+        idm_rhs(c, &fr, m, v0 + slope * st, slope, yn, k7);
         double err2 = 0.0;
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) {
@@ -399,7 +515,7 @@ IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc,
                 break;
             }
             v_prev = y[n];
-            ff_prev = idm_rhs(c, m, v0, slope, y, kt);
+            ff_prev = idm_rhs(c, &fr, m, v0, slope, y, kt);
             if (accepted % IDM_CRAWL_CHECK_STEPS == 0) {
                 double pace = (t - t_check) / (double)IDM_CRAWL_CHECK_STEPS;
                 t_check = t;
