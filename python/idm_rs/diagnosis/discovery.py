@@ -1003,111 +1003,125 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
     standing: list[Discovery] = []
     for body in order:
         force = forces[body]
-        # where the form is looked for: the inferred force's effect (plain, and in the complement
-        # of the calibrated parameters), and the calibrated residual itself by the library's
-        # exact sensitivities (direct: no knots between the force and the library)
-        views: list[tuple[InferredForce, bool]] = []
-        if force.gain > BIC_THRESHOLD:
-            views += [(force, False)] + ([(force, True)] if force.nuisance else [])
-        else:
-            reasons.append(f"no force on the {body} explains the residual (it lowers chi² by "
-                           f"{force.chi2_before - force.chi2_after:.0f} with {force.dof:.1f} effective parameters)")
-        try:
-            views.append((direct_force(rec, spec, sigma, body, simulator=objective.sim, nuisance=calibrated_free,
-                                       progress=progress), bool(calibrated_free)))
-        except NumericalFailure as e:
-            failures.append(f"the direct view of the {body}: {e}")
-        forms = []
-        for view, project in views:
-            try:
-                f_ = find_terms(view, project=project)
-            except NumericalFailure as e:
-                failures.append(f"the form on the {body} ({'direct' if view.target is not None else 'inferred'}): {e}")
-                continue
-            if all({t.param for t in f_.terms} != {t.param for t in g.terms} for g in forms):
-                forms.append(f_)
-        if not forms:
-            continue
-        found_any = [f_ for f_ in forms if f_.terms]
-        form = found_any[0] if found_any else forms[0]
-        if not form.terms:
-            best_cv = min(min(f_.cv_by_size) for f_ in forms)
-            lead = (f"a force on the {body} explains the residual (chi² {force.chi2_before:.0f} → "
-                    f"{force.chi2_after:.0f}), but " if force.gain > BIC_THRESHOLD else "")
-            reasons.append(f"{lead}no library term reproduces the {body}'s missing force across experiments, "
-                           f"inferred or read directly off the residual (cross-validated error {best_cv:.2f} of "
-                           f"what is to be explained, at best)")
-            if out.form is None:
-                out.body, out.form = body, form
-            continue
-        # the fewest parameters first: once a form leaves noise, a larger one can at best tie
-        # (a periodic form in x1 whose period is the step length mimics any function of the
-        # drive's phase: on the drag device four periodic terms at 4.2 um reached 1.09 x noise,
-        # v1|v1| alone 1.00)
-        found_any.sort(key=lambda f_: len(f_.terms) + (f_.wavelength > 0))
         done = False
-        for form in found_any:
-            # the refit starts at the calibration's optimum, then (while a start leaves more
-            # than noise) at the nominal values (with the missing term found, the calibration's
-            # mimicry of it is no longer needed: on the drag device the calibration had moved
-            # friction and damping to mimic the drag, and the refit from there stopped at
-            # short of noise) and where the force's own fit left the calibrated parameters
-            starts = [list(calibrated_free)]
-            if nominal is not None:
-                starts.append([f.at(float(nominal.params.get(f.name) or f.x0)) for f in calibrated_free])
-            if force.parameters:
-                starts.append([f.at(force.parameters.get(f.name, f.x0)) for f in calibrated_free])
-            r, lib, start = _refit_from(objective, spec, starts, form, progress)
-            for _ in range(PRUNE_ROUNDS):
-                smaller, r, lib = _pruned(objective, spec, start, form, r, lib, progress)
-                if smaller is form:
-                    break
-                form = smaller
-            trial = Discovery(False, "", body, form, forces, refit=r, rms_before=rms_null,
-                              heldout_rms_before=heldout_rms_null, heldout_experiment=out.heldout_experiment)
-            trial.delta_bic = null_chi2 - r.chi2 - len(lib) * math.log(objective.n)
-            trial.rms_after = r.rms
-            vals = {f.name: r.values[f.name] for f in lib}
-            trial.values = {n: (v, r.std.get(n)) for n, v in vals.items()}
-            if heldout is not None:
-                trial.heldout_rms_after = heldout.rms(r.spec, [f.at(r.values[f.name]) for f in list(start) + lib])
-            trial.equation = _equation(form, vals)
-            trial.description = describe(form, vals, force)
-            improves = not (math.isfinite(trial.heldout_rms_after) and math.isfinite(heldout_rms_null)
-                            and trial.heldout_rms_after >= heldout_rms_null)
-            # "discovered" means the residual is explained, not merely lowered: the refit leaves
-            # noise and so does the held-out experiment's prediction (a floor vibration, which no
-            # library term represents, was "explained" by sgn v1 and a periodic term at 2.16 x
-            # noise, held out 3.2 x, before this rule)
-            explains = (trial.rms_after <= NOISE_RATIO_OK * sigma
-                        and not (math.isfinite(trial.heldout_rms_after)
-                                 and trial.heldout_rms_after > NOISE_RATIO_OK * sigma))
-            trial.discovered = trial.delta_bic >= BIC_THRESHOLD and improves and explains
-            terms = ", ".join(t.symbol for t in form.terms)
-            where = "main body" if body == "main" else "weight"
-            if trial.discovered:
-                trial.reason = (f"a force on the {where} of the form {terms} ({trial.description}) improves BIC by "
-                                f"{trial.delta_bic:.0f} over the calibrated model (RMS {rms_null / sigma:.2f} → "
-                                f"{trial.rms_after / sigma:.2f} x noise) and predicts the held-out experiment better "
-                                f"({heldout_rms_null * 1e9:.2f} → {trial.heldout_rms_after * 1e9:.2f} nm)")
-                standing.append(trial)
-                if trial.rms_after <= NOISE_RATIO_OK * sigma:
-                    done = True  # it leaves noise: another form could at best tie
-                    break
-                continue
-            if trial.delta_bic < BIC_THRESHOLD:
-                why = f"ΔBIC {trial.delta_bic:.0f} < {BIC_THRESHOLD:g}"
-            elif not improves:
-                why = (f"the held-out prediction does not improve ({heldout_rms_null * 1e9:.2f} → "
-                       f"{trial.heldout_rms_after * 1e9:.2f} nm)")
+        refitted: set[frozenset[str]] = set()  # the forms refitted for this body (a phase may find one again)
+        for phase in ("inferred", "direct"):
+            # where the form is looked for: the inferred force's effect (plain, and in the complement
+            # of the calibrated parameters); then, unless a form from it stood, the calibrated
+            # residual itself by the library's exact sensitivities (direct: no knots between the
+            # force and the library; it costs a second library scan, so it is taken only when needed)
+            views: list[tuple[InferredForce, bool]] = []
+            if phase == "inferred":
+                if force.gain > BIC_THRESHOLD:
+                    views += [(force, False)] + ([(force, True)] if force.nuisance else [])
+                else:
+                    reasons.append(f"no force on the {body} explains the residual (it lowers chi² by "
+                                   f"{force.chi2_before - force.chi2_after:.0f} with {force.dof:.1f} effective "
+                                   f"parameters)")
             else:
-                why = (f"it improves BIC by {trial.delta_bic:.0f} but does not explain the residual: RMS "
-                       f"{rms_null / sigma:.2f} → {trial.rms_after / sigma:.2f} x noise, held out "
-                       f"{heldout_rms_null / sigma:.2f} → {trial.heldout_rms_after / sigma:.2f} x noise "
-                       f"(both must reach {NOISE_RATIO_OK:g})")
-            reasons.append(f"the form found on the {where} ({terms}) does not stand: {why}")
-            if out.refit is None:
-                out = trial
+                try:
+                    views.append((direct_force(rec, spec, sigma, body, simulator=objective.sim,
+                                               nuisance=calibrated_free, progress=progress), bool(calibrated_free)))
+                except NumericalFailure as e:
+                    failures.append(f"the direct view of the {body}: {e}")
+            forms = []
+            for view, project in views:
+                try:
+                    f_ = find_terms(view, project=project)
+                except NumericalFailure as e:
+                    kind = "direct" if view.target is not None else "inferred"
+                    failures.append(f"the form on the {body} ({kind}): {e}")
+                    continue
+                if all({t.param for t in f_.terms} != {t.param for t in g.terms} for g in forms):
+                    forms.append(f_)
+            if not forms:
+                continue
+            found_any = [f_ for f_ in forms if f_.terms]
+            form = found_any[0] if found_any else forms[0]
+            if not form.terms:
+                best_cv = min(min(f_.cv_by_size) for f_ in forms)
+                lead = (f"a force on the {body} explains the residual (chi² {force.chi2_before:.0f} → "
+                        f"{force.chi2_after:.0f}), but " if force.gain > BIC_THRESHOLD else "")
+                reasons.append(f"{lead}no library term reproduces the {body}'s missing force across experiments "
+                               f"({'inferred' if phase == 'inferred' else 'read directly off the residual'}: "
+                               f"cross-validated error {best_cv:.2f} of what is to be explained, at best)")
+                if out.form is None:
+                    out.body, out.form = body, form
+                continue
+            # the fewest parameters first: once a form leaves noise, a larger one can at best tie
+            # (a periodic form in x1 whose period is the step length mimics any function of the
+            # drive's phase: on the drag device four periodic terms at 4.2 um reached 1.09 x noise,
+            # v1|v1| alone 1.00)
+            found_any.sort(key=lambda f_: len(f_.terms) + (f_.wavelength > 0))
+            for form in found_any:
+                key = frozenset(t.param for t in form.terms)
+                if key in refitted:
+                    continue
+                refitted.add(key)
+                # the refit starts at the calibration's optimum, then (while a start leaves more
+                # than noise) at the nominal values (with the missing term found, the calibration's
+                # mimicry of it is no longer needed: on the drag device the calibration had moved
+                # friction and damping to mimic the drag, and the refit from there stopped at
+                # short of noise) and where the force's own fit left the calibrated parameters
+                starts = [list(calibrated_free)]
+                if nominal is not None:
+                    starts.append([f.at(float(nominal.params.get(f.name) or f.x0)) for f in calibrated_free])
+                if force.parameters:
+                    starts.append([f.at(force.parameters.get(f.name, f.x0)) for f in calibrated_free])
+                r, lib, start = _refit_from(objective, spec, starts, form, progress)
+                for _ in range(PRUNE_ROUNDS):
+                    smaller, r, lib = _pruned(objective, spec, start, form, r, lib, progress)
+                    if smaller is form:
+                        break
+                    form = smaller
+                trial = Discovery(False, "", body, form, forces, refit=r, rms_before=rms_null,
+                                  heldout_rms_before=heldout_rms_null, heldout_experiment=out.heldout_experiment)
+                trial.delta_bic = null_chi2 - r.chi2 - len(lib) * math.log(objective.n)
+                trial.rms_after = r.rms
+                vals = {f.name: r.values[f.name] for f in lib}
+                trial.values = {n: (v, r.std.get(n)) for n, v in vals.items()}
+                if heldout is not None:
+                    trial.heldout_rms_after = heldout.rms(r.spec, [f.at(r.values[f.name]) for f in list(start) + lib])
+                trial.equation = _equation(form, vals)
+                trial.description = describe(form, vals, force)
+                improves = not (math.isfinite(trial.heldout_rms_after) and math.isfinite(heldout_rms_null)
+                                and trial.heldout_rms_after >= heldout_rms_null)
+                # "discovered" means the residual is explained, not merely lowered: the refit leaves
+                # noise and so does the held-out experiment's prediction (a floor vibration, which no
+                # library term represents, was "explained" by sgn v1 and a periodic term at 2.16 x
+                # noise, held out 3.2 x, before this rule)
+                explains = (trial.rms_after <= NOISE_RATIO_OK * sigma
+                            and not (math.isfinite(trial.heldout_rms_after)
+                                     and trial.heldout_rms_after > NOISE_RATIO_OK * sigma))
+                trial.discovered = trial.delta_bic >= BIC_THRESHOLD and improves and explains
+                terms = ", ".join(t.symbol for t in form.terms)
+                where = "main body" if body == "main" else "weight"
+                if trial.discovered:
+                    trial.reason = (f"a force on the {where} of the form {terms} ({trial.description}) improves "
+                                    f"BIC by {trial.delta_bic:.0f} over the calibrated model (RMS "
+                                    f"{rms_null / sigma:.2f} → {trial.rms_after / sigma:.2f} x noise) and predicts "
+                                    f"the held-out experiment better "
+                                    f"({heldout_rms_null * 1e9:.2f} → {trial.heldout_rms_after * 1e9:.2f} nm)")
+                    standing.append(trial)
+                    if trial.rms_after <= NOISE_RATIO_OK * sigma:
+                        done = True  # it leaves noise: another form could at best tie
+                        break
+                    continue
+                if trial.delta_bic < BIC_THRESHOLD:
+                    why = f"ΔBIC {trial.delta_bic:.0f} < {BIC_THRESHOLD:g}"
+                elif not improves:
+                    why = (f"the held-out prediction does not improve ({heldout_rms_null * 1e9:.2f} → "
+                           f"{trial.heldout_rms_after * 1e9:.2f} nm)")
+                else:
+                    why = (f"it improves BIC by {trial.delta_bic:.0f} but does not explain the residual: RMS "
+                           f"{rms_null / sigma:.2f} → {trial.rms_after / sigma:.2f} x noise, held out "
+                           f"{heldout_rms_null / sigma:.2f} → {trial.heldout_rms_after / sigma:.2f} x noise "
+                           f"(both must reach {NOISE_RATIO_OK:g})")
+                reasons.append(f"the form found on the {where} ({terms}) does not stand: {why}")
+                if out.refit is None:
+                    out = trial
+            if done:
+                break
         if done:
             break
     if standing:
