@@ -586,8 +586,8 @@ def _second_effect(pb: _Problem, cal: _Calibration, lead: _Refit, heldout: _Held
     # missing, the calibration can sit in a basin that compensates both, which no local fit
     # from it leaves (an incline and a spring with the masses mis-set: m1, m2 and mu_k moved
     # 13-15 % to mimic them and the pair stopped at 5.5 x noise)
-    first_names = {f.name for f in cal.free}
-    nominal_start = list(cal.free) + [f for f in at1 if f.name not in first_names]
+    calibrated_names = {f.name for f in cal.free}
+    nominal_start = list(cal.free) + [f for f in at1 if f.name not in calibrated_names]
     with_first = _Calibration(nominal_start, r1, at1, r1, at1, bic1, whiteness_z(r1.residuals), None)  # type: ignore[arg-type]
     structure = r1.spec.structure
     effects = [e for e in CATALOGUE if e.id != first.effect and e.applies(structure, r1.spec.params)]
