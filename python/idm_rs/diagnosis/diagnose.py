@@ -504,14 +504,13 @@ def _without_lead(pb: _Problem, cal: _Calibration, lead: _Refit, found: Discover
     with it) over the term alone, refitted from the calibrated null: the first effect must pay
     its own way beside the found term (it may have mimicked part of it). Returns (ΔBIC, the
     term alone's refit, its library parameters)."""
-    from .discovery import FoundForm, _refit
+    from .discovery import _refit
 
     assert found.form is not None and found.refit is not None
     v = found.refit.values
     form = found.form
-    alone_form = FoundForm(form.body, form.terms, {t.param: v.get(t.param, form.coefficients[t.param]) for t in form.terms},
-                           v.get("lib_wavelength", form.wavelength), form.cv_error, form.cv_by_size, form.candidates,
-                           form.notes, form.source)
+    alone_form = replace(form, coefficients={t.param: v.get(t.param, form.coefficients[t.param]) for t in form.terms},
+                         wavelength=v.get("lib_wavelength", form.wavelength))
     start = [f.at(v.get(f.name, f.x0)) for f in cal.free]
     r0, lib = _refit(pb.obj, cal.fit.spec, start, alone_form, pb.tick)
     n_lib = len(lib)

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
@@ -957,8 +957,7 @@ def _pruned(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[Fre
     coefs = {t.param: r.values[t.param] for t in keep}
     periodic = any(t.periodic for t in keep)
     wl = r.values.get("lib_wavelength", form.wavelength) if periodic else 0.0
-    smaller = FoundForm(form.body, keep, coefs, wl, form.cv_error, form.cv_by_size, form.candidates, form.notes,
-                        form.source)
+    smaller = replace(form, terms=keep, coefficients=coefs, wavelength=wl)
     free = [f.at(r.values[f.name]) for f in calibrated_free]
     r2, lib2 = _refit(objective, spec, free, smaller, progress)
     ln_n = math.log(objective.n)
