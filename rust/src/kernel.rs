@@ -125,7 +125,12 @@ mod tests {
         for name in SCALARS {
             assert!(src.contains(&format!("IDM_C_{name}]")), "the kernel never reads {name}");
         }
-        let used: Vec<&str> = src.split("IDM_C_").skip(1).map(|s| s.split(']').next().unwrap()).collect();
+        // The name after each `IDM_C_` is the identifier that follows (read through `c[...]`
+        // or passed to a macro such as IDM_RARE).
+        fn ident(s: &str) -> &str {
+            s.split(|ch: char| !(ch.is_ascii_alphanumeric() || ch == '_')).next().unwrap_or("")
+        }
+        let used: Vec<&str> = src.split("IDM_C_").skip(1).map(ident).collect();
         for u in used {
             assert!(SCALARS.contains(&u), "the kernel reads IDM_C_{u}, which kernel.rs does not declare");
         }
