@@ -98,3 +98,69 @@ def test_a_second_effect_is_searched_only_where_the_first_stands_and_leaves_stru
     assert _partial_leader(pb, explains) is None
     unsupported = [refit(_candidate("incline", 5.0, 1.5, 20.0))]
     assert _partial_leader(pb, unsupported) is None
+
+
+def _tried(rms: float, delta_bic: float):
+    """A refitted form that did not stand from the model with a first effect."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis.discovery import MAIN_TERMS, Discovery, FoundForm
+
+    term = next(t for t in MAIN_TERMS if t.param == "lib_ff_sin")
+    form = FoundForm("main", [term], {"lib_ff_sin": 0.02}, 12e-6, 0.3, [1.0, 0.3])
+    d = Discovery(False, "held out 4.76 x noise", "main", form, {}, delta_bic=delta_bic, rms_after=rms)
+    d.refit = SimpleNamespace(values={"lib_ff_sin": 0.02, "lib_wavelength": 12e-6, "mu_k": 0.2}, chi2=1.0)
+    return d
+
+
+def test_a_form_spoilt_by_a_spurious_first_effect_is_refitted_alone(monkeypatch):
+    """A form found from the model with a first effect that leaves noise there but not in the
+    held-out experiment is refitted without the first effect; alone it is the discovery only
+    when it leaves noise, predicts the held-out experiment to noise and better than the null,
+    and pays by BIC — else the reason says how far it got and nothing is claimed."""
+    import importlib
+    from types import SimpleNamespace
+
+    dg = importlib.import_module("idm_rs.diagnosis.diagnose")  # the package exports a function of this name
+
+    sigma, n = 1e-9, 10_000
+    pb = SimpleNamespace(sigma=sigma, ln_n=math.log(n), obj=None, tick=None)
+    def param(name: str):
+        return SimpleNamespace(name=name, at=lambda v: SimpleNamespace(name=name, value=v))
+
+    free = [param("mu_k")]
+    cal = SimpleNamespace(fit=SimpleNamespace(chi2=3.0 * n, rms=1.73 * sigma), free=free)
+    lead = SimpleNamespace(candidate=SimpleNamespace(effect="friction_asymmetry"))
+    lib = [param("lib_ff_sin"), param("lib_wavelength")]
+
+    def alone(rms: float):
+        r0 = SimpleNamespace(chi2=(rms / sigma) ** 2 * n, rms=rms, spec="spec", std={},
+                             values={"lib_ff_sin": 0.021, "lib_wavelength": 11.8e-6, "mu_k": 0.2})
+        monkeypatch.setattr(dg, "_term_alone", lambda pb_, cal_, found: (r0, lib))
+
+    class HeldOut:
+        def __init__(self, rms: float) -> None:
+            self.value = rms
+
+        def rms(self, spec, free_):
+            return self.value
+
+    # alone it explains: discovered, with the form's values refitted without the lead
+    found = _tried(1.04 * sigma, 5000.0)
+    found.tried = [_tried(1.11 * sigma, 4000.0)]
+    alone(1.0 * sigma)
+    d = dg._alone_explains(pb, cal, HeldOut(1.05 * sigma), 7.5 * sigma, lead, found)
+    assert d is not None and d.discovered
+    assert d.values["lib_ff_sin"][0] == 0.021 and d.heldout_rms_after == 1.05 * sigma
+    assert "refitted without it" in d.reason and "friction_asymmetry had mimicked" in d.reason
+    assert d.delta_bic > 1000
+    # the held-out experiment still not predicted: nothing claimed, the figures in the reason
+    found = _tried(1.04 * sigma, 5000.0)
+    d = dg._alone_explains(pb, cal, HeldOut(4.0 * sigma), 7.5 * sigma, lead, found)
+    assert d is None and "held out 4.00 x noise" in found.reason
+    # alone it leaves more than noise: nothing claimed
+    alone(1.3 * sigma)
+    assert dg._alone_explains(pb, cal, HeldOut(1.0 * sigma), 7.5 * sigma, lead, _tried(1.04 * sigma, 5000.0)) is None
+    # a form that did not gain by BIC is not retried at all
+    monkeypatch.setattr(dg, "_term_alone", lambda *a: pytest.fail("retried a form with no BIC gain"))
+    assert dg._alone_explains(pb, cal, HeldOut(1.0 * sigma), 7.5 * sigma, lead, _tried(1.04 * sigma, 5.0)) is None

@@ -246,3 +246,24 @@ def test_the_direct_regression_reads_the_residual_net_of_its_noise():
     net, supports = _cv_path(X, y, 2, noisy=True)
     assert plain[1] == pytest.approx(0.2, abs=0.02)  # the noise's share of the energy
     assert abs(net[1]) < 0.01 and list(supports[1]) == [0]
+
+
+def test_a_periodic_term_is_refitted_with_its_phase_free():
+    """A periodic term found alone gets its quadrature partner before the refit (a force
+    periodic in position has a phase), started at zero and free over the found term's size."""
+    from idm_rs.diagnosis.discovery import FoundForm, _free_library, with_quadrature
+
+    ff_sin = next(t for t in MAIN_TERMS if t.param == "lib_ff_sin")
+    vv = next(t for t in MAIN_TERMS if t.param == "lib_vv")
+    form = FoundForm("main", [ff_sin, vv], {"lib_ff_sin": 0.02, "lib_vv": -1e3}, 12e-6, 0.1, [1.0, 0.3, 0.1])
+    q = with_quadrature(form)
+    assert [t.param for t in q.terms] == ["lib_ff_sin", "lib_vv", "lib_ff_cos"]
+    assert q.coefficients["lib_ff_cos"] == 0.0 and q.wavelength == 12e-6
+    free = {f.name: f for f in _free_library(q)}
+    cos = free["lib_ff_cos"]
+    assert cos.x0 == 0.0 and cos.lower == pytest.approx(-0.02) and cos.upper == pytest.approx(0.02)
+    assert free["lib_ff_sin"].upper == pytest.approx(0.02 * 21)
+    # a form with both, or none periodic, is left as it is
+    assert with_quadrature(q) is q
+    plain = FoundForm("main", [vv], {"lib_vv": -1e3}, 0.0, 0.1, [1.0, 0.1])
+    assert with_quadrature(plain) is plain

@@ -572,9 +572,9 @@ mod tests {
             s: Structure::Rig(RigDrive::Position { stiffness: 2e4, damping: 5.0 }),
             hyst: false,
             wave: PiecewiseLinear::new(vec![0.0, 1.0], vec![0.0, 2e-2]).unwrap(),
-            t_end: 0.02,
+            t_end: 0.01,
             method: Method::Rk4 { dt: 2e-8 },
-            every: 10_000,
+            every: 5_000,
             derived_fn: false,
         };
         let names = ["m1", "mu_k", "mu_s", "sigma2", "normal_force"];

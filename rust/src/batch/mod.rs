@@ -342,6 +342,7 @@ mod tests {
         let rk4 = Method::Rk4 { dt: 5e-9 };
         let mut c = cfg(rk4, Structure::Lps);
         c.record_every = 200;
+        c.t_end = 1e-3; // bitwise equality needs no long run (half of cfg's: CI time)
         let names = ["mu_k", "m2", "k_ground", "q0"];
         c.sensitivities = names.iter().map(|s| s.to_string()).collect();
         let mut sp = specs(3);
@@ -371,6 +372,7 @@ mod tests {
         let mut coarse = c.clone();
         coarse.method = RK4;
         coarse.record_every = 50;
+        coarse.t_end = 2e-3;
         let r = run_batch(&coarse, &sp[2..], &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
         assert_eq!(r[0].metrics.status, Status::Ok);
         assert!(r[0].reason.contains("stability limit of the friction state"), "{}", r[0].reason);
