@@ -555,7 +555,10 @@ mod tests {
             libw_x2: 1e4, libw_v2: 0.5, libw_dx: 1e4, libw_dv: 0.5, libw_sgn: 0.01, libw_vv: 100.0,
             libw_volt: 1e-4, libw_dvolt: 1e-8,
         };
-        let c = paper(Structure::Lps, e);
+        // dt 2e-8: a fifth of the paper case's RK4 stability limit (1e-7 s), and half the CI
+        // time of this, the longest unit test (the comparison is within one discretisation)
+        let mut c = paper(Structure::Lps, e);
+        c.method = Method::Rk4 { dt: 2e-8 };
         let names = EFFECT_NAMES;
         let h: Vec<f64> = names.iter().map(|n| rel_step(&c, n)).collect();
         c.check(&names, &h, 1e-6);
