@@ -2,9 +2,10 @@
 against their answers in ``KEY.json``: the verdict, the residual after refit within 1.1x the noise,
 and the effect's key parameter within 25 %. Skipped where that folder is absent (a user's clone).
 
-By default a healthy case (dev02: the worst failure is a false alarm) and the smallest effect case
-(dev14, 7603 samples) run; the others take 1-3 minutes each on a 2-core machine and are marked
-slow (``pytest -m slow``). Every one is expected right (issue 18)."""
+By default the healthy case runs (dev02: the worst failure is a false alarm); the effect cases take
+1-3 minutes each on a 2-core machine and are marked slow (``pytest -m slow``; the smallest, dev14,
+was in the default run until CI's time grew past its 20 minutes in issue 31 — an effect named and
+fitted end to end stays in the default run through tests/test_diagnosis.py). Every one is expected right (issue 18)."""
 
 from __future__ import annotations
 
@@ -18,10 +19,10 @@ import idm_rs
 DEV = Path(__file__).resolve().parents[1].parent / "shared" / "recordings" / "dev"
 KEY = DEV / "KEY.json"
 
-#: fast cases (LPS nominal or few samples); the first two are not slow
+#: the first (healthy) is not slow
 CASES = [
     pytest.param("dev02", id="dev02-none"),
-    pytest.param("dev14", id="dev14-weight_friction"),
+    pytest.param("dev14", id="dev14-weight_friction", marks=pytest.mark.slow),
     pytest.param("dev09", id="dev09-pe_mass", marks=pytest.mark.slow),
     pytest.param("dev01", id="dev01-friction_asymmetry", marks=pytest.mark.slow),
     pytest.param("dev06", id="dev06-piezo_hysteresis", marks=pytest.mark.slow),
