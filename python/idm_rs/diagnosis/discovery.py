@@ -855,8 +855,8 @@ def with_quadrature(form: FoundForm) -> FoundForm:
     """The form with each periodic term's quadrature partner added (at zero) where it lacks
     it: a force periodic in position has a phase, which one term at a fixed phase cannot carry.
     The regression may pick one of the pair, the other below its cross-validation threshold;
-    a phase 0.1 rad off a 2 % periodic friction leaves ~10 % of its effect, enough to fail the
-    held-out test of a long stroke. The refit prunes a partner it does not support."""
+    a phase 0.1 rad off a 2 % periodic friction leaves ~10 % of its effect unexplained. The
+    refit prunes a partner it does not support."""
     have = {t.param for t in form.terms}
     by_param = {t.param: t for t in MAIN_TERMS}
     extra = [by_param[QUADRATURE[t.param]] for t in form.terms if t.periodic and QUADRATURE[t.param] not in have]
