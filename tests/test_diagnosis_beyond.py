@@ -64,15 +64,49 @@ def test_two_catalogue_effects_are_named_together(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.skipif(not (SHARED / "dev2" / "d2_12").exists(), reason="needs ../shared/recordings")
-def test_d2_12s_look_alikes_get_an_answer_about_separating_them():
-    """An incline and a direction-dependent friction (d2_12): the report names the alternative
-    and says which experiment separates them — here that no drive does (they differ only while
-    the body is stuck), and what would."""
-    d = idm_rs.diagnose(SHARED / "dev2" / "d2_12", progress=False)
+def test_d2_12s_look_alikes_are_separated_by_the_proposed_experiment(tmp_path):
+    """An incline and a direction-dependent friction (d2_12; |cos| 0.9998 on its five drives):
+    the report names the alternative and proposes the experiment that separates them (the rig
+    turned end for end: no drive as the rig stands does). That experiment simulated from the
+    key's truth and added to the case, the diagnosis names the incline."""
+    import json
+    import shutil
+
+    case = SHARED / "dev2" / "d2_12"
+    d = idm_rs.diagnose(case, progress=False)
     assert {d.verdict} | {a.effect for a in d.alternatives} >= {"incline", "friction_asymmetry"}
     p = d.proposal
-    assert p is not None and not p.separates and p.predicted_delta_bic < 10
-    assert "turn the rig around" in d.report()
+    assert p is not None and p.separates and p.drive.orientation == "reversed"
+    assert "turned end for end" in d.report()
+    d2 = _with_proposed_experiment(case, json.loads((case.parent / "KEY.json").read_text())["d2_12"], p.drive,
+                                   tmp_path, shutil)
+    again = idm_rs.diagnose(d2, progress=False)
+    assert again.verdict == "incline", again.reason
+    theta = again.verdict_candidate.params["theta_rad"]
+    assert abs(theta / -0.000132443 - 1.0) < 0.25
+
+
+def _with_proposed_experiment(case: Path, key: dict, drive, tmp_path: Path, shutil) -> Path:
+    """A copy of `case` with `drive` recorded on the key's true device (its structure, parameters,
+    effect, noise and quantisation), appended to meta.json as the lab would."""
+    import json
+
+    out = tmp_path / case.name
+    shutil.copytree(case, out)
+    meta = json.loads((out / "meta.json").read_text())
+    n = len(meta["experiments"]) + 1
+    spec = {k: v for k, v in drive.to_dict().items() if k != "waveform"}
+    name = f"exp{n}_{spec['direction']}_{spec['amplitude_V']:g}V_{spec['frequency_Hz']:g}Hz.csv"
+    s = key["true_structure"]
+    made = make_case(tmp_path / "proposed", nominal_params=idm_rs.Params(**key["true_nominal_params"]),
+                     model=s["model"], n_elements=s.get("n_elements", 4), piezo_hysteresis=s["piezo_hysteresis"],
+                     effects=idm_rs.Effects(**key["params"]), experiments=[dict(spec, file=name)],
+                     noise_rms=key["noise_rms_m"], resolution=key["quantisation_m"], seed=12, dt=2e-8,
+                     sample_rate_Hz=meta["sensor"]["sample_rate_Hz"])
+    shutil.copy(made / name, out / name)
+    meta["experiments"].append(json.loads((made / "meta.json").read_text())["experiments"][0])
+    (out / "meta.json").write_text(json.dumps(meta, indent=2))
+    return out
 
 
 def _candidate(effect: str, delta_bic: float, rms: float, z: float):

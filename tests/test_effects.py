@@ -250,3 +250,19 @@ def test_energy_balance_closes_with_each_force_effect(name):
     e = r.energy
     assert np.max(np.abs(e.input_work)) > 0
     assert e.relative_residual < 1e-10
+
+
+def test_bench_fixed_forces_are_declared_effect_parameters_and_turn_with_the_rig():
+    """Every name in BENCH_FIXED is an effect parameter of the engine's declarations whose
+    domain is symmetric (the turned value is valid too), and `oriented` negates exactly those."""
+    from idm_rs import engine
+    from idm_rs.effects import BENCH_FIXED, oriented
+
+    names = set(engine.effect_names())
+    assert BENCH_FIXED and BENCH_FIXED <= names
+    values = {n: 0.25 for n in names}
+    turned = oriented(values, True)
+    assert {n for n in names if turned[n] == -0.25} == BENCH_FIXED
+    assert oriented(values, False) == values
+    for n in BENCH_FIXED:
+        idm_rs.Effects(**{n: -0.01})  # the turned value is accepted

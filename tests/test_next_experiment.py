@@ -113,3 +113,68 @@ def test_the_raw_difference_bounds_the_separation_from_above(rec):
     raw = raw_differences(v, 1.5e-9, a, b)
     sep = separations(v, 1.5e-9, a, b)
     assert all(0.0 < x <= r * (1 + 1e-9) for x, r in zip(sep, raw))
+
+
+def _incline_and_its_look_alike(rec, theta=1e-4):
+    """An incline and the friction asymmetry that exerts the same force while sliding:
+    eps Fc = (m1 + m2 + mPE) g sin(theta) (the incline pulls by -M g sin(theta), the asymmetric
+    friction by -(1 + eps sgn v) Fc sgn v = -Fc sgn v - eps Fc)."""
+    nom = rec.nominal
+    p0 = nom.params.to_dict(resolved=False)
+    s = Structure(nom.model, nom.n_elements, nom.piezo_hysteresis)
+    mass = nom.params.m1 + nom.params.m2 + nom.params.pe_mass
+    fc = nom.params.mu_k * nom.params.effective_normal_force
+    eps = mass * 9.81 * math.sin(theta) / fc
+    return ModelSpec(s, p0, {"theta_rad": theta}), ModelSpec(s, p0, {"eps": eps})
+
+
+def test_turning_the_rig_end_for_end_separates_an_incline_from_a_direction_dependent_friction(rec):
+    """No drive tells them apart as the rig stands (they differ only while the body sticks);
+    turned end for end, gravity along the guide acts the other way in the device's frame and the
+    contact's asymmetry does not, so one drive separates them by far more than 10 (theta as on
+    d2_12, ~1e-4 rad), and the
+    proposal is such a drive, worded for the lab."""
+    from idm_rs.diagnosis.next_experiment import orientations_for, propose
+
+    incline, asym = _incline_and_its_look_alike(rec)
+    sigma = 1.5e-9
+    as_stands = Drive("forward", 80.0, 100.0, 4, 5e-4, 2e-3)
+    turned = Drive("forward", 80.0, 100.0, 4, 5e-4, 2e-3, "reversed")
+    same = separation(virtual_recording(rec, [as_stands]), sigma, (incline, []), (asym, []))
+    apart = separation(virtual_recording(rec, [turned]), sigma, (incline, []), (asym, []))
+    assert same < 2.0 and apart > 100.0
+    assert orientations_for(asym) == ("normal",) and orientations_for(incline, asym) == ("normal", "reversed")
+    p = propose(rec, sigma, ("incline", "friction_asymmetry"), (incline, []), (asym, []))
+    assert p is not None and p.separates and p.drive.orientation == "reversed"
+    assert p.recorded_delta_bic < 10.0
+    assert "turned end for end" in p.words() and p.to_dict()["drive"]["orientation"] == "reversed"
+
+
+def test_a_reversed_experiment_is_simulated_with_the_bench_fixed_force_turned(tmp_path):
+    """The case simulator reads an experiment recorded with the rig turned end for end as the
+    synthetic writer (the engine with the incline negated) made it, and its reading's
+    derivative in theta is the turned one (checked against a central difference)."""
+    from idm_rs.diagnosis.case_model import CaseSimulator
+
+    theta = 3e-3
+    exps = [dict(e, cycles=2) for e in EXPERIMENTS[:1]] * 2
+    exps[1] = dict(exps[1], orientation="reversed")
+    case = make_case(tmp_path / "turned", nominal_params=NOMINAL, effects=idm_rs.Effects(theta_rad=theta),
+                     experiments=exps, noise_rms=0.0, resolution=0.0, offsets=[0.0, 0.0], dt=2e-7)
+    rec = load_case(case)
+    assert [e.orientation for e in rec.experiments] == ["normal", "reversed"]
+    nom = rec.nominal
+    s = Structure(nom.model, nom.n_elements, nom.piezo_hysteresis)
+    p0 = nom.params.to_dict(resolved=False)
+    sim = CaseSimulator(rec, dt=2e-7)
+    (pred,), (sens,), _ = sim.predict_with_sensitivities([ModelSpec(s, p0, {"theta_rad": theta})], ["theta_rad"])
+    for j in range(2):
+        assert np.max(np.abs(pred[j] - rec.experiments[j].x)) < 1e-12
+    # turned, the incline pulls forward: the body gets further than as the rig stands
+    assert pred[1][-1] - pred[1][0] > pred[0][-1] - pred[0][0] + 1e-8
+    h = 1e-5
+    up, down = (sim.predict([ModelSpec(s, p0, {"theta_rad": theta + d})])[0] for d in (h, -h))
+    for j in range(2):
+        fd = (up[j] - down[j]) / (2 * h)
+        assert np.max(np.abs(sens[j][0] - fd)) < 1e-3 * np.max(np.abs(fd))
+    assert np.sign(sens[0][0][-1]) == -np.sign(sens[1][0][-1])

@@ -348,6 +348,20 @@ def test_bad_experiment_entries(case):
     refused(case, "meta.json", "plain file name", column="experiments[1].file")
 
 
+def test_an_experiment_may_be_recorded_with_the_rig_turned_end_for_end(case):
+    """``orientation`` is optional ("normal"), "reversed" is read, anything else is refused
+    by name with the two accepted values."""
+    assert [e.orientation for e in load_case(case).experiments] == ["normal"] * len(read_meta(case)["experiments"])
+    meta = read_meta(case)
+    meta["experiments"][1]["orientation"] = "reversed"
+    write_meta(case, meta)
+    rec = load_case(case)
+    assert rec.experiments[1].is_reversed and not rec.experiments[0].is_reversed
+    meta["experiments"][1]["orientation"] = "upside down"
+    write_meta(case, meta)
+    refused(case, "meta.json", "'upside down'", "\"reversed\"", column="experiments[1].orientation")
+
+
 def test_meta_disagrees_with_file_name(case):
     meta = read_meta(case)
     meta["experiments"][0]["direction"] = "backward"

@@ -47,6 +47,21 @@ def _field(effect: str, d: ParamDecl) -> tuple[str, type, dataclasses.Field]:
     return d.name, float, dataclasses.field(default=d.value, metadata=meta)
 
 
+#: effect parameters of forces fixed to the bench, not to the device: they change sign in the
+#: device's frame when the rig is turned end for end (an experiment's ``orientation:
+#: "reversed"``). Gravity along a tilted guide is the one such force; everything else (the
+#: contact, the sensor, a load hung from the device) turns with the rig.
+BENCH_FIXED: frozenset[str] = frozenset({"theta_rad"})
+
+
+def oriented(values: dict[str, float], reversed_: bool) -> dict[str, float]:
+    """Effect parameters as they act in the device's frame: ``values`` with the bench-fixed
+    ones (:data:`BENCH_FIXED`) negated when the rig is turned end for end."""
+    if not reversed_:
+        return dict(values)
+    return {k: (-v if k in BENCH_FIXED else v) for k, v in values.items()}
+
+
 _TERMS = [(e.id, d) for e in EFFECTS if e.kind == "term" for d in e.params]
 
 Effects = dataclasses.make_dataclass(

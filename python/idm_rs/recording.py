@@ -119,6 +119,15 @@ class Experiment:
     t: NDArray[np.float64] = field(repr=False)
     voltage: NDArray[np.float64] = field(repr=False)
     x: NDArray[np.float64] = field(repr=False)
+    #: how the rig stood on the bench: "normal", or "reversed" (turned end for end, 180 degrees
+    #: about the vertical: forces fixed to the bench, gravity along a tilted guide, act the other
+    #: way in the device's frame; the contact, the sensor and the drive turn with it)
+    orientation: str = "normal"
+
+    @property
+    def is_reversed(self) -> bool:
+        """True when the rig was turned end for end for this experiment (``orientation``)."""
+        return self.orientation == "reversed"
 
     @property
     def is_sampled(self) -> bool:
@@ -331,10 +340,23 @@ def _parse_nominal(nom: Any, meta: Path) -> Nominal:
 _EXPERIMENT_KEYS = ("file", "waveform", "amplitude_V", "frequency_Hz", "direction", "cycles", "rest_s", "edge_s")
 
 
+#: how a rig may stand on the bench (an experiment's optional ``orientation``)
+ORIENTATIONS = ("normal", "reversed")
+
+
+def _parse_orientation(e: dict, where: str, meta: Path) -> str:
+    """An experiment's optional ``orientation`` ("normal" when absent)."""
+    value = e.get("orientation", "normal")
+    if value not in ORIENTATIONS:
+        raise RecordingError(meta, f"must be \"normal\" or \"reversed\" (the rig turned end for end on the bench), "
+                             f"got {value!r}", column=f"{where}.orientation")
+    return value
+
+
 def _parse_experiment_meta(e: Any, i: int, meta: Path) -> dict[str, Any]:
     where = f"experiments[{i}]"
     if isinstance(e, dict) and e.get("waveform") == "sampled":
-        return _parse_sampled_meta(e, i, meta)
+        return dict(_parse_sampled_meta(e, i, meta), orientation=_parse_orientation(e, where, meta))
     _require(e, _EXPERIMENT_KEYS, meta, where)
     name = e["file"]
     if not isinstance(name, str) or not name or Path(name).name != name or name in (".", ".."):
@@ -357,6 +379,7 @@ def _parse_experiment_meta(e: Any, i: int, meta: Path) -> dict[str, Any]:
         "cycles": int(cycles),
         "rest_s": _number(e, "rest_s", meta, where, non_negative=True),
         "edge_s": _number(e, "edge_s", meta, where, positive=True),
+        "orientation": _parse_orientation(e, where, meta),
     }
     if out["edge_s"] >= 1.0 / out["frequency_Hz"]:
         raise RecordingError(

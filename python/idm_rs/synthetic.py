@@ -12,6 +12,7 @@ that is how test cases with known answers (mis-set parameters, missing physics) 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import fields
@@ -20,9 +21,9 @@ from typing import Any, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from .effects import Effects
+from .effects import Effects, oriented
 from .params import Params
-from .recording import FORMAT_ID, HEADER, META
+from .recording import FORMAT_ID, HEADER, META, ORIENTATIONS
 from .simulation import simulate
 from .waveforms import Sampled, Sawtooth, voltage_at
 
@@ -78,7 +79,9 @@ def make_case(
     ``true_piezo_hysteresis`` (each defaulting to the nominal one) with ``effects``.
 
     ``experiments``: dicts with ``amplitude_V``, ``frequency_Hz``, ``direction``, ``cycles`` and
-    optionally ``rest_s``, ``edge_s`` and ``file`` (default :data:`DEFAULT_EXPERIMENTS`); or,
+    optionally ``rest_s``, ``edge_s``, ``file`` and ``orientation`` ("reversed": the rig turned end
+    for end, so bench-fixed effects such as an incline act the other way; written to meta.json)
+    (default :data:`DEFAULT_EXPERIMENTS`); or,
     for a drive recorded sample by sample, ``{"sampled": idm_rs.Sampled(t, V)}`` (its times on
     the sample grid, from 0; optionally ``file``), written as ``waveform: "sampled"``.
     ``write_noise_rms`` puts the noise RMS in meta.json (``sensor.noise_rms_m``).
@@ -122,15 +125,23 @@ def make_case(
     out.mkdir(parents=True, exist_ok=True)
     meta_exps = []
     for i, e in enumerate(exps):
-        allowed = {"sampled", "file"} if "sampled" in e else {"amplitude_V", "frequency_Hz", "direction", "cycles",
-                                                                "rest_s", "edge_s", "file"}
+        allowed = {"sampled", "file", "orientation"} if "sampled" in e else {
+            "amplitude_V", "frequency_Hz", "direction", "cycles", "rest_s", "edge_s", "file", "orientation"}
         unknown = set(e) - allowed
         if unknown:
             raise ValueError(f"experiments[{i}]: unknown key(s) {sorted(unknown)}")
+        orientation = e.get("orientation", "normal")
+        if orientation not in ORIENTATIONS:
+            raise ValueError(f"experiments[{i}]: orientation must be one of {ORIENTATIONS}, got {orientation!r}")
+        # the device's frame: a rig turned end for end feels bench-fixed forces the other way
+        acting = effects
+        if effects is not None and orientation == "reversed":
+            acting = Effects(**oriented(dataclasses.asdict(effects), True))
+        placed = {} if orientation == "normal" else {"orientation": orientation}
         if "sampled" in e:
-            meta_exps.append(_sampled_experiment(out, i, e, true_params, true_model, true_n_elements,
-                                                 true_piezo_hysteresis, effects, offs[i], noise_rms, resolution,
-                                                 rng, dt, save_every, sample_rate_Hz))
+            meta_exps.append(dict(_sampled_experiment(out, i, e, true_params, true_model, true_n_elements,
+                                                      true_piezo_hysteresis, acting, offs[i], noise_rms, resolution,
+                                                      rng, dt, save_every, sample_rate_Hz), **placed))
             continue
         rest = float(e.get("rest_s", rest_s))
         edge = float(e.get("edge_s", edge_s))
@@ -158,7 +169,7 @@ def make_case(
             n_elements=true_n_elements,
             save_every=save_every,
             piezo_hysteresis=true_piezo_hysteresis,
-            effects=effects,
+            effects=acting,
         )
         if sim.t.shape != t.shape or np.max(np.abs(sim.t - t)) > 1e-3 / sample_rate_Hz:
             raise RuntimeError(f"experiments[{i}]: simulation saved {sim.t.size} times, expected {n}")
@@ -187,6 +198,7 @@ def make_case(
                 "cycles": wave.cycles,
                 "rest_s": rest,
                 "edge_s": edge,
+                **placed,
             }
         )
 

@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import engine
+from ..effects import BENCH_FIXED
 from ..batch import Structure, Tables, param_row
 from ..batch import run as run_batch
 from ..recording import Recording
@@ -54,6 +55,10 @@ class CaseSimulator:
              for c in names]
             for e in recording.experiments
         ]
+        #: experiments recorded with the rig turned end for end: bench-fixed effect parameters
+        #: act with the other sign there (their rows and reading derivatives are negated)
+        self._reversed = [e.is_reversed for e in recording.experiments]
+        self._bench_slots = [k for k, n in enumerate(engine.effect_names()) if n in BENCH_FIXED]
         self.evaluations = 0  # simulated experiment runs, for reports
         #: experiments whose reading derivatives blew up at this step (fast slips beyond the
         #: friction state's RK4 stability limit): their Jacobian columns are taken by differences
@@ -117,7 +122,7 @@ class CaseSimulator:
             for j in sawtooth:
                 for a in range(len(idx)):
                     rows_p.append(prows[a])
-                    rows_e.append(erows[a])
+                    rows_e.append(self._oriented(erows[a], j))
                     rows_w.append(self._wave_rows[j])
                     t_ends.append(horizons[j][0])
             tables = Tables(np.asarray(rows_p), np.asarray(rows_e), Sawtooth.batch_kind, np.asarray(rows_w),
@@ -144,6 +149,21 @@ class CaseSimulator:
         if names:
             s = res["sensitivities"][point][:, :samples]
             sens[i][j] = s if s.shape[1] == samples else np.full((len(names), samples), np.nan)
+            if self._reversed[j]:  # d reading / d theta = -(d reading / d theta) at -theta
+                flip = [k for k, n in enumerate(names) if n in BENCH_FIXED]
+                if flip:
+                    sens[i][j] = sens[i][j].copy()
+                    sens[i][j][flip] *= -1.0
+
+    def _oriented(self, erow: list, j: int) -> list:
+        """An effects row as experiment j's device frame sees it (bench-fixed slots negated when
+        the rig was turned end for end)."""
+        if not self._reversed[j] or not self._bench_slots:
+            return erow
+        out = list(erow)
+        for k in self._bench_slots:
+            out[k] = -out[k]
+        return out
 
     @staticmethod
     def _sawtooth_slot(row: list, j: int) -> None:
@@ -155,7 +175,7 @@ class CaseSimulator:
                          why: list[list], names: list[str]) -> None:
         """Experiment j (a sampled drive) for the specs `idx`: one batch with its samples."""
         e = self.recording.experiments[j]
-        tables = Tables(np.asarray(prows), np.asarray(erows), "sampled", np.ones((len(idx), 1)),
+        tables = Tables(np.asarray(prows), np.asarray([self._oriented(r, j) for r in erows]), "sampled", np.ones((len(idx), 1)),
                         sampled=(np.ascontiguousarray(e.t), np.ascontiguousarray(e.voltage)),
                         t_ends=np.full(len(idx), horizon[0]))
         extra = {"sensitivities": names} if names else {}

@@ -11,6 +11,9 @@ absorb by refitting (its exact Jacobian on that experiment, to first order), in 
 drive comes first (predictions only); the absorption is computed for the SHORTLIST drives that
 differ most (it only lowers a drive's figure). The drive with the largest
 score is proposed, with that figure and the same figure for the recordings already made.
+Where either model has a force fixed to the bench (an incline), each drive is also scored
+with the rig turned end for end (``orientation: "reversed"``): the only experiment that
+separates an incline from a direction-dependent friction.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from ..effects import BENCH_FIXED
 from ..recording import Experiment, Recording
 from .case_model import FIT_DT, CaseSimulator, ModelSpec
 from .fitting import FreeParam, Objective
@@ -42,8 +46,9 @@ SHORTLIST = 10
 NOT_BY_DRIVE: dict[tuple[str, str], str] = {
     ("incline", "friction_asymmetry"): (
         "they differ only while the main body is stuck (an incline loads the stuck contact, by "
-        "|m g sin(theta)| / fric_alpha, ~1e-13 m here); turn the rig around on the bench or tilt it by a known "
-        "angle: an incline changes with it, a direction-dependent friction does not"),
+        "|m g sin(theta)| / fric_alpha, ~1e-13 m here); record with the rig turned end for end on the bench "
+        "(orientation \"reversed\"): the incline then acts the other way, a direction-dependent friction of the "
+        "contact does not (tilting by a known angle does not separate them: both models absorb the known tilt)"),
 }
 #: drive cycles of a proposed experiment
 CYCLES = 4
@@ -59,15 +64,20 @@ class Drive:
     cycles: int
     edge_s: float
     rest_s: float
+    #: "normal", or "reversed": the rig turned end for end on the bench (an experiment's
+    #: ``orientation`` in meta.json)
+    orientation: str = "normal"
 
     def words(self) -> str:
+        turned = " with the rig turned end for end on the bench (orientation \"reversed\")" \
+            if self.orientation == "reversed" else ""
         return (f"{self.direction} sawtooth, {self.amplitude_V:.0f} V, {self.frequency_Hz:.0f} Hz, {self.cycles} "
-                f"cycles, {self.edge_s * 1e3:.2g} ms edge, {self.rest_s * 1e3:.2g} ms rest")
+                f"cycles, {self.edge_s * 1e3:.2g} ms edge, {self.rest_s * 1e3:.2g} ms rest{turned}")
 
     def to_dict(self) -> dict[str, Any]:
         return {"waveform": "sawtooth", "direction": self.direction, "amplitude_V": self.amplitude_V,
                 "frequency_Hz": self.frequency_Hz, "cycles": self.cycles, "edge_s": self.edge_s,
-                "rest_s": self.rest_s}
+                "rest_s": self.rest_s, "orientation": self.orientation}
 
 
 @dataclass
@@ -105,8 +115,10 @@ class Proposal:
                 "scored": [dict(d.to_dict(), delta_bic=s) for d, s in self.scored]}
 
 
-def drives(rec: Recording, cycles: int = CYCLES) -> list[Drive]:
-    """The sawtooth drives within the rig's limits (module docstring)."""
+def drives(rec: Recording, cycles: int = CYCLES, orientations: Sequence[str] = ("normal",)) -> list[Drive]:
+    """The sawtooth drives within the rig's limits (module docstring), in each of
+    `orientations` (the rig as it stands, and turned end for end where a model has a force
+    fixed to the bench)."""
     saw = [e for e in rec.experiments if not e.is_sampled]
     if not saw:
         return []
@@ -117,13 +129,21 @@ def drives(rec: Recording, cycles: int = CYCLES) -> list[Drive]:
     edge = min(e.edge_s for e in saw)
     rest = max(e.rest_s for e in saw)
     out = []
-    for direction in ("forward", "backward"):
-        for share in AMPLITUDE_SHARES:
-            for f in freqs:
-                if edge >= 0.5 / f:
-                    continue  # the edge must fit in the period
-                out.append(Drive(direction, round(share * a_max, 1), f, cycles, edge, rest))
+    for orientation in orientations:
+        for direction in ("forward", "backward"):
+            for share in AMPLITUDE_SHARES:
+                for f in freqs:
+                    if edge >= 0.5 / f:
+                        continue  # the edge must fit in the period
+                    out.append(Drive(direction, round(share * a_max, 1), f, cycles, edge, rest, orientation))
     return out
+
+
+def orientations_for(*specs: ModelSpec) -> tuple[str, ...]:
+    """The rig's orientations worth trying: turned end for end too when any of `specs` has a
+    bench-fixed force (BENCH_FIXED: it then acts the other way, and nothing else changes)."""
+    bench = any(abs(float(s.effects.get(n, 0.0))) > 0.0 for s in specs for n in BENCH_FIXED)
+    return ("normal", "reversed") if bench else ("normal",)
 
 
 def virtual_recording(rec: Recording, drive_list: Sequence[Drive]) -> Recording:
@@ -137,7 +157,7 @@ def virtual_recording(rec: Recording, drive_list: Sequence[Drive]) -> Recording:
         t = np.arange(n) * step
         name = f"proposed{i + 1}_{d.direction}_{d.amplitude_V:g}V_{d.frequency_Hz:g}Hz.csv"
         exps.append(Experiment(name, rec.path / name, d.amplitude_V, d.frequency_Hz, d.direction, d.cycles, d.rest_s,
-                               d.edge_s, t, np.zeros(n), np.zeros(n)))
+                               d.edge_s, t, np.zeros(n), np.zeros(n), orientation=d.orientation))
     return replace(rec, experiments=exps)
 
 
@@ -213,7 +233,7 @@ def propose(rec: Recording, sigma: float, names: tuple[str, str], a: tuple[Model
             b: tuple[ModelSpec, Sequence[FreeParam]], dt: float = FIT_DT) -> Optional[Proposal]:
     """The drive (of :func:`drives`) that best separates models `a` and `b` (their names in
     `names`), or None when the recording has no sawtooth drive to take the rig's limits from."""
-    grid = drives(rec)
+    grid = drives(rec, orientations=orientations_for(a[0], b[0]))
     if not grid:
         return None
     # the raw difference of every drive first (predictions only: one batch call); what the
