@@ -198,3 +198,41 @@ def test_a_form_spoilt_by_a_spurious_first_effect_is_refitted_alone(monkeypatch)
     # a form that did not gain by BIC is not retried at all
     monkeypatch.setattr(dg, "_term_alone", lambda *a: pytest.fail("retried a form with no BIC gain"))
     assert dg._alone_explains(pb, cal, HeldOut(1.0 * sigma), 7.5 * sigma, lead, _tried(1.04 * sigma, 5.0)) is None
+
+
+def test_a_found_term_whose_gain_is_a_better_calibration_is_not_discovered(monkeypatch):
+    """The found term's refit also moves the calibrated subset (it starts from the nominal values
+    too): the nominal model refitted from there must leave the term paying by BIC_THRESHOLD.
+    When that null does as well, nothing is discovered and the reason gives both figures; when
+    it does not, the term stands with its gain taken against the better of the two nulls."""
+    import importlib
+    from types import SimpleNamespace
+
+    dg = importlib.import_module("idm_rs.diagnosis.diagnose")
+    sigma, n = 1e-9, 10_000
+    pb = SimpleNamespace(sigma=sigma, ln_n=math.log(n), obj=None, tick=None)
+    mu = SimpleNamespace(name="mu_k", at=lambda v: ("mu_k", v))
+    cal = SimpleNamespace(fit=SimpleNamespace(chi2=4.0 * n, spec="null"), free=[mu])
+
+    def null_reaches(rms: float):
+        def fake_fit(obj, spec, start, max_nfev, progress):
+            assert spec == "null" and start == [("mu_k", 0.2)]  # from where the term's refit went
+            return SimpleNamespace(chi2=(rms / sigma) ** 2 * n, rms=rms)
+        monkeypatch.setattr(dg, "fit", fake_fit)
+
+    def found():
+        d = _tried(1.0 * sigma, 29_000.0)
+        d.discovered, d.reason = True, "a force on the main body ... improves BIC"
+        d.refit.chi2, d.refit.rms = 1.0 * n, 1.0 * sigma
+        d.values = {"lib_ff_sin": (0.02, 0.001), "lib_wavelength": (12e-6, 1e-8)}
+        return d
+
+    null_reaches(1.0005 * sigma)  # the null from there is as good: a calibration gain
+    f = found()
+    dg._found_against_null(pb, cal, f)
+    assert not f.discovered and "the gain was a better calibration" in f.reason and f.delta_bic < 10
+    null_reaches(1.5 * sigma)  # better than the calibration, far from the term: the term stands
+    f = found()
+    dg._found_against_null(pb, cal, f)
+    want = 1.5**2 * n - 1.0 * n - 2 * math.log(n)
+    assert f.discovered and f.delta_bic == pytest.approx(want)

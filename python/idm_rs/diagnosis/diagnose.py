@@ -498,6 +498,30 @@ def _next_experiment(pb: _Problem, refits: list[_Refit], winner: str, other: str
     return propose(pb.rec, pb.sigma, (winner, other), models[0], models[1])
 
 
+def _found_against_null(pb: _Problem, cal: _Calibration, found: Discovery) -> None:
+    """A found term's gain, taken against the nominal model refitted from where the term's
+    refit left the calibrated subset (as every catalogue candidate's is, _null_refits): the
+    refit starts from the nominal values too, and a better basin of the nominal parameters it
+    reaches is the null's credit, not the term's. When the term no longer pays by BIC_THRESHOLD
+    there, it is not discovered (the reason says so, with both figures)."""
+    r = found.refit
+    if r is None:
+        return
+    start = [f.at(r.values[f.name]) for f in cal.free if f.name in r.values]
+    if len(start) != len(cal.free):
+        return
+    n0 = fit(pb.obj, cal.fit.spec, start, max_nfev=6, progress=pb.tick)
+    k = len(found.values)
+    gain = min(cal.fit.chi2, n0.chi2) - r.chi2 - k * pb.ln_n
+    found.delta_bic = min(found.delta_bic, gain)
+    if gain < BIC_THRESHOLD:
+        found.discovered = False
+        found.reason = (f"{found.reason}; but the nominal model refitted from where the term's refit left the "
+                        f"calibrated parameters reaches RMS {n0.rms / pb.sigma:.2f} x noise (the term "
+                        f"{r.rms / pb.sigma:.2f}): ΔBIC {gain:.0f} < {BIC_THRESHOLD:g}, the gain was a better "
+                        f"calibration, not the term")
+
+
 def _term_alone(pb: _Problem, cal: _Calibration, found: Discovery) -> tuple[FitResult, list[FreeParam]]:
     """The form of `found` (found and refitted from the model with a first effect) refitted
     from the calibrated null without that effect, started at the found values: the term alone's
@@ -907,9 +931,14 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
             reason += f"; second effect: {second.reason}"
         clock.lap("second effect")
     found: Optional[Discovery] = None
-    if discover and verdict == "unexplained":
+    if discover and verdict in ("unexplained", "not_converged"):
         # beyond the catalogue: only where every catalogue effect left a systematic residual;
-        # from the model with the first effect when one stands (what it leaves is what is missing)
+        # from the model with the first effect when one stands (what it leaves is what is missing).
+        # A calibration whose local fits disagree is also searched, from its best: a force the
+        # model lacks is itself a reason the nominal model's fits land in different places (an
+        # off-catalogue drag: local fits at chi2 2.1-2.3 x noise), and a found term must then
+        # also beat the nominal model refitted from where its own refit went (_found_against_null)
+        unconverged = verdict == "not_converged"
         run.stage = "discovery"
         if not _finite(ho_cal):
             ho_cal = heldout.rms(cal.fit.spec, cal.at)
@@ -927,8 +956,13 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
         except (np.linalg.LinAlgError, NumericalFailure) as e:
             reason += f"; discovery stopped by a numerical failure, which says nothing about the physics: {e}"
         else:
+            if found.discovered and lead is None:
+                _found_against_null(pb, cal, found)
             if found.discovered:
                 verdict, reason, rms_after = "discovered", found.reason, found.rms_after
+                if unconverged:
+                    reason += (f" (the calibration's local fits had disagreed, {cal.search.summary()}: with the "
+                               f"term the model reaches noise)")
                 if lead is not None:
                     without, r0, lib = _without_lead(pb, cal, lead, found)
                     if without >= BIC_THRESHOLD:
