@@ -931,14 +931,12 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
             reason += f"; second effect: {second.reason}"
         clock.lap("second effect")
     found: Optional[Discovery] = None
-    if discover and verdict in ("unexplained", "not_converged"):
+    if discover and verdict == "unexplained":
         # beyond the catalogue: only where every catalogue effect left a systematic residual;
         # from the model with the first effect when one stands (what it leaves is what is missing).
-        # A calibration whose local fits disagree is also searched, from its best: a force the
-        # model lacks is itself a reason the nominal model's fits land in different places (an
-        # off-catalogue drag: local fits at chi2 2.1-2.3 x noise), and a found term must then
-        # also beat the nominal model refitted from where its own refit went (_found_against_null)
-        unconverged = verdict == "not_converged"
+        # Not after "not_converged": tried from the calibration's best on two such devices (an
+        # off-catalogue drag, two large effects), it found nothing that stands and cost 17-27
+        # minutes each (benches/RESULTS.md 15d)
         run.stage = "discovery"
         if not _finite(ho_cal):
             ho_cal = heldout.rms(cal.fit.spec, cal.at)
@@ -960,9 +958,6 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
                 _found_against_null(pb, cal, found)
             if found.discovered:
                 verdict, reason, rms_after = "discovered", found.reason, found.rms_after
-                if unconverged:
-                    reason += (f" (the calibration's local fits had disagreed, {cal.search.summary()}: with the "
-                               f"term the model reaches noise)")
                 if lead is not None:
                     without, r0, lib = _without_lead(pb, cal, lead, found)
                     if without >= BIC_THRESHOLD:
