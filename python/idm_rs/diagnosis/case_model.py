@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import engine
-from ..effects import BENCH_FIXED
+from ..effects import BENCH_FIXED, oriented
 from ..batch import Structure, Tables, param_row
 from ..batch import run as run_batch
 from ..recording import Recording
@@ -58,7 +58,6 @@ class CaseSimulator:
         #: experiments recorded with the rig turned end for end: bench-fixed effect parameters
         #: act with the other sign there (their rows and reading derivatives are negated)
         self._reversed = [e.is_reversed for e in recording.experiments]
-        self._bench_slots = [k for k, n in enumerate(engine.effect_names()) if n in BENCH_FIXED]
         self.evaluations = 0  # simulated experiment runs, for reports
         #: experiments whose reading derivatives blew up at this step (fast slips beyond the
         #: friction state's RK4 stability limit): their Jacobian columns are taken by differences
@@ -108,7 +107,9 @@ class CaseSimulator:
         for structure, idx in by_structure.items():
             rows_p, rows_e, rows_w, t_ends = [], [], [], []
             prows = [param_row(specs[i].params) for i in idx]
-            erows = [[float(specs[i].effects.get(n, 0.0)) for n in enames] for i in idx]
+            # each spec's effects row as the rig stood (False) and turned end for end (True)
+            erows = {turned: [[float(oriented(specs[i].effects, turned).get(n, 0.0)) for n in enames] for i in idx]
+                     for turned in (False, True)}
             wanted = range(n_exp) if experiments is None else sorted(set(experiments))
             sawtooth = [j for j in wanted if self._wave_rows[j] is not None]
             for j in wanted:
@@ -122,7 +123,7 @@ class CaseSimulator:
             for j in sawtooth:
                 for a in range(len(idx)):
                     rows_p.append(prows[a])
-                    rows_e.append(self._oriented(erows[a], j))
+                    rows_e.append(erows[self._reversed[j]][a])
                     rows_w.append(self._wave_rows[j])
                     t_ends.append(horizons[j][0])
             tables = Tables(np.asarray(rows_p), np.asarray(rows_e), Sawtooth.batch_kind, np.asarray(rows_w),
@@ -155,27 +156,17 @@ class CaseSimulator:
                     sens[i][j] = sens[i][j].copy()
                     sens[i][j][flip] *= -1.0
 
-    def _oriented(self, erow: list, j: int) -> list:
-        """An effects row as experiment j's device frame sees it (bench-fixed slots negated when
-        the rig was turned end for end)."""
-        if not self._reversed[j] or not self._bench_slots:
-            return erow
-        out = list(erow)
-        for k in self._bench_slots:
-            out[k] = -out[k]
-        return out
-
     @staticmethod
     def _sawtooth_slot(row: list, j: int) -> None:
         while len(row) <= j:
             row.append(None)
 
-    def _predict_sampled(self, j: int, structure: Structure, idx: list[int], prows: list, erows: list,
+    def _predict_sampled(self, j: int, structure: Structure, idx: list[int], prows: list, erows: dict,
                          horizon: tuple[float, int], retries: int, out: list[list], sens: list[list],
                          why: list[list], names: list[str]) -> None:
         """Experiment j (a sampled drive) for the specs `idx`: one batch with its samples."""
         e = self.recording.experiments[j]
-        tables = Tables(np.asarray(prows), np.asarray([self._oriented(r, j) for r in erows]), "sampled", np.ones((len(idx), 1)),
+        tables = Tables(np.asarray(prows), np.asarray(erows[self._reversed[j]]), "sampled", np.ones((len(idx), 1)),
                         sampled=(np.ascontiguousarray(e.t), np.ascontiguousarray(e.voltage)),
                         t_ends=np.full(len(idx), horizon[0]))
         extra = {"sensitivities": names} if names else {}
