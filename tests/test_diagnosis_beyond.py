@@ -236,3 +236,72 @@ def test_a_found_term_whose_gain_is_a_better_calibration_is_not_discovered(monke
     dg._found_against_null(pb, cal, f)
     want = 1.5**2 * n - 1.0 * n - 2 * math.log(n)
     assert f.discovered and f.delta_bic == pytest.approx(want)
+
+
+def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_alone(monkeypatch):
+    """When no second effect stands beside the leader (it mimics parts of both true effects),
+    every pair of the leading supported candidates is fitted together from the nominal values
+    as given, each effect at its own fit alone; the best pair is judged by the second round's
+    rules, with the better-ranked of the two as the first. Here the true pair (incline and a
+    drag on the weight, the runners-up behind piezo creep) leaves noise only together."""
+    import importlib
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    dg = importlib.import_module("idm_rs.diagnosis.diagnose")
+    from idm_rs.diagnosis.catalogue import CALIBRATED, by_id
+    from idm_rs.diagnosis.case_model import ModelSpec, Structure
+    from idm_rs.diagnosis.fitting import FitResult
+
+    sigma, n = 1e-9, 4_000
+    rng = np.random.default_rng(0)
+    p = idm_rs.Params().to_dict(resolved=False)
+    structure = Structure("lps", 1, False)
+    nominal_free = dg._calibration_params(p)
+    truth = {"theta_rad": -0.01, "c_weight": 50.0}
+    # chi^2 / n of a fit by the set of effect parameters it holds (the joint pair at noise)
+    level = {frozenset(): 40.0, frozenset({"kappa", "tau_creep"}): 20.0, frozenset({"c_weight"}): 26.0,
+             frozenset({"theta_rad"}): 31.0, frozenset({"theta_rad", "c_weight"}): 1.0}
+    starts = []
+
+    def fake_fit(obj, base, start, max_nfev, progress=None):
+        names = {f.name for f in start} - set(CALIBRATED)
+        starts.append({f.name: f.x0 for f in start})
+        ratio = level.get(frozenset(names), 10.0)
+        values = {f.name: f.x0 for f in start}
+        values.update({k: v for k, v in truth.items() if k in names and ratio == 1.0})
+        return FitResult(values, {k: 0.01 * abs(v) + 1e-12 for k, v in values.items()}, ratio * n, n,
+                         [rng.normal(0.0, sigma * math.sqrt(ratio), n)], [0.0], base, 10, True, "fake")
+
+    monkeypatch.setattr(dg, "fit", fake_fit)
+    pb = SimpleNamespace(sigma=sigma, ln_n=math.log(n), n_offsets=1, obj=SimpleNamespace(n=n), tick=None)
+    null = fake_fit(None, ModelSpec(structure, p, {}), nominal_free, 0)
+    cal = SimpleNamespace(fit=null, free=nominal_free, bic=null.chi2 + (len(nominal_free) + 1) * pb.ln_n)
+
+    def first_round(effect: str, values: dict):
+        eff = by_id(effect)
+        start = [f.at(f.x0 * 0.9) for f in nominal_free] + [ep.free(values[ep.name]) for ep in eff.params]
+        r = fake_fit(None, ModelSpec(structure, p, {}), start, 0)
+        base = ModelSpec(structure, p, {})
+        return dg._Refit(dg._candidate(pb, cal, eff, r, screened_only=False), base, start)
+
+    refits = [first_round("piezo_creep", {"kappa": 0.43, "tau_creep": 4.8e-3}),
+              first_round("weight_friction", {"c_weight": 50.9}), first_round("incline", {"theta_rad": -0.0105})]
+    heldout = SimpleNamespace(rms=lambda spec, free: 1.2 * sigma)
+    starts.clear()
+    out = dg._joint_pair(pb, cal, refits, heldout)
+    # three pairs, each from the nominal values as given with its effects at their fits alone
+    pairs = starts[:3]  # then the second alone, refitted from the pair (the first pays its way)
+    assert [sorted(set(s) - set(CALIBRATED)) for s in pairs] == [
+        ["c_weight", "kappa", "tau_creep"], ["kappa", "tau_creep", "theta_rad"], ["c_weight", "theta_rad"]]
+    for s in pairs:
+        assert all(s[k] == pytest.approx(p[k]) for k in CALIBRATED)
+    joint = next(s for s in pairs if {"theta_rad", "c_weight"} <= set(s))
+    assert joint["theta_rad"] == -0.0105 and joint["c_weight"] == 50.9
+    assert out is not None and out.joint and out.named, out.reason
+    assert (out.first.effect, out.pair.effect) == ("weight_friction", "incline")
+    assert out.pair.rms_after == pytest.approx(sigma, rel=0.05)
+    assert set(out.shares) == {"weight_friction", "incline"} and sum(out.shares.values()) == pytest.approx(1.0)
+    # fewer than two supported candidates: nothing to pair
+    assert dg._joint_pair(pb, cal, refits[:1], heldout) is None

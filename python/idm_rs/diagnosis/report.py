@@ -403,8 +403,10 @@ def text_report(d: Diagnosis) -> str:
 
     sec = getattr(d, "second", None)
     if sec is not None:
-        lines += ["", f"A second effect, searched from the model with {sec.first.effect} (which left RMS "
-                      f"{_ratio(sec.first.rms_after, sigma)}, whiteness z = {sec.first.whiteness_z:.1f})"]
+        how = ("fitted together with" if getattr(sec, "joint", False) else "searched from the model with")
+        lines += ["", f"A second effect, {how} {sec.first.effect} (which left RMS "
+                      f"{_ratio(sec.first.rms_after, sigma)}, whiteness z = {sec.first.whiteness_z:.1f})"
+                      + (" from the nominal values, each at its fit alone" if getattr(sec, "joint", False) else "")]
         rows = [[c.effect, format_params(c), _ratio(c.rms_after, sigma),
                  f"{c.delta_bic:.1f}" if c.delta_bic >= 0 else "not supported", c.fit_label] for c in sec.ranking]
         if rows:

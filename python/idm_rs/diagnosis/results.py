@@ -142,10 +142,13 @@ class SecondSearch:
     #: the pair's free parameters at its optimum and its model before them (for a refit)
     free: list[Any] = field(default_factory=list, repr=False)
     base: Optional[ModelSpec] = field(default=None, repr=False)
+    #: how the pair was found: False, from the first's optimum (screening and multistart fits);
+    #: True, the two fitted together from the nominal values, each at its fit alone
+    joint: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "first": self.first.effect, "second": self.pair.effect if self.pair else None, "named": self.named,
+            "first": self.first.effect, "joint": self.joint, "second": self.pair.effect if self.pair else None, "named": self.named,
             "reason": self.reason, "shares": self.shares, "heldout_rms": self.heldout_rms,
             "first_heldout_rms": self.first_heldout_rms, "delta_bic_over_first": self.over_first,
             "delta_bic_over_second_alone": self.over_second_alone,
