@@ -305,3 +305,41 @@ def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_a
     assert set(out.shares) == {"weight_friction", "incline"} and sum(out.shares.values()) == pytest.approx(1.0)
     # fewer than two supported candidates: nothing to pair
     assert dg._joint_pair(pb, cal, refits[:1], heldout) is None
+
+
+def test_a_form_that_fails_only_the_held_out_check_gets_the_drive_that_would_decide_it(monkeypatch):
+    """Of the forms tried, the one with the lowest RMS among those that leave noise, gain by BIC
+    and fail the held-out prediction is the one the drive is proposed for (its wavelength when
+    periodic); a form that leaves more than noise, or passes the held-out check, is not."""
+    import importlib
+    from types import SimpleNamespace
+
+    dg = importlib.import_module("idm_rs.diagnosis.diagnose")
+    sigma = 1e-9
+    pb = SimpleNamespace(sigma=sigma, rec=SimpleNamespace(experiments=[SimpleNamespace(name=f"e{i}") for i in range(4)]))
+    monkeypatch.setattr(dg, "_heldout_index", lambda rec: 2)
+    asked = []
+
+    def fake(rec, s, name, model, heldout_index):
+        asked.append((name, model[0]))
+        return SimpleNamespace(context="", words=lambda: "")
+
+    monkeypatch.setattr(dg, "propose_for_heldout", fake)
+
+    def form(rms: float, held: float, spec: str, periodic: bool = True):
+        d = _tried(rms * sigma, 5000.0)
+        d.heldout_rms_after = held * sigma
+        d.free = ["free"]
+        d.refit = SimpleNamespace(values={"lib_ff_sin": 0.02, **({"lib_wavelength": 12e-6} if periodic else {})},
+                                  std={"lib_ff_sin": 0.001}, spec=spec)
+        return d
+
+    found = form(1.3, 5.0, "too far")  # more than noise: not this one
+    found.tried = [form(1.05, 6.9, "the true form"), form(1.04, 1.05, "passes held out"), form(1.06, 1.2, "runner-up")]
+    p = dg._travel_experiment(pb, found)
+    assert p is not None and asked == [("lib_wavelength", "the true form")]
+    assert "predicts it at 6.90 x noise" in p.context and "e2" in p.context
+    # nothing left noise and failed the held-out check only: no proposal
+    asked.clear()
+    found.tried = [form(1.04, 1.05, "passes held out")]
+    assert dg._travel_experiment(pb, found) is None and not asked

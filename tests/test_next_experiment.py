@@ -178,3 +178,36 @@ def test_a_reversed_experiment_is_simulated_with_the_bench_fixed_force_turned(tm
         fd = (up[j] - down[j]) / (2 * h)
         assert np.max(np.abs(sens[j][0] - fd)) < 1e-3 * np.max(np.abs(fd))
     assert np.sign(sens[0][0][-1]) == -np.sign(sens[1][0][-1])
+
+
+def test_the_drive_that_lets_a_found_periodic_form_pass_the_held_out_check(rec, monkeypatch):
+    """A friction periodic in position (6 um; the forward experiment travels 6.7 um, the
+    backward 5.1 um): refitted without the held-out forward experiment, the backward one leaves
+    the wavelength and phase loose, so the held-out prediction is predicted to fail (> 1.5 x
+    noise). The proposed drive brings the predicted held-out RMS to noise; the worst drives are
+    the long ones that would themselves be held out (predicting them is an extrapolation over
+    several periods from what the others pin down)."""
+    from idm_rs.diagnosis import next_experiment
+    from idm_rs.diagnosis.diagnose import _heldout_index
+    from idm_rs.diagnosis.fitting import FreeParam, set_effect
+    from idm_rs.diagnosis.next_experiment import propose_for_heldout
+
+    monkeypatch.setattr(next_experiment, "FREQUENCIES", (400.0,))
+    nom = rec.nominal
+    p0 = nom.params.to_dict(resolved=False)
+    s = Structure(nom.model, nom.n_elements, nom.piezo_hysteresis)
+    wl = 6e-6
+    spec = ModelSpec(s, p0, {"lib_ff_sin": 0.03, "lib_ff_cos": 0.01, "lib_wavelength": wl})
+    free = _calibration_params(p0)[:3] + [
+        FreeParam("lib_ff_sin", 0.03, -0.3, 0.3, 0.003, set_effect("lib_ff_sin")),
+        FreeParam("lib_ff_cos", 0.01, -0.3, 0.3, 0.003, set_effect("lib_ff_cos")),
+        FreeParam("lib_wavelength", wl, wl / 1.6, wl * 1.6, 0.02, set_effect("lib_wavelength"), log=True)]
+    pp = propose_for_heldout(rec, 1.5e-9, "lib_wavelength", (spec, free), _heldout_index, cycles=(4, 16),
+                             shares=(1.0,))
+    assert pp is not None and pp.value == pytest.approx(wl)
+    assert len(pp.scored) == 8  # 200 (recorded) and 400 Hz, both directions, 4 and 16 cycles
+    assert pp.heldout_now > 1.5
+    assert pp.heldout_with == min(x for _, x in pp.scored) < 1.1
+    assert pp.std_with < pp.std_now
+    assert pp.scored[-1][0].cycles == 16 and pp.scored[-1][1] > pp.heldout_with
+    assert "held-out check" in pp.words() and "to determine lib_wavelength" in pp.words()

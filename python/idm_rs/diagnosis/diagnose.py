@@ -30,7 +30,7 @@ from .fitting import FitResult, FreeParam, Objective, apply, fit, set_effect, se
 from .identifiability import assess
 from .locate import Location, locate, merge_windows
 from .multistart import Start, agree, multistart
-from .next_experiment import ParameterProposal, Proposal, propose, propose_for_parameter
+from .next_experiment import ParameterProposal, Proposal, propose, propose_for_heldout, propose_for_parameter
 from .noise import NoiseEstimate, cross_check, estimate_noise, whiteness_z
 from .results import Alternative, Candidate, Diagnosis, SecondSearch
 from .thresholds import BIC_THRESHOLD, LR_ALPHA, NOISE_RATIO_OK, REFIT_TOP, SEPARATION, WHITENESS_Z
@@ -572,6 +572,9 @@ def _alone_explains(pb: _Problem, cal: _Calibration, heldout: _HeldOut, ho_cal: 
             and ho < ho_cal):
         found.reason += (f"; without {lead.candidate.effect}, the form {terms} alone leaves RMS "
                          f"{r0.rms / sigma:.2f} x noise, held out {ho / sigma:.2f} x noise (ΔBIC {delta_bic:.0f})")
+        # kept among the forms tried (the experiment that would decide it is looked for there)
+        found.tried.append(replace(best, refit=r0, rms_after=r0.rms, delta_bic=delta_bic, heldout_rms_after=ho,
+                                   free=[f.at(r0.values[f.name]) for f in list(cal.free) + lib], tried=[]))
         return None
     from .discovery import _equation, describe
 
@@ -589,6 +592,36 @@ def _alone_explains(pb: _Problem, cal: _Calibration, heldout: _HeldOut, ho_cal: 
                   f"x noise) and predicts the held-out experiment ({ho_cal * 1e9:.2f} → {ho * 1e9:.2f} nm); "
                   f"{lead.candidate.effect} had mimicked part of it")
     return out
+
+
+def _travel_experiment(pb: _Problem, found: Discovery) -> Optional[ParameterProposal]:
+    """For a discovery that did not stand because a form that leaves noise on every recording
+    failed the held-out prediction, the drive after which the held-out check's training
+    experiments would determine the form's least determined parameter (the wavelength of a
+    periodic form; else the library coefficient with the largest relative 1-sigma):
+    :func:`.next_experiment.propose_for_heldout`. The form is the one with the lowest RMS of
+    those that leave noise and gain by BIC. None when no form left noise."""
+    sigma = pb.sigma
+    forms = [t for t in [found, *found.tried] if t.refit is not None and t.form is not None and t.form.terms
+             and t.free and t.delta_bic >= BIC_THRESHOLD and t.rms_after <= NOISE_RATIO_OK * sigma
+             and _finite(t.heldout_rms_after) and t.heldout_rms_after > NOISE_RATIO_OK * sigma]
+    if not forms:
+        return None
+    best = min(forms, key=lambda t: t.rms_after)
+    assert best.refit is not None and best.form is not None
+    lib = {t.param for t in best.form.terms}
+    if "lib_wavelength" in best.refit.values:
+        name = "lib_wavelength"
+    else:
+        name = max(lib, key=lambda n: (best.refit.std.get(n) or math.inf) / max(abs(best.refit.values[n]), 1e-300))
+    p = propose_for_heldout(pb.rec, pb.sigma, name, (best.refit.spec, best.free), _heldout_index)
+    if p is not None:
+        terms = ", ".join(t.symbol for t in best.form.terms)
+        p.context = (f"the form {terms} leaves {best.rms_after / sigma:.2f} x noise on the recordings but, refitted "
+                     f"without {pb.rec.experiments[_heldout_index(pb.rec)].name}, predicts it at "
+                     f"{best.heldout_rms_after / sigma:.2f} x noise: the other experiments leave {name} undetermined "
+                     f"(its 1-sigma below is from the experiments the held-out check fits)")
+    return p
 
 
 def _determining_experiment(pb: _Problem, refits: list[_Refit], verdict: str) -> Optional[ParameterProposal]:
@@ -1059,6 +1092,9 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
         proposal = _next_experiment(pb, refits, verdict, alternatives[0].effect)
         clock.lap("next experiment")
     parameter_proposal = _determining_experiment(pb, refits, verdict)
+    if parameter_proposal is None and verdict == "unexplained" and found is not None and not found.discovered:
+        run.stage = "the next experiment"
+        parameter_proposal = _travel_experiment(pb, found)
     if parameter_proposal is not None:
         clock.lap("next experiment (parameter)")
     n_all = pb.obj.n

@@ -827,6 +827,8 @@ class Discovery:
     failures: list[str] = field(default_factory=list)
     #: the refitted forms that did not stand (each with its evidence), in the order tried
     tried: list["Discovery"] = field(default_factory=list)
+    #: the refit's free parameters (the calibrated subset and the library's), centred on its optimum
+    free: list[FreeParam] = field(default_factory=list, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -1106,6 +1108,7 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
                 trial = Discovery(False, "", body, form, forces, refit=r, rms_before=rms_null,
                                   heldout_rms_before=heldout_rms_null, heldout_experiment=out.heldout_experiment)
                 trial.delta_bic = null_chi2 - r.chi2 - len(lib) * math.log(objective.n)
+                trial.free = [f.at(r.values[f.name]) for f in list(start) + lib]
                 trial.rms_after = r.rms
                 vals = {f.name: r.values[f.name] for f in lib}
                 trial.values = {n: (v, r.std.get(n)) for n, v in vals.items()}

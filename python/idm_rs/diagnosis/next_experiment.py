@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,6 +52,10 @@ NOT_BY_DRIVE: dict[tuple[str, str], str] = {
 }
 #: drive cycles of a proposed experiment
 CYCLES = 4
+#: a proposal for a force found along the stroke: drive cycles and amplitude shares tried (the
+#: body must travel: each cycle advances it by one step, and the small amplitudes hardly move it)
+TRAVEL_CYCLES = (4, 8, 16)
+TRAVEL_SHARES = (0.75, 1.0)
 
 
 @dataclass(frozen=True)
@@ -115,7 +119,8 @@ class Proposal:
                 "scored": [dict(d.to_dict(), delta_bic=s) for d, s in self.scored]}
 
 
-def drives(rec: Recording, cycles: int = CYCLES, orientations: Sequence[str] = ("normal",)) -> list[Drive]:
+def drives(rec: Recording, cycles: int = CYCLES, orientations: Sequence[str] = ("normal",),
+           shares: Sequence[float] = AMPLITUDE_SHARES) -> list[Drive]:
     """The sawtooth drives within the rig's limits (module docstring), in each of
     `orientations` (the rig as it stands, and turned end for end where a model has a force
     fixed to the bench)."""
@@ -131,7 +136,7 @@ def drives(rec: Recording, cycles: int = CYCLES, orientations: Sequence[str] = (
     out = []
     for orientation in orientations:
         for direction in ("forward", "backward"):
-            for share in AMPLITUDE_SHARES:
+            for share in shares:
                 for f in freqs:
                     if edge >= 0.5 / f:
                         continue  # the edge must fit in the period
@@ -262,15 +267,26 @@ class ParameterProposal:
     std_with: float  #: predicted 1-sigma with the drive added
     value: float
     scored: list[tuple[Drive, float]] = field(default_factory=list, repr=False)  #: (drive, std with it)
+    #: why the proposal is made, said before it ("" for an effect's parameter)
+    context: str = ""
+    #: for a proposal for the held-out check (propose_for_heldout): the held-out experiment's
+    #: RMS predicted from the others' fit [x noise], now and with the drive added; else NaN
+    heldout_now: float = math.nan
+    heldout_with: float = math.nan
 
     def words(self) -> str:
-        return (f"to determine {self.parameter}, record a {self.drive.words()}: its 1-sigma is predicted to fall "
-                f"from {self.std_now:.3g} ({100 * self.std_now / abs(self.value):.0f} % of its value) to "
+        lead = f"{self.context}; " if self.context else ""
+        held = (f": the held-out check's refit is then predicted to reproduce its experiment to "
+                f"{self.heldout_with:.2f} x noise (now {self.heldout_now:.2f} x), and "
+                if math.isfinite(self.heldout_with) else ": ")
+        return (f"{lead}to determine {self.parameter}, record a {self.drive.words()}{held}its 1-sigma is predicted to "
+                f"fall from {self.std_now:.3g} ({100 * self.std_now / abs(self.value):.0f} % of its value) to "
                 f"{self.std_with:.3g} ({100 * self.std_with / abs(self.value):.0f} %)")
 
     def to_dict(self) -> dict[str, Any]:
         return {"parameter": self.parameter, "drive": self.drive.to_dict(), "std_now": self.std_now,
-                "std_with": self.std_with, "value": self.value}
+                "std_with": self.std_with, "value": self.value, "context": self.context,
+                "heldout_now": self.heldout_now, "heldout_with": self.heldout_with}
 
 
 def propose_for_parameter(rec: Recording, sigma: float, name: str, model: tuple[ModelSpec, Sequence[FreeParam]],
@@ -311,3 +327,66 @@ def propose_for_parameter(rec: Recording, sigma: float, name: str, model: tuple[
     scored.sort(key=lambda x: x[1])
     best, with_ = scored[0]
     return ParameterProposal(name, best, now, with_, value, scored)
+
+
+def propose_for_heldout(rec: Recording, sigma: float, name: str, model: tuple[ModelSpec, Sequence[FreeParam]],
+                        heldout_index: Callable[[Recording], int], dt: float = FIT_DT,
+                        cycles: Sequence[int] = TRAVEL_CYCLES, shares: Sequence[float] = TRAVEL_SHARES
+                        ) -> Optional[ParameterProposal]:
+    """The drive after which the held-out check would pass for a form that leaves noise.
+
+    A found form that leaves noise on every recording but fails the held-out prediction has
+    parameters that only the held-out experiment pins down (a friction periodic in position
+    whose wavelength and phase only the experiment that travels furthest spans: refitted without
+    it, they wander). With drive `d` added, the experiment held out is
+    ``heldout_index(recordings + d)``, h. The refit on the others leaves the parameters with
+    covariance F_train^-1 (Fisher information of the fitted experiments, exact Jacobians at
+    the fitted `model`), which adds tr(F_h F_train^-1) to the held-out experiment's chi^2 to
+    first order: its predicted RMS is sqrt(1 + that / n_h) x noise. `d` (of ``cycles`` cycles
+    at ``shares`` of the largest recorded amplitude: a force along the stroke needs travel) is
+    scored by that figure, lowest first; ``heldout_now`` is the figure for the recordings as
+    they are, and ``std_now`` / ``std_with`` the 1-sigma of `name` from the fitted experiments.
+    None without sawtooth drives or when `name` is not free."""
+    spec, free = model
+    idx = next((i for i, f in enumerate(free) if f.name == name), None)
+    grid = [d for c in cycles for d in drives(rec, c, shares=shares)]
+    if idx is None or not grid:
+        return None
+    obj0 = Objective(rec, CaseSimulator(rec, dt=dt), sigma)
+    J0 = _jacobian(obj0, spec, free)
+    blocks0 = _blocks(obj0)
+    F_exp = [J0[sl].T @ J0[sl] for sl in blocks0]
+    n_exp = [sl.stop - sl.start for sl in blocks0]
+    F_all = sum(F_exp[1:], F_exp[0].copy())
+    virtual = virtual_recording(rec, grid)
+    obj = Objective(virtual, CaseSimulator(virtual, dt=dt), sigma)
+    J = _jacobian(obj, spec, free)
+    f = free[idx]
+    h = 1e-6
+    scale = abs(f.value(h) - f.value(-h)) / (2 * h)
+
+    def judged(F_train: NDArray[np.float64], F_h: NDArray[np.float64], n_h: int) -> tuple[float, float]:
+        """(the held-out RMS predicted [x noise], name's 1-sigma from the fitted experiments)"""
+        try:
+            cov = np.linalg.pinv(F_train)
+        except np.linalg.LinAlgError:
+            return math.inf, math.inf
+        extra = float(np.trace(F_h @ cov))
+        return math.sqrt(1.0 + max(extra, 0.0) / n_h), math.sqrt(max(float(cov[idx, idx]), 0.0)) * scale
+
+    held = heldout_index(rec)
+    ho_now, now = judged(F_all - F_exp[held], F_exp[held], n_exp[held])
+    scored, figures = [], {}
+    for d, e, sl in zip(grid, virtual.experiments, _blocks(obj)):
+        Fd = J[sl].T @ J[sl]
+        h_d = heldout_index(replace(rec, experiments=[*rec.experiments, e]))
+        if h_d == len(rec.experiments):
+            figure = judged(F_all, Fd, sl.stop - sl.start)
+        else:
+            figure = judged(F_all + Fd - F_exp[h_d], F_exp[h_d], n_exp[h_d])
+        scored.append((d, figure[0]))
+        figures[d] = figure
+    scored.sort(key=lambda x: x[1])
+    best = scored[0][0]
+    return ParameterProposal(name, best, now, figures[best][1], f.value(0.0), scored,
+                             heldout_now=ho_now, heldout_with=figures[best][0])

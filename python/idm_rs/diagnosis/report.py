@@ -240,8 +240,12 @@ def plain_summary(d: Diagnosis) -> list[str]:
                      + (f", most of it in {where.experiment} ({where.phase})" if where is not None else "") + ".")
         lines.append(f"  How sure: the residual is systematic, not noise (whiteness z = {d.whiteness_z_calibrated:.1f}; "
                      "noise gives |z| < 3).")
-        lines.append("  What to do: look at the located windows and the fit figures: the missing physics is not "
-                     "among the catalogue's effects.")
+        todo = ("  What to do: look at the located windows and the fit figures: the missing physics is not "
+                "among the catalogue's effects")
+        pp = getattr(d, "parameter_proposal", None)
+        if pp is not None:
+            todo += "; " + pp.words() + ", and diagnose again with it added"
+        lines.append(todo + ".")
     elif d.verdict == "interrupted":
         lines.append(f"  Found: no answer yet — {d.reason}.")
         lines.append("  How sure: not at all: the run did not reach a verdict; the numbers below are what it "
