@@ -343,3 +343,30 @@ def test_a_form_that_fails_only_the_held_out_check_gets_the_drive_that_would_dec
     asked.clear()
     found.tried = [form(1.04, 1.05, "passes held out")]
     assert dg._travel_experiment(pb, found) is None and not asked
+
+
+def test_discovery_after_a_calibration_that_did_not_converge_starts_from_the_nominal_values():
+    """After "not_converged" discovery starts from the nominal values as given (each of the
+    calibration's basins compensates for the missing force its own way), with the calibrated
+    subset free around them and the calibrated null's held-out RMS as the bar, and beside no
+    first effect; after "unexplained", from the model with the first effect when one stands,
+    else from the calibrated null."""
+    import importlib
+    from types import SimpleNamespace
+
+    dg = importlib.import_module("idm_rs.diagnosis.diagnose")
+    from idm_rs.diagnosis.case_model import ModelSpec, Structure
+
+    p = idm_rs.Params().to_dict(resolved=False)
+    free = dg._calibration_params(p)
+    nominal = SimpleNamespace(spec=ModelSpec(Structure("lps", 1, False), p, {}))
+    cal_spec = ModelSpec(Structure("lps", 1, False), dict(p, mu_k=0.3), {})
+    cal = SimpleNamespace(free=free, at=[f.at(f.x0 * 0.9) for f in free], fit=SimpleNamespace(spec=cal_spec))
+    lead = SimpleNamespace(base=cal_spec, free=[f.at(f.x0 * 1.1) for f in free],
+                           candidate=SimpleNamespace(heldout_rms=3e-9))
+    spec, start, ho, first = dg._discovery_start("not_converged", lead, cal, nominal, 5e-9)
+    assert spec is nominal.spec and [f.x0 for f in start] == [f.x0 for f in free] and ho == 5e-9 and first is None
+    spec, start, ho, first = dg._discovery_start("unexplained", lead, cal, nominal, 5e-9)
+    assert first is lead and ho == 3e-9 and [f.x0 for f in start] == [f.x0 for f in lead.free]
+    spec, start, ho, first = dg._discovery_start("unexplained", None, cal, nominal, 5e-9)
+    assert spec is cal_spec and first is None and [f.x0 for f in start] == [f.x0 for f in cal.at]
