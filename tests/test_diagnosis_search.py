@@ -44,6 +44,25 @@ def long_rec(tmp_path_factory):
                                noise_rms=NOISE, seed=3, dt=2e-8))
 
 
+def test_a_jacobian_remembers_nothing_between_calls(long_rec):
+    """Which experiments take difference columns is the caller's set (a fit keeps one for its
+    Jacobians): a call that took them for an experiment leaves no trace on the next call, so a
+    fit's path never depends on the fits run before it (it once did: a blow-up at one model
+    sent every later Jacobian of that experiment to differences, and a two-effect fit that
+    reaches noise from a fresh start stopped at 1.08 x noise)."""
+    sim = CaseSimulator(long_rec)
+    obj = Objective(long_rec, sim, NOISE).with_cycles(2)
+    free = [_m2(1.02)]
+    blew: set[int] = set()
+    _, J0, runs0 = obj.jacobian(SPEC, free, np.zeros(1), unbounded=blew)
+    assert blew != {0, 1}, "the test needs an experiment with exact derivatives"
+    # every experiment by differences, as if both had blown up before
+    _, Jd, runs_d = obj.jacobian(SPEC, free, np.zeros(1), unbounded={0, 1})
+    assert runs_d == 1 + len(free) and not np.array_equal(Jd, J0)
+    _, J1, runs1 = obj.jacobian(SPEC, free, np.zeros(1))
+    assert np.array_equal(J1, J0) and runs1 == runs0
+
+
 def test_the_fit_jacobian_is_the_engines_exact_one(long_rec):
     sim = CaseSimulator(long_rec)
     obj = Objective(long_rec, sim, NOISE).with_cycles(2)
@@ -52,8 +71,9 @@ def test_the_fit_jacobian_is_the_engines_exact_one(long_rec):
     tied = diagnose_module._set_tied_friction
     free = [_m2(1.02), FreeParam("mu_k", 0.55, 0.3, 0.7, 0.01, tied)]
     spec = apply(SPEC, free, np.zeros(2))
-    r, J, runs = obj.jacobian(SPEC, free, np.zeros(2))
-    exact = [j for j in range(2) if j not in sim.derivatives_unbounded]
+    unbounded: set[int] = set()
+    r, J, runs = obj.jacobian(SPEC, free, np.zeros(2), unbounded=unbounded)
+    exact = [j for j in range(2) if j not in unbounded]
     assert exact, "no experiment with exact derivatives: the test case needs slower slips"
     # central differences of a stick-slip run carry a kink bias that shrinks with the step (at
     # 1e-4 of a fit unit still 2e-3 here), so the reference takes a tiny one

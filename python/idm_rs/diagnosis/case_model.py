@@ -59,9 +59,6 @@ class CaseSimulator:
         #: act with the other sign there (their rows and reading derivatives are negated)
         self._reversed = [e.is_reversed for e in recording.experiments]
         self.evaluations = 0  # simulated experiment runs, for reports
-        #: experiments whose reading derivatives blew up at this step (fast slips beyond the
-        #: friction state's RK4 stability limit): their Jacobian columns are taken by differences
-        self.derivatives_unbounded: set[int] = set()
 
     def horizon(self, j: int, cycles: Optional[int]) -> tuple[float, int]:
         """(duration [s], samples) of experiment j cut after `cycles` drive cycles (None: all)."""

@@ -228,16 +228,20 @@ class Objective:
         return -np.concatenate(blocks, axis=1).T / self.sigma
 
     def jacobian(self, base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64],
-                 fd_step: float = 1e-3) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+                 fd_step: float = 1e-3, unbounded: Optional[set[int]] = None
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
         """(residual vector, its exact Jacobian in the fit units, simulations run) at `u`. An
         experiment whose derivatives could not be taken (the engine reports why: e.g. a fast
         slip beyond the friction state's RK4 stability limit at the fit step, where the plain
         run stays bounded but its derivative does not; see :func:`usable_derivative`) gets
-        forward-difference columns, from then on without trying the engine's derivative again
-        (`CaseSimulator.derivatives_unbounded`)."""
+        forward-difference columns and is added to `unbounded`; an experiment already in it gets
+        them without trying the engine's derivative (a fit passes one set for all its
+        Jacobians). Nothing is remembered beyond the set the caller passes: a blow-up at one
+        model says nothing about another (kept on the simulator, it once made a fit's path
+        depend on every fit run before it — RESULTS 15e)."""
         names, D = engine_chain(base, free, u)
         spec = apply(base, free, u)
-        skip = self.sim.derivatives_unbounded
+        skip = unbounded if unbounded is not None else set()
         exact = [j for j in self.experiments if j not in skip]
         preds, sens, _ = self.sim.predict_with_sensitivities([spec], names, self.cycles, experiments=exact)
         preds, sens = list(preds[0]), sens[0]
@@ -280,6 +284,7 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     from scipy.optimize import least_squares  # lazily: it is most of `import idm_rs`'s time
 
     cache: dict[bytes, NDArray[np.float64]] = {}
+    unbounded: set[int] = set()  # experiments whose derivatives blew up in this fit (see Objective.jacobian)
 
     def fun(u: NDArray[np.float64]) -> NDArray[np.float64]:
         key = u.tobytes()
@@ -294,7 +299,7 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     hi = np.array([f.u_bounds()[1] for f in free])
 
     def jac(u: NDArray[np.float64]) -> NDArray[np.float64]:
-        _, J, _ = objective.jacobian(base, free, u, fd_step)
+        _, J, _ = objective.jacobian(base, free, u, fd_step, unbounded)
         if progress:
             progress()
         return J
