@@ -320,9 +320,11 @@ def test_a_form_that_fails_only_the_held_out_check_gets_the_drive_that_would_dec
     monkeypatch.setattr(dg, "_heldout_index", lambda rec: 2)
     asked = []
 
+    now = [3.0]
+
     def fake(rec, s, name, model, heldout_index):
         asked.append((name, model[0]))
-        return SimpleNamespace(context="", words=lambda: "")
+        return SimpleNamespace(context="", words=lambda: "", heldout_now=now[0])
 
     monkeypatch.setattr(dg, "propose_for_heldout", fake)
 
@@ -339,6 +341,12 @@ def test_a_form_that_fails_only_the_held_out_check_gets_the_drive_that_would_dec
     p = dg._travel_experiment(pb, found)
     assert p is not None and asked == [("lib_wavelength", "the true form")]
     assert "predicts it at 6.90 x noise" in p.context and "e2" in p.context
+    # the experiments determine the form already (held out predicted at noise to first order):
+    # no drive is proposed, the reason says the form falls short
+    now[0] = 1.02
+    asked.clear()
+    assert dg._travel_experiment(pb, found) is None and len(asked) == 1
+    assert "the form, not the experiments, falls short" in found.reason
     # nothing left noise and failed the held-out check only: no proposal
     asked.clear()
     found.tried = [form(1.04, 1.05, "passes held out")]
