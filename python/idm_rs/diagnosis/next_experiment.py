@@ -182,6 +182,22 @@ def _jacobian(obj: Objective, spec: ModelSpec, free: Sequence[FreeParam]) -> NDA
     return np.where(np.isfinite(J), J, 0.0)
 
 
+def _fisher_by_experiment(rec: Recording, sigma: float, spec: ModelSpec, free: Sequence[FreeParam], dt: float
+                          ) -> tuple[list[NDArray[np.float64]], list[int], NDArray[np.float64]]:
+    """Each experiment's Fisher information J'J in the fit units (noise units, exact Jacobian at
+    `spec`), its number of samples, and all experiments' together."""
+    obj = Objective(rec, CaseSimulator(rec, dt=dt), sigma)
+    J = _jacobian(obj, spec, free)
+    blocks = _blocks(obj)
+    return [J[sl].T @ J[sl] for sl in blocks], [sl.stop - sl.start for sl in blocks], J.T @ J
+
+
+def _per_unit(f: FreeParam) -> float:
+    """A parameter's value per fit unit at the fit's centre (log-scaled ones included)."""
+    h = 1e-6
+    return abs(f.value(h) - f.value(-h)) / (2 * h)
+
+
 def _unabsorbed(diff: NDArray[np.float64], J: NDArray[np.float64]) -> float:
     """||diff - J u*||^2 with u* the least-squares step (noise units)."""
     if J.shape[1] == 0:
@@ -301,15 +317,10 @@ def propose_for_parameter(rec: Recording, sigma: float, name: str, model: tuple[
     grid = drives(rec)
     if idx is None or not grid:
         return None
-    J0 = _jacobian(Objective(rec, CaseSimulator(rec, dt=dt), sigma), spec, free)
-    F0 = J0.T @ J0
-    virtual = virtual_recording(rec, grid)
-    obj = Objective(virtual, CaseSimulator(virtual, dt=dt), sigma)
-    J = _jacobian(obj, spec, free)
-    # the parameter's value per fit unit at the optimum (log-scaled ones included)
+    _, _, F0 = _fisher_by_experiment(rec, sigma, spec, free, dt)
+    grid_F, _, _ = _fisher_by_experiment(virtual_recording(rec, grid), sigma, spec, free, dt)
     f = free[idx]
-    h = 1e-6
-    scale = abs(f.value(h) - f.value(-h)) / (2 * h)
+    scale = _per_unit(f)
     value = f.value(0.0)
 
     def std(F: NDArray[np.float64]) -> float:
@@ -320,10 +331,7 @@ def propose_for_parameter(rec: Recording, sigma: float, name: str, model: tuple[
         return math.sqrt(max(var, 0.0)) * scale
 
     now = std(F0)
-    scored = []
-    for d, sl in zip(grid, _blocks(obj)):
-        Jb = J[sl]
-        scored.append((d, std(F0 + Jb.T @ Jb)))
+    scored = [(d, std(F0 + Fd)) for d, Fd in zip(grid, grid_F)]
     scored.sort(key=lambda x: x[1])
     best, with_ = scored[0]
     return ParameterProposal(name, best, now, with_, value, scored)
@@ -352,18 +360,11 @@ def propose_for_heldout(rec: Recording, sigma: float, name: str, model: tuple[Mo
     grid = [d for c in cycles for d in drives(rec, c, shares=shares)]
     if idx is None or not grid:
         return None
-    obj0 = Objective(rec, CaseSimulator(rec, dt=dt), sigma)
-    J0 = _jacobian(obj0, spec, free)
-    blocks0 = _blocks(obj0)
-    F_exp = [J0[sl].T @ J0[sl] for sl in blocks0]
-    n_exp = [sl.stop - sl.start for sl in blocks0]
-    F_all = sum(F_exp[1:], F_exp[0].copy())
+    F_exp, n_exp, F_all = _fisher_by_experiment(rec, sigma, spec, free, dt)
     virtual = virtual_recording(rec, grid)
-    obj = Objective(virtual, CaseSimulator(virtual, dt=dt), sigma)
-    J = _jacobian(obj, spec, free)
+    grid_F, grid_n, _ = _fisher_by_experiment(virtual, sigma, spec, free, dt)
+    scale = _per_unit(free[idx])
     f = free[idx]
-    h = 1e-6
-    scale = abs(f.value(h) - f.value(-h)) / (2 * h)
 
     def judged(F_train: NDArray[np.float64], F_h: NDArray[np.float64], n_h: int) -> tuple[float, float]:
         """(the held-out RMS predicted [x noise], name's 1-sigma from the fitted experiments)"""
@@ -377,11 +378,10 @@ def propose_for_heldout(rec: Recording, sigma: float, name: str, model: tuple[Mo
     held = heldout_index(rec)
     ho_now, now = judged(F_all - F_exp[held], F_exp[held], n_exp[held])
     scored, figures = [], {}
-    for d, e, sl in zip(grid, virtual.experiments, _blocks(obj)):
-        Fd = J[sl].T @ J[sl]
+    for d, e, Fd, nd in zip(grid, virtual.experiments, grid_F, grid_n):
         h_d = heldout_index(replace(rec, experiments=[*rec.experiments, e]))
         if h_d == len(rec.experiments):
-            figure = judged(F_all, Fd, sl.stop - sl.start)
+            figure = judged(F_all, Fd, nd)
         else:
             figure = judged(F_all + Fd - F_exp[h_d], F_exp[h_d], n_exp[h_d])
         scored.append((d, figure[0]))
