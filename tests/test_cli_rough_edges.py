@@ -110,7 +110,7 @@ def test_csv_has_the_reading_when_a_sensor_effect_is_on_and_titles_name_the_effe
 
 def test_sweep_titles_fit_the_figure_and_results_print_a_summary():
     ds = idm_rs.sweep(idm_rs.Params(), idm_rs.Sawtooth(80.0, 500.0, 4), {"frequency": [400.0, 500.0]},
-                      t_end=8e-3, method="auto", model="dps", progress=False)
+                      method="auto", model="dps", progress=False)
     title = sweep_title(ds, "mean_velocity")
     assert "frequency=swept" in title
     assert all(len(line) <= 95 for line in title.splitlines()), title

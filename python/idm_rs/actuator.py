@@ -33,7 +33,7 @@ from .batch import Point, Structure, run
 from .effects import Effects
 from .methods import MethodName
 from .params import Params
-from .waveforms import Sawtooth
+from .waveforms import STARTUP_CYCLES, Sawtooth
 
 if TYPE_CHECKING:
     import xarray
@@ -86,7 +86,7 @@ def _run_trains(params: Sequence[Params], waves: Sequence[Sawtooth], *, model: s
     """One batch of trains (each point to its own train's end, or to ``t_end``)."""
     from . import methods
 
-    method_name, rtol, atol = methods.resolve(method, how.pop("rtol", 1e-7), how.pop("atol", 1e-7))
+    method_name, rtol, atol = methods.resolve(method, how.pop("rtol", None), how.pop("atol", None))
     effects = effects or Effects()
     points = [Point(p, effects, w, t_end=t_end or w.duration) for p, w in zip(params, waves)]
     longest = max(pt.t_end for pt in points)  # type: ignore[type-var]
@@ -102,7 +102,7 @@ def _steady(out: dict[str, Any], i: int) -> SteadyState:
 
 
 def steady_state(params: Params, waveform: Sawtooth, *, model: Literal["lps", "dps"] = "dps", n_elements: int = 4,
-                 effects: Optional[Effects] = None, skip_cycles: int = 1, method: MethodName = "auto",
+                 effects: Optional[Effects] = None, skip_cycles: int = STARTUP_CYCLES, method: MethodName = "auto",
                  threads: Optional[int] = None, piezo_hysteresis: bool = True, t_end: Optional[float] = None,
                  **how: Any) -> SteadyState:
     """Steady-state metrics of ``params`` driven by the sawtooth train ``waveform`` (to its end,
@@ -128,7 +128,7 @@ class StallForce:
 
 
 def stall_force(params: Params, waveform: Sawtooth, *, model: Literal["lps", "dps"] = "dps", n_elements: int = 4,
-                effects: Optional[Effects] = None, skip_cycles: int = 2, method: MethodName = "auto",
+                effects: Optional[Effects] = None, skip_cycles: int = STARTUP_CYCLES, method: MethodName = "auto",
                 loads: int = 9, xtol: Optional[float] = None, threads: Optional[int] = None,
                 **how: Any) -> StallForce:
     """The opposing load on the main body at which the mean velocity reaches zero.
@@ -177,7 +177,7 @@ def characterize(params: Optional[Params] = None, *, model: Literal["lps", "dps"
                  effects: Optional[Effects] = None, frequencies: Optional[Sequence[float]] = None,
                  voltages: Sequence[float] = (40.0, 60.0, 80.0, 100.0, 120.0),
                  step_voltages: Optional[Sequence[float]] = None, frequency: float = 100.0,
-                 voltage: float = 80.0, rise: float = 0.5e-3, cycles: int = 6, skip_cycles: int = 2,
+                 voltage: float = 80.0, rise: float = 0.5e-3, cycles: int = 6, skip_cycles: int = STARTUP_CYCLES,
                  loads: int = 9, method: MethodName = "auto", threads: Optional[int] = None,
                  progress: bool = True) -> "xarray.Dataset":
     """The standard characteristics of a design as one Dataset.
@@ -210,12 +210,10 @@ def characterize(params: Optional[Params] = None, *, model: Literal["lps", "dps"
     done: dict[str, Any] = {}
     try:
         vmap = done["vmap"] = sweep(params, train, {"voltage": np.asarray(voltages, float),
-                                                    "frequency": np.asarray(frequencies, float)},
-                                    t_end=_longest(train, frequencies), **common)
+                                                    "frequency": np.asarray(frequencies, float)}, **common)
         if not vmap.attrs["complete"]:
             raise KeyboardInterrupt
-        steps = done["steps"] = sweep(params, train, {"voltage": np.asarray(step_voltages, float)},
-                                      t_end=train.duration, **common)
+        steps = done["steps"] = sweep(params, train, {"voltage": np.asarray(step_voltages, float)}, **common)
         if not steps.attrs["complete"]:
             raise KeyboardInterrupt
         stall = stall_force(params, train, model=model, n_elements=n_elements, effects=effects,
@@ -287,12 +285,6 @@ def _interrupted(done: dict[str, Any], step_voltages: Any, frequency: float, par
     for name, value in params.to_dict(resolved=False).items():
         ds.attrs[f"param_{name}"] = value if value is not None else "derived"
     return ds
-
-
-def _longest(train: Sawtooth, frequencies: Sequence[float]) -> float:
-    """A sweep over frequency runs each point to its own train's end: the batch's t_end is the
-    longest (the lowest frequency's)."""
-    return train.delay + train.cycles / float(min(frequencies))
 
 
 def plot_characteristics(ds: "xarray.Dataset", out_dir: Path) -> list[Path]:

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from . import engine
 from .effects import Effects
 from .params import Params
-from .waveforms import Sampled, Waveform
+from .waveforms import STARTUP_CYCLES, Sampled, Waveform
 
 
 @dataclass(frozen=True)
@@ -168,7 +168,7 @@ class Tables:
 def start(tables: Tables, structure: Structure, *, t_end: float, method: str = "rk4", dt: float = 1e-8,
           rtol: float = 1e-7, atol: float = 1e-7, first_step: Optional[float] = None, retries: int = 2,
           threads: Optional[int] = None, record_every: int = 0, final_states: bool = False,
-          skip_cycles: int = 1, sensitivities: Optional[Sequence[str]] = None) -> Any:
+          skip_cycles: int = STARTUP_CYCLES, sensitivities: Optional[Sequence[str]] = None) -> Any:
     """Start the batch on a background thread; returns an ``engine.BatchRun`` (``progress()``,
     ``wait(timeout)``, ``cancel()``, ``result()``). Settings as in :func:`run`."""
     config = structure.config(method=method, dt=float(dt), rtol=float(rtol), atol=float(atol),
@@ -196,10 +196,10 @@ def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: 
     ``how``: ``method`` ("rk4", "dopri5" or "rodas4"), ``dt`` [s] (RK4 step), ``rtol``/``atol``
     and ``first_step`` [s] (adaptive), ``retries`` (RK4 retries at dt/2, dt/4 of a diverging
     point), ``threads``, ``record_every``, ``final_states``, ``skip_cycles`` (start-up cycles
-    left out of the steady-state metrics, default 1), ``sensitivities`` (names, as for
-    :func:`idm_rs.simulate`; needs ``record_every``): then ``sensitivities`` is an array
-    (points x names x samples) of d trace / d name (NaN where a point did not finish or its
-    derivatives could not be taken, with the reason in ``reasons``), and ``sensitivity_names``."""
+    left out of the steady-state metrics, default :data:`~idm_rs.waveforms.STARTUP_CYCLES` = 2),
+    ``sensitivities`` (names, as for :func:`idm_rs.simulate`; needs ``record_every``): then
+    ``sensitivities`` is an array (points x names x samples) of d trace / d name (NaN where a
+    point did not finish or its derivatives could not be taken, with the reason in ``reasons``), and ``sensitivity_names``."""
     tables = points if isinstance(points, Tables) else Tables.from_points(points)
     handle = start(tables, structure, t_end=t_end, **how)
     try:

@@ -25,7 +25,8 @@ count or the lane width. Rust: ``stiffness.rs``, ``switching.rs``.
 
 from __future__ import annotations
 
-from typing import Literal
+import math
+from typing import Literal, Optional
 
 MethodName = Literal["rk4", "dopri5", "rodas4", "auto"]
 
@@ -46,9 +47,18 @@ def check(method: object) -> str:
     return str(method)
 
 
-def resolve(method: str, rtol: float, atol: float) -> tuple[str, float, float]:
-    """(engine method, rtol, atol) for ``method``: "auto" becomes :data:`AUTO`."""
+#: the adaptive methods' tolerances when none are given (dopri5, rodas4)
+DEFAULT_TOLERANCE: float = 1e-7
+
+
+def resolve(method: str, rtol: Optional[float] = None, atol: Optional[float] = None) -> tuple[str, float, float]:
+    """(engine method, rtol, atol) for ``method``. A tolerance left out (None) is the method's
+    own: :data:`AUTO`'s for "auto" (the setting measured to keep 1 nm), :data:`DEFAULT_TOLERANCE`
+    for the others. A tolerance given is honoured, by "auto" too (its implicit part then runs at
+    10/3 of it); the 1 nm measurement holds for AUTO's only."""
     check(method)
-    if method == "auto":
-        return AUTO
-    return method, float(rtol), float(atol)
+    for name, value in (("rtol", rtol), ("atol", atol)):
+        if value is not None and (isinstance(value, bool) or not float(value) > 0 or not math.isfinite(float(value))):
+            raise ValueError(f"parameter '{name}' must be a positive number, got {value!r}")
+    default = AUTO[1] if method == "auto" else DEFAULT_TOLERANCE
+    return method, float(default if rtol is None else rtol), float(default if atol is None else atol)

@@ -276,8 +276,8 @@ def run_dense(
     on_done: Optional[Callable[[], None]] = None,
     *,
     method: str = "rk4",
-    rtol: float = 1e-7,
-    atol: float = 1e-7,
+    rtol: Optional[float] = None,
+    atol: Optional[float] = None,
     max_halvings: int = 4,
     threads: Optional[int] = None,
 ) -> list[FinalPoint]:
@@ -285,7 +285,8 @@ def run_dense(
     engine on all cores; no trajectory is kept). With ``method="rk4"`` each point is bit for bit
     ``simulate()`` of ``sweep.build(value)`` at step ``dt``; a point that diverges is retried at
     dt/2, ... (``max_halvings`` times) and, if it still diverges, returned with a NaN position and
-    status 3. ``method="dopri5"`` is the adaptive Dormand-Prince 5(4) with ``rtol``/``atol``.
+    status 3. ``method="dopri5"`` is the adaptive Dormand-Prince 5(4) with ``rtol``/``atol`` (default 1e-7; "auto" as in
+    :func:`idm_rs.sweep`).
     ``on_done()`` is called once per point when the sweep is done."""
     from .sweep import sweep as batch_sweep
 

@@ -17,7 +17,7 @@ from .external_force import ExternalForce
 from .methods import MethodName
 from .params import PARAM_INFO, Params
 from .state import State
-from .waveforms import Waveform
+from .waveforms import STARTUP_CYCLES, Waveform
 
 #: above this many RK4 steps simulate() warns that the run will be long
 LONG_RUN_STEPS = 1e8
@@ -152,7 +152,7 @@ class SimulationResult:
         """v1 [m/s]."""
         return self.velocities[:, 0]
 
-    def steady_state(self, skip_cycles: int = 1) -> "SteadyState":
+    def steady_state(self, skip_cycles: int = STARTUP_CYCLES) -> "SteadyState":
         """Steady-state actuator metrics of this run's sawtooth train (mean velocity, step and
         back-slip per cycle, direction; see :mod:`idm_rs.actuator`), over its full cycles after
         the first ``skip_cycles``. Computed by the batch engine from the same settings (the
@@ -241,8 +241,8 @@ def simulate(
     effects: Optional[Effects] = None,
     energy: bool = False,
     method: MethodName = "rk4",
-    rtol: float = 1e-7,
-    atol: float = 1e-7,
+    rtol: Optional[float] = None,
+    atol: Optional[float] = None,
     first_step: Optional[float] = None,
     t_start: Optional[float] = None,
     initial_state: Optional[ArrayLike] = None,
@@ -262,11 +262,13 @@ def simulate(
     :class:`DivergenceError` with the time and a smaller step to try.
     ``method="dopri5"`` (explicit Dormand-Prince 5(4)) or ``"rodas4"`` (linearly implicit
     Rosenbrock 4(3), L-stable: far fewer steps where the friction state is stiff): adaptive, with
-    ``rtol`` and ``atol`` (``atol`` in units of each state's natural scale: the free stroke d33·V
-    for positions, Fs for forces) and no ``dt``; ``first_step`` [s] is an optional first trial
-    step (as ``solve_ivp``'s); they land exactly on every breakpoint. ``method="auto"``: the
-    adaptive setting measured to stay within 1 nm of RK4 (:data:`idm_rs.methods.AUTO`; rtol and
-    atol are then ignored). ``save_every`` counts accepted steps either way.
+    ``rtol`` and ``atol`` (default 1e-7; ``atol`` in units of each state's natural scale: the
+    free stroke d33·V for positions, Fs for forces) and no ``dt``; ``first_step`` [s] is an
+    optional first trial step (as ``solve_ivp``'s); they land exactly on every breakpoint.
+    ``method="auto"``: the adaptive setting measured to stay within 1 nm of RK4
+    (:data:`idm_rs.methods.AUTO`, rtol = atol = 3e-7) when no tolerance is given; a given
+    ``rtol``/``atol`` is honoured (the 1 nm measurement is for AUTO's). ``save_every`` counts
+    accepted steps either way.
 
     ``initial_state`` (a :class:`State`, e.g. a previous result's ``final_state``, or any array
     of the model's state size) with ``t_start`` [s] continues or restarts a run (``t_start``

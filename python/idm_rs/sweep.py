@@ -27,7 +27,7 @@ from .declarations import EFFECT_PARAMS, GRAVITY
 from .effects import Effects
 from .methods import MethodName
 from .params import PARAM_INFO, Params
-from .waveforms import Sampled, Sawtooth, Triangle, Waveform
+from .waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
 
 if TYPE_CHECKING:
     import xarray
@@ -82,7 +82,9 @@ class _Plan:
     atol: float
     retries: int
     first_step: float
-    skip_cycles: int = 1
+    skip_cycles: int = STARTUP_CYCLES
+    #: each point runs to its own waveform's end (``t_end`` is then the longest of them)
+    own_t_end: bool = False
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -132,7 +134,43 @@ class _Plan:
             elif name == "stiffness":
                 pm[:, col["pe_youngs"]] = v * pm[:, col["pe_length"]] / pm[:, col["pe_area"]]
         sampled = (self.waveform.t, self.waveform.voltage) if isinstance(self.waveform, Sampled) else None
-        return Tables(pm, em, self.waveform.batch_kind, wm, sampled)
+        t_ends = None
+        if self.own_t_end:
+            t_ends = _durations(self.waveform, {c: wm[:, j] for j, c in enumerate(wnames)})
+            if self.method == "rk4":  # a whole number of steps where within rounding of one
+                k = np.round(t_ends / self.dt)
+                t_ends = np.where(np.abs(k * self.dt - t_ends) <= 1e-9 * np.maximum(1.0, t_ends), k * self.dt, t_ends)
+        return Tables(pm, em, self.waveform.batch_kind, wm, sampled, t_ends)
+
+
+def _durations(waveform: Waveform, fields: Mapping[str, Any]) -> NDArray[np.float64]:
+    """The end of each point's waveform [s] from its batch fields (arrays or scalars)."""
+    if isinstance(waveform, Sawtooth):
+        d = np.asarray(fields["delay"], float) + np.asarray(fields["cycles"], float) / np.asarray(fields["frequency"], float)
+    elif isinstance(waveform, Triangle):
+        d = np.asarray(fields["delay"], float) + np.asarray(fields["rise"], float) + np.asarray(fields["fall"], float)
+    else:
+        d = np.asarray(waveform.duration, float)
+    return np.atleast_1d(d).astype(float)
+
+
+def _train_span(waveform: Waveform, names: Sequence[str], values: Sequence[NDArray[np.float64]]
+                ) -> tuple[float, float, dict[str, float]]:
+    """(shortest, longest) waveform end over the grid [s], and the swept wave fields of a point
+    whose waveform is the longest. A waveform's end is a sum of terms each growing or shrinking
+    with one field, so the extremes sit at the axes' ends: O(axes), whatever the grid's size."""
+    base = dict(waveform.batch_fields())
+    lo, hi = dict(base), dict(base)
+    where: dict[str, float] = {}
+    for name, v in zip(names, values):
+        field = "amplitude" if name == "voltage" else name
+        if field not in WAVE_FIELDS or field == "amplitude":
+            continue
+        longer = float(v.min()) if field == "frequency" else float(v.max())
+        shorter = float(v.max()) if field == "frequency" else float(v.min())
+        hi[field], lo[field] = longer, shorter
+        where[name] = longer
+    return float(_durations(waveform, lo)[0]), float(_durations(waveform, hi)[0]), where
 
 
 def _axis_info(name: str) -> tuple[str, str]:
@@ -211,16 +249,16 @@ def sweep(
     waveform: Waveform,
     grid: Mapping[str, ArrayLike],
     *,
-    t_end: float,
+    t_end: Optional[float] = None,
     dt: Optional[float] = None,
     model: Literal["lps", "dps"] = "dps",
     n_elements: int = 4,
     metrics: Optional[Sequence[str]] = None,
     method: MethodName = "rk4",
-    rtol: float = 1e-7,
-    atol: float = 1e-7,
+    rtol: Optional[float] = None,
+    atol: Optional[float] = None,
     first_step: Optional[float] = None,
-    skip_cycles: int = 1,
+    skip_cycles: int = STARTUP_CYCLES,
     retries: int = 2,
     piezo_hysteresis: bool = True,
     effects: Optional[Effects] = None,
@@ -240,20 +278,29 @@ def sweep(
     The normal force is recomputed per point as (m1+m2+mPE)·g unless ``params.normal_force`` is
     set or swept.
 
+    ``t_end`` [s]: by default (None) each point runs to the end of its own waveform (a 50 Hz
+    train of 6 cycles for 0.12 s, a 100 Hz one for 0.06 s; a triangle to the end of its fall; a
+    sampled input to its last sample), so no train is cut short. Given, every point runs to it
+    (past a waveform's end the voltage is 0 V, or the last sample); a ``t_end`` that ends before
+    some point's sawtooth train is refused with the point and the ``t_end`` it needs (the steady
+    state and the step per cycle of a cut train would be silently wrong).
+
     ``method="rk4"``: fixed step ``dt`` [s] (default 1e-8), the reference; each point equals
     ``simulate()`` bit for bit. A point that diverges is retried at dt/2, dt/4 (``retries``
     times) and then flagged (``status`` 3 with ``diverged_at``), never returned as a silent NaN.
     ``method="dopri5"`` (explicit Dormand-Prince 5(4)) or ``"rodas4"`` (linearly implicit
     Rosenbrock 4(3) with the analytic Jacobian; several times fewer steps where friction is
-    stiff): adaptive with ``rtol``/``atol`` (``atol`` in units of each state's natural scale: the
-    free stroke d33·V for positions, Fs for friction) and no ``dt``; ``first_step`` [s] is an
+    stiff): adaptive with ``rtol``/``atol`` (default 1e-7; ``atol`` in units of each state's
+    natural scale: the free stroke d33·V for positions, Fs for friction) and no ``dt``; ``first_step`` [s] is an
     optional first trial step (default 1e-8; a ``dt`` given with an adaptive method is taken as
     its first step, as in earlier versions). ``method="auto"``: the fastest adaptive setting
-    measured to keep every benchmark point within 1 nm of RK4 (:data:`idm_rs.methods.AUTO`).
+    measured to keep every benchmark point within 1 nm of RK4 (:data:`idm_rs.methods.AUTO`,
+    rtol = atol = 3e-7) when no tolerance is given; a given ``rtol``/``atol`` is honoured.
 
     Metrics (computed in the Rust loop): ``final_position`` [m], ``step_per_cycle`` [m] (sawtooth
     trains), ``peak_velocity`` [m/s], ``peak_friction`` [N], ``slip_fraction`` [-], and for
-    sawtooth trains the steady state over the cycles after the first ``skip_cycles``:
+    sawtooth trains the steady state over the cycles after the first ``skip_cycles`` (default
+    :data:`~idm_rs.waveforms.STARTUP_CYCLES`, 2, as in :func:`idm_rs.characterize`):
     ``mean_velocity`` [m/s], ``step_mean`` and ``step_std`` [m] per cycle, ``backslip`` [m] per
     cycle (travel against the net direction) and ``backslip_ratio`` (over the travel along it),
     ``direction`` (+1, -1, 0 stalled); always with ``status``, ``diverged_at``
@@ -320,10 +367,30 @@ def sweep(
     if isinstance(skip_cycles, bool) or int(skip_cycles) != skip_cycles or skip_cycles < 0:
         raise ValueError(f"parameter 'skip_cycles' must be a non-negative integer, got {skip_cycles!r}")
     skips = int(skip_cycles)
+    shortest, longest, where = _train_span(waveform, names, values)
+    given = t_end is not None
+    if t_end is None:
+        own = shortest != longest
+        t_end = longest
+    else:
+        own = False
+        if isinstance(t_end, bool) or not (float(t_end) > 0 and math.isfinite(float(t_end))):
+            raise ValueError(f"parameter 't_end' must be a positive time [s], got {t_end!r}")
+        slack = 0.5 * float(dt) if method == "rk4" else 1e-12 * longest
+        if isinstance(waveform, Sawtooth) and float(t_end) < longest - slack:
+            at = " of the point " + ", ".join(f"{k} = {v:g}" for k, v in where.items()) if where else ""
+            raise ValueError(f"t_end = {float(t_end):g} s ends before the sawtooth train{at} (it ends at {longest:g} s): "
+                             "its cycles would be cut short and its steady state and step per cycle silently wrong. "
+                             f"Give t_end >= {longest:g} s, or leave t_end out so that each point runs to the end "
+                             "of its own train")
     plan = _Plan(params, waveform, effects, names, values, float(t_end), float(dt), model, int(n_elements),
-                 bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries), first, skips)
+                 bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries), first, skips, own)
     if kernel:
         _check_kernel_admits(plan, backend)
+        if own:
+            raise ValueError(f"backend={backend!r} runs every point to one t_end, and this grid's waveforms end between "
+                             f"{shortest:g} and {longest:g} s: give t_end={longest:g} (the shorter ones then rest "
+                             "until it) or use backend='cpu', which runs each point to its own end")
     _validate_axes(plan)
 
     n = plan.size
@@ -377,6 +444,8 @@ def sweep(
         "dt_s": float(dt) if not adaptive else math.nan,
         "first_step_s": first if adaptive else math.nan,
         "t_end_s": float(t_end),
+        "t_end_rule": (f"each point to its own waveform's end ({shortest:g}-{longest:g} s)" if own
+                       else "as given" if given else "the waveform's end"),
         "rtol": float(rtol) if adaptive else math.nan,
         "atol": float(atol) if adaptive else math.nan,
         "retries": int(retries),
