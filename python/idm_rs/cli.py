@@ -208,7 +208,9 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--scheduler", default=None, metavar="ADDRESS",
                     help="run on a Dask cluster at ADDRESS (e.g. tcp://host:8786, from `dask scheduler`) "
                          "instead of the local thread pool")
-    sw.add_argument("--out", default=None, metavar="FILE.nc", help="save the results as netCDF")
+    sw.add_argument("--out", default=None, metavar="FILE.nc|DIR.zarr",
+                    help="save the results as netCDF (.nc, written at the end) or into a Zarr store (.zarr, written "
+                         "block by block as they finish: for sweeps larger than memory)")
     sw.add_argument("--plot", default=None, metavar="FILE.png",
                     help="heat map (2 axes) or line plot (1 axis) of --metric; diverged points hatched grey")
     sw.add_argument("--metric", choices=(*METRICS, "dt_used", "steps"), default="final_position",
@@ -599,8 +601,10 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     grid = parse_grid(a.grid)
     if a.plot and len(grid) not in (1, 2):
         raise CliError(f"--plot draws sweeps of 1 or 2 axes; --grid gives {len(grid)} ({', '.join(grid)})")
-    if a.out and Path(a.out).suffix.lower() != ".nc":
-        raise CliError(f"--out: unknown file type {Path(a.out).suffix!r} (use .nc)")
+    store = a.out if a.out and Path(a.out).suffix.lower() == ".zarr" else None
+    if a.out and store is None and Path(a.out).suffix.lower() != ".nc":
+        raise CliError(f"--out: unknown file type {Path(a.out).suffix!r} (use .nc, or .zarr to write blocks as they "
+                       "finish)")
     if a.plot and Path(a.plot).suffix.lower() != ".png":
         raise CliError(f"--plot: unknown file type {Path(a.plot).suffix!r} (use .png)")
     if a.retries < 0:
@@ -631,7 +635,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
                 n_elements=a.n_elements, method=a.method, rtol=a.rtol, atol=a.atol, first_step=a.first_step,
                 retries=a.retries, effects=effects_from_overrides(a.effect), skip_cycles=a.skip_cycles,
                 piezo_hysteresis=not a.no_hysteresis, progress=not a.no_progress, client=client,
-                threads=a.threads,
+                threads=a.threads, out=store,
             )
     finally:
         if client is not None:
@@ -640,7 +644,9 @@ def cmd_sweep(a: argparse.Namespace) -> int:
         if not (issubclass(w.category, RuntimeWarning) and "interrupted" in str(w.message)):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     print(sweep_summary(ds, a.metric))
-    if a.out:
+    if store is not None:
+        print(f"wrote {store} (Zarr, written block by block)")
+    elif a.out:
         engine = write_sweep_netcdf(ds, Path(a.out))
         print(f"wrote {a.out} (netCDF, {engine} engine)")
     if a.plot:
@@ -861,7 +867,7 @@ def _run(a: argparse.Namespace) -> int:
         command = {"reproduce": cmd_reproduce, "simulate": cmd_simulate, "sweep": cmd_sweep,
                    "characterize": cmd_characterize, "rig-fit": cmd_rig_fit, "diagnose": cmd_diagnose}[a.command]
         return command(a)
-    except (ValueError, DivergenceError, OSError) as exc:
+    except (ValueError, DivergenceError, OSError, MemoryError, ImportError) as exc:
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_ERROR
     except KeyboardInterrupt:

@@ -15,7 +15,8 @@ import os
 import time
 import warnings
 from dataclasses import dataclass, fields
-from typing import TYPE_CHECKING, Any, Literal, Mapping, Optional, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, Mapping, Optional, Sequence, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -267,6 +268,7 @@ def sweep(
     threads: Optional[int] = None,
     block_size: int = 65_536,
     backend: Literal["cpu", "cuda", "kernel-cpu"] = "cpu",
+    out: Optional[Union[str, "os.PathLike[str]"]] = None,
 ) -> "xarray.Dataset":
     """Sweep the outer product of ``grid`` and return the metrics as an ``xarray.Dataset``.
 
@@ -321,10 +323,16 @@ def sweep(
     they are left out of the Dataset there (``attrs["metrics_not_computed"]`` names them).
 
     Ctrl-C stops within about a second and returns the finished points (others NaN,
-    ``attrs["complete"] == 0``). ``client`` (a ``dask.distributed.Client``) runs blocks of at
-    least 10⁴ points as Dask tasks, each capped at the worker's thread count.
+    ``attrs["complete"] == 0``).
+
+    Memory: the results take :data:`BYTES_PER_POINT` bytes per point; a grid whose results do
+    not fit in the memory available is refused up front with what it needs. ``out`` (a path
+    ending ``.zarr``; needs ``zarr``) writes the results into a Zarr store slab by slab along
+    the first axis as they finish, so a sweep larger than memory runs, and returns the store
+    opened lazily (``xarray.open_zarr``); an interrupted one keeps the slabs written.
+    ``client`` (a ``dask.distributed.Client``) runs blocks of at least 10⁴ points as Dask tasks,
+    each capped at the worker's thread count.
     """
-    import xarray as xr
 
     from .engine import __version__
 
@@ -391,51 +399,12 @@ def sweep(
             raise ValueError(f"backend={backend!r} runs every point to one t_end, and this grid's waveforms end between "
                              f"{shortest:g} and {longest:g} s: give t_end={longest:g} (the shorter ones then rest "
                              "until it) or use backend='cpu', which runs each point to its own end")
+    if out is None:
+        _check_memory(plan.size, out_hint=True)
     _validate_axes(plan)
 
-    n = plan.size
-    out = {k: np.full(n, np.nan if t is np.float64 else 0, dtype=t) for k, t in _OUTPUTS.items()}
-    out["reason"] = np.full(n, "not run", dtype=object)
     threads = int(threads or os.cpu_count() or 1)
-    t0 = time.perf_counter()
-    complete = True
-    bar = None
-    try:
-        bar = _progress_bar(n, progress)
-        if backend != "cpu":
-            complete = _run_kernel(plan, out, threads, block_size, bar, backend)
-        elif client is not None:
-            complete = _run_dask(plan, out, client, max(block_size, DASK_MIN_BLOCK), bar)
-        else:
-            complete = _run_local(plan, out, threads, block_size, bar)
-    except KeyboardInterrupt:  # between blocks or before the first: nothing finished is lost
-        complete = False
-        warnings.warn(f"sweep interrupted: {int(np.count_nonzero(out['status']))} of {n} points finished; "
-                      "the rest are NaN (attrs['complete'] = 0)", RuntimeWarning, stacklevel=2)
-    finally:
-        if bar is not None:
-            bar.close()
-    wall = time.perf_counter() - t0
-
-    shape = plan.shape
-    coords = {}
-    for name, vals in zip(names, values):
-        units, long_name = _axis_info(name)
-        coords[name] = (name, vals, {"units": units, "long_name": long_name})
-    data_vars = {}
-    for m in metrics:
-        units, long_name = METRICS[m]
-        data_vars[m] = (names, out[m].reshape(shape), {"units": units, "long_name": long_name})
-    data_vars["status"] = (names, out["status"].reshape(shape), {
-        "long_name": "point status", "flag_values": np.arange(5, dtype=np.uint8), "flag_meanings": STATUS_MEANINGS})
-    data_vars["diverged_at"] = (names, out["diverged_at"].reshape(shape), {"units": "s", "long_name": "time of divergence"})
-    data_vars["dt_used"] = (names, out["dt_used"].reshape(shape), {
-        "units": "s", "long_name": "step used (rk4) or smallest accepted step (adaptive)"})
-    data_vars["steps"] = (names, out["steps"].reshape(shape), {"long_name": "integration steps taken"})
-    data_vars["reason"] = (names, out["reason"].reshape(shape), {
-        "long_name": "why the status is not ok (empty where it is)"})
-    ds = xr.Dataset(data_vars, coords=coords)
-    ds.attrs.update({
+    attrs: dict[str, Any] = {
         "idm_rs_version": __version__,
         "model": model,
         "n_elements": int(n_elements) if model == "dps" else 1,
@@ -453,19 +422,199 @@ def sweep(
         "piezo_hysteresis": int(piezo_hysteresis),
         "waveform": repr(waveform),
         "normal_force_rule": "as set" if params.normal_force is not None else f"(m1+m2+mPE)*{GRAVITY:g} per point",
-        "complete": int(complete),
-        "points": n,
-        "points_finished": int(np.count_nonzero(out["status"])),
-        "wall_time_s": wall,
         "executor": ("dask" if client is not None else f"local rayon, {threads} threads") if backend == "cpu"
         else f"{backend} kernel",
         "backend": backend,
         "metrics_not_computed": ", ".join(not_computed),
-    })
+    }
     for name, value in params.to_dict(resolved=False).items():
-        ds.attrs[f"param_{name}"] = value
+        attrs[f"param_{name}"] = value
     for name, value in effects.active().items():
-        ds.attrs[f"effect_{name}"] = value
+        attrs[f"effect_{name}"] = value
+    run = _Run(metrics, attrs, threads, block_size, client, backend)
+    if out is not None:
+        return _run_to_store(plan, run, Path(out), progress)
+    bar = None
+    try:
+        bar = _progress_bar(plan.size, progress)
+        ds, _ = _run_in_memory(plan, run, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    return ds
+
+
+@dataclass(frozen=True)
+class _Run:
+    """How a plan is run and labelled: the metrics kept, the Dataset's fixed attributes, the
+    executor."""
+
+    metrics: Sequence[str]
+    attrs: Mapping[str, Any]
+    threads: int
+    block_size: int
+    client: Any
+    backend: str
+
+
+def _run_in_memory(plan: _Plan, run: _Run, bar: Any) -> tuple["xarray.Dataset", bool]:
+    """Every point of ``plan`` into one Dataset in memory; (the Dataset, whether it finished)."""
+    import xarray as xr
+
+    n = plan.size
+    out = {k: np.full(n, np.nan if t is np.float64 else 0, dtype=t) for k, t in _OUTPUTS.items()}
+    out["reason"] = np.full(n, "not run", dtype=object)
+    t0 = time.perf_counter()
+    complete = True
+    try:
+        if run.backend != "cpu":
+            complete = _run_kernel(plan, out, run.threads, run.block_size, bar, run.backend)
+        elif run.client is not None:
+            complete = _run_dask(plan, out, run.client, max(run.block_size, DASK_MIN_BLOCK), bar)
+        else:
+            complete = _run_local(plan, out, run.threads, run.block_size, bar)
+    except KeyboardInterrupt:  # between blocks or before the first: nothing finished is lost
+        complete = False
+        warnings.warn(f"sweep interrupted: {int(np.count_nonzero(out['status']))} of {n} points finished; "
+                      "the rest are NaN (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
+    wall = time.perf_counter() - t0
+
+    names, shape = plan.names, plan.shape
+    coords = {}
+    for name, vals in zip(names, plan.values):
+        units, long_name = _axis_info(name)
+        coords[name] = (name, vals, {"units": units, "long_name": long_name})
+    data_vars = {}
+    for m in run.metrics:
+        units, long_name = METRICS[m]
+        data_vars[m] = (names, out[m].reshape(shape), {"units": units, "long_name": long_name})
+    data_vars["status"] = (names, out["status"].reshape(shape), {
+        "long_name": "point status", "flag_values": np.arange(5, dtype=np.uint8), "flag_meanings": STATUS_MEANINGS})
+    data_vars["diverged_at"] = (names, out["diverged_at"].reshape(shape), {"units": "s", "long_name": "time of divergence"})
+    data_vars["dt_used"] = (names, out["dt_used"].reshape(shape), {
+        "units": "s", "long_name": "step used (rk4) or smallest accepted step (adaptive)"})
+    data_vars["steps"] = (names, out["steps"].reshape(shape), {"long_name": "integration steps taken"})
+    data_vars["reason"] = (names, out["reason"].reshape(shape), {
+        "long_name": "why the status is not ok (empty where it is)"})
+    ds = xr.Dataset(data_vars, coords=coords)
+    ds.attrs.update(run.attrs)
+    ds.attrs.update({
+        "complete": int(complete),
+        "points": n,
+        "points_finished": int(np.count_nonzero(out["status"])),
+        "wall_time_s": wall,
+    })
+    return ds, complete
+
+
+#: bytes of results per point in memory: every metric column and the bookkeeping columns, plus
+#: the reason's reference (the strings themselves are shared: one "not run", one "")
+BYTES_PER_POINT: int = sum(np.dtype(t).itemsize for t in _OUTPUTS.values()) + np.dtype(object).itemsize
+
+#: the share of the memory available now that a sweep's results may take
+MEMORY_SHARE: float = 0.8
+
+
+def _available_memory() -> Optional[int]:
+    """Bytes of memory available now (Linux: MemAvailable; elsewhere the free pages), or None."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _check_memory(points: int, out_hint: bool) -> None:
+    """Refuse up front a grid whose results cannot fit in memory, saying what it needs."""
+    need = points * BYTES_PER_POINT
+    have = _available_memory()
+    if have is None or need <= MEMORY_SHARE * have:
+        return
+    gib = 2.0**30
+    raise MemoryError(f"this grid of {points:,} points needs {need / gib:.1f} GiB for its results ({BYTES_PER_POINT} "
+                      f"bytes per point) and {have / gib:.1f} GiB of memory is available: sweep fewer points"
+                      + (", or write the results to a Zarr store as the blocks finish (sweep(..., out='sweep.zarr'), "
+                         "CLI --out sweep.zarr), which keeps one block in memory" if out_hint else ""))
+
+
+def _run_to_store(plan: _Plan, run: _Run, path: Path, progress: bool) -> "xarray.Dataset":
+    """The grid in slabs along its first axis, each run in memory and written into the Zarr
+    store at ``path`` as it finishes (xarray region writes), so a sweep larger than memory runs;
+    returns the store opened lazily. Ctrl-C keeps the slabs written (the rest ``status`` 0)."""
+    import xarray as xr
+
+    if path.suffix.lower() != ".zarr":
+        raise ValueError(f"parameter 'out' must name a Zarr store (…/name.zarr), got {str(path)!r}")
+    if path.exists():
+        raise ValueError(f"parameter 'out': {str(path)!r} exists; remove it or name another store")
+    try:
+        import zarr  # noqa: F401
+    except ImportError:
+        raise ImportError("sweep(..., out=...) writes a Zarr store: pip install 'idm-rs[store]' (zarr)") from None
+    shape, first = plan.shape, plan.names[0]
+    rest = int(np.prod(shape[1:], dtype=np.int64))
+    _check_memory(rest, out_hint=False)  # one row of the first axis is the smallest slab
+    rows = max(1, run.block_size // max(rest, 1))
+    t0 = time.perf_counter()
+    complete, finished = True, 0
+    bar = None
+    try:
+        bar = _progress_bar(plan.size, progress)
+        for a in range(0, shape[0], rows):
+            b = min(shape[0], a + rows)
+            with warnings.catch_warnings():  # the store says once what was written
+                warnings.filterwarnings("ignore", message="sweep interrupted", category=RuntimeWarning)
+                slab, done = _run_in_memory(dataclasses.replace(plan, values=(plan.values[0][a:b], *plan.values[1:])),
+                                            run, bar)
+            slab["reason"] = slab["reason"].astype(_TEXT)
+            if a == 0:
+                _store_template(plan, slab, rows).to_zarr(path, compute=False, mode="w-", consolidated=False)
+            other = [v for v in slab.variables if first not in slab[v].dims]
+            slab.drop_vars(other).drop_attrs().to_zarr(path, region={first: slice(a, b)}, mode="r+", consolidated=False)
+            finished += int(slab.attrs["points_finished"])
+            if not done:
+                complete = False
+                break
+    finally:
+        if bar is not None:
+            bar.close()
+    import zarr
+
+    group = zarr.open_group(str(path), mode="r+")
+    group.attrs.update({"complete": int(complete), "points_finished": finished,
+                        "wall_time_s": time.perf_counter() - t0})
+    if not complete:
+        warnings.warn(f"sweep interrupted: {finished} of {plan.size} points written to {str(path)!r}; the rest "
+                      "have status 0 (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
+    return xr.open_zarr(path, consolidated=False)
+
+
+#: the reasons' type in a store: variable-length text (numpy >= 2), else fixed width
+_TEXT: Any = np.dtypes.StringDType() if hasattr(np.dtypes, "StringDType") else np.dtype("<U240")
+
+
+def _store_template(plan: _Plan, slab: "xarray.Dataset", rows: int) -> "xarray.Dataset":
+    """The whole grid's Dataset as lazy arrays (Dask) shaped like ``slab``'s variables, chunked
+    by slab, with the whole grid's coordinates and attributes: what ``to_zarr(compute=False)``
+    needs to lay out the store before any slab is written."""
+    import dask.array as da
+    import xarray as xr
+
+    shape = plan.shape
+    chunks = (rows, *shape[1:])
+    data_vars = {}
+    for name, var in slab.data_vars.items():
+        fill = "" if var.dtype == _TEXT else (0 if var.dtype.kind in "ui" else np.nan)
+        data_vars[name] = (var.dims, da.full(shape, fill, dtype=var.dtype, chunks=chunks), var.attrs)
+    coords = {name: (name, vals, slab[name].attrs) for name, vals in zip(plan.names, plan.values)}
+    ds = xr.Dataset(data_vars, coords=coords, attrs=dict(slab.attrs))
+    ds.attrs.update({"points": plan.size, "complete": 0, "points_finished": 0})
     return ds
 
 
