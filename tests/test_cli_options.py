@@ -124,7 +124,7 @@ def test_ctrl_c_in_the_simulate_command_keeps_the_trajectory(tmp_path, capsys, m
         warnings.simplefilter("default")  # as outside pytest: the CLI prints them as one line
         rc = main(["simulate", "--model", "lps", "--t-end", "2", "--save-every", "100000", "--out", str(out)])
     interrupter.join()
-    assert rc == 0
+    assert rc == 130  # the same exit code as every other command stopped by Ctrl-C
     cap = capsys.readouterr()
     assert "interrupted at t = " in cap.out and "last position" in cap.out
     assert "warning: simulate interrupted at t = " in cap.err

@@ -243,3 +243,50 @@ def test_ctrl_c_keeps_what_was_finished(spring_case, tmp_path, capsys, monkeypat
     data = json.loads(out.read_text())
     assert data["complete"] is False and data["verdict"] == "interrupted"
     assert "what was finished" in capsys.readouterr().err
+
+
+def test_the_report_prints_the_refit_model_whole(spring_diagnosis):
+    """'Add this effect with the fitted values (the refit model below)': below are the effect's
+    and every refitted nominal parameter with units, ±1σ and [at bound], not the null's values."""
+    from idm_rs.diagnosis.catalogue import CALIBRATED
+    from idm_rs.diagnosis.report import _unit, at_bound, pm
+
+    d = spring_diagnosis
+    cand = d.verdict_candidate
+    tail = d.report().split("Refit model:")[1].split("every fitted parameter")[1]
+    assert "k_ground" in tail and "N/m" in tail
+    assert set(cand.calibrated_std) == set(CALIBRATED)
+    for name, v in cand.calibrated.items():
+        row = next(line for line in tail.splitlines() if line.strip().startswith(name + " "))
+        assert pm(v, cand.calibrated_std[name], _unit(name)) in row, row
+    ranked = next(c for c in d.to_dict()["ranking"] if c["effect"] == "spring_to_ground")
+    assert set(ranked["calibrated_std"]) == set(CALIBRATED)
+    # a bounded fit stops just inside its bound: still at the bound (sigma1 at +49.97 %)
+    assert at_bound(1.4997 * 111.0, 0.6 * 111.0, 1.5 * 111.0) and not at_bound(1.45 * 111.0, 0.6 * 111.0, 1.5 * 111.0)
+
+
+def test_an_interrupted_diagnosis_reports_and_plots_only_what_finished(spring_case, tmp_path, capsys, monkeypatch):
+    """Ctrl-C after the calibration: no invented refit model or time windows in the report, the
+    figures of what finished written (--plots is not skipped), exit code 130 as every command."""
+    import importlib
+
+    from idm_rs.cli import main
+
+    module = importlib.import_module("idm_rs.diagnosis.diagnose")
+
+    def stop(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(module, "_screen", stop)
+    d = idm_rs.diagnose(spring_case, progress=False)
+    assert not d.complete and math.isfinite(d.rms_calibrated)
+    text = d.report()
+    assert "unexplained" not in text and "no systematic time window" not in text
+    assert "Refit model:\n  not reached (interrupted before a verdict)" in text
+    assert "time windows: not computed (interrupted)" in text and "held-out : calibrated" not in text
+    assert "Candidate effects: none fitted before the interrupt" in text
+    names = sorted(p.name for p in d.plot(tmp_path / "figs"))
+    assert names == sorted([f"fit_{e.name}.png" for e in d.recording.experiments]
+                           + ["residual_phases.png", "rms_story.png"]), names
+    assert main(["diagnose", str(spring_case), "--plots", str(tmp_path / "cli"), "--no-progress"]) == 130
+    assert "figures (of what finished before the interrupt)" in capsys.readouterr().out

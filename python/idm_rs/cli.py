@@ -31,6 +31,8 @@ if TYPE_CHECKING:
     import xarray
 
 EXIT_ERROR = 2
+#: every command stopped by Ctrl-C exits with this (128 + SIGINT), after saying what it kept
+EXIT_INTERRUPTED = 130
 CSV_COLUMNS = ("t", "voltage", "x1", "x2", "friction", "fh")
 
 
@@ -590,7 +592,7 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     if a.plot:
         plot_result(result, Path(a.plot))
         print(f"wrote {a.plot}")
-    return 0
+    return 0 if result.complete else EXIT_INTERRUPTED
 
 
 def cmd_sweep(a: argparse.Namespace) -> int:
@@ -652,7 +654,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     if a.plot:
         plot_sweep(ds, a.metric, Path(a.plot))
         print(f"wrote {a.plot}")
-    return 0 if ds.attrs["complete"] else 130
+    return 0 if ds.attrs["complete"] else EXIT_INTERRUPTED
 
 
 def cmd_reproduce(a: argparse.Namespace) -> int:
@@ -715,7 +717,7 @@ def cmd_characterize(a: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
         write_sweep_netcdf(ds, out / "characteristics.nc")
         print(f"interrupted: wrote {out / 'characteristics.nc'} with {ds.attrs['kept']} (no figures, no stall force)")
-        return 130
+        return EXIT_INTERRUPTED
     paths = plot_characteristics(ds, out)
     write_sweep_netcdf(ds, out / "characteristics.nc")
     at = ds.attrs
@@ -796,10 +798,14 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
             out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps(json_safe(d.to_dict()), indent=2, allow_nan=False) + "\n", encoding="utf-8")
         print(f"wrote {out}")
-    if a.plots and d.complete:
+    if a.plots:  # what finished, also after Ctrl-C
         paths = d.plot(a.plots)
-        print(f"wrote {len(paths)} figures in {a.plots}: " + ", ".join(p.name for p in paths))
-    return 0 if d.complete else 130
+        if paths:
+            kept = "" if d.complete else " (of what finished before the interrupt)"
+            print(f"wrote {len(paths)} figures{kept} in {a.plots}: " + ", ".join(p.name for p in paths))
+        else:
+            print(f"no figures: the run was interrupted before the calibration finished ({a.plots} not written)")
+    return 0 if d.complete else EXIT_INTERRUPTED
 
 
 def _one_line(exc: BaseException) -> str:
@@ -872,4 +878,4 @@ def _run(a: argparse.Namespace) -> int:
         return EXIT_ERROR
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED

@@ -395,7 +395,8 @@ def _candidate(pb: _Problem, cal: _Calibration, eff: Effect, r: FitResult, scree
         whiteness_z(r.residuals), screened_only, r.residuals, r.spec,
         reported_std={n: s for n, (_, s) in reported.items() if s is not None},
         significance=significance, correlation=corr, at_null=at_null, lr_chi2=cal.fit.chi2 - r.chi2,
-        identifiability=assess(r.values, r.std, r.corr, names + [n for n in cal.fit.values if n not in names]))
+        identifiability=assess(r.values, r.std, r.corr, names + [n for n in cal.fit.values if n not in names]),
+        calibrated_std={n: r.std[n] for n in CALIBRATED if n in r.std})
 
 
 def _at_null(cal: _Calibration, eff: Effect, base: ModelSpec) -> Optional[FitResult]:

@@ -265,11 +265,24 @@ def plot_rms_story(d: Diagnosis, directory: Path) -> Path:
 
     sigma = d.noise.sigma
     cand = refit_candidate(d)
-    labels = ["nominal\n(meta.json)", "calibrated\nnominal"]
-    values = [d.rms_before, d.rms_calibrated]
-    colours = [C_NOMINAL, C_CALIBRATED]
-    hatches = [None, None]
-    if cand is not None:
+    found = _discovered_refit(d)
+    labels = ["nominal\n(meta.json)"]
+    values = [d.rms_before]
+    colours = [C_NOMINAL]
+    hatches: list = [None]
+    if math.isfinite(d.rms_calibrated):  # an interrupted run may stop before the calibration
+        labels.append("calibrated\nnominal")
+        values.append(d.rms_calibrated)
+        colours.append(C_CALIBRATED)
+        hatches.append(None)
+    if found is not None:
+        labels.append("with the\ndiscovered term")
+        values.append(d.discovery.rms_after)
+        colours.append(C_REFIT)
+        hatches.append(None)
+    elif not d.complete:
+        pass  # no verdict was reached: no refit to show
+    elif cand is not None:
         labels.append(f"with\n{cand.effect}")
         values.append(cand.rms_after)
         colours.append(C_REFIT)
@@ -320,10 +333,14 @@ def plot_diagnosis(d: Diagnosis, directory: Path) -> list[Path]:
     matplotlib.use("Agg")
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    paths = plot_fits(d, directory)
-    paths.append(plot_residual_phases(d, directory))
-    paths.append(plot_ranking(d, directory))
-    paths.append(plot_rms_story(d, directory))
+    paths = plot_fits(d, directory)  # none before the calibration finished
+    # an interrupted diagnosis plots what it finished, nothing it did not compute
+    if d.locations:
+        paths.append(plot_residual_phases(d, directory))
+    if d.ranking:
+        paths.append(plot_ranking(d, directory))
+    if math.isfinite(d.rms_before):
+        paths.append(plot_rms_story(d, directory))
     if getattr(d, "discovery", None) is not None and d.discovery.form is not None:
         paths.append(plot_discovery(d, directory))
     return paths

@@ -82,9 +82,15 @@ def candidate_params(c: Candidate) -> list[tuple[str, float, Optional[float]]]:
     return out
 
 
+#: a fitted value within this share of its range from a bound counts as at the bound (a bounded
+#: least-squares fit stops just inside; the change column's two decimals cannot tell it apart)
+AT_BOUND_SHARE = 1e-3
+
+
 def at_bound(value: float, lower: float, upper: float) -> bool:
     """Whether a fitted value sits on a bound of its fit (its ±σ then means little)."""
-    tol = 1e-6 * max(abs(lower), abs(upper), 1e-300)
+    width = upper - lower if math.isfinite(upper - lower) else max(abs(lower), abs(upper))
+    tol = AT_BOUND_SHARE * max(width, 1e-300)
     return _finite(value) and (abs(value - lower) <= tol or abs(value - upper) <= tol)
 
 
@@ -115,11 +121,42 @@ def refit_model_line(d: Diagnosis) -> str:
         return f"{eq} + {term}   [{base}, calibrated; {first.term}; {by_id(sec.pair.effect).term}]"
     if d.verdict.endswith("discovered") and found is not None:
         return f"{eq} + [{found.equation}]   [{base}, calibrated; a library force found in the data]"
+    if not d.complete:
+        return "not reached (interrupted before a verdict)"
     if cand is None:
         tail = "nothing added" if d.verdict == "none" else "missing term not in the catalogue (unexplained)"
         return f"{eq}   [{base}, calibrated; {tail}]"
     term = f"{cand.effect}({format_params(cand)})" if candidate_params(cand) else cand.effect
     return f"{eq} + {term}   [{base}, calibrated; {by_id(cand.effect).term}]"
+
+
+def refit_parameter_rows(d: Diagnosis) -> list[list[str]]:
+    """Every fitted parameter of the verdict's refit model, as the report's table prints it:
+    (parameter, meta.json, refit ±1σ, change against meta.json with [at bound] wherever the fit
+    sits on a bound). Effect parameters first, then the nominal subset refitted beside them (the
+    values to put in the model: they differ from the calibrated null's)."""
+    cand = d.verdict_candidate
+    if cand is None:
+        return []
+    rows: list[list[str]] = []
+    sec = getattr(d, "second", None)
+    if "+" in d.verdict and sec is not None and sec.pair is not None and sec.pair.spec is not None:
+        spec = sec.pair.spec
+        for ep in by_id(sec.first.effect).params:  # the first effect as refitted beside the second
+            v = spec.effects.get(ep.name, spec.params.get(ep.name))
+            if v is not None:
+                rows.append([ep.name, "–", pm(float(v), None, ep.unit) + _bound_note(ep.name, float(v)), "effect"])
+    for name, v, sd in candidate_params(cand):
+        rows.append([name, "–", pm(v, sd, _unit(name)) + _bound_note(name, v), "effect"])
+    meta = d.recording.nominal.params.to_dict(resolved=False)
+    for name, v in cand.calibrated.items():
+        m = meta.get(name)
+        unit = _unit(name)
+        change = f"{100 * (v / m - 1):+.2f} %" if _finite(m) and m else "–"
+        bound = _finite(m) and at_bound(v, CALIBRATION_RANGE[0] * m, CALIBRATION_RANGE[1] * m)
+        rows.append([name, _g(m) + (f" {unit}" if unit else "") if _finite(m) else "–",
+                     pm(v, cand.calibrated_std.get(name), unit), change + (" [at bound]" if bound else "")])
+    return rows
 
 
 def first_effect_params(d: Diagnosis) -> str:
@@ -293,15 +330,17 @@ def text_report(d: Diagnosis) -> str:
          f"rest {_nm(d.noise.rest_sigma)}, fitted residual's 2nd differences "
          f"{_nm(getattr(d.noise, 'residual_sigma', math.nan))}, ±{100 * d.noise.relative_uncertainty:.1f} %"],
         ["nominal model (meta.json)", _nm(d.rms_before), _ratio(d.rms_before, sigma), ""],
-        ["calibrated nominal", _nm(d.rms_calibrated), _ratio(d.rms_calibrated, sigma),
-         f"whiteness z = {d.whiteness_z_calibrated:.1f}"],
     ]
+    if _finite(d.rms_calibrated):  # an interrupted run may stop before the calibration
+        rows.append(["calibrated nominal", _nm(d.rms_calibrated), _ratio(d.rms_calibrated, sigma),
+                     f"whiteness z = {d.whiteness_z_calibrated:.1f}"])
     label = d.verdict.replace("+", " + ") if "+" in d.verdict and best is not None else (best.effect if best else "")
     if best is not None:
         rows.append([f"with {label}", _nm(best.rms_after), _ratio(best.rms_after, sigma),
                      f"whiteness z = {best.whiteness_z:.1f}" if _finite(best.whiteness_z) else ""])
-    rows.append([f"held-out {d.heldout_experiment}: calibrated", _nm(d.heldout_rms_calibrated),
-                 _ratio(d.heldout_rms_calibrated, sigma), "fitted on the other experiments"])
+    if d.heldout_experiment:  # not computed when the run was interrupted before it
+        rows.append([f"held-out {d.heldout_experiment}: calibrated", _nm(d.heldout_rms_calibrated),
+                     _ratio(d.heldout_rms_calibrated, sigma), "fitted on the other experiments"])
     if best is not None and _finite(best.heldout_rms):
         rows.append([f"held-out {d.heldout_experiment}: with {label}", _nm(best.heldout_rms),
                      _ratio(best.heldout_rms, sigma), ""])
@@ -343,10 +382,29 @@ def text_report(d: Diagnosis) -> str:
         lines.append(f"  systematic time windows: {len(d.windows)} spans, {1e3 * total:.1f} ms in all; largest: "
                      + "; ".join(f"{w.experiment} {1e3 * w.t_start:.1f}–{1e3 * w.t_end:.1f} ms "
                                  f"({100 * w.excess_share:.0f} %, {w.rms_over_noise:.1f} × noise)" for w in top))
+    elif not d.complete:
+        lines.append("  systematic time windows: not computed (interrupted)")
     else:
         lines.append("  no systematic time window")
 
     # --- candidate ranking
+    if not d.ranking and not d.complete:
+        lines += ["", "Candidate effects: none fitted before the interrupt"]
+    else:
+        lines += _ranking_lines(d, sigma)
+    lines += _discovery_and_second_lines(d, sigma)
+    lines += _identifiability_lines(d)
+    lines += ["", "Refit model:", "  " + refit_model_line(d)]
+    rows = refit_parameter_rows(d)
+    if rows:
+        lines += ["  every fitted parameter (±1σ from the Jacobian; the values to put in your model):"]
+        lines += ["  " + line for line in _table(["parameter", "meta.json", "refit", "change"], rows, "lrrr")]
+    return "\n".join(lines) + "\n"
+
+
+def _ranking_lines(d: Diagnosis, sigma: float) -> list[str]:
+    """The candidate table and what it implies (correlations, degeneracies, the wider search)."""
+    lines: list[str] = []
     lines += ["", "Candidate effects (score: the chi² one linearised step from the null optimum would gain, "
                   "which orders the fits; \"fitted\": multistart local fits with the calibrated subset and the "
                   "offsets, the null it contains among the starts; \"at null\": the fit ended no better than that "
@@ -381,6 +439,12 @@ def text_report(d: Diagnosis) -> str:
                      "beyond first order): " + "; ".join(f"{a} ~ {b} (|cos| = {c:.3f})" for a, b, c in pairs))
     if getattr(d, "searched_wide", False):
         lines.append("  the wider search ran: every candidate got a population search of its own")
+    return lines
+
+
+def _discovery_and_second_lines(d: Diagnosis, sigma: float) -> list[str]:
+    """Discovery's forces and form, and the second-effect search, where they ran."""
+    lines: list[str] = []
 
     found = getattr(d, "discovery", None)
     if found is not None:
@@ -420,10 +484,7 @@ def text_report(d: Diagnosis) -> str:
             lines.append("  share of the improvement over the calibrated null: "
                          + ", ".join(f"{k} {100 * v:.0f} %" for k, v in sec.shares.items()))
         lines.append(f"  {'BOTH NAMED' if sec.named else 'no second effect named'}: {sec.reason}")
-
-    lines += _identifiability_lines(d)
-    lines += ["", "Refit model:", "  " + refit_model_line(d)]
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def _identifiability_lines(d: Diagnosis) -> list[str]:

@@ -62,6 +62,8 @@ class Candidate:
     lr_chi2: float = math.nan
     #: which fitted parameters (effect and calibrated) the experiments determine (Fisher matrix)
     identifiability: list[ParamStatus] = field(default_factory=list, repr=False)
+    #: 1-sigma of `calibrated` (the nominal subset refitted alongside) from the Jacobian
+    calibrated_std: dict[str, float] = field(default_factory=dict)
 
     @property
     def fit_label(self) -> str:
@@ -99,6 +101,7 @@ class Candidate:
             "whiteness_z": self.whiteness_z,
             "screened_only": self.screened_only,
             "calibrated": self.calibrated,
+            "calibrated_std": self.calibrated_std,
             "significance_sigmas": self.significance,
             "correlation": self.correlation,
             "present": self.present,
