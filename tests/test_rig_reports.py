@@ -70,13 +70,20 @@ def test_a_fit_that_does_not_reproduce_its_record_says_so(capsys):
     assert good.describes is True and "(+1 %)" in good.judgement
     assert main(["rig-fit", str(REAL / "ensl_paper_stickslip" / "k168Nm_v4300.mat")]) == 0
     out = capsys.readouterr().out
-    assert "fit: DOES NOT DESCRIBE THE RECORD" in out
+    assert "The identified model DOES NOT DESCRIBE the record" in out
     assert "(not a model of this record: see above)" in out
     fs_line = next(ln for ln in out.splitlines() if ln.strip().startswith("fs "))
     assert fs_line.split("(")[0].rstrip().endswith(" N"), fs_line  # units with every number
     assert "residual RMS" in out and "noise RMS 0 " not in out
+    assert "_pct" not in out and "_s:" not in out  # every metric in words, with its unit
+    assert "simulated stick-slip period: 0.0945 s" in out
     emps = rig_fit(load(REAL / "emps" / "DATA_EMPS.mat"), simulate=False)
     assert emps.describes is True and "inverse model's force" in emps.judgement
+    from idm_rs.rigs.fit import METRIC_WORDS
+
+    for fit in (bad, good, emps):
+        assert set(fit.metrics) <= set(METRIC_WORDS), set(fit.metrics) - set(METRIC_WORDS)
+        assert "In plain words" in fit.report().split("The numbers behind it")[0]
 
 
 @needs_real
@@ -85,6 +92,9 @@ def test_rig_diagnosis_writes_its_figures_and_says_why_a_better_fit_lost(tmp_pat
     assert main(["diagnose", str(path), "--plots", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "VERDICT: POSITION_DEPENDENT" in out
+    plain = out.split("The numbers behind it")[0]
+    assert "Found: friction that changes along the stroke." in plain and "How sure: overwhelming evidence" in plain
+    assert "What to do: add (p1 u + p2 u^2) sgn v" in plain and " m, p2 = " in plain  # the frame's unit: m
     assert ("Not named: stribeck_peak lowers BIC more (by 281), but its amplitude s = -0.000279 has the unphysical "
             "sign") in out
     for name in ("rig_residual_s_b_450g.png", "rig_ranking_s_b_450g.png"):

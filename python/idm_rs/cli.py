@@ -731,30 +731,12 @@ def cmd_characterize(a: argparse.Namespace) -> int:
 
 def cmd_rig_fit(a: argparse.Namespace) -> int:
     import json
-    import math
 
     from .rigs import load, plot_rig_fit, rig_fit
-    from .rigs.fit import RESIDUAL_UNITS, UNITS
 
     t0 = time.perf_counter()
     fit = rig_fit(load(a.path), simulate=not a.no_simulation)
-    print(f"{fit.rig}: {fit.name}")
-    head = {True: "describes the record", False: "DOES NOT DESCRIBE THE RECORD", None: "not judged"}[fit.describes]
-    print(f"  fit: {head} — {fit.judgement}")
-    caveat = "   (not a model of this record: see above)" if fit.describes is False else ""
-    for k, v in fit.params.items():
-        ref = fit.reference.get(k)
-        unit = UNITS.get(k, "")
-        shown = f" {unit}" if unit and unit != "1" else ""
-        print(f"  {k:<8} = {v:12.5g} ± {fit.params_std[k]:.2g}{shown}"
-              + (f"   (benchmark reference {ref:g}{shown})" if ref else "") + caveat)
-    unit = RESIDUAL_UNITS[fit.rig]
-    noise = (f"{fit.noise_rms:.4g} {unit} (robust estimate)" if math.isfinite(fit.noise_rms) and fit.noise_rms > 0
-             else "could not be estimated")
-    print(f"  residual RMS {fit.rms:.4g} {unit}, noise RMS {noise}")
-    print("  not identifiable from these data: " + (", ".join(fit.not_identifiable) or "-"))
-    for k, v in fit.metrics.items():
-        print(f"  {k}: {v:.4g}")
+    print(fit.report())
     if a.json:
         out = Path(a.json)
         out.parent.mkdir(parents=True, exist_ok=True)

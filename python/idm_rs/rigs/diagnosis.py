@@ -45,6 +45,32 @@ from .signals import lstsq
 #: a candidate's amplitudes must each be this many σ from zero (its BIC gain must reach the IDM
 #: diagnosis's ``BIC_THRESHOLD``)
 NULL_SIGMAS = 2.0
+#: each rig effect in words and the term it adds (u: the position scaled to -1..1 over the stroke)
+EFFECT_WORDS: dict[str, tuple[str, str]] = {
+    "stribeck_peak": ("a static-friction peak at low speed (Stribeck)", "s exp(-(v/vs)^2) sgn v"),
+    "position_dependent": ("friction that changes along the stroke", "(p1 u + p2 u^2) sgn v"),
+    "cogging": ("a force rippling with the position (cogging)", "a sin(2 pi q/lambda) + b cos(2 pi q/lambda)"),
+    "position_force": ("a smooth force of the position alone (a non-linear spring or a slope)", "n2 u^2 + n3 u^3"),
+    "stick_time_aging": ("static friction that grows with the time stuck before a slip (rate/state aging)",
+                         "Fs = F0 + beta ln(t_stick / 1 s)"),
+    "drift_over_record": ("an onset force that drifts over the record", "Fs = F0 + drift t"),
+}
+
+
+def param_unit(rig: str, name: str) -> str:
+    """The unit of a rig candidate's amplitude: the regression's left-hand side (N for EMPS and
+    the slider's forces, m for the frame's deflection), per second for a drift."""
+    if name == "drift_N_per_s":
+        return "N/s"
+    if name.endswith("_N"):
+        return "N"
+    return RESIDUAL_UNITS.get(rig, "")
+
+
+def _with_unit(value: float, std: float, unit: str) -> str:
+    return f"{value:.4g} ± {std:.2g}" + (f" {unit}" if unit else "")
+
+
 #: scanned Stribeck velocities [m/s] and cogging wavelengths [m]
 STRIBECK_VS = (1e-3, 3e-3, 1e-2, 3e-2)
 COGGING_WAVELENGTHS = tuple(np.geomspace(2e-3, 0.1, 25))
@@ -111,16 +137,50 @@ class RigDiagnosis:
     locations: list[str] = field(default_factory=list)
     arrays: dict[str, NDArray[np.float64]] = field(default_factory=dict, repr=False)
 
+    def plain_summary(self) -> list[str]:
+        """What was found, how sure, what remains and what to do, in words (as the IDM
+        diagnosis's report opens)."""
+        from ..diagnosis.report import _evidence
+
+        unit = RESIDUAL_UNITS.get(self.rig, "SI")
+        named = next((c for c in self.ranking if c.effect == self.verdict), None)
+        lines = ["In plain words"]
+        if named is not None:
+            words, term = EFFECT_WORDS.get(named.effect, (named.effect, ""))
+            values = ", ".join(f"{k} = {_with_unit(v, named.std[k], param_unit(self.rig, k))}"
+                               for k, v in named.values.items())
+            lines.append(f"  Found: {words}.")
+            lines.append(f"  How sure: {_evidence(named.delta_bic)} evidence (BIC lower by {named.delta_bic:.0f}; "
+                         f"its amplitudes beyond {NULL_SIGMAS:g} σ of zero).")
+            lines.append(f"  What to do: add {term} to the identified friction model with {values}"
+                         + (f" ({named.setting})" if named.setting else "") + ".")
+        elif self.verdict == "none":
+            lines.append("  Found: nothing missing — the identified model leaves the record's noise.")
+            lines.append("  What to do: keep the identified model (rig-fit gives its parameters).")
+        elif self.verdict == "not_converged":
+            lines.append(f"  Found: no answer — {self.reason}.")
+            lines.append("  What to do: record a longer run.")
+        else:
+            lines.append("  Found: no catalogue effect explains the residual.")
+            lines.append("  What to do: look at where the residual lives (below) and at the residual figure.")
+        if self.noise_rms > 0 and math.isfinite(self.rms_after):
+            ratio = self.rms_after / self.noise_rms
+            lines.append(f"  What remains: a residual RMS of {self.rms_after:.4g} {unit}, {ratio:.1f} x the record's "
+                         "white-noise estimate" + (" (real data do not fit to their noise floor)" if ratio > 1.5
+                                                    else "") + ".")
+        return lines
+
     def report(self) -> str:
         unit = RESIDUAL_UNITS.get(self.rig, "SI")
-        lines = [f"{self.rig}: {self.name}", f"VERDICT: {self.verdict.upper()} — {self.reason}",
+        lines = [f"{self.rig}: {self.name}", *self.plain_summary(), "", "The numbers behind it",
+                 f"VERDICT: {self.verdict.upper()} — {self.reason}",
                  f"residual RMS {self.rms_before:.4g} {unit} (identified model) -> {self.rms_after:.4g} {unit} "
                  f"(with the verdict); white-noise estimate {self.noise_rms:.4g} {unit}", "Where the residual lives:"]
         lines += [f"  {loc}" for loc in self.locations]
         lines.append("Candidates (ΔBIC > 0: better than the identified model; σ: smallest |amplitude|/σ):")
         for c in self.ranking:
             z = min((abs(v) / c.std[k] for k, v in c.values.items() if c.std[k] > 0), default=math.nan)
-            vals = ", ".join(f"{k} = {v:.4g} ± {c.std[k]:.2g}" for k, v in c.values.items())
+            vals = ", ".join(f"{k} = {_with_unit(v, c.std[k], param_unit(self.rig, k))}" for k, v in c.values.items())
             lines.append(f"  {c.effect:<22} ΔBIC {c.delta_bic:10.1f}   {z:6.1f} σ   RMS {c.rms_after:.4g} {unit}   "
                          f"{vals}" + (f"   [{c.setting}]" if c.setting else ""))
         # a candidate whose BIC gain passes the threshold but that is not named: say why
@@ -143,8 +203,12 @@ class RigDiagnosis:
         return {"rig": self.rig, "name": self.name, "verdict": self.verdict, "reason": self.reason,
                 "rms_before": self.rms_before, "rms_after": self.rms_after, "noise_rms": self.noise_rms,
                 "locations": self.locations,
-                "ranking": [{"effect": c.effect, "delta_bic": c.delta_bic, "rms_after": c.rms_after, "values": c.values,
-                             "std": c.std, "setting": c.setting, "significant": c.significant} for c in self.ranking]}
+                "residual_unit": RESIDUAL_UNITS.get(self.rig, ""),
+                "ranking": [{"effect": c.effect, "words": EFFECT_WORDS.get(c.effect, (c.effect, ""))[0],
+                             "term": EFFECT_WORDS.get(c.effect, ("", ""))[1], "delta_bic": c.delta_bic,
+                             "rms_after": c.rms_after, "values": c.values, "std": c.std,
+                             "units": {k: param_unit(self.rig, k) for k in c.values}, "setting": c.setting,
+                             "significant": c.significant} for c in self.ranking]}
 
 
 def _bic(e: NDArray[np.float64], k: int) -> float:

@@ -43,6 +43,31 @@ EMPS_PRESLIDING_STIFFNESS = 1e8
 UNITS = {"m": "kg", "fv": "N s/m", "fc": "N", "offset": "N", "mu_s": "1", "mu_k": "1", "fs": "N",
          "mu_sliding": "1", "f0_Hz": "Hz", "zeta": "1", "fc_over_k_m": "m", "mu_over_k_m_per_N": "m/N",
          "offset_m": "m"}
+#: each metric a fit reports, in words, with its unit
+METRIC_WORDS: dict[str, tuple[str, str]] = {
+    "position_relative_error_pct": ("simulated position against the measured one: relative error", "%"),
+    "force_relative_error_pct": ("simulated force against the measured one: relative error", "%"),
+    "reference_model_position_relative_error_pct": ("the benchmark's reference model, position: relative error",
+                                                    "%"),
+    "reference_model_force_relative_error_pct": ("the benchmark's reference model, force: relative error", "%"),
+    "validation_inverse_model_force_relative_error_pct": (
+        "validation run, the inverse model's force (parameters from the estimation run): relative error", "%"),
+    "validation_position_relative_error_pct": ("validation run, simulated position: relative error", "%"),
+    "validation_force_relative_error_pct": ("validation run, simulated force: relative error", "%"),
+    "inverse_model_relative_error_pct": ("the inverse model (the fitted equation on the measured motion): "
+                                         "relative error", "%"),
+    "stribeck_amplitude_sigmas": ("a Stribeck peak beside the Coulomb level: its amplitude in σ", "σ"),
+    "sliding_share": ("share of the samples in sliding", ""),
+    "slip_events": ("stick-slip events in the record", ""),
+    "period_s": ("stick-slip period (median)", "s"),
+    "peak_spread_N": ("spread of the slip-onset forces (1σ)", "N"),
+    "trough_spread_N": ("spread of the forces where slips end (1σ)", "N"),
+    "simulated_period_s": ("simulated stick-slip period", "s"),
+    "simulated_peak_N": ("simulated slip-onset force (mean)", "N"),
+    "simulated_trough_N": ("simulated force where slips end (mean)", "N"),
+    "force_rms_residual_N": ("RMS of the simulated minus the measured force", "N"),
+}
+
 #: the unit of each rig's residual and noise RMS (its regression's left-hand side)
 RESIDUAL_UNITS = {"emps": "N", "spring_slider": "N", "frame": "m"}
 
@@ -74,11 +99,45 @@ class RigFit:
     #: why, in one sentence with the numbers
     judgement: str = ""
 
+    def report(self) -> str:
+        """The fit in words first (does it describe the record, why), then every parameter with
+        its unit and uncertainty, the residual against the noise, and every metric in words."""
+        unit = RESIDUAL_UNITS[self.rig]
+        lines = [f"{self.rig}: {self.name}", "In plain words"]
+        if self.describes is None:
+            lines.append("  The identified model was not judged against the record (no simulation was run).")
+        else:
+            lines.append(f"  The identified model {'describes' if self.describes else 'DOES NOT DESCRIBE'} the record: "
+                         f"{self.judgement}.")
+        if self.not_identifiable:
+            lines.append("  Not identifiable from these data (not fitted): " + ", ".join(self.not_identifiable) + ".")
+        if self.describes is False:
+            lines.append("  What to do: do not use these values as a model of this record; diagnose the record "
+                         "(idm-rs diagnose) to see what the model misses.")
+        lines += ["", "The numbers behind it", "  parameters (±1σ):"]
+        caveat = "   (not a model of this record: see above)" if self.describes is False else ""
+        for k, v in self.params.items():
+            ref = self.reference.get(k)
+            u = UNITS.get(k, "")
+            shown = f" {u}" if u and u != "1" else ""
+            lines.append(f"    {k:<8} = {v:12.5g} ± {self.params_std[k]:.2g}{shown}"
+                         + (f"   (benchmark reference {ref:g}{shown})" if ref else "") + caveat)
+        noise = (f"{self.noise_rms:.4g} {unit} (robust estimate)" if math.isfinite(self.noise_rms) and self.noise_rms > 0
+                 else "could not be estimated")
+        lines.append(f"  residual RMS {self.rms:.4g} {unit}, noise RMS {noise}")
+        for k, v in self.metrics.items():
+            words, u = METRIC_WORDS.get(k, (k.replace("_", " "), ""))
+            value = f"{v:.0f}" if k == "slip_events" else f"{v:.4g}"
+            lines.append(f"  {words}: {value}" + (f" {u}" if u else ""))
+        return "\n".join(lines)
+
     def to_dict(self) -> dict[str, Any]:
         return {"rig": self.rig, "name": self.name, "params": self.params, "params_std": self.params_std,
                 "units": {k: UNITS.get(k, "") for k in self.params}, "residual_unit": RESIDUAL_UNITS[self.rig],
                 "rms": self.rms, "noise_rms": self.noise_rms, "not_identifiable": self.not_identifiable,
-                "correlation": self.correlation, "metrics": self.metrics, "reference": self.reference,
+                "correlation": self.correlation, "metrics": self.metrics,
+                "metric_words": {k: METRIC_WORDS.get(k, (k, ""))[0] for k in self.metrics},
+                "metric_units": {k: METRIC_WORDS.get(k, ("", ""))[1] for k in self.metrics}, "reference": self.reference,
                 "describes": self.describes, "judgement": self.judgement}
 
 
