@@ -51,19 +51,19 @@ def test_sweep_method_options_reach_the_dataset(tmp_path):
 
 @needs_real
 @pytest.mark.parametrize("path, judged", [
-    ("ensl_paper_stickslip/k1002Nm_v42.mat", "not judged"),
-    ("marino_frame_friction/s_b_450g_x.mat", "describes the record"),
+    ("ensl_paper_stickslip/k1002Nm_v42.mat", "The identified model was not judged against the record"),
+    ("marino_frame_friction/s_b_450g_x.mat", "The identified model describes the record"),
 ])
 def test_rig_fit_without_simulation(path, judged, tmp_path, capsys):
     out = tmp_path / "f.json"
     assert main(["rig-fit", str(REAL / path), "--no-simulation", "--json", str(out)]) == 0
     text = capsys.readouterr().out
-    assert f"fit: {judged}" in text
+    assert judged in text
     import json
 
     d = json.loads(out.read_text())
     assert "simulated_period_s" not in d["metrics"] and "position_relative_error_pct" not in d["metrics"]
-    assert d["describes"] is (None if judged == "not judged" else True)
+    assert d["describes"] is (None if "not judged" in judged else True)
 
 
 def _stroke(seed: int = 1):

@@ -342,15 +342,56 @@ def waveform_from_args(a: argparse.Namespace) -> Waveform:
 
 
 def sampled_from_csv(path: Path) -> Sampled:
-    """A :class:`Sampled` input from a CSV of time [s] and voltage [V] (first two columns; a
-    header line is skipped)."""
+    """A :class:`Sampled` input from a CSV of time [s] and voltage [V] (first two columns; one
+    header line and ``#`` comments are skipped). Every error names the file, and the line (as an
+    editor counts them, from 1) and column of a cell that is not a number."""
+    where = f"--voltage-csv {path}"
     try:
-        data = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise CliError(f"{where}: no such file") from None
+    except UnicodeDecodeError as exc:
+        raise CliError(f"{where}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
+    rows: list[tuple[float, float]] = []
+    header_seen = False
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        cells = [c.strip() for c in line.split(",")]
+        if len(cells) < 2:
+            raise CliError(f"{where}, line {lineno}: needs two columns, time [s] and voltage [V]; got {raw.strip()!r}")
+        try:
+            rows.append((float(cells[0]), float(cells[1])))
+        except ValueError:
+            if not rows and not header_seen:  # the header line
+                header_seen = True
+                continue
+            col = 1 if not _is_number(cells[0]) else 2
+            raise CliError(f"{where}, line {lineno}, column {col}: cannot read {cells[col - 1]!r} as a number") from None
+    if len(rows) < 2:
+        raise CliError(f"{where}: {len(rows)} sample(s); a sampled input needs at least 2 (time [s], voltage [V])")
+    data = np.array(rows)
+    bad = np.flatnonzero(~np.isfinite(data).all(axis=1))
+    if bad.size:
+        raise CliError(f"{where}: sample {bad[0] + 1} is not finite ({data[bad[0]].tolist()})")
+    back = np.flatnonzero(np.diff(data[:, 0]) <= 0)
+    if back.size:
+        i = int(back[0])
+        raise CliError(f"{where}: times must increase strictly; sample {i + 2} (t = {data[i + 1, 0]:g} s) is not after "
+                       f"sample {i + 1} (t = {data[i, 0]:g} s)")
+    try:
+        return Sampled(data[:, 0], data[:, 1])
+    except ValueError as exc:
+        raise CliError(f"{where}: {exc}") from None
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
     except ValueError:
-        data = np.loadtxt(path, delimiter=",", ndmin=2, comments="#", skiprows=1)
-    if data.shape[1] < 2:
-        raise CliError(f"--voltage-csv {path}: needs two columns, time [s] and voltage [V]")
-    return Sampled(data[:, 0], data[:, 1])
+        return False
+    return True
 
 
 def _warn_past_samples(waveform: Waveform, t_end: float) -> None:
@@ -689,15 +730,38 @@ def cmd_reproduce(a: argparse.Namespace) -> int:
     return 0
 
 
-def _values(spec: str, name: str, log: bool = False) -> np.ndarray:
-    """``A:B:N`` (linear, or log-spaced with ``log``) or ``V1,V2,...`` as floats."""
-    try:
-        if ":" in spec:
-            a, b, n = spec.split(":")
-            return (np.geomspace if log else np.linspace)(float(a), float(b), int(n))
-        return np.array([float(x) for x in spec.split(",") if x.strip()])
-    except ValueError:
-        raise CliError(f"--{name}: cannot read {spec!r} (use A:B:N or V1,V2,...)") from None
+def _values(spec: str, name: str, log: bool = False, positive: bool = False) -> np.ndarray:
+    """``A:B:N`` (linear, or log-spaced with ``log``) or ``V1,V2,...`` as floats; ``positive``:
+    every value must be > 0 (frequencies). The error names what is wrong, not only the form."""
+    usage = "use A:B:N or V1,V2,..."
+    if ":" in spec:
+        parts = [t.strip() for t in spec.split(":")]
+        if len(parts) != 3:
+            raise CliError(f"--{name}: expected A:B:N, got {spec!r} ({usage})")
+        try:
+            a, b = float(parts[0]), float(parts[1])
+        except ValueError:
+            raise CliError(f"--{name}: cannot read {spec!r}: A and B must be numbers ({usage})") from None
+        if not parts[2].isdigit() or int(parts[2]) < 1:
+            raise CliError(f"--{name}: N must be a positive integer, got {parts[2]!r} in {spec!r}")
+        if log and not (a > 0 and b > 0):
+            zero = "A" if not a > 0 else "B"
+            raise CliError(f"--{name} {spec}: the values are log-spaced, so A and B must be > 0 (got {zero} = "
+                           f"{a if zero == 'A' else b:g}); e.g. {max(a, 1e-12) if a > 0 else 20:g}:{b if b > 0 else 1000:g}"
+                           f":{parts[2]}")
+        values = (np.geomspace if log else np.linspace)(a, b, int(parts[2]))
+    else:
+        try:
+            values = np.array([float(x) for x in spec.split(",") if x.strip()])
+        except ValueError:
+            raise CliError(f"--{name}: cannot read {spec!r} ({usage})") from None
+    if values.size == 0:
+        raise CliError(f"--{name}: no values in {spec!r}")
+    if not np.all(np.isfinite(values)):
+        raise CliError(f"--{name}: values must be finite, got {spec!r}")
+    if positive and not np.all(values > 0):
+        raise CliError(f"--{name}: every value must be > 0, got {values[values <= 0][0]:g} in {spec!r}")
+    return values
 
 
 def cmd_characterize(a: argparse.Namespace) -> int:
@@ -707,7 +771,7 @@ def cmd_characterize(a: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     ds = characterize(
         params, model=a.model, n_elements=a.n_elements,
-        frequencies=None if a.frequencies is None else _values(a.frequencies, "frequencies", log=True),
+        frequencies=None if a.frequencies is None else _values(a.frequencies, "frequencies", log=True, positive=True),
         voltages=_values(a.voltages, "voltages"), step_voltages=_values(a.step_voltages, "step-voltages"),
         frequency=a.frequency, voltage=a.voltage, rise=a.rise, cycles=a.cycles, skip_cycles=a.skip_cycles,
         loads=a.loads, method=a.method, threads=a.threads, progress=not a.no_progress,
