@@ -13,6 +13,7 @@ from .waveforms import Sawtooth
 
 if TYPE_CHECKING:
     import xarray
+    from matplotlib.figure import Figure
 
 
 class PlotError(ValueError):
@@ -27,7 +28,7 @@ def result_title(result: SimulationResult) -> str:
     return f"{label}{effects}: x1(t_end) = {result.final_position * 1e6:.4f} µm"
 
 
-def plot_result(result: SimulationResult, path: Path) -> None:
+def plot_result(result: SimulationResult, path: Path) -> "Figure":
     """Displacements and voltage over the run, and the friction force. A sawtooth train of 4 or
     more cycles switches friction between ±Fs several times per cycle, which over the whole run
     is a solid band: its friction panel zooms on the last full cycle instead (shaded above)."""
@@ -48,8 +49,10 @@ def plot_result(result: SimulationResult, path: Path) -> None:
     axv.plot(t, result.voltage, color="0.5", lw=0.9, label="voltage")
     axv.set_ylabel("voltage V [V]", color="0.4")
     lines = ax.get_lines() + axv.get_lines()
-    ax.legend(lines, [ln.get_label() for ln in lines], fontsize=8.5, loc="best")
-    ax.set_title(result_title(result), fontsize=10)
+    # above the axes, never over the traces
+    ax.legend(lines, [ln.get_label() for ln in lines], fontsize=8.5, loc="lower center", bbox_to_anchor=(0.5, 1.0),
+              ncol=3, frameon=False)
+    fig.suptitle(result_title(result), fontsize=10)
     if zoom:
         assert isinstance(w, Sawtooth)
         last = min(w.cycles, int((result.t[-1] - w.delay) / w.period + 1e-9)) - 1
@@ -69,6 +72,7 @@ def plot_result(result: SimulationResult, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=130)
     plt.close(fig)
+    return fig  # closed: what was drawn, for a caller that checks it
 
 
 def _cell_edges(c: np.ndarray) -> np.ndarray:

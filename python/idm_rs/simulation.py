@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, Optional, Sequence, Union
 
@@ -125,6 +126,23 @@ class SimulationResult:
         return (f"SimulationResult({model}, {self.waveform!r}, {how}, {span}, {self.t.size} saved times, "
                 f"x1(end) = {self.final_position * 1e6:.6g} µm{effects}"
                 f"{'' if self.complete else ', INCOMPLETE (interrupted)'})")
+
+    def thinned(self, every: int) -> "SimulationResult":
+        """Every ``every``-th saved time from the first, and the last: the result a run with
+        ``save_every`` that many times larger saves (the same states, as the saved times of a
+        run do not change its steps)."""
+        if every == 1 or self.t.size == 0:
+            return self
+        keep = np.arange(0, self.t.size, every)
+        if keep[-1] != self.t.size - 1:
+            keep = np.append(keep, self.t.size - 1)
+        n = self.t.size
+        changes = {f.name: getattr(self, f.name)[keep] for f in dataclasses.fields(self)
+                   if isinstance(getattr(self, f.name), np.ndarray) and getattr(self, f.name).shape[:1] == (n,)}
+        if self.energy is not None:
+            changes["energy"] = EnergyBudget(**{f.name: getattr(self.energy, f.name)[keep]
+                                                for f in dataclasses.fields(self.energy)})
+        return dataclasses.replace(self, **changes)
 
     def sensitivity(self, name: str) -> NDArray[np.float64]:
         """d ``reading`` / d ``name`` at every saved time [m per unit of ``name``]: the exact
