@@ -72,7 +72,7 @@ def test_quadratic_drag_is_found_as_a_function_of_v1(drag):
     assert abs(c / -1e3 - 1.0) < 0.15 and float(np.sum((y - c * x) ** 2)) < 0.02 * float(y @ y)
 
 
-def test_the_report_and_the_figures_tell_a_discovery(cases, drag, tmp_path):
+def test_the_report_and_the_figures_tell_a_discovery(cases, drag, tmp_path, monkeypatch):
     """A Diagnosis whose verdict is "discovered": the plain words name the term, the numbers
     section has each body's inferred force and the refit, the refit model line the equation, the
     JSON the discovery, and discovery.png is written."""
@@ -104,8 +104,20 @@ def test_the_report_and_the_figures_tell_a_discovery(cases, drag, tmp_path):
     assert "v1|v1|" in text.split("Refit model:")[1]
     j = json.loads(json.dumps(json_safe(d.to_dict())))
     assert j["discovery"]["discovered"] and j["discovery"]["variables"] == ["v1"]
+    import importlib
+
+    plots = importlib.import_module("idm_rs.diagnosis.plots")
+    drawn = {}
+    real_save = plots._save
+    monkeypatch.setattr(plots, "_save", lambda fig, path: (drawn.__setitem__(path.name, fig), real_save(fig, path))[1])
     paths = d.plot(tmp_path)
     assert (tmp_path / "discovery.png") in paths and (tmp_path / "discovery.png").stat().st_size > 10_000
+    # the force against the found form's variable too (v1 for a quadratic drag), not only time
+    labels = [ax.get_xlabel() for ax in drawn["discovery.png"].axes]
+    assert any(label.startswith("v1 [mm/s]") for label in labels), labels
+    # the RMS story ends with the discovered model, not a rejected candidate
+    story = drawn["rms_story.png"].axes[0]
+    assert [t.get_text() for t in story.get_xticklabels()][-1] == "with the\ndiscovered term"
 
 
 def test_position_periodic_friction_is_found_with_its_period(cases):

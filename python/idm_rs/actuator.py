@@ -308,7 +308,7 @@ def plot_characteristics(ds: "xarray.Dataset", out_dir: Path) -> list[Path]:
     ax.set_xlabel("drive frequency [Hz]")
     ax.set_ylabel("mean velocity [mm/s]")
     ax.set_title(f"velocity vs frequency (rise {a['rise_s'] * 1e3:g} ms, {a['model'].upper()})", fontsize=10)
-    ax.legend(title="amplitude", fontsize=8)
+    ax.legend(title="amplitude", fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))  # beside the curves
     ax.grid(alpha=0.3, which="both")
     paths.append(out_dir / "velocity_vs_frequency.png")
     fig.savefig(paths[-1], dpi=130)
@@ -328,7 +328,9 @@ def plot_characteristics(ds: "xarray.Dataset", out_dir: Path) -> list[Path]:
     ax.set_title(f"step and back-slip at {a['design_frequency_Hz']:g} Hz", fontsize=10)
     lines = ax.get_legend_handles_labels()
     lines2 = ax2.get_legend_handles_labels()
-    ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=8)
+    # above the axes: inside, it covered the back-slip peak at 40 V
+    ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.08),
+              ncol=3, frameon=False)
     ax.grid(alpha=0.3)
     paths.append(out_dir / "step_backslip_vs_voltage.png")
     fig.savefig(paths[-1], dpi=130)

@@ -346,11 +346,23 @@ def plot_diagnosis(d: Diagnosis, directory: Path) -> list[Path]:
     return paths
 
 
+#: each library variable along a trajectory, and its display scale and unit
+_VARIABLES = {
+    "x1": (lambda tr: tr.x1, 1e6, "µm"), "v1": (lambda tr: tr.v1, 1e3, "mm/s"),
+    "x2": (lambda tr: tr.x2, 1e6, "µm"), "v2": (lambda tr: tr.v2, 1e3, "mm/s"),
+    "x1 - x2": (lambda tr: tr.x1 - tr.x2, 1e6, "µm"), "x2 - x1": (lambda tr: tr.x2 - tr.x1, 1e6, "µm"),
+    "v1 - v2": (lambda tr: tr.v1 - tr.v2, 1e3, "mm/s"), "v2 - v1": (lambda tr: tr.v2 - tr.v1, 1e3, "mm/s"),
+    "Ff": (lambda tr: tr.ff, 1.0, "N"), "V": (lambda tr: tr.volt, 1.0, "V"), "t": (lambda tr: tr.t, 1e3, "ms"),
+}
+
+
 def plot_discovery(d: Diagnosis, directory: Path) -> Path:
     """``discovery.png``: per experiment, the force inferred through the simulator (knots) against
     the found term at its refitted coefficients, both on the knots (the term projected there, as
     the regression compared them), with the share of the force the data can see (the force's
-    knots weighted by what their derivatives move) as the band's shade."""
+    knots weighted by what their derivatives move) as the band's shade; and beside it the same
+    against the found form's variable (x1, v1, V, ...): a force periodic in the position or
+    quadratic in the velocity reads there, not against time."""
     import matplotlib.pyplot as plt
 
     from .discovery import library_columns
@@ -360,8 +372,11 @@ def plot_discovery(d: Diagnosis, directory: Path) -> Path:
     form = f.form
     values = {n: v for n, (v, _) in f.values.items()} if f.values else dict(form.coefficients)
     wl = values.get("lib_wavelength", form.wavelength)
+    variable = next((v for v in form.variables if v in _VARIABLES and v != "t"), None)
     n_exp = len(force.values)
-    fig, axes = plt.subplots(n_exp, 1, figsize=(9.5, 2.2 * n_exp + 0.8), sharex=False, squeeze=False)
+    cols = 2 if variable is not None else 1
+    fig, axes = plt.subplots(n_exp, cols, figsize=(9.5 if cols == 1 else 13.5, 2.2 * n_exp + 0.8), sharex=False,
+                             squeeze=False, gridspec_kw={"width_ratios": [2, 1]} if cols == 2 else None)
     for j in range(n_exp):
         ax = axes[j, 0]
         tr = force.trajectories[j]
@@ -384,10 +399,22 @@ def plot_discovery(d: Diagnosis, directory: Path) -> Path:
         ax.set_ylabel("force [mN]")
         ax.set_title(d.recording.experiments[j].name, fontsize=9, loc="left")
         if j == 0:
-            ax.legend(fontsize=7, loc="upper right")
+            ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.08), ncol=3, frameon=False)
+        if variable is not None:
+            get, scale, unit = _VARIABLES[variable]
+            axv = axes[j, 1]
+            along = get(tr)[:n]
+            at_knots = np.interp(k, tr.t[:n], along)
+            order = np.argsort(along)
+            axv.plot(at_knots * scale, force.values[j] * 1e3, "o", ms=2.5, color="0.3", alpha=0.7)
+            axv.plot(along[order] * scale, term[order] * 1e3, "-", lw=1.2, color=C_REFIT)
+            axv.set_ylim(lo, hi)
+            axv.grid(alpha=0.3)
+            if j == n_exp - 1:
+                axv.set_xlabel(f"{variable} [{unit}]  (the found form's variable)")
     axes[-1, 0].set_xlabel("time [ms]  (green: where the readings see the force)")
     title = (f"{d.case}: the force on the {'main body' if f.body == 'main' else 'weight'} inferred from the "
              f"data, against the found term")
-    fig.suptitle(title if len(title) <= 95 else title[:92] + "...", fontsize=9)
+    fig.suptitle(title if len(title) <= 120 else title[:117] + "...", fontsize=9)
     fig.tight_layout()
     return _save(fig, directory / "discovery.png")

@@ -130,14 +130,24 @@ def plot_rig_diagnosis(d: RigDiagnosis, directory: Any) -> list[Path]:
             ax2.plot(a["t_onset"], a["fs"], ".", color="0.3", ms=3, label="onset force")
             if after:
                 fit_line = a["fs"] - a["residual_after"]
-                order = np.argsort(a["t_stick"])
-                ax1.semilogx(a["t_stick"][order], fit_line[order], color="C3", lw=1.2, label=d.verdict)
-                ax2.plot(a["t_onset"], fit_line, color="C3", lw=1.2, label=d.verdict)
+                # each model drawn against its own variable: aging against the stick time, a
+                # drift against the time of the record (against the other it is a scribble)
+                if d.verdict == "stick_time_aging":
+                    order = np.argsort(a["t_stick"])
+                    ax1.semilogx(a["t_stick"][order], fit_line[order], color="C3", lw=1.2, label=d.verdict)
+                    ax1.legend(fontsize=8, loc="upper left", bbox_to_anchor=(0.0, 1.0))
+                else:
+                    detrended = a["fs"] - (fit_line - fit_line.mean())
+                    ax1.semilogx(a["t_stick"], detrended, ".", color="C3", ms=3, alpha=0.7,
+                                 label=f"less the {d.verdict.replace('_', ' ')}")
+                    ax1.legend(fontsize=8, loc="lower left", bbox_to_anchor=(0.0, 1.0), frameon=False)
+                order = np.argsort(a["t_onset"])
+                ax2.plot(a["t_onset"][order], fit_line[order], color="C3", lw=1.2, label=d.verdict)
             for ax in (ax1, ax2):
                 ax.set_ylabel("slip onset force [N]")
                 ax.grid(alpha=0.3)
             ax2.set_xlabel("time of the slip [s]")
-            ax2.legend(fontsize=8)
+            ax2.legend(fontsize=8, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=2, frameon=False)
         else:
             fig, axes = plt.subplots(3, 1, figsize=(10, 9), constrained_layout=True)
             e0, e1 = a["residual"], a["residual_after"]
@@ -161,7 +171,7 @@ def plot_rig_diagnosis(d: RigDiagnosis, directory: Any) -> list[Path]:
                     ax.axhspan(-d.noise_rms, d.noise_rms, color="C0", alpha=0.12, lw=0, label="± white-noise RMS")
                 ax.set_ylabel(f"residual [{unit}]")
                 ax.grid(alpha=0.3)
-                ax.legend(fontsize=7.5, loc="upper right")
+                ax.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(1.0, 1.0))  # beside, not over, the data
         fig.suptitle(f"{d.rig} {d.name}: {d.verdict} — RMS {d.rms_before:.4g} -> {d.rms_after:.4g} {unit}, "
                      f"noise {d.noise_rms:.3g} {unit}", fontsize=9.5)
         path = out / f"rig_residual_{d.name}.png"
