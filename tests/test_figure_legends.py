@@ -58,13 +58,14 @@ def _covered(fig) -> list[str]:
     return bad
 
 
-def test_simulate_and_characterize_legends_sit_off_the_data(tmp_path, saved):
+def test_simulate_and_characterize_legends_sit_off_the_data(tmp_path, saved, capsys):
     assert main(["simulate", "--model", "lps", "--method", "auto", "--waveform", "sawtooth", "--cycles", "4",
                  "--plot", str(tmp_path / "s.png")]) == 0
     assert main(["characterize", "--model", "lps", "--out", str(tmp_path / "c"), "--no-progress", "--cycles", "4",
                  "--frequencies", "50,200,800", "--voltages", "40,80,120", "--step-voltages", "20:120:6",
                  "--loads", "5"]) == 0
     assert len(saved) == 4
+    assert "steady state: the cycles after the first 2 of 4 (--skip-cycles)" in capsys.readouterr().out
     for fig in saved:
         assert _covered(fig) == [], fig
 

@@ -806,6 +806,7 @@ def cmd_characterize(a: argparse.Namespace) -> int:
     print(f"design point {at['design_frequency_Hz']:g} Hz, {at['design_voltage_V']:g} V ({at['model'].upper()}, "
           f"rise {at['rise_s']:g} s, {at['method']}): mean velocity {at['velocity_at_design_m_per_s'] * 1e3:.4g} mm/s, "
           f"stall force {at['stall_force_N']:.4g} N")
+    print(f"steady state: the cycles after the first {at['skip_cycles']} of {at['cycles']} (--skip-cycles), as in sweep")
     print(f"wrote {out / 'characteristics.nc'} and " + ", ".join(p.name for p in paths) + f" in {out} "
           f"({time.perf_counter() - t0:.1f} s)")
     return 0
