@@ -55,6 +55,7 @@ def test_every_python_block_runs_as_written(path, tmp_path, monkeypatch):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600)  # the README's discovery example alone is 10-20 minutes on 2 cores
 @pytest.mark.parametrize("path", [p for p in DOCS if any(SLOW in b for b in blocks(p))],
                          ids=lambda p: str(p.relative_to(ROOT)))
 def test_the_diagnosis_examples_run_as_written(path, tmp_path, monkeypatch):
