@@ -405,9 +405,9 @@ def plot_discovery(d: Diagnosis, directory: Path) -> Path:
             axv = axes[j, 1]
             along = get(tr)[:n]
             at_knots = np.interp(k, tr.t[:n], along)
-            order = np.argsort(along)
             axv.plot(at_knots * scale, force.values[j] * 1e3, "o", ms=2.5, color="0.3", alpha=0.7)
-            axv.plot(along[order] * scale, term[order] * 1e3, "-", lw=1.2, color=C_REFIT)
+            # dots, not a line: a term such as Ff sin(2 pi x1/lambda) is no function of x1 alone
+            axv.plot(along * scale, term * 1e3, ".", ms=1.0, color=C_REFIT, alpha=0.35)
             axv.set_ylim(lo, hi)
             axv.grid(alpha=0.3)
             if j == n_exp - 1:
