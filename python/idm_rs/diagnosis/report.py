@@ -148,14 +148,21 @@ def refit_parameter_rows(d: Diagnosis) -> list[list[str]]:
                 rows.append([ep.name, "–", pm(float(v), None, ep.unit) + _bound_note(ep.name, float(v)), "effect"])
     for name, v, sd in candidate_params(cand):
         rows.append([name, "–", pm(v, sd, _unit(name)) + _bound_note(name, v), "effect"])
+    return rows + calibrated_rows(d, cand.calibrated, cand.calibrated_std)
+
+
+def calibrated_rows(d: Diagnosis, values: dict, std: dict) -> list[list[str]]:
+    """(parameter, meta.json, value ±1σ, change against meta.json [at bound]) of calibrated
+    nominal parameters: the calibrated null's or a refit's."""
     meta = d.recording.nominal.params.to_dict(resolved=False)
-    for name, v in cand.calibrated.items():
+    rows = []
+    for name, v in values.items():
         m = meta.get(name)
         unit = _unit(name)
         change = f"{100 * (v / m - 1):+.2f} %" if _finite(m) and m else "–"
         bound = _finite(m) and at_bound(v, CALIBRATION_RANGE[0] * m, CALIBRATION_RANGE[1] * m)
         rows.append([name, _g(m) + (f" {unit}" if unit else "") if _finite(m) else "–",
-                     pm(v, cand.calibrated_std.get(name), unit), change + (" [at bound]" if bound else "")])
+                     pm(v, std.get(name), unit), change + (" [at bound]" if bound else "")])
     return rows
 
 
@@ -347,16 +354,8 @@ def text_report(d: Diagnosis) -> str:
     lines += _table(["model", "RMS", "/ noise", "note"], rows, "lrrl")
 
     # --- calibrated nominal parameters
-    p_meta = rec.nominal.params.to_dict(resolved=False)
     lines += ["", "Calibrated nominal parameters (±1σ from the Jacobian), against meta.json"]
-    rows = []
-    for name, v in d.calibrated.items():
-        m = p_meta.get(name)
-        unit = _unit(name)
-        change = f"{100 * (v / m - 1):+.2f} %" if _finite(m) and m else "–"
-        bound = _finite(m) and at_bound(v, CALIBRATION_RANGE[0] * m, CALIBRATION_RANGE[1] * m)
-        rows.append([name, _g(m) + (f" {unit}" if unit else "") if _finite(m) else "–",
-                     pm(v, d.calibrated_std.get(name), unit), change + (" [at bound]" if bound else "")])
+    rows = calibrated_rows(d, d.calibrated, d.calibrated_std)
     lines += _table(["parameter", "meta.json", "calibrated", "change"], rows, "lrrr")
     summary = getattr(d, "calibration_summary", "")
     if summary:
