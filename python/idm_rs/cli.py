@@ -421,8 +421,9 @@ def effects_from_overrides(items: Sequence[str]) -> Effects:
 
 def _snap(t: float, dt: float) -> float:
     """``t`` rounded to a whole number of steps when it is within 1e-9 of one."""
-    k = round(t / dt)
-    return k * dt if abs(k * dt - t) <= 1e-9 * max(1.0, abs(t)) else t
+    from .sweep import snap_to_steps
+
+    return snap_to_steps(t, dt)
 
 
 def write_csv(result: SimulationResult, path: Path) -> None:

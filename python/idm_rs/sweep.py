@@ -138,10 +138,18 @@ class _Plan:
         t_ends = None
         if self.own_t_end:
             t_ends = _durations(self.waveform, {c: wm[:, j] for j, c in enumerate(wnames)})
-            if self.method == "rk4":  # a whole number of steps where within rounding of one
-                k = np.round(t_ends / self.dt)
-                t_ends = np.where(np.abs(k * self.dt - t_ends) <= 1e-9 * np.maximum(1.0, t_ends), k * self.dt, t_ends)
+            if self.method == "rk4":
+                t_ends = snap_to_steps(t_ends, self.dt)
         return Tables(pm, em, self.waveform.batch_kind, wm, sampled, t_ends)
+
+
+def snap_to_steps(t: Any, dt: float) -> Any:
+    """``t`` [s] (a number or an array) rounded to a whole number of steps ``dt`` where it is
+    within 1e-9 (relative, or absolute below 1 s) of one; elsewhere unchanged."""
+    t = np.asarray(t, dtype=float)
+    k = np.round(t / dt)
+    out = np.where(np.abs(k * dt - t) <= 1e-9 * np.maximum(1.0, np.abs(t)), k * dt, t)
+    return float(out) if out.ndim == 0 else out
 
 
 def _durations(waveform: Waveform, fields: Mapping[str, Any]) -> NDArray[np.float64]:
