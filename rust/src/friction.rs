@@ -2,13 +2,12 @@
 //! Bouc-Wen presliding force Fh driven by the asperity deformation g.
 
 use crate::params::Params;
-use crate::scalar::Scalar;
-use crate::scalar::sign0;
+use crate::real::{Mask, Real};
 
 /// Leuven friction constants, precomputed once per run (`T` = f64, or a dual number when
 /// derivatives with respect to them are asked for).
 #[derive(Clone, Copy, Debug)]
-pub struct Leuven<T = f64> {
+pub struct Leuven<T: Real = f64> {
     fc: T,
     fs_minus_fc: T,
     inv_vs: T,
@@ -21,14 +20,14 @@ pub struct Leuven<T = f64> {
     sigma2: T,
     /// Direction asymmetry: Fc, Fs scaled by (1 + eps sgn v) (0 for the paper's model).
     eps: T,
-    /// no Stribeck peak and no derivative through one: the exp is skipped
-    no_peak: bool,
-    symmetric: bool,
-    delta_is_two: bool,
-    n_is_one: bool,
+    /// no Stribeck peak and no derivative through one: the exp is skipped (per lane)
+    no_peak: T::Mask,
+    symmetric: T::Mask,
+    delta_is_two: T::Mask,
+    n_is_one: T::Mask,
 }
 
-impl<T: Scalar> Leuven<T> {
+impl<T: Real> Leuven<T> {
     /// `normal_force` is passed explicitly so that effects (an incline) can change it.
     pub fn new(p: &Params<T>, normal_force: T, eps: T) -> Self {
         let fs_minus_fc = (p.mu_s - p.mu_k) * normal_force;
@@ -54,23 +53,14 @@ impl<T: Scalar> Leuven<T> {
     /// Stribeck curve S(v) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta) [N], times (1 + eps sgn v).
     #[inline(always)]
     pub fn stribeck(&self, v: T) -> T {
-        let s = if self.no_peak {
-            self.fc // no Stribeck peak (mu_s = mu_k): skip the exp
-        } else {
+        // no Stribeck peak (mu_s = mu_k): skip the exp
+        let s = T::choose(self.no_peak, || self.fc, || {
             let x = v.abs() * self.inv_vs;
             // (|v|/vs)^2 as a product: powf would be the most expensive call in the step
-            let e = if self.delta_is_two {
-                x * x
-            } else {
-                x.pow(self.delta)
-            };
+            let e = T::choose(self.delta_is_two, || x * x, || x.pow(self.delta));
             self.fc + self.fs_minus_fc * (-e).exp()
-        };
-        if self.symmetric {
-            s
-        } else {
-            s * (self.eps * sign0(v) + 1.0)
-        }
+        });
+        T::choose(self.symmetric, || s, || s * (self.eps * v.sign0() + 1.0))
     }
 
     /// (dg/dt [m/s], dFh/dt [N/s]) at main-body velocity `v` [m/s] and presliding force `fh` [N].
@@ -78,11 +68,7 @@ impl<T: Scalar> Leuven<T> {
     pub fn rates(&self, v: T, fh: T) -> (T, T) {
         let ratio = fh / self.stribeck(v);
         // eq. 6 written with |v| so that v = 0 needs no 0/0; for n = 1, sgn(Fh)|Fh/S| = Fh/S
-        let gdot = if self.n_is_one {
-            v - v.abs() * ratio
-        } else {
-            v - v.abs() * sign0(fh) * ratio.abs().pow(self.n)
-        };
+        let gdot = T::choose(self.n_is_one, || v - v.abs() * ratio, || v - v.abs() * fh.sign0() * ratio.abs().pow(self.n));
         let fhdot = self.a * gdot - self.b * gdot.abs() * fh - self.c * gdot * fh.abs();
         (gdot, fhdot)
     }
@@ -91,17 +77,13 @@ impl<T: Scalar> Leuven<T> {
     /// delta > 1; the one-sided slope is taken for delta <= 1).
     #[inline(always)]
     pub fn stribeck_slope(&self, v: T) -> T {
-        if self.no_peak || v.value() == 0.0 {
-            return T::zero();
-        }
-        let x = v.abs() * self.inv_vs;
-        let (e, de) = if self.delta_is_two {
-            (x * x, x * 2.0)
-        } else {
-            (x.pow(self.delta), self.delta * x.pow(self.delta - 1.0))
-        };
-        let ds = -self.fs_minus_fc * (-e).exp() * de * self.inv_vs * sign0(v);
-        ds * (self.eps * sign0(v) + 1.0)
+        T::choose(self.no_peak.or(v.equals(0.0)), T::zero, || {
+            let x = v.abs() * self.inv_vs;
+            let e = T::choose(self.delta_is_two, || x * x, || x.pow(self.delta));
+            let de = T::choose(self.delta_is_two, || x * 2.0, || self.delta * x.pow(self.delta - 1.0));
+            let ds = -self.fs_minus_fc * (-e).exp() * de * self.inv_vs * v.sign0();
+            ds * (self.eps * v.sign0() + 1.0)
+        })
     }
 
     /// The rates of [`Leuven::rates`] and their partial derivatives, for implicit integrators:
@@ -113,17 +95,14 @@ impl<T: Scalar> Leuven<T> {
         let s = self.stribeck(v);
         let ratio = fh / s;
         // gdot = v - |v| sgn(Fh) |Fh/S|^n
-        let (pow_n, pow_n1) = if self.n_is_one {
-            (ratio.abs(), T::one())
-        } else {
-            (ratio.abs().pow(self.n), self.n * ratio.abs().pow(self.n - 1.0))
-        };
+        let pow_n = T::choose(self.n_is_one, || ratio.abs(), || ratio.abs().pow(self.n));
+        let pow_n1 = T::choose(self.n_is_one, T::one, || self.n * ratio.abs().pow(self.n - 1.0));
         let dg_dfh = -v.abs() * pow_n1 / s;
-        let dg_dv = -pow_n * (sign0(v) * sign0(fh)) + 1.0 + v.abs() * pow_n1 * fh * self.stribeck_slope(v) / (s * s);
+        let dg_dv = -pow_n * (v.sign0() * fh.sign0()) + 1.0 + v.abs() * pow_n1 * fh * self.stribeck_slope(v) / (s * s);
         // dFh/dt = a gdot - b |gdot| Fh - c gdot |Fh|
-        let outer = self.a - self.b * sign0(gdot) * fh - self.c * fh.abs();
+        let outer = self.a - self.b * gdot.sign0() * fh - self.c * fh.abs();
         let dfh_dv = outer * dg_dv;
-        let dfh_dfh = outer * dg_dfh - self.b * gdot.abs() - self.c * gdot * sign0(fh);
+        let dfh_dfh = outer * dg_dfh - self.b * gdot.abs() - self.c * gdot * fh.sign0();
         [gdot, fhdot, dg_dv, dg_dfh, dfh_dv, dfh_dfh]
     }
 

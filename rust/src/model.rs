@@ -12,6 +12,7 @@ use crate::friction::Leuven;
 use crate::mechanics::{Actuation, Actuator, Mechanics, Structure};
 use crate::params::Params;
 use crate::piezo::{piezo_force, PiezoHysteresis};
+use crate::real::Real;
 use crate::scalar::Scalar;
 
 /// Dispatch on the state size: `$fixed!(N, D)` for a plain state (see [`Model::is_plain`]) of
@@ -112,7 +113,7 @@ impl Layout {
 /// on: `f64` for plain runs, a dual number when derivatives with respect to parameters are
 /// asked for (see [`Model::build`]); `params` and `effects` keep the plain values either way.
 #[derive(Clone, Debug)]
-pub struct Model<T: Scalar = f64> {
+pub struct Model<T: Real = f64> {
     pub params: Params,
     pub effects: Effects,
     pub structure: Structure,
@@ -200,7 +201,7 @@ impl<T: Scalar + ComplexField> Model<T> {
     }
 }
 
-impl<T: Scalar> Model<T> {
+impl<T: Real> Model<T> {
     /// This model with a sampled external force on one of its bodies (see `external_force.rs`).
     /// A rig has one body: only `Body::Main` there.
     pub fn with_external_force(mut self, force: ExternalForce<T>) -> Result<Self, String> {
@@ -213,7 +214,7 @@ impl<T: Scalar> Model<T> {
 
     /// The sampled external force [N] on the main body and on the last node at time `t` [s].
     #[inline(always)]
-    fn timed_forces(&self, t: f64) -> (T, T) {
+    fn timed_forces(&self, t: T::Value) -> (T, T) {
         let mut f = (T::zero(), T::zero());
         if let Some(x) = &self.external {
             let (v, _) = x.at(t);
@@ -268,20 +269,12 @@ impl<T: Scalar> Model<T> {
         Ok(())
     }
 
-    /// The divergence criterion: the state is no longer finite where it matters, or |Fh| left
-    /// its bound [N] (which a correct solution never does; see MODEL.md's invariants).
-    #[inline(always)]
-    pub fn is_diverged(&self, y: &[T], fh_bound: f64) -> bool {
-        let l = &self.layout;
-        !(y[l.fh].value().abs() <= fh_bound) || !y[l.dof].value().is_finite() || !y[0].value().is_finite()
-    }
-
     /// PE voltage and its rate [V, V/s] given the commanded ones (the amplifier may lag).
     #[inline(always)]
-    fn pe_voltage(&self, v_cmd: T, dv_cmd: f64, y: &[T]) -> (T, T) {
+    fn pe_voltage(&self, v_cmd: T, dv_cmd: T::Value, y: &[T]) -> (T, T) {
         match self.layout.lags[AMPLIFIER] {
             Some(i) => (y[i], first_order_rate(v_cmd, y[i], self.inv_tau[AMPLIFIER])),
-            None => (v_cmd, T::from(dv_cmd)),
+            None => (v_cmd, T::of_value(dv_cmd)),
         }
     }
 
@@ -314,14 +307,6 @@ impl<T: Scalar> Model<T> {
         s
     }
 
-    /// Piezo force Fp [N] in state `y` at commanded voltage `v_cmd`.
-    #[inline(always)]
-    pub fn piezo_force(&self, v_cmd: f64, y: &[T]) -> T {
-        let (v, _) = self.pe_voltage(T::from(v_cmd), 0.0, y);
-        let xc = self.layout.lags[CREEP].map_or(T::zero(), |i| y[i]);
-        piezo_force(self.kp, self.d33, v, xc, y[self.layout.h])
-    }
-
     /// Friction force Ff [N] on the main body in state `y`.
     #[inline(always)]
     pub fn friction_force(&self, y: &[T]) -> T {
@@ -331,16 +316,9 @@ impl<T: Scalar> Model<T> {
         self.friction.force(v1, fh, gdot)
     }
 
-    /// What the sensor reads [m] at time `t` [s] in state `y`.
-    #[inline(always)]
-    pub fn reading(&self, t: f64, y: &[T]) -> T {
-        let x = self.layout.lags[SENSOR].map_or(y[0], |i| y[i]);
-        x + self.effect_values.drift_rate * t
-    }
-
     /// What the library forces read at time `t` [s].
     #[inline(always)]
-    pub(crate) fn library_states(&self, t: f64, q: &[T], v: &[T], volt: T, dvolt: T, ff: T) -> LibraryStates<T> {
+    pub(crate) fn library_states(&self, t: T::Value, q: &[T], v: &[T], volt: T, dvolt: T, ff: T) -> LibraryStates<T> {
         let n = q.len();
         LibraryStates {
             x1: q[0],
@@ -361,12 +339,6 @@ impl<T: Scalar> Model<T> {
         self.layout.dim == 2 * self.layout.dof + 3
     }
 
-    /// dy/dt at time `t` [s] and commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s].
-    #[inline(always)]
-    pub fn rhs(&self, t: f64, v_cmd: f64, dv_cmd: f64, y: &[T], dy: &mut [T]) {
-        self.rhs_impl::<0, true>(t, T::from(v_cmd), dv_cmd, y, dy);
-    }
-
     /// The right-hand side. `N` > 0 fixes the node count at compile time; `EXTRAS = false`
     /// promises a plain state (see [`Model::is_plain`]). Both only let the compiler keep the
     /// state in registers; the physics is the same code. Returns (Ff [N], dg/dt [m/s]) at `y`,
@@ -374,9 +346,9 @@ impl<T: Scalar> Model<T> {
     #[inline(always)]
     pub fn rhs_impl<const N: usize, const EXTRAS: bool>(
         &self,
-        t: f64,
+        t: T::Value,
         v_cmd: T,
-        dv_cmd: f64,
+        dv_cmd: T::Value,
         y: &[T],
         dy: &mut [T],
     ) -> (T, T) {
@@ -387,7 +359,7 @@ impl<T: Scalar> Model<T> {
         let (v_pe, dv_pe) = if EXTRAS {
             self.pe_voltage(v_cmd, dv_cmd, y)
         } else {
-            (v_cmd, T::from(dv_cmd))
+            (v_cmd, T::of_value(dv_cmd))
         };
         let h = y[ih];
         dy[ih] = self.hysteresis.map_or(T::zero(), |hy| hy.rate(dv_pe, h));
@@ -456,5 +428,38 @@ impl<T: Scalar> Model<T> {
             }
         }
         (ff, gdot)
+    }
+}
+
+/// What needs the value as one `f64` (a scalar or a dual number, not lanes).
+impl<T: Scalar> Model<T> {
+
+    /// The divergence criterion: the state is no longer finite where it matters, or |Fh| left
+    /// its bound [N] (which a correct solution never does; see MODEL.md's invariants).
+    #[inline(always)]
+    pub fn is_diverged(&self, y: &[T], fh_bound: f64) -> bool {
+        let l = &self.layout;
+        !(y[l.fh].value().abs() <= fh_bound) || !y[l.dof].value().is_finite() || !y[0].value().is_finite()
+    }
+
+    /// Piezo force Fp [N] in state `y` at commanded voltage `v_cmd`.
+    #[inline(always)]
+    pub fn piezo_force(&self, v_cmd: f64, y: &[T]) -> T {
+        let (v, _) = self.pe_voltage(T::from(v_cmd), 0.0, y);
+        let xc = self.layout.lags[CREEP].map_or(T::zero(), |i| y[i]);
+        piezo_force(self.kp, self.d33, v, xc, y[self.layout.h])
+    }
+
+    /// What the sensor reads [m] at time `t` [s] in state `y`.
+    #[inline(always)]
+    pub fn reading(&self, t: f64, y: &[T]) -> T {
+        let x = self.layout.lags[SENSOR].map_or(y[0], |i| y[i]);
+        x + self.effect_values.drift_rate * t
+    }
+
+    /// dy/dt at time `t` [s] and commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s].
+    #[inline(always)]
+    pub fn rhs(&self, t: f64, v_cmd: f64, dv_cmd: f64, y: &[T], dy: &mut [T]) {
+        self.rhs_impl::<0, true>(t, T::from(v_cmd), dv_cmd, y, dy);
     }
 }
