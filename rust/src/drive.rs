@@ -764,7 +764,8 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pu
 
     #[inline(always)]
     fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<()> {
-        if self.tasks.iter().all(|t| PlainLanes::<N, L>::accepts(t.model)) {
+        let shape = self.tasks[0].model.shape();
+        if self.tasks.iter().all(|t| PlainLanes::<N, L, E>::accepts(t.model) && t.model.shape() == shape) {
             // the state stored component by component, lanes refilled from the queue
             let ends = match *self.method {
                 Method::Rk4 { dt } => Some(run_rk4_lanes::<O, E, N, D, L>(self.tasks, dt, self.observer, self.cancel)?),

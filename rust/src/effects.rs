@@ -94,6 +94,15 @@ macro_rules! effects {
             }
         }
 
+        impl<T: crate::lane_real::Lanewise<f64>> crate::lane_real::Lanewise<Effects> for Effects<T> {
+            fn splat(src: &Effects) -> Self {
+                Effects { $($($field: T::splat(&src.$field),)*)* }
+            }
+            fn set_lane(&mut self, i: usize, src: &Effects) {
+                $($(self.$field.set_lane(i, &src.$field);)*)*
+            }
+        }
+
         impl Effects {
             /// Every value as a `T` made by `lift(name, value)` (see `Params::lift`).
             pub fn lift<T>(&self, lift: impl Fn(&str, f64) -> T) -> Effects<T> {

@@ -5,6 +5,7 @@
 //! like parameters (`sensitivity::Seed::ForceKnot`): the derivative of a run with respect to
 //! the force at each knot, which is what infers an unknown force from a recording.
 
+use crate::lane_real::{LaneExp, Lanes, Lanewise};
 use crate::real::Real;
 use crate::waveform::PiecewiseLinear;
 
@@ -64,6 +65,16 @@ impl ExternalForce {
 
     pub fn is_empty(&self) -> bool {
         self.values.is_empty()
+    }
+}
+
+impl<const L: usize, E: LaneExp> Lanewise<ExternalForce> for ExternalForce<Lanes<L, E>> {
+    fn splat(x: &ExternalForce) -> Self {
+        ExternalForce { body: x.body, knots: x.knots.clone(), values: Lanewise::splat(&x.values) }
+    }
+    fn set_lane(&mut self, i: usize, x: &ExternalForce) {
+        // one body and one set of knot times in every lane (the lane gate's shape)
+        self.values.set_lane(i, &x.values);
     }
 }
 

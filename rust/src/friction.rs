@@ -2,6 +2,7 @@
 //! Bouc-Wen presliding force Fh driven by the asperity deformation g.
 
 use crate::params::Params;
+use crate::lane_real::{LaneExp, Lanes, Lanewise};
 use crate::real::{Mask, Real};
 
 /// Leuven friction constants, precomputed once per run (`T` = f64, or a dual number when
@@ -111,6 +112,45 @@ impl<T: Real> Leuven<T> {
     #[inline(always)]
     pub fn force(&self, v: T, fh: T, gdot: T) -> T {
         (fh + self.sigma2 * v) + self.sigma1 * gdot
+    }
+}
+
+impl<const L: usize, E: LaneExp> Lanewise<Leuven> for Leuven<Lanes<L, E>> {
+    fn splat(m: &Leuven) -> Self {
+        Leuven {
+            fc: Lanewise::splat(&m.fc),
+            fs_minus_fc: Lanewise::splat(&m.fs_minus_fc),
+            inv_vs: Lanewise::splat(&m.inv_vs),
+            delta: Lanewise::splat(&m.delta),
+            n: Lanewise::splat(&m.n),
+            a: Lanewise::splat(&m.a),
+            b: Lanewise::splat(&m.b),
+            c: Lanewise::splat(&m.c),
+            sigma1: Lanewise::splat(&m.sigma1),
+            sigma2: Lanewise::splat(&m.sigma2),
+            eps: Lanewise::splat(&m.eps),
+            no_peak: Lanewise::splat(&m.no_peak),
+            symmetric: Lanewise::splat(&m.symmetric),
+            delta_is_two: Lanewise::splat(&m.delta_is_two),
+            n_is_one: Lanewise::splat(&m.n_is_one),
+        }
+    }
+    fn set_lane(&mut self, i: usize, m: &Leuven) {
+        self.fc.set_lane(i, &m.fc);
+        self.fs_minus_fc.set_lane(i, &m.fs_minus_fc);
+        self.inv_vs.set_lane(i, &m.inv_vs);
+        self.delta.set_lane(i, &m.delta);
+        self.n.set_lane(i, &m.n);
+        self.a.set_lane(i, &m.a);
+        self.b.set_lane(i, &m.b);
+        self.c.set_lane(i, &m.c);
+        self.sigma1.set_lane(i, &m.sigma1);
+        self.sigma2.set_lane(i, &m.sigma2);
+        self.eps.set_lane(i, &m.eps);
+        self.no_peak.set_lane(i, &m.no_peak);
+        self.symmetric.set_lane(i, &m.symmetric);
+        self.delta_is_two.set_lane(i, &m.delta_is_two);
+        self.n_is_one.set_lane(i, &m.n_is_one);
     }
 }
 

@@ -312,3 +312,79 @@ mod tests {
         assert_eq!(s.0, [2.0, -4.0, 0.0, 0.0]);
     }
 }
+
+/// A lane type built from its scalar counterpart `S`: every lane a copy of one, then each lane
+/// set from its own (the lane drivers put each point's model on its lane this way). Implemented
+/// beside each struct of the physics, field by field.
+pub trait Lanewise<S>: Sized {
+    /// Every lane `src`.
+    fn splat(src: &S) -> Self;
+    /// Lane `i` from `src` (which has the shape of the others: the lane gate checked it).
+    fn set_lane(&mut self, i: usize, src: &S);
+}
+
+impl<const L: usize, E> Lanewise<f64> for Lanes<L, E> {
+    #[inline(always)]
+    fn splat(src: &f64) -> Self {
+        Lanes::splat(*src)
+    }
+    #[inline(always)]
+    fn set_lane(&mut self, i: usize, src: &f64) {
+        self.0[i] = *src;
+    }
+}
+
+impl<const L: usize> Lanewise<bool> for LaneMask<L> {
+    fn splat(src: &bool) -> Self {
+        LaneMask([*src; L])
+    }
+    fn set_lane(&mut self, i: usize, src: &bool) {
+        self.0[i] = *src;
+    }
+}
+
+impl<S, T: Lanewise<S>, const K: usize> Lanewise<[S; K]> for [T; K] {
+    fn splat(src: &[S; K]) -> Self {
+        std::array::from_fn(|k| T::splat(&src[k]))
+    }
+    fn set_lane(&mut self, i: usize, src: &[S; K]) {
+        for (a, b) in self.iter_mut().zip(src) {
+            a.set_lane(i, b);
+        }
+    }
+}
+
+impl<S, T: Lanewise<S>> Lanewise<Vec<S>> for Vec<T> {
+    fn splat(src: &Vec<S>) -> Self {
+        src.iter().map(T::splat).collect()
+    }
+    fn set_lane(&mut self, i: usize, src: &Vec<S>) {
+        debug_assert_eq!(self.len(), src.len(), "lanes of one shape");
+        for (a, b) in self.iter_mut().zip(src) {
+            a.set_lane(i, b);
+        }
+    }
+}
+
+impl<S, T: Lanewise<S>> Lanewise<Option<S>> for Option<T> {
+    fn splat(src: &Option<S>) -> Self {
+        src.as_ref().map(T::splat)
+    }
+    fn set_lane(&mut self, i: usize, src: &Option<S>) {
+        // the lane gate groups models of one shape: present in every lane or in none
+        if let (Some(a), Some(b)) = (self.as_mut(), src.as_ref()) {
+            a.set_lane(i, b);
+        }
+    }
+}
+
+impl<const L: usize, E: LaneExp> Lanewise<nalgebra::DMatrix<f64>> for nalgebra::DMatrix<Lanes<L, E>> {
+    fn splat(src: &nalgebra::DMatrix<f64>) -> Self {
+        src.map(Lanes::splat)
+    }
+    fn set_lane(&mut self, i: usize, src: &nalgebra::DMatrix<f64>) {
+        for (a, b) in self.iter_mut().zip(src.iter()) {
+            a.0[i] = *b;
+        }
+    }
+}

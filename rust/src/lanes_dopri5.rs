@@ -67,7 +67,7 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
     if tasks.is_empty() {
         return Some(Vec::new());
     }
-    let mut p = PlainLanes::<N, L>::new(&[tasks[0].model; L]).expect("tasks the vector path accepts");
+    let mut p = PlainLanes::<N, L, E2>::new(&[tasks[0].model; L]).expect("tasks the vector path accepts");
     let mut slots: [Option<Slot>; L] = std::array::from_fn(|_| None);
     let mut y = [[0.0; L]; D];
     let mut k = [[[0.0; L]; D]; 7];
@@ -105,7 +105,7 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
             Queue::Cancelled => return None,
         }
         // each lane's input, segment end and step (drive.rs, then Dopri5::attempt)
-        let (mut v0, mut slope, mut step) = ([0.0; L], [0.0; L], [0.0; L]);
+        let (mut t0, mut v0, mut slope, mut step) = ([0.0; L], [0.0; L], [0.0; L], [0.0; L]);
         let (mut end, mut last, mut fresh) = ([0.0; L], [false; L], [false; L]);
         for i in 0..L {
             let Some(s) = &mut slots[i] else { continue };
@@ -115,6 +115,7 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
             }
             end[i] = s.cursor.next_breakpoint(task.wave, s.t).min(task.t_end);
             (v0[i], slope[i]) = s.cursor.input(task.wave, s.t, s.t);
+            t0[i] = s.t;
             fresh[i] = s.fresh;
             s.fresh = false;
             let h = s.h;
@@ -122,9 +123,10 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
             step[i] = if last[i] { end[i] - s.t } else { h };
         }
         let v_at = |tau: &[f64; L]| -> [f64; L] { std::array::from_fn(|i| v0[i] + slope[i] * tau[i]) };
+        let t_at = |tau: &[f64; L]| -> [f64; L] { std::array::from_fn(|i| t0[i] + tau[i]) };
         if fresh.iter().any(|f| *f) {
             let mut k0 = [[0.0; L]; D];
-            p.rhs_soa::<E2, D>(&v_at(&[0.0; L]), &slope, &y, &mut k0);
+            p.rhs_soa::<D>(&t_at(&[0.0; L]), &v_at(&[0.0; L]), &slope, &y, &mut k0);
             for j in 0..D {
                 for i in 0..L {
                     if fresh[i] {
@@ -137,10 +139,10 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
             combine(&mut tmp, &y, &step, a, &k);
             let tau: [f64; L] = std::array::from_fn(|i| C[s] * step[i]);
             let (ks, _) = k.split_at_mut(s + 1);
-            p.rhs_soa::<E2, D>(&v_at(&tau), &slope, &tmp, &mut ks[s]);
+            p.rhs_soa::<D>(&t_at(&tau), &v_at(&tau), &slope, &tmp, &mut ks[s]);
         }
         combine(&mut y_new, &y, &step, &B, &k);
-        p.rhs_soa::<E2, D>(&v_at(&step), &slope, &y_new, &mut k[6]);
+        p.rhs_soa::<D>(&t_at(&step), &v_at(&step), &slope, &y_new, &mut k[6]);
         let err = error_norms(&y, &y_new, &k, &scale, &step, rtol, atol);
         for i in 0..L {
             let Some(s) = &mut slots[i] else { continue };

@@ -7,6 +7,7 @@ use crate::effects::Effects;
 use crate::params::Params;
 use crate::piezo::PiezoElement;
 use crate::rig::RigDrive;
+use crate::lane_real::{LaneExp, Lanes, Lanewise};
 use crate::real::Real;
 use crate::scalar::Scalar;
 use nalgebra::{ComplexField, DMatrix};
@@ -278,6 +279,33 @@ impl<T: Real> Mechanics<T> {
     /// v'Cv [W]: the power the structure's damping dissipates.
     pub fn dissipation(&self, v: &[T]) -> T {
         quad(&self.damping, v)
+    }
+}
+
+impl<const L: usize, E: LaneExp> Lanewise<Mechanics> for Mechanics<Lanes<L, E>> {
+    fn splat(m: &Mechanics) -> Self {
+        Mechanics {
+            dof: m.dof,
+            mass: Lanewise::splat(&m.mass),
+            damping: Lanewise::splat(&m.damping),
+            stiffness: Lanewise::splat(&m.stiffness),
+            pe_mass_matrix: Lanewise::splat(&m.pe_mass_matrix),
+            minv_k: Lanewise::splat(&m.minv_k),
+            minv_c: Lanewise::splat(&m.minv_c),
+            minv_main: Lanewise::splat(&m.minv_main),
+            minv_weight: Lanewise::splat(&m.minv_weight),
+        }
+    }
+    fn set_lane(&mut self, i: usize, m: &Mechanics) {
+        debug_assert_eq!(self.dof, m.dof, "lanes of one shape");
+        self.mass.set_lane(i, &m.mass);
+        self.damping.set_lane(i, &m.damping);
+        self.stiffness.set_lane(i, &m.stiffness);
+        self.pe_mass_matrix.set_lane(i, &m.pe_mass_matrix);
+        self.minv_k.set_lane(i, &m.minv_k);
+        self.minv_c.set_lane(i, &m.minv_c);
+        self.minv_main.set_lane(i, &m.minv_main);
+        self.minv_weight.set_lane(i, &m.minv_weight);
     }
 }
 

@@ -12,6 +12,7 @@ use crate::friction::Leuven;
 use crate::mechanics::{Actuation, Actuator, Mechanics, Structure};
 use crate::params::Params;
 use crate::piezo::{piezo_force, PiezoHysteresis};
+use crate::lane_real::{LaneExp, Lanes, Lanewise};
 use crate::real::Real;
 use crate::scalar::Scalar;
 
@@ -37,7 +38,7 @@ pub(crate) use with_state_size;
 pub const N_ACCOUNTING: usize = 7;
 
 /// Where each quantity lives in the flat state vector.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Layout {
     /// nodes (node 0 main body, node dof-1 weight)
     pub dof: usize,
@@ -137,6 +138,74 @@ pub struct Model<T: Real = f64> {
     pub external: Option<ExternalForce<T>>,
     /// whether the library force on the main body, and on the weight, is on
     pub(crate) library: (bool, bool),
+}
+
+/// What every lane of one group must share: all that is not a number (the structure, the state
+/// layout, the mechanism, which parts of the physics are on, the external force's body and knot
+/// times). Models of one shape differ only in values, so one [`Model`] over lanes holds them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Shape {
+    structure: Structure,
+    layout: Layout,
+    actuator: Actuator,
+    hysteresis: bool,
+    library: (bool, bool),
+    external: Option<(Body, Vec<f64>)>,
+}
+
+impl<T: Real> Model<T> {
+    /// This model's [`Shape`].
+    pub fn shape(&self) -> Shape {
+        Shape {
+            structure: self.structure,
+            layout: self.layout,
+            actuator: self.actuator,
+            hysteresis: self.hysteresis.is_some(),
+            library: self.library,
+            external: self.external.as_ref().map(|x| (x.body, x.knots.times().to_vec())),
+        }
+    }
+}
+
+/// `L` models of one [`Shape`] as one model over lanes (the plain values, `params` and
+/// `effects`, are lane 0's).
+impl<const L: usize, E: LaneExp> Lanewise<Model> for Model<Lanes<L, E>> {
+    fn splat(m: &Model) -> Self {
+        Model {
+            params: m.params,
+            effects: m.effects,
+            structure: m.structure,
+            mech: Lanewise::splat(&m.mech),
+            friction: Lanewise::splat(&m.friction),
+            layout: m.layout,
+            values: Lanewise::splat(&m.values),
+            effect_values: Lanewise::splat(&m.effect_values),
+            hysteresis: Lanewise::splat(&m.hysteresis),
+            actuator: m.actuator,
+            kp: Lanewise::splat(&m.kp),
+            d33: Lanewise::splat(&m.d33),
+            f_constant: Lanewise::splat(&m.f_constant),
+            inv_tau: Lanewise::splat(&m.inv_tau),
+            pe_mass_sums: Lanewise::splat(&m.pe_mass_sums),
+            external: Lanewise::splat(&m.external),
+            library: m.library,
+        }
+    }
+
+    fn set_lane(&mut self, i: usize, m: &Model) {
+        debug_assert!(self.shape() == m.shape(), "lanes of one shape");
+        self.mech.set_lane(i, &m.mech);
+        self.friction.set_lane(i, &m.friction);
+        self.values.set_lane(i, &m.values);
+        self.effect_values.set_lane(i, &m.effect_values);
+        self.hysteresis.set_lane(i, &m.hysteresis);
+        self.kp.set_lane(i, &m.kp);
+        self.d33.set_lane(i, &m.d33);
+        self.f_constant.set_lane(i, &m.f_constant);
+        self.inv_tau.set_lane(i, &m.inv_tau);
+        self.pe_mass_sums.set_lane(i, &m.pe_mass_sums);
+        self.external.set_lane(i, &m.external);
+    }
 }
 
 impl Model {

@@ -1,5 +1,6 @@
 //! Piezo element force with Bouc-Wen hysteresis (MODEL.md eqs. 14, 15).
 
+use crate::lane_real::{LaneExp, Lanes, Lanewise};
 use crate::real::Real;
 use crate::scalar::Scalar;
 
@@ -36,6 +37,17 @@ impl<T: Real> PiezoHysteresis<T> {
             self.ap_d33 - self.bp * dv.sign0() * h - self.cp * h.abs(),
             -self.bp * dv.abs() - self.cp * dv * h.sign0(),
         )
+    }
+}
+
+impl<const L: usize, E: LaneExp> Lanewise<PiezoHysteresis> for PiezoHysteresis<Lanes<L, E>> {
+    fn splat(h: &PiezoHysteresis) -> Self {
+        PiezoHysteresis { ap_d33: Lanewise::splat(&h.ap_d33), bp: Lanewise::splat(&h.bp), cp: Lanewise::splat(&h.cp) }
+    }
+    fn set_lane(&mut self, i: usize, h: &PiezoHysteresis) {
+        self.ap_d33.set_lane(i, &h.ap_d33);
+        self.bp.set_lane(i, &h.bp);
+        self.cp.set_lane(i, &h.cp);
     }
 }
 
