@@ -294,28 +294,3 @@ def test_a_diverged_experiment_leaves_a_finite_jacobian(long_rec, monkeypatch):
     n0 = obj.samples[0]
     assert np.all(np.isfinite(J)) and np.all(J[:n0] == 0.0) and np.any(J[n0:] != 0.0)
     assert np.all(r[:n0] == r[0]) and r[0] > 100
-
-
-def test_a_joint_pair_starts_at_each_fit_alone_and_on_both_magnitude_grids(spring_problem):
-    # each effect's fit alone may compensate for the other (two-effect pair 9 stopped at 1.72 x
-    # noise from there): the joint multistart also starts every combination of the grids
-    rec, obj, null, at = spring_problem
-    nominal = diagnose_module._calibration_params(SPEC.params)
-    cal = diagnose_module._Calibration(nominal, null, at, null, at, null.chi2, 0.0, None)  # type: ignore[arg-type]
-    spring, drift = by_id("spring_to_ground"), by_id("thermal_drift")
-    alone = {"k_ground": 123.0, "drift_rate": -7e-7}
-
-    def refit(eff):
-        free = at + [ep.free(alone[ep.name]) for ep in eff.params]
-        return diagnose_module._Refit(_cand(eff.id, 50.0), SPEC, free)
-
-    starts = diagnose_module._pair_starts(cal, [(spring, refit(spring)), (drift, refit(drift))])
-    grids = [[alone[ep.name]] + diagnose_module._magnitudes(ep) for ep in (*spring.params, *drift.params)]
-    combos = {(s.free[-2].x0, s.free[-1].x0) for s in starts}
-    assert combos == {(a, b) for a in grids[0] for b in grids[1]}
-    assert len(starts) == 2 * len(combos) <= 2 * diagnose_module.JOINT_COMBOS
-    groups = {"nominal values": nominal, "null fit": at}
-    for s in starts:
-        assert [f.x0 for f in s.free[:-2]] == [f.x0 for f in groups[s.group]]
-    # the fits alone are one start of each group
-    assert sum((s.free[-2].x0, s.free[-1].x0) == (123.0, -7e-7) for s in starts) == 2

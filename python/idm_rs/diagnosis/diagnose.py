@@ -734,35 +734,6 @@ def _second_effect(pb: _Problem, cal: _Calibration, lead: _Refit, heldout: _Held
 #: effect at its own fit alone, 24 evaluations reach noise; 12 stop at 2.06 x noise)
 JOINT_TOP = 3
 JOINT_NFEV = 30
-#: a joint pair's multistart ranks at most this many magnitude combinations per nominal start
-#: (every combination of two one-parameter effects' grids: 10 x 10)
-JOINT_COMBOS = 100
-
-
-def _pair_starts(cal: _Calibration, pair: Sequence[tuple[Effect, _Refit]]) -> list[Start]:
-    """A jointly fitted pair's starts: the nominal values as given and the null fit, each with
-    every combination of the two effects' magnitudes — each parameter at its fit alone and on
-    its catalogue grid (`_magnitudes`). Each effect's fit alone compensates for the other
-    (two-effect pair 9: a drag on the weight and a thermal drift with both masses mis-set; from
-    the nominal values with each at its fit alone the pair stopped at 1.72 x noise, from the
-    nominal values with each near its true size it reaches noise in 11 evaluations)."""
-    grids: list[list[float]] = []
-    for eff, r in pair:
-        for ep in eff.params:
-            alone = next(f.x0 for f in r.free if f.name == ep.name)
-            grids.append([alone] + [v for v in _magnitudes(ep) if v != alone])
-    combos = [tuple(c) for c in np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(grids), -1).T]
-    if len(combos) > JOINT_COMBOS:
-        # evenly through the grid, the fits alone (the first combination) kept
-        keep = np.unique(np.linspace(0, len(combos) - 1, JOINT_COMBOS).round().astype(int))
-        combos = [combos[i] for i in keep]
-    params = [ep for eff, _ in pair for ep in eff.params]
-    starts = []
-    for label, nominal in (("nominal values", cal.free), ("null fit", cal.at)):
-        for c in combos:
-            what = ", ".join(f"{ep.name}={v:.3g}" for ep, v in zip(params, c))
-            starts.append(Start(f"{label}; {what}", list(nominal) + [ep.free(v) for ep, v in zip(params, c)], label))
-    return starts
 
 
 def _joint_pair(pb: _Problem, cal: _Calibration, first_round: list[_Refit], heldout: _HeldOut
@@ -773,11 +744,9 @@ def _joint_pair(pb: _Problem, cal: _Calibration, first_round: list[_Refit], held
     the presliding stiffness mis-set; the leader, piezo creep, mimics parts of both and no
     second effect stands beside it), while each true effect's fit alone finds its own size
     (θ −0.0105 for −0.01, c_weight 50.9 for 50). Every pair of the JOINT_TOP supported
-    first-round candidates is fitted by multistart (`_pair_starts`: the nominal values and the
-    null fit, each effect at its fit alone and on its magnitude grid, ranked over everything;
-    least squares from the best distinct start and from the best at the nominal values); the
-    lowest is judged by the second round's rules, its better-ranked effect taken as the first.
-    None when fewer than two candidates are supported."""
+    first-round candidates is fitted by least squares from the nominal values as given, each
+    effect at its fit alone; the lowest is judged by the second round's rules, its better-ranked
+    effect taken as the first. None when fewer than two candidates are supported."""
     ranked = [r for r in _ordered(first_round) if _eligible(r.candidate)][:JOINT_TOP]
     structure, params = cal.fit.spec.structure, cal.fit.spec.params
     best: Optional[tuple[_Refit, _Refit, Effect, FitResult, ModelSpec, list[FreeParam]]] = None
@@ -788,12 +757,10 @@ def _joint_pair(pb: _Problem, cal: _Calibration, first_round: list[_Refit], held
             if not eb.applies(ea.structure(structure), params):
                 continue
             base = ModelSpec(eb.structure(ea.structure(structure)), dict(params), dict(cal.fit.spec.effects))
-            ms = multistart(pb.obj, base, _pair_starts(cal, [(ea, ra), (eb, rb)]), local_fits=1,
-                            horizons=(None,), max_nfev=(JOINT_NFEV,), always=("nominal values",),
-                            stop_at_noise=True, progress=pb.tick)
-            r = ms.best
+            own = {ep.name for ep in ea.params} | {ep.name for ep in eb.params}
+            start = list(cal.free) + [f for f in ra.free + rb.free if f.name in own]
+            r = fit(pb.obj, base, start, max_nfev=JOINT_NFEV, progress=pb.tick)
             if best is None or r.chi2 < best[3].chi2:
-                start = list(cal.free) + [ep.free(r.values[ep.name]) for ep in (*ea.params, *eb.params)]
                 best = (ra, rb, eb, r, base, start)
     if best is None:
         return None
