@@ -124,25 +124,43 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
         }
         let v_at = |tau: &[f64; L]| -> [f64; L] { std::array::from_fn(|i| v0[i] + slope[i] * tau[i]) };
         let t_at = |tau: &[f64; L]| -> [f64; L] { std::array::from_fn(|i| t0[i] + tau[i]) };
-        if fresh.iter().any(|f| *f) {
-            let mut k0 = [[0.0; L]; D];
-            p.rhs_soa::<D>(&t_at(&[0.0; L]), &v_at(&[0.0; L]), &slope, &y, &mut k0);
-            for j in 0..D {
-                for i in 0..L {
-                    if fresh[i] {
-                        k[0][j][i] = k0[j][i];
+        // the stages through one call site, so the right-hand side is inlined once (the first,
+        // k0, only where a lane starts fresh; the last, k6, at the candidate: FSAL)
+        let any_fresh = fresh.iter().any(|f| *f);
+        let mut k0 = [[0.0; L]; D];
+        for st in 0..7 {
+            if st == 0 && !any_fresh {
+                continue;
+            }
+            let (tau, src, dst): ([f64; L], &[[f64; L]; D], &mut [[f64; L]; D]) = match st {
+                0 => ([0.0; L], &y, &mut k0),
+                6 => {
+                    combine(&mut y_new, &y, &step, &B, &k);
+                    (step, &y_new, &mut k[6])
+                }
+                _ => {
+                    let a: &[f64] = match st {
+                        1 => &A2,
+                        2 => &A3,
+                        3 => &A4,
+                        4 => &A5,
+                        _ => &A6,
+                    };
+                    combine(&mut tmp, &y, &step, a, &k);
+                    (std::array::from_fn(|i| C[st] * step[i]), &tmp, &mut k[st])
+                }
+            };
+            p.rhs_soa::<D>(&t_at(&tau), &v_at(&tau), &slope, src, dst);
+            if st == 0 {
+                for j in 0..D {
+                    for i in 0..L {
+                        if fresh[i] {
+                            k[0][j][i] = k0[j][i];
+                        }
                     }
                 }
             }
         }
-        for (s, a) in [(1usize, &A2[..]), (2, &A3[..]), (3, &A4[..]), (4, &A5[..]), (5, &A6[..])] {
-            combine(&mut tmp, &y, &step, a, &k);
-            let tau: [f64; L] = std::array::from_fn(|i| C[s] * step[i]);
-            let (ks, _) = k.split_at_mut(s + 1);
-            p.rhs_soa::<D>(&t_at(&tau), &v_at(&tau), &slope, &tmp, &mut ks[s]);
-        }
-        combine(&mut y_new, &y, &step, &B, &k);
-        p.rhs_soa::<D>(&t_at(&step), &v_at(&step), &slope, &y_new, &mut k[6]);
         let err = error_norms(&y, &y_new, &k, &scale, &step, rtol, atol);
         for i in 0..L {
             let Some(s) = &mut slots[i] else { continue };

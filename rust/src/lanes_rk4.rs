@@ -89,13 +89,27 @@ pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, co
         }
         let v_at = |tau: f64| -> [f64; L] { std::array::from_fn(|i| v0[i] + slope[i] * tau) };
         let t_at = |tau: f64| -> [f64; L] { std::array::from_fn(|i| t0[i] + tau) };
-        let (ff, gdot) = p.rhs_soa::<D>(&t_at(0.0), &v_at(0.0), &slope, &y, &mut k1);
-        stage(&mut tmp, &y, h2, &k1);
-        p.rhs_soa::<D>(&t_at(h2), &v_at(h2), &slope, &tmp, &mut k2);
-        stage(&mut tmp, &y, h2, &k2);
-        p.rhs_soa::<D>(&t_at(h2), &v_at(h2), &slope, &tmp, &mut k3);
-        stage(&mut tmp, &y, dt, &k3);
-        p.rhs_soa::<D>(&t_at(dt), &v_at(dt), &slope, &tmp, &mut k4);
+        // the four stages through one call site, so the right-hand side is inlined once
+        let (mut ff, mut gdot) = ([0.0; L], [0.0; L]);
+        for st in 0..4 {
+            let tau = [0.0, h2, h2, dt][st];
+            let (src, dst) = match st {
+                0 => (&y, &mut k1),
+                1 => (&tmp, &mut k2),
+                2 => (&tmp, &mut k3),
+                _ => (&tmp, &mut k4),
+            };
+            let out = p.rhs_soa::<D>(&t_at(tau), &v_at(tau), &slope, src, dst);
+            match st {
+                0 => {
+                    (ff, gdot) = out;
+                    stage(&mut tmp, &y, h2, &k1);
+                }
+                1 => stage(&mut tmp, &y, h2, &k2),
+                2 => stage(&mut tmp, &y, dt, &k3),
+                _ => {}
+            }
+        }
         for j in 0..D {
             for i in 0..L {
                 y[j][i] += (k1[j][i] + (k2[j][i] + k3[j][i]) * 2.0 + k4[j][i]) * h6;

@@ -281,8 +281,20 @@ impl<T: Real> Model<T> {
         Ok(self)
     }
 
+    /// The library forces [N] on the main body and on the weight (each 0 when off). Out of line:
+    /// only discovery's runs have them, and every copy of the right-hand side the lane drivers
+    /// inline would otherwise carry them.
+    #[inline(never)]
+    fn library_forces(&self, t: T::Value, q: &[T], v: &[T], volt: T, dvolt: T, ff: T) -> (T, T) {
+        let s = self.library_states(t, q, v, volt, dvolt, ff);
+        let main = if self.library.0 { self.effect_values.library_force_main(&s).0 } else { T::zero() };
+        let weight = if self.library.1 { self.effect_values.library_force_weight(&s).0 } else { T::zero() };
+        (main, weight)
+    }
+
     /// The sampled external force [N] on the main body and on the last node at time `t` [s].
-    #[inline(always)]
+    /// Out of line, as `library_forces`.
+    #[inline(never)]
     fn timed_forces(&self, t: T::Value) -> (T, T) {
         let mut f = (T::zero(), T::zero());
         if let Some(x) = &self.external {
@@ -465,12 +477,12 @@ impl<T: Real> Model<T> {
             f_ext_weight += b;
         }
         if self.library.0 || self.library.1 {
-            let s = self.library_states(t, q, v, v_pe, dv_pe, ff);
+            let (a, b) = self.library_forces(t, q, v, v_pe, dv_pe, ff);
             if self.library.0 {
-                f_ext_main += self.effect_values.library_force_main(&s).0;
+                f_ext_main += a;
             }
             if self.library.1 {
-                f_ext_weight += self.effect_values.library_force_weight(&s).0;
+                f_ext_weight += b;
             }
         }
         for i in 0..n {
