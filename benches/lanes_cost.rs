@@ -75,26 +75,26 @@ fn rhs_only(models: &[Model]) {
     let _ = active;
     {
         use idm_rs::lanes::PlainLanes;
-        struct Soa<'r> { p: &'r PlainLanes<2, 8>, y: [[f64; 8]; D], n: usize }
+        struct Soa<'r> { p: &'r PlainLanes<2, 8, PolyExp>, y: [[f64; 8]; D], n: usize }
         impl pulp::WithSimd for Soa<'_> {
             type Output = (f64, f64);
             #[inline(always)]
             fn with_simd<S: pulp::Simd>(mut self, _s: S) -> (f64, f64) {
                 let mut dy = [[0.0; 8]; D];
-                let (v, dv) = ([10.0; 8], [1e5; 8]);
+                let (t0, v, dv) = ([0.0; 8], [10.0; 8], [1e5; 8]);
                 let t = Instant::now();
                 let mut acc = 0.0;
                 for k in 0..self.n {
                     self.y[2][k % 8] = k as f64 * 1e-12;
                     self.y[5][(k + 3) % 8] = 0.01 * (k % 7) as f64;
-                    self.p.rhs_soa::<PolyExp, D>(&v, &dv, &self.y, &mut dy);
+                    self.p.rhs_soa::<D>(&t0, &v, &dv, &self.y, &mut dy);
                     acc += dy[3][0];
                 }
                 (t.elapsed().as_secs_f64(), acc)
             }
         }
         let group: [&Model; 8] = std::array::from_fn(|i| &models[i]);
-        let p = PlainLanes::<2, 8>::new(&group).unwrap();
+        let p = PlainLanes::<2, 8, PolyExp>::new(&group).unwrap();
         let y: [[f64; 8]; D] = std::array::from_fn(|j| std::array::from_fn(|i| ys[i][j]));
         let (t, _) = pulp::Arch::new().dispatch(Soa { p: &p, y, n });
         println!("  rhs only, {:26} {:6.2} ns per lane-evaluation", "SoA vector lanes (poly)", t / (8 * n) as f64 * 1e9);

@@ -41,21 +41,31 @@ device = st.fixed_dictionaries({
     "peak": st.sampled_from([True, False]),
     "k_ground": st.sampled_from([0.0, 2e3]),
     "eps": st.sampled_from([0.0, 0.03]),
+    "c_weight": st.sampled_from([0.0, 0.2]),
+    # any Stribeck exponent and Bouc-Wen exponent: a power per lane (the physics' own code)
+    "stribeck_exponent": st.sampled_from([2.0, 1.5, 2.7]),
+    "fric_n": st.sampled_from([1.0, 1.4]),
+    # library forces (a term of each kind: polynomial, periodic in x1, time, the weight's)
+    "library": st.sampled_from([{}, {"lib_x1sq": 2e6, "lib_sin": 0.04, "lib_wavelength": 15e-6, "lib_t": 0.3,
+                                     "libw_sgn": 0.01, "lib_ff_cos": 0.02}]),
     "volts": st.floats(20.0, 120.0),
 })
 
 
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(devices=st.lists(device, min_size=1, max_size=11), model=st.sampled_from(["lps", "dps"]),
-       hysteresis=st.booleans())
-def test_every_instruction_set_gives_the_scalar_models_bits(devices, model, hysteresis):
-    structure = Structure(model, 2 if model == "dps" else 1, hysteresis)
+       n_elements=st.integers(1, 4), hysteresis=st.booleans(), sawtooth=st.booleans())
+def test_every_instruction_set_gives_the_scalar_models_bits(devices, model, n_elements, hysteresis, sawtooth):
+    structure = Structure(model, n_elements if model == "dps" else 1, hysteresis)
     points = []
     for d in devices:
-        p = idm_rs.Params().replace(m2=d["m2"], mu_k=d["mu_k"], sigma1=d["sigma1"], fric_alpha=d["fric_alpha"])
+        p = idm_rs.Params().replace(m2=d["m2"], mu_k=d["mu_k"], sigma1=d["sigma1"], fric_alpha=d["fric_alpha"],
+                                    stribeck_exponent=d["stribeck_exponent"], fric_n=d["fric_n"])
         p = p.replace(mu_s=p.mu_k if not d["peak"] else max(p.mu_s, 1.2 * p.mu_k))
-        eff = idm_rs.Effects(k_ground=d["k_ground"], eps=d["eps"])
-        points.append(Point(p, effects=eff, waveform=idm_rs.Triangle(d["volts"], 0.2e-3, 0.3e-3)))
+        eff = idm_rs.Effects(k_ground=d["k_ground"], eps=d["eps"], c_weight=d["c_weight"], **d["library"])
+        wave = (idm_rs.Sawtooth(d["volts"], 2000.0, cycles=1, rise=0.1e-3) if sawtooth
+                else idm_rs.Triangle(d["volts"], 0.2e-3, 0.3e-3))
+        points.append(Point(p, effects=eff, waveform=wave))
     t_end, dt = 0.5e-3, 2e-8
     outs = {}
     for level in LEVELS:

@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::dopri5::Dopri5;
 use crate::stepper::{AdaptiveOptions, Held};
-use crate::lanes::{simd_arch, LaneExp, LanesRhs, LibmExp, PlainLanes};
+use crate::lanes::{simd_arch, LaneExp, LibmExp, PlainLanes};
 use crate::lanes_dopri5::run_dopri5_lanes;
 use crate::lanes_rk4::run_rk4_lanes;
 use crate::model::{with_state_size, Model};
@@ -764,7 +764,8 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pu
 
     #[inline(always)]
     fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<()> {
-        if self.tasks.iter().all(|t| PlainLanes::<N, L>::accepts(t.model)) {
+        let shape = self.tasks[0].model.shape();
+        if self.tasks.iter().all(|t| PlainLanes::<N, L, E>::accepts(t.model) && t.model.shape() == shape) {
             // the state stored component by component, lanes refilled from the queue
             let ends = match *self.method {
                 Method::Rk4 { dt } => Some(run_rk4_lanes::<O, E, N, D, L>(self.tasks, dt, self.observer, self.cancel)?),
@@ -789,7 +790,10 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pu
                             self.method,
                             &Held::default(),
                             [0.0; D],
-                            |c, slack| LanesRhs::<E, N, D, L>::new(ModelRhs::for_tasks(c, slack)),
+                            // lane-interleaved scalar code: the vector right-hand side lives in
+                            // the two SoA drivers only (each of its inlined copies costs build
+                            // time; Rodas4's cost is its Jacobian and LU, not the stages)
+                            |c, slack| ModelRhs::<f64, N, false, L>::for_tasks(c, slack),
                             &mut Renumbered { inner: &mut *self.observer, index: &index },
                             self.cancel,
                             &mut done,
@@ -815,7 +819,7 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pu
                 self.method,
                 &Held::default(),
                 [0.0; D],
-                |c, slack| LanesRhs::<E, N, D, L>::new(ModelRhs::for_tasks(c, slack)),
+                |c, slack| ModelRhs::<f64, N, false, L>::for_tasks(c, slack),
                 self.observer,
                 self.cancel,
                 self.out,

@@ -7,6 +7,7 @@
 
 use crate::declare::{check_domains, Domain, EffectDecl, EffectKind, ParamDecl};
 use crate::params::{table1, GRAVITY};
+use crate::real::Real;
 use crate::scalar::Scalar;
 
 /// Declares the catalogue once. `other` effects change the structure or Table 1 values and
@@ -90,6 +91,15 @@ macro_rules! effects {
                     $($(stringify!($field) => Some(self.$field),)*)*
                     _ => None,
                 }
+            }
+        }
+
+        impl<T: crate::lane_real::Lanewise<f64>> crate::lane_real::Lanewise<Effects> for Effects<T> {
+            fn splat(src: &Effects) -> Self {
+                Effects { $($($field: T::splat(&src.$field),)*)* }
+            }
+            fn set_lane(&mut self, i: usize, src: &Effects) {
+                $($(self.$field.set_lane(i, &src.$field);)*)*
             }
         }
 
@@ -316,7 +326,7 @@ impl<T: Scalar> Effects<T> {
 
 /// What the library forces read: the states they are functions of, at one instant.
 #[derive(Clone, Copy, Debug)]
-pub struct LibraryStates<T> {
+pub struct LibraryStates<T: Real> {
     /// main body and weight position [m] and velocity [m/s]
     pub x1: T,
     pub v1: T,
@@ -328,15 +338,15 @@ pub struct LibraryStates<T> {
     /// the friction force on the main body [N]
     pub ff: T,
     /// time [s]
-    pub t: f64,
+    pub t: T::Value,
     /// the velocity over which sgn v is smoothed (the Stribeck velocity) [m/s]
     pub vs: T,
 }
 
 /// |x| deciding the branch on the value (one-sided derivative at 0, as the friction law).
 #[inline(always)]
-fn magnitude<T: Scalar>(x: T) -> T {
-    if x.value() < 0.0 { -x } else { x }
+fn magnitude<T: Real>(x: T) -> T {
+    T::choose(x.below(0.0), || -x, || x)
 }
 
 impl<T: Scalar> Effects<T> {
@@ -355,7 +365,9 @@ impl<T: Scalar> Effects<T> {
         let on = |c: &[T]| c.iter().any(|x| !x.is_exactly(0.0));
         (on(&main), on(&weight))
     }
+}
 
+impl<T: Real> Effects<T> {
     /// The library force on the main body [N] (`library_force`'s term) and its partials with
     /// respect to [x1, v1, x2, v2, volt, dvolt, ff, t] (for the Jacobian).
     #[inline(always)]
@@ -364,17 +376,22 @@ impl<T: Scalar> Effects<T> {
         let (x1, v1) = (s.x1, s.v1);
         let th = (v1 / s.vs).tanh();
         let av = magnitude(v1);
-        let sg = if v1.value() < 0.0 { -T::one() } else { T::one() };
-        let (mut per, mut dper, mut modf) = (z, z, T::one() * self.lib_ff);
-        let mut dmod = z;
-        if self.lib_wavelength.value() > 0.0 {
-            let k = T::from(2.0 * std::f64::consts::PI) / self.lib_wavelength;
-            let (sn, cs) = ((k * x1).sin(), (k * x1).cos());
-            per = self.lib_sin * sn + self.lib_cos * cs;
-            dper = k * (self.lib_sin * cs - self.lib_cos * sn);
-            modf = modf + self.lib_ff_sin * sn + self.lib_ff_cos * cs;
-            dmod = k * (self.lib_ff_sin * cs - self.lib_ff_cos * sn);
-        }
+        let sg = T::choose(v1.below(0.0), || -T::one(), T::one);
+        let modf = T::one() * self.lib_ff;
+        let [per, dper, modf, dmod] = T::choose_n(
+            self.lib_wavelength.above(0.0),
+            || {
+                let k = T::from(2.0 * std::f64::consts::PI) / self.lib_wavelength;
+                let (sn, cs) = ((k * x1).sin(), (k * x1).cos());
+                [
+                    self.lib_sin * sn + self.lib_cos * cs,
+                    k * (self.lib_sin * cs - self.lib_cos * sn),
+                    modf + self.lib_ff_sin * sn + self.lib_ff_cos * cs,
+                    k * (self.lib_ff_sin * cs - self.lib_ff_cos * sn),
+                ]
+            },
+            || [z, z, modf, z],
+        );
         let f = self.lib_x1 * x1
             + self.lib_v1 * v1
             + self.lib_dx * (x1 - s.x2)
@@ -472,19 +489,19 @@ pub const SENSOR: usize = lag_following(LagInput::Position);
 
 /// Ground spring force on the main body [N].
 #[inline(always)]
-pub fn ground_spring_force<T: Scalar>(k_ground: T, x1: T) -> T {
+pub fn ground_spring_force<T: Real>(k_ground: T, x1: T) -> T {
     -k_ground * x1
 }
 
 /// Viscous drag on the weight [N].
 #[inline(always)]
-pub fn weight_drag<T: Scalar>(c_weight: T, v2: T) -> T {
+pub fn weight_drag<T: Real>(c_weight: T, v2: T) -> T {
     -c_weight * v2
 }
 
 /// First-order lag dy/dt = (u - y)/tau, used by the amplifier, the creep and the sensor.
 #[inline(always)]
-pub fn first_order_rate<T: Scalar>(u: T, y: T, inv_tau: T) -> T {
+pub fn first_order_rate<T: Real>(u: T, y: T, inv_tau: T) -> T {
     (u - y) * inv_tau
 }
 

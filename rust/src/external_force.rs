@@ -5,7 +5,8 @@
 //! like parameters (`sensitivity::Seed::ForceKnot`): the derivative of a run with respect to
 //! the force at each knot, which is what infers an unknown force from a recording.
 
-use crate::scalar::Scalar;
+use crate::lane_real::{LaneExp, Lanes, Lanewise};
+use crate::real::Real;
 use crate::waveform::PiecewiseLinear;
 
 /// Which body the force acts on.
@@ -67,25 +68,22 @@ impl ExternalForce {
     }
 }
 
-impl<T: Scalar> ExternalForce<T> {
+impl<const L: usize, E: LaneExp> Lanewise<ExternalForce> for ExternalForce<Lanes<L, E>> {
+    fn splat(x: &ExternalForce) -> Self {
+        ExternalForce { body: x.body, knots: x.knots.clone(), values: Lanewise::splat(&x.values) }
+    }
+    fn set_lane(&mut self, i: usize, x: &ExternalForce) {
+        // one body and one set of knot times in every lane (the lane gate's shape)
+        self.values.set_lane(i, &x.values);
+    }
+}
+
+impl<T: Real> ExternalForce<T> {
     /// The force [N] at time `t` [s] and its slope [N/s] there (0 outside the samples). The
     /// force is continuous, so at a knot either neighbouring piece gives the same value.
     #[inline]
-    pub fn at(&self, t: f64) -> (T, T) {
-        let ts = self.knots.times();
-        let last = ts.len() - 1;
-        if t <= ts[0] {
-            return (self.values[0], T::zero());
-        }
-        if t >= ts[last] {
-            return (self.values[last], T::zero());
-        }
-        // the piece [ts[j], ts[j+1]) holding t
-        let j = ts.partition_point(|&x| x <= t) - 1;
-        let span = ts[j + 1] - ts[j];
-        let w = (t - ts[j]) / span;
-        let (a, b) = (self.values[j], self.values[j + 1]);
-        (a + (b - a) * w, (b - a) / span)
+    pub fn at(&self, t: T::Value) -> (T, T) {
+        T::interpolate(&self.values, self.knots.times(), t)
     }
 
     /// The first knot after `t` [s] (infinity past the last): an adaptive step ends there.

@@ -2,13 +2,13 @@
 //! Bouc-Wen presliding force Fh driven by the asperity deformation g.
 
 use crate::params::Params;
-use crate::scalar::Scalar;
-use crate::scalar::sign0;
+use crate::lane_real::{LaneExp, Lanes, Lanewise};
+use crate::real::{Mask, Real};
 
 /// Leuven friction constants, precomputed once per run (`T` = f64, or a dual number when
 /// derivatives with respect to them are asked for).
 #[derive(Clone, Copy, Debug)]
-pub struct Leuven<T = f64> {
+pub struct Leuven<T: Real = f64> {
     fc: T,
     fs_minus_fc: T,
     inv_vs: T,
@@ -21,14 +21,14 @@ pub struct Leuven<T = f64> {
     sigma2: T,
     /// Direction asymmetry: Fc, Fs scaled by (1 + eps sgn v) (0 for the paper's model).
     eps: T,
-    /// no Stribeck peak and no derivative through one: the exp is skipped
-    no_peak: bool,
-    symmetric: bool,
-    delta_is_two: bool,
-    n_is_one: bool,
+    /// no Stribeck peak and no derivative through one: the exp is skipped (per lane)
+    no_peak: T::Mask,
+    symmetric: T::Mask,
+    delta_is_two: T::Mask,
+    n_is_one: T::Mask,
 }
 
-impl<T: Scalar> Leuven<T> {
+impl<T: Real> Leuven<T> {
     /// `normal_force` is passed explicitly so that effects (an incline) can change it.
     pub fn new(p: &Params<T>, normal_force: T, eps: T) -> Self {
         let fs_minus_fc = (p.mu_s - p.mu_k) * normal_force;
@@ -54,23 +54,24 @@ impl<T: Scalar> Leuven<T> {
     /// Stribeck curve S(v) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta) [N], times (1 + eps sgn v).
     #[inline(always)]
     pub fn stribeck(&self, v: T) -> T {
-        let s = if self.no_peak {
-            self.fc // no Stribeck peak (mu_s = mu_k): skip the exp
-        } else {
-            let x = v.abs() * self.inv_vs;
-            // (|v|/vs)^2 as a product: powf would be the most expensive call in the step
-            let e = if self.delta_is_two {
-                x * x
-            } else {
-                x.pow(self.delta)
-            };
-            self.fc + self.fs_minus_fc * (-e).exp()
-        };
-        if self.symmetric {
+        // no Stribeck peak (mu_s = mu_k): skip the exp (lanes: when no lane has a peak). Branches
+        // here are plain `if`s and selects, not closures (see `Real::select`).
+        let s = if self.no_peak.all() { self.fc } else { T::select(self.no_peak, self.fc, self.stribeck_curve(v)) };
+        if self.symmetric.all() {
             s
         } else {
-            s * (self.eps * sign0(v) + 1.0)
+            T::select(self.symmetric, s, s * (self.eps * v.sign0() + 1.0))
         }
+    }
+
+    /// Fc + (Fs - Fc) exp(-(|v|/vs)^delta) [N], the symmetric curve with its peak.
+    #[inline(always)]
+    fn stribeck_curve(&self, v: T) -> T {
+        let x = v.abs() * self.inv_vs;
+        // (|v|/vs)^2 as a product: powf would be the most expensive call in the step
+        let square = x * x;
+        let e = if self.delta_is_two.all() { square } else { T::select(self.delta_is_two, square, x.pow(self.delta)) };
+        self.fc + self.fs_minus_fc * (-e).exp()
     }
 
     /// (dg/dt [m/s], dFh/dt [N/s]) at main-body velocity `v` [m/s] and presliding force `fh` [N].
@@ -78,10 +79,11 @@ impl<T: Scalar> Leuven<T> {
     pub fn rates(&self, v: T, fh: T) -> (T, T) {
         let ratio = fh / self.stribeck(v);
         // eq. 6 written with |v| so that v = 0 needs no 0/0; for n = 1, sgn(Fh)|Fh/S| = Fh/S
-        let gdot = if self.n_is_one {
-            v - v.abs() * ratio
+        let linear = v - v.abs() * ratio;
+        let gdot = if self.n_is_one.all() {
+            linear
         } else {
-            v - v.abs() * sign0(fh) * ratio.abs().pow(self.n)
+            T::select(self.n_is_one, linear, v - v.abs() * fh.sign0() * ratio.abs().pow(self.n))
         };
         let fhdot = self.a * gdot - self.b * gdot.abs() * fh - self.c * gdot * fh.abs();
         (gdot, fhdot)
@@ -91,17 +93,13 @@ impl<T: Scalar> Leuven<T> {
     /// delta > 1; the one-sided slope is taken for delta <= 1).
     #[inline(always)]
     pub fn stribeck_slope(&self, v: T) -> T {
-        if self.no_peak || v.value() == 0.0 {
-            return T::zero();
-        }
-        let x = v.abs() * self.inv_vs;
-        let (e, de) = if self.delta_is_two {
-            (x * x, x * 2.0)
-        } else {
-            (x.pow(self.delta), self.delta * x.pow(self.delta - 1.0))
-        };
-        let ds = -self.fs_minus_fc * (-e).exp() * de * self.inv_vs * sign0(v);
-        ds * (self.eps * sign0(v) + 1.0)
+        T::choose(self.no_peak.or(v.equals(0.0)), T::zero, || {
+            let x = v.abs() * self.inv_vs;
+            let e = T::choose(self.delta_is_two, || x * x, || x.pow(self.delta));
+            let de = T::choose(self.delta_is_two, || x * 2.0, || self.delta * x.pow(self.delta - 1.0));
+            let ds = -self.fs_minus_fc * (-e).exp() * de * self.inv_vs * v.sign0();
+            ds * (self.eps * v.sign0() + 1.0)
+        })
     }
 
     /// The rates of [`Leuven::rates`] and their partial derivatives, for implicit integrators:
@@ -113,17 +111,14 @@ impl<T: Scalar> Leuven<T> {
         let s = self.stribeck(v);
         let ratio = fh / s;
         // gdot = v - |v| sgn(Fh) |Fh/S|^n
-        let (pow_n, pow_n1) = if self.n_is_one {
-            (ratio.abs(), T::one())
-        } else {
-            (ratio.abs().pow(self.n), self.n * ratio.abs().pow(self.n - 1.0))
-        };
+        let pow_n = T::choose(self.n_is_one, || ratio.abs(), || ratio.abs().pow(self.n));
+        let pow_n1 = T::choose(self.n_is_one, T::one, || self.n * ratio.abs().pow(self.n - 1.0));
         let dg_dfh = -v.abs() * pow_n1 / s;
-        let dg_dv = -pow_n * (sign0(v) * sign0(fh)) + 1.0 + v.abs() * pow_n1 * fh * self.stribeck_slope(v) / (s * s);
+        let dg_dv = -pow_n * (v.sign0() * fh.sign0()) + 1.0 + v.abs() * pow_n1 * fh * self.stribeck_slope(v) / (s * s);
         // dFh/dt = a gdot - b |gdot| Fh - c gdot |Fh|
-        let outer = self.a - self.b * sign0(gdot) * fh - self.c * fh.abs();
+        let outer = self.a - self.b * gdot.sign0() * fh - self.c * fh.abs();
         let dfh_dv = outer * dg_dv;
-        let dfh_dfh = outer * dg_dfh - self.b * gdot.abs() - self.c * gdot * sign0(fh);
+        let dfh_dfh = outer * dg_dfh - self.b * gdot.abs() - self.c * gdot * fh.sign0();
         [gdot, fhdot, dg_dv, dg_dfh, dfh_dv, dfh_dfh]
     }
 
@@ -132,6 +127,45 @@ impl<T: Scalar> Leuven<T> {
     #[inline(always)]
     pub fn force(&self, v: T, fh: T, gdot: T) -> T {
         (fh + self.sigma2 * v) + self.sigma1 * gdot
+    }
+}
+
+impl<const L: usize, E: LaneExp> Lanewise<Leuven> for Leuven<Lanes<L, E>> {
+    fn splat(m: &Leuven) -> Self {
+        Leuven {
+            fc: Lanewise::splat(&m.fc),
+            fs_minus_fc: Lanewise::splat(&m.fs_minus_fc),
+            inv_vs: Lanewise::splat(&m.inv_vs),
+            delta: Lanewise::splat(&m.delta),
+            n: Lanewise::splat(&m.n),
+            a: Lanewise::splat(&m.a),
+            b: Lanewise::splat(&m.b),
+            c: Lanewise::splat(&m.c),
+            sigma1: Lanewise::splat(&m.sigma1),
+            sigma2: Lanewise::splat(&m.sigma2),
+            eps: Lanewise::splat(&m.eps),
+            no_peak: Lanewise::splat(&m.no_peak),
+            symmetric: Lanewise::splat(&m.symmetric),
+            delta_is_two: Lanewise::splat(&m.delta_is_two),
+            n_is_one: Lanewise::splat(&m.n_is_one),
+        }
+    }
+    fn set_lane(&mut self, i: usize, m: &Leuven) {
+        self.fc.set_lane(i, &m.fc);
+        self.fs_minus_fc.set_lane(i, &m.fs_minus_fc);
+        self.inv_vs.set_lane(i, &m.inv_vs);
+        self.delta.set_lane(i, &m.delta);
+        self.n.set_lane(i, &m.n);
+        self.a.set_lane(i, &m.a);
+        self.b.set_lane(i, &m.b);
+        self.c.set_lane(i, &m.c);
+        self.sigma1.set_lane(i, &m.sigma1);
+        self.sigma2.set_lane(i, &m.sigma2);
+        self.eps.set_lane(i, &m.eps);
+        self.no_peak.set_lane(i, &m.no_peak);
+        self.symmetric.set_lane(i, &m.symmetric);
+        self.delta_is_two.set_lane(i, &m.delta_is_two);
+        self.n_is_one.set_lane(i, &m.n_is_one);
     }
 }
 

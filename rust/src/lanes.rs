@@ -1,152 +1,68 @@
-//! The right-hand side of `L` plain models at once, as vector arithmetic: every quantity of the
-//! physics is an `[f64; L]` (one value per lane) and every operation a loop over the lanes that
-//! the compiler turns into SIMD instructions of the width the processor has (the caller runs it
-//! under `pulp`'s runtime dispatch, see `drive.rs`). The arithmetic per lane is that of
-//! `Model::rhs_impl` operation for operation, so a lane's result is bitwise that of the scalar
-//! model; the one exception is `exp`, which is the C library's per lane by default ([`LibmExp`],
-//! bitwise) or a vectorised polynomial ([`PolyExp`], within 2 ulp; see `fast_exp`).
+//! `L` plain models at once: one [`Model`] over [`Lanes`] (`lane_real.rs`), whose right-hand
+//! side is the scalar model's own code (`Model::rhs_impl`) with every number a vector of lanes,
+//! so a lane's result is bitwise the scalar model's (with [`LibmExp`]; [`PolyExp`] within 2 ulp
+//! per exp). The lane drivers (`lanes_rk4.rs`, `lanes_dopri5.rs`) keep the state component by
+//! component (`y[j][i]`: component j of lane i), the layout the vector instructions want, and
+//! run under `pulp`'s runtime dispatch (`drive.rs`).
 //!
-//! Supported: plain states (nodes, g, Fh, h) of the piezo-driven IDM with the effects that add
-//! no state (incline, load, a spring to ground, weight drag, friction asymmetry), piezo
-//! hysteresis on or off, `fric_n = 1` and a Stribeck exponent of 2 (or no Stribeck peak) in every
-//! lane. Anything else runs lane by lane through the scalar model ([`PlainLanes::new`] says so
-//! by returning `None`).
+//! Which models run on lanes is [`PlainLanes::accepts`]: a plain state (nodes, g, Fh, h: what
+//! the drivers' fixed-size state holds) and no sampled external force (the lane drivers do not
+//! end steps at its knots); the models of one group share a [`Shape`](crate::model::Shape).
+//! Anything else runs lane by lane through the scalar model.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::drive::{LaneInputs, ModelRhs, Observer, Task};
-use crate::fast_exp::exp_poly;
-use crate::mechanics::Actuator;
+pub use crate::lane_real::{LaneExp, Lanes, LibmExp, PolyExp};
+use crate::lane_real::Lanewise;
 use crate::model::Model;
 use crate::stepper::{Rhs, State};
 
-/// How a lane's `exp` is computed.
-pub trait LaneExp: Copy + Send + Sync + 'static {
-    fn exp(x: f64) -> f64;
-}
-
-/// The C library's `exp`, one lane at a time: bitwise the scalar model's.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct LibmExp;
-impl LaneExp for LibmExp {
-    #[inline(always)]
-    fn exp(x: f64) -> f64 {
-        x.exp()
-    }
-}
-
-/// A branch-free polynomial `exp` that vectorises (see `fast_exp`).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct PolyExp;
-impl LaneExp for PolyExp {
-    #[inline(always)]
-    fn exp(x: f64) -> f64 {
-        exp_poly(x)
-    }
-}
-
-/// `[f64; L]` per quantity; `N` nodes.
+/// `L` plain models of one shape with `N` nodes as one model over lanes.
 #[derive(Clone, Debug)]
-pub struct PlainLanes<const N: usize, const L: usize> {
-    kp: [f64; L],
-    d33: [f64; L],
-    fc: [f64; L],
-    fs_minus_fc: [f64; L],
-    inv_vs: [f64; L],
-    a: [f64; L],
-    b: [f64; L],
-    c: [f64; L],
-    sigma1: [f64; L],
-    sigma2: [f64; L],
-    eps: [f64; L],
-    hyst: [[f64; L]; 3],
-    f_constant: [f64; L],
-    k_ground: [f64; L],
-    c_weight: [f64; L],
-    minv_k: [[[f64; L]; N]; N],
-    minv_c: [[[f64; L]; N]; N],
-    minv_main: [[f64; L]; N],
-    minv_weight: [[f64; L]; N],
-    /// some lane has piezo hysteresis / asymmetric friction (else those terms are skipped, as
-    /// the scalar model skips them)
-    any_hysteresis: bool,
-    asymmetric: [bool; L],
-    any_asymmetric: bool,
-    hysteresis_on: [bool; L],
+pub struct PlainLanes<const N: usize, const L: usize, E: LaneExp = LibmExp> {
+    model: Model<Lanes<L, E>>,
 }
 
-impl<const N: usize, const L: usize> PlainLanes<N, L> {
-    /// Whether the vector path computes `m` exactly as the scalar model does (see the module's
-    /// documentation).
+impl<const N: usize, const L: usize, E: LaneExp> PlainLanes<N, L, E> {
+    /// Whether the lane drivers run `m`: a plain state of `N` nodes, no sampled external force.
     pub fn accepts(m: &Model) -> bool {
-        let f = m.friction.constants();
-        let (fs_fc, delta, n) = (f[1], f[3], f[4]);
-        m.is_plain()
-            && m.external.is_none()
-            && m.library == (false, false)
-            && m.layout.dof == N
-            && matches!(m.actuator, Actuator::Piezo(_))
-            && n == 1.0
-            && (fs_fc == 0.0 || delta == 2.0)
+        m.is_plain() && m.external.is_none() && m.layout.dof == N
     }
 
-    /// The lanes' constants, or `None` when some model is outside what the vector path computes
-    /// exactly like the scalar model.
+    /// The lanes of `models`, or `None` when one is not accepted or the shapes differ.
     pub fn new(models: &[&Model; L]) -> Option<Self> {
-        if !models.iter().all(|m| Self::accepts(m)) {
+        let shape = models[0].shape();
+        if !models.iter().all(|m| Self::accepts(m) && m.shape() == shape) {
             return None;
         }
-        let mut p = Self::zeroed();
-        for (i, m) in models.iter().enumerate() {
+        let mut p = PlainLanes { model: Lanewise::splat(models[0]) };
+        for (i, m) in models.iter().enumerate().skip(1) {
             p.set(i, m);
         }
         Some(p)
     }
 
-    fn zeroed() -> Self {
-        let z = [0.0; L];
-        PlainLanes {
-            kp: z, d33: z, fc: z, fs_minus_fc: z, inv_vs: z, a: z, b: z, c: z, sigma1: z, sigma2: z, eps: z,
-            hyst: [z; 3], f_constant: z, k_ground: z, c_weight: z,
-            minv_k: [[z; N]; N], minv_c: [[z; N]; N], minv_main: [z; N], minv_weight: [z; N],
-            any_hysteresis: false, asymmetric: [false; L], any_asymmetric: false, hysteresis_on: [false; L],
-        }
+    /// Whether `m` can join these lanes (accepted, and of their shape).
+    pub fn admits(&self, m: &Model) -> bool {
+        Self::accepts(m) && m.shape() == self.model.shape()
     }
 
-    /// Put model `m` (which [`PlainLanes::accepts`]) on lane `i`.
-    pub fn set(&mut self, i: usize, m: &Model) {
-        debug_assert!(Self::accepts(m));
-        let f = m.friction.constants();
-        (self.fc[i], self.fs_minus_fc[i], self.inv_vs[i]) = (f[0], f[1], f[2]);
-        (self.a[i], self.b[i], self.c[i]) = (f[5], f[6], f[7]);
-        (self.sigma1[i], self.sigma2[i], self.eps[i]) = (f[8], f[9], f[10]);
-        let h = m.hysteresis.map_or([0.0; 3], |h| h.constants());
-        for k in 0..3 {
-            self.hyst[k][i] = h[k];
-        }
-        self.hysteresis_on[i] = m.hysteresis.is_some();
-        self.asymmetric[i] = f[10] != 0.0;
-        self.any_hysteresis = self.hysteresis_on.iter().any(|h| *h);
-        self.any_asymmetric = self.asymmetric.iter().any(|a| *a);
-        (self.kp[i], self.d33[i], self.f_constant[i]) = (m.kp, m.d33, m.f_constant);
-        (self.k_ground[i], self.c_weight[i]) = (m.effect_values.k_ground, m.effect_values.c_weight);
-        for r in 0..N {
-            for c in 0..N {
-                self.minv_k[r][c][i] = m.mech.minv_k[r * N + c];
-                self.minv_c[r][c][i] = m.mech.minv_c[r * N + c];
-            }
-            self.minv_main[r][i] = m.mech.minv_main[r];
-            self.minv_weight[r][i] = m.mech.minv_weight[r];
-        }
-    }
-
-    /// dy/dt of every lane at commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s], the lanes'
-    /// states stored lane by lane (`S` an array of 2 N + 3 components, for the compiler to see
-    /// the size): transposed to and from [`PlainLanes::rhs_soa`]. Returns each lane's
-    /// (Ff [N], dg/dt [m/s]), as `Model::rhs_impl` does.
+    /// Put model `m` (which [`PlainLanes::admits`]) on lane `i`.
     #[inline(always)]
-    pub fn rhs<E: LaneExp, S: State<Elem = f64>, const D: usize>(
+    pub fn set(&mut self, i: usize, m: &Model) {
+        debug_assert!(self.admits(m));
+        self.model.set_lane(i, m);
+    }
+
+    /// dy/dt of every lane at times `t` [s], commanded voltage `v_cmd` [V] rising at `dv_cmd`
+    /// [V/s], the lanes' states stored lane by lane (`S` an array of D = 2 N + 3 components):
+    /// transposed to and from [`PlainLanes::rhs_soa`]. Returns each lane's (Ff [N], dg/dt
+    /// [m/s]), as `Model::rhs_impl` does.
+    #[inline(always)]
+    pub fn rhs<S: State<Elem = f64>, const D: usize>(
         &self,
+        t: &[f64; L],
         v_cmd: &[f64; L],
         dv_cmd: &[f64; L],
         ys: &[S; L],
@@ -154,7 +70,7 @@ impl<const N: usize, const L: usize> PlainLanes<N, L> {
     ) -> ([f64; L], [f64; L]) {
         let y: [[f64; L]; D] = std::array::from_fn(|j| std::array::from_fn(|i| ys[i].as_ref()[j]));
         let mut dy = [[0.0; L]; D];
-        let out = self.rhs_soa::<E, D>(v_cmd, dv_cmd, &y, &mut dy);
+        let out = self.rhs_soa::<D>(t, v_cmd, dv_cmd, &y, &mut dy);
         for i in 0..L {
             let d = dys[i].as_mut();
             for j in 0..D {
@@ -165,86 +81,25 @@ impl<const N: usize, const L: usize> PlainLanes<N, L> {
     }
 
     /// [`PlainLanes::rhs`] on states stored component by component: `y[j][i]` is component j
-    /// of lane i (the layout the vector instructions want).
+    /// of lane i. The model's own right-hand side, over lanes.
     #[inline(always)]
-    pub fn rhs_soa<E: LaneExp, const D: usize>(
+    pub fn rhs_soa<const D: usize>(
         &self,
+        t: &[f64; L],
         v_cmd: &[f64; L],
         dv_cmd: &[f64; L],
         y: &[[f64; L]; D],
         dy: &mut [[f64; L]; D],
     ) -> ([f64; L], [f64; L]) {
-        let (ig, ifh, ih) = (2 * N, 2 * N + 1, 2 * N + 2);
-        let (h, fh) = (&y[ih], &y[ifh]);
-        let v0 = &y[N];
-        let mut out_h = [0.0; L];
-        if self.any_hysteresis {
-            let [ap, bp, cp] = &self.hyst;
-            for i in 0..L {
-                let dv = dv_cmd[i];
-                let r = ap[i] * dv - bp[i] * dv.abs() * h[i] - cp[i] * dv * h[i].abs();
-                out_h[i] = if self.hysteresis_on[i] { r } else { 0.0 };
-            }
-        }
-        let mut fp = [0.0; L];
-        for i in 0..L {
-            // piezo_force with xc = 0, in the scalar model's order: kp ((d33 V + 0) - h)
-            fp[i] = self.kp[i] * ((self.d33[i] * v_cmd[i] + 0.0) - h[i]);
-        }
-        // friction: the Stribeck curve, then the Bouc-Wen rates (Leuven::rates, fric_n = 1)
-        let mut e = [0.0; L];
-        for i in 0..L {
-            let x = v0[i].abs() * self.inv_vs[i];
-            e[i] = -(x * x);
-        }
-        // the exps in a loop of their own: a library call per lane then has no vector
-        // registers live across it to save (PolyExp vectorises either way)
-        for x in e.iter_mut() {
-            *x = E::exp(*x);
-        }
-        let mut s = [0.0; L];
-        for i in 0..L {
-            let curve = self.fc[i] + self.fs_minus_fc[i] * e[i];
-            // a lane without a peak: fc exactly, as the scalar model's shortcut
-            s[i] = if self.fs_minus_fc[i] == 0.0 { self.fc[i] } else { curve };
-        }
-        if self.any_asymmetric {
-            for i in 0..L {
-                let sg = if v0[i] > 0.0 { 1.0 } else if v0[i] < 0.0 { -1.0 } else { 0.0 };
-                let scaled = s[i] * (self.eps[i] * sg + 1.0);
-                s[i] = if self.asymmetric[i] { scaled } else { s[i] };
-            }
-        }
-        let (mut gdot, mut ff) = ([0.0; L], [0.0; L]);
-        for i in 0..L {
-            let ratio = fh[i] / s[i];
-            let g = v0[i] - v0[i].abs() * ratio;
-            gdot[i] = g;
-            dy[ifh][i] = self.a[i] * g - self.b[i] * g.abs() * fh[i] - self.c[i] * g * fh[i].abs();
-            ff[i] = (fh[i] + self.sigma2[i] * v0[i]) + self.sigma1[i] * g;
-        }
-        let (mut f_main, mut f_weight) = ([0.0; L], [0.0; L]);
-        for i in 0..L {
-            let f_ext_main = self.f_constant[i] + -self.k_ground[i] * y[0][i];
-            let f_ext_weight = -self.c_weight[i] * y[2 * N - 1][i];
-            f_main[i] = (fp[i] + f_ext_main) - ff[i];
-            f_weight[i] = f_ext_weight + -fp[i];
-        }
-        for r in 0..N {
-            for i in 0..L {
-                let mut a = 0.0;
-                for c in 0..N {
-                    a -= self.minv_k[r][c][i] * y[c][i] + self.minv_c[r][c][i] * y[N + c][i];
-                }
-                dy[N + r][i] = a + self.minv_weight[r][i] * f_weight[i] + self.minv_main[r][i] * f_main[i];
-            }
-        }
-        for j in 0..N {
-            dy[j] = y[N + j];
-        }
-        dy[ig] = gdot;
-        dy[ih] = out_h;
-        (ff, gdot)
+        // the plain state: rhs_impl writes every one of the D components
+        let (ff, gdot) = self.model.rhs_impl::<N, false>(
+            Lanes::new(*t),
+            Lanes::new(*v_cmd),
+            Lanes::new(*dv_cmd),
+            Lanes::view(y),
+            Lanes::view_mut(dy),
+        );
+        (ff.0, gdot.0)
     }
 }
 
@@ -254,7 +109,7 @@ impl<const N: usize, const L: usize> PlainLanes<N, L> {
 /// nodes, `D` = 2 N + 3 state components, `L` lanes.
 pub struct LanesRhs<'a, E: LaneExp, const N: usize, const D: usize, const L: usize> {
     pub inner: ModelRhs<'a, f64, N, false, L>,
-    lanes: Option<PlainLanes<N, L>>,
+    lanes: Option<PlainLanes<N, L, E>>,
     _exp: std::marker::PhantomData<E>,
 }
 
@@ -299,8 +154,9 @@ impl<E: LaneExp, const N: usize, const D: usize, const L: usize> Rhs<f64> for La
             dys.as_mut_slice().try_into().expect("lane count"),
             active.as_slice().try_into().expect("lane count"),
         );
+        let t: [f64; L] = std::array::from_fn(|i| self.inner.t0[i] + tau[i]);
         let v_cmd: [f64; L] = std::array::from_fn(|i| self.inner.v0[i] + self.inner.slope[i] * tau[i]);
-        let (ff, gdot) = p.rhs::<E, S, D>(&v_cmd, &self.inner.slope, ys, dys);
+        let (ff, gdot) = p.rhs::<S, D>(&t, &v_cmd, &self.inner.slope, ys, dys);
         for i in 0..L {
             if active[i] && tau[i] == 0.0 {
                 self.inner.at_start[i] = (ff[i], gdot[i]);
@@ -395,11 +251,11 @@ pub(crate) enum Queue {
 /// Every [`CANCEL_CHECK_ATTEMPTS`] attempts it also looks at `cancel`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn refill_lanes<Sl, O: Observer, const N: usize, const D: usize, const L: usize>(
+pub(crate) fn refill_lanes<Sl, O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize>(
     tasks: &[Task],
     next: &mut usize,
     slots: &mut [Option<Sl>; L],
-    p: &mut PlainLanes<N, L>,
+    p: &mut PlainLanes<N, L, E>,
     y: &mut [[f64; L]; D],
     observer: &mut O,
     attempts: &mut usize,
@@ -444,9 +300,14 @@ mod tests {
         fn step(&mut self, _: usize, _: f64, _: f64, _: &[f64], _: f64, _: Option<(f64, f64)>, _: bool) {}
     }
 
-    /// Eleven devices that differ in every constant the vector path reads, with hysteresis on
-    /// some and effects that add no state on others.
+    /// Eleven devices that differ in every constant the physics reads — Stribeck peak or none,
+    /// Stribeck exponent, Bouc-Wen exponent, direction asymmetry, effects that add no state —
+    /// of one shape (piezo hysteresis off; see `models_with`).
     fn models(structure: Structure) -> Vec<Model> {
+        models_with(structure, false)
+    }
+
+    fn models_with(structure: Structure, hysteresis: bool) -> Vec<Model> {
         (0..11)
             .map(|k| {
                 let f = 1.0 + 0.07 * k as f64;
@@ -456,8 +317,15 @@ mod tests {
                 p.sigma1 *= f;
                 p.fric_alpha *= f;
                 p.d33 *= 2.0 - f.sqrt();
+                p.hyst_alpha *= f;
                 if k == 3 {
                     p.mu_s = p.mu_k; // no Stribeck peak
+                }
+                if k == 6 {
+                    p.stribeck_exponent = 1.5; // a power per lane, not the square
+                }
+                if k == 8 {
+                    p.fric_n = 1.3;
                 }
                 let mut e = Effects::default();
                 if k % 4 == 1 {
@@ -467,7 +335,7 @@ mod tests {
                 if k % 5 == 2 {
                     e.eps = 0.05;
                 }
-                Model::new(p, e, structure, k % 3 == 0, false).unwrap()
+                Model::new(p, e, structure, hysteresis, false).unwrap()
             })
             .collect()
     }
@@ -495,8 +363,8 @@ mod tests {
     #[test]
     fn vector_lanes_are_bitwise_the_scalar_model_with_and_without_simd() {
         let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
-        for structure in [Structure::Lps, Structure::Dps(4)] {
-            let ms = models(structure);
+        for (structure, hysteresis) in [(Structure::Lps, false), (Structure::Lps, true), (Structure::Dps(4), true)] {
+            let ms = models_with(structure, hysteresis);
             let n = ms[0].layout.dof;
             let group: [&Model; 8] = std::array::from_fn(|i| &ms[i]);
             assert!(PlainLanes::<2, 8>::new(&group).is_some() || n != 2);
@@ -617,15 +485,52 @@ mod tests {
     }
 
     #[test]
-    fn groups_the_vector_path_cannot_compute_exactly_run_lane_by_lane() {
+    fn models_of_another_shape_run_lane_by_lane() {
+        // hysteresis on and off are two shapes (a state the other lacks the physics of); a
+        // Stribeck exponent other than 2 is only a value
         let mut p = Params::paper();
         p.stribeck_exponent = 1.5;
         let odd = Model::new(p, Effects::default(), Structure::Lps, false, false).unwrap();
         let plain = Model::new(Params::paper(), Effects::default(), Structure::Lps, false, false).unwrap();
-        assert!(PlainLanes::<2, 2>::new(&[&plain, &plain]).is_some());
-        assert!(PlainLanes::<2, 2>::new(&[&plain, &odd]).is_none());
-        let ms = vec![plain.clone(), odd.clone(), plain, odd];
+        let hyst = Model::new(Params::paper(), Effects::default(), Structure::Lps, true, false).unwrap();
+        assert!(PlainLanes::<2, 2>::new(&[&plain, &odd]).is_some());
+        assert!(PlainLanes::<2, 2>::new(&[&plain, &hyst]).is_none());
+        let mut e = Effects::default();
+        e.tau_sensor = 1e-5; // a lag: not a plain state
+        let lagged = Model::new(Params::paper(), e, Structure::Lps, false, false).unwrap();
+        assert!(!PlainLanes::<2, 2>::accepts(&lagged));
+        let ms = vec![plain.clone(), hyst.clone(), odd, hyst, plain, lagged];
         let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
         assert_eq!(run(&ms, &wave, true), run(&ms, &wave, false));
+    }
+
+    #[test]
+    fn library_forces_on_vector_lanes_are_bitwise_the_scalar_model() {
+        // every library term, with time and position in it: each lane reads its own clock
+        let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
+        let ms: Vec<Model> = models(Structure::Lps)
+            .into_iter()
+            .enumerate()
+            .map(|(k, m)| {
+                let mut e = m.effects;
+                let f = 1.0 + 0.1 * k as f64;
+                (e.lib_x1sq, e.lib_sin, e.lib_wavelength, e.lib_ff_cos) = (1e6 * f, 0.05 * f, 20e-6 * f, 0.02);
+                (e.lib_t, e.lib_abs, e.libw_sgn, e.libw_vv) = (0.5 * f, 0.3, 0.01 * f, 2.0);
+                if k == 4 {
+                    e.lib_wavelength = 0.0; // no periodic term in this lane
+                }
+                Model::new(m.params, e, Structure::Lps, false, false).unwrap()
+            })
+            .collect();
+        let group: [&Model; 8] = std::array::from_fn(|i| &ms[i]);
+        assert!(PlainLanes::<2, 8>::new(&group).is_some());
+        let reference = run(&ms, &wave, false);
+        for level in ["scalar", "avx2"] {
+            set_simd_level(level);
+            assert_eq!(run(&ms, &wave, true), reference, "{level}");
+        }
+        set_simd_level("avx2");
+        let plain = run(&models(Structure::Lps), &wave, false);
+        assert!(reference.iter().zip(&plain).all(|(a, b)| a[0] != b[0]), "the library forces act");
     }
 }

@@ -67,7 +67,7 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
     if tasks.is_empty() {
         return Some(Vec::new());
     }
-    let mut p = PlainLanes::<N, L>::new(&[tasks[0].model; L]).expect("tasks the vector path accepts");
+    let mut p = PlainLanes::<N, L, E2>::new(&[tasks[0].model; L]).expect("tasks the vector path accepts");
     let mut slots: [Option<Slot>; L] = std::array::from_fn(|_| None);
     let mut y = [[0.0; L]; D];
     let mut k = [[[0.0; L]; D]; 7];
@@ -105,7 +105,7 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
             Queue::Cancelled => return None,
         }
         // each lane's input, segment end and step (drive.rs, then Dopri5::attempt)
-        let (mut v0, mut slope, mut step) = ([0.0; L], [0.0; L], [0.0; L]);
+        let (mut t0, mut v0, mut slope, mut step) = ([0.0; L], [0.0; L], [0.0; L], [0.0; L]);
         let (mut end, mut last, mut fresh) = ([0.0; L], [false; L], [false; L]);
         for i in 0..L {
             let Some(s) = &mut slots[i] else { continue };
@@ -115,32 +115,69 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
             }
             end[i] = s.cursor.next_breakpoint(task.wave, s.t).min(task.t_end);
             (v0[i], slope[i]) = s.cursor.input(task.wave, s.t, s.t);
+            t0[i] = s.t;
             fresh[i] = s.fresh;
             s.fresh = false;
             let h = s.h;
             last[i] = end[i] - (s.t + h) < 1e-3 * h;
             step[i] = if last[i] { end[i] - s.t } else { h };
         }
-        let v_at = |tau: &[f64; L]| -> [f64; L] { std::array::from_fn(|i| v0[i] + slope[i] * tau[i]) };
-        if fresh.iter().any(|f| *f) {
-            let mut k0 = [[0.0; L]; D];
-            p.rhs_soa::<E2, D>(&v_at(&[0.0; L]), &slope, &y, &mut k0);
-            for j in 0..D {
-                for i in 0..L {
-                    if fresh[i] {
-                        k[0][j][i] = k0[j][i];
+        // plain loops, not array::from_fn (see lanes_rk4.rs)
+        let v_at = |tau: &[f64; L]| -> [f64; L] {
+            let mut v = v0;
+            for i in 0..L {
+                v[i] += slope[i] * tau[i];
+            }
+            v
+        };
+        let t_at = |tau: &[f64; L]| -> [f64; L] {
+            let mut t = t0;
+            for i in 0..L {
+                t[i] += tau[i];
+            }
+            t
+        };
+        // the stages through one call site, so the right-hand side is inlined once (the first,
+        // k0, only where a lane starts fresh; the last, k6, at the candidate: FSAL)
+        let any_fresh = fresh.iter().any(|f| *f);
+        let mut k0 = [[0.0; L]; D];
+        for st in 0..7 {
+            if st == 0 && !any_fresh {
+                continue;
+            }
+            let (tau, src, dst): ([f64; L], &[[f64; L]; D], &mut [[f64; L]; D]) = match st {
+                0 => ([0.0; L], &y, &mut k0),
+                6 => {
+                    combine(&mut y_new, &y, &step, &B, &k);
+                    (step, &y_new, &mut k[6])
+                }
+                _ => {
+                    let a: &[f64] = match st {
+                        1 => &A2,
+                        2 => &A3,
+                        3 => &A4,
+                        4 => &A5,
+                        _ => &A6,
+                    };
+                    combine(&mut tmp, &y, &step, a, &k);
+                    let mut tau = step;
+                    for x in tau.iter_mut() {
+                        *x *= C[st];
+                    }
+                    (tau, &tmp, &mut k[st])
+                }
+            };
+            p.rhs_soa::<D>(&t_at(&tau), &v_at(&tau), &slope, src, dst);
+            if st == 0 {
+                for j in 0..D {
+                    for i in 0..L {
+                        if fresh[i] {
+                            k[0][j][i] = k0[j][i];
+                        }
                     }
                 }
             }
         }
-        for (s, a) in [(1usize, &A2[..]), (2, &A3[..]), (3, &A4[..]), (4, &A5[..]), (5, &A6[..])] {
-            combine(&mut tmp, &y, &step, a, &k);
-            let tau: [f64; L] = std::array::from_fn(|i| C[s] * step[i]);
-            let (ks, _) = k.split_at_mut(s + 1);
-            p.rhs_soa::<E2, D>(&v_at(&tau), &slope, &tmp, &mut ks[s]);
-        }
-        combine(&mut y_new, &y, &step, &B, &k);
-        p.rhs_soa::<E2, D>(&v_at(&step), &slope, &y_new, &mut k[6]);
         let err = error_norms(&y, &y_new, &k, &scale, &step, rtol, atol);
         for i in 0..L {
             let Some(s) = &mut slots[i] else { continue };

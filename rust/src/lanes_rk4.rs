@@ -48,7 +48,7 @@ pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, co
     if tasks.is_empty() {
         return Some(Vec::new());
     }
-    let mut p = PlainLanes::<N, L>::new(&[tasks[0].model; L]).expect("tasks the vector path accepts");
+    let mut p = PlainLanes::<N, L, E>::new(&[tasks[0].model; L]).expect("tasks the vector path accepts");
     let mut y = [[0.0; L]; D];
     let mut slots: [Option<Slot>; L] = [None; L];
     let mut next = 0usize;
@@ -77,24 +77,53 @@ pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, co
             Queue::Cancelled => return None,
         }
         // each lane's input over the step: V = v0 + slope tau (breakpoints on step boundaries)
-        let (mut v0, mut slope) = ([0.0; L], [0.0; L]);
+        let (mut t0, mut v0, mut slope) = ([0.0; L], [0.0; L], [0.0; L]);
         for i in 0..L {
             if let Some(s) = &mut slots[i] {
                 let wave = tasks[s.task].wave;
-                let t0 = s.k as f64 * dt;
-                let probe = t0 + 0.5 * dt;
+                t0[i] = s.k as f64 * dt;
+                let probe = t0[i] + 0.5 * dt;
                 s.cursor.advance(wave, probe);
-                (v0[i], slope[i]) = s.cursor.input(wave, t0, probe);
+                (v0[i], slope[i]) = s.cursor.input(wave, t0[i], probe);
             }
         }
-        let v_at = |tau: f64| -> [f64; L] { std::array::from_fn(|i| v0[i] + slope[i] * tau) };
-        let (ff, gdot) = p.rhs_soa::<E, D>(&v_at(0.0), &slope, &y, &mut k1);
-        stage(&mut tmp, &y, h2, &k1);
-        p.rhs_soa::<E, D>(&v_at(h2), &slope, &tmp, &mut k2);
-        stage(&mut tmp, &y, h2, &k2);
-        p.rhs_soa::<E, D>(&v_at(h2), &slope, &tmp, &mut k3);
-        stage(&mut tmp, &y, dt, &k3);
-        p.rhs_soa::<E, D>(&v_at(dt), &slope, &tmp, &mut k4);
+        // plain loops, not array::from_fn: a call the compiler leaves out of line runs as
+        // baseline code (see `Real::select`)
+        let v_at = |tau: f64| -> [f64; L] {
+            let mut v = v0;
+            for i in 0..L {
+                v[i] += slope[i] * tau;
+            }
+            v
+        };
+        let t_at = |tau: f64| -> [f64; L] {
+            let mut t = t0;
+            for x in t.iter_mut() {
+                *x += tau;
+            }
+            t
+        };
+        // the four stages through one call site, so the right-hand side is inlined once
+        let (mut ff, mut gdot) = ([0.0; L], [0.0; L]);
+        for st in 0..4 {
+            let tau = [0.0, h2, h2, dt][st];
+            let (src, dst) = match st {
+                0 => (&y, &mut k1),
+                1 => (&tmp, &mut k2),
+                2 => (&tmp, &mut k3),
+                _ => (&tmp, &mut k4),
+            };
+            let out = p.rhs_soa::<D>(&t_at(tau), &v_at(tau), &slope, src, dst);
+            match st {
+                0 => {
+                    (ff, gdot) = out;
+                    stage(&mut tmp, &y, h2, &k1);
+                }
+                1 => stage(&mut tmp, &y, h2, &k2),
+                2 => stage(&mut tmp, &y, dt, &k3),
+                _ => {}
+            }
+        }
         for j in 0..D {
             for i in 0..L {
                 y[j][i] += (k1[j][i] + (k2[j][i] + k3[j][i]) * 2.0 + k4[j][i]) * h6;

@@ -7,6 +7,8 @@ use crate::effects::Effects;
 use crate::params::Params;
 use crate::piezo::PiezoElement;
 use crate::rig::RigDrive;
+use crate::lane_real::{LaneExp, Lanes, Lanewise};
+use crate::real::Real;
 use crate::scalar::Scalar;
 use nalgebra::{ComplexField, DMatrix};
 
@@ -21,13 +23,13 @@ pub trait Actuation {
     fn supported_mass<T: Scalar>(&self, p: &Params<T>) -> T;
     /// Forces [N] on the main body and on the last node, given the piezo force `fp` [N], the
     /// input `u` rising at `du`, and the main body at `x` [m] moving at `v` [m/s].
-    fn forces<T: Scalar>(&self, fp: T, u: T, du: T, x: T, v: T) -> (T, T);
+    fn forces<T: Real>(&self, fp: T, u: T, du: T, x: T, v: T) -> (T, T);
     /// Partials of [`Actuation::forces`] at fixed du/dt: [d f_main/d fp, d f_last/d fp,
     /// d f_main/du, d f_main/dx, d f_main/dv].
     fn force_partials<T: Scalar>(&self, u: T, x: T, v: T) -> [f64; 5];
     /// Power [W] the actuation puts in, its force on the main body being `f_main` [N], with
     /// the main body and the last node at `v_main`, `v_last` [m/s].
-    fn power<T: Scalar>(&self, f_main: T, v_main: T, v_last: T) -> T;
+    fn power<T: Real>(&self, f_main: T, v_main: T, v_last: T) -> T;
     /// Partials of [`Actuation::power`]: [d/d f_main, d/d v_main, d/d v_last].
     fn power_partials<T: Scalar>(&self, f_main: T, v_main: T, v_last: T) -> [T; 3];
 }
@@ -56,7 +58,7 @@ impl Actuation for Actuator {
         each_actuator!(self, a => a.supported_mass(p))
     }
     #[inline(always)]
-    fn forces<T: Scalar>(&self, fp: T, u: T, du: T, x: T, v: T) -> (T, T) {
+    fn forces<T: Real>(&self, fp: T, u: T, du: T, x: T, v: T) -> (T, T) {
         each_actuator!(self, a => a.forces(fp, u, du, x, v))
     }
     #[inline(always)]
@@ -64,7 +66,7 @@ impl Actuation for Actuator {
         each_actuator!(self, a => a.force_partials(u, x, v))
     }
     #[inline(always)]
-    fn power<T: Scalar>(&self, f_main: T, v_main: T, v_last: T) -> T {
+    fn power<T: Real>(&self, f_main: T, v_main: T, v_last: T) -> T {
         each_actuator!(self, a => a.power(f_main, v_main, v_last))
     }
     #[inline(always)]
@@ -110,7 +112,7 @@ pub enum Structure {
 /// Generic over the number type (f64, or dual numbers carrying derivatives with respect to the
 /// parameters the matrices are built from).
 #[derive(Clone, Debug)]
-pub struct Mechanics<T: Scalar = f64> {
+pub struct Mechanics<T: Real = f64> {
     /// number of nodes (degrees of freedom)
     pub dof: usize,
     pub mass: DMatrix<T>,
@@ -219,7 +221,7 @@ impl<T: Scalar + ComplexField> Mechanics<T> {
     }
 }
 
-impl<T: Scalar> Mechanics<T> {
+impl<T: Real> Mechanics<T> {
     /// acc = M^-1 (f_main e_0 + f_weight e_n - K q - C v) [m/s^2].
     #[inline(always)]
     pub fn accelerations(&self, q: &[T], v: &[T], f_main: T, f_weight: T, acc: &mut [T]) {
@@ -280,6 +282,33 @@ impl<T: Scalar> Mechanics<T> {
     }
 }
 
+impl<const L: usize, E: LaneExp> Lanewise<Mechanics> for Mechanics<Lanes<L, E>> {
+    fn splat(m: &Mechanics) -> Self {
+        Mechanics {
+            dof: m.dof,
+            mass: Lanewise::splat(&m.mass),
+            damping: Lanewise::splat(&m.damping),
+            stiffness: Lanewise::splat(&m.stiffness),
+            pe_mass_matrix: Lanewise::splat(&m.pe_mass_matrix),
+            minv_k: Lanewise::splat(&m.minv_k),
+            minv_c: Lanewise::splat(&m.minv_c),
+            minv_main: Lanewise::splat(&m.minv_main),
+            minv_weight: Lanewise::splat(&m.minv_weight),
+        }
+    }
+    fn set_lane(&mut self, i: usize, m: &Mechanics) {
+        debug_assert_eq!(self.dof, m.dof, "lanes of one shape");
+        self.mass.set_lane(i, &m.mass);
+        self.damping.set_lane(i, &m.damping);
+        self.stiffness.set_lane(i, &m.stiffness);
+        self.pe_mass_matrix.set_lane(i, &m.pe_mass_matrix);
+        self.minv_k.set_lane(i, &m.minv_k);
+        self.minv_c.set_lane(i, &m.minv_c);
+        self.minv_main.set_lane(i, &m.minv_main);
+        self.minv_weight.set_lane(i, &m.minv_weight);
+    }
+}
+
 impl Mechanics {
     /// Highest natural frequency of the undamped structure [rad/s] (generalised eigenproblem
     /// K x = w^2 M x, solved through the Cholesky factor of M).
@@ -320,7 +349,7 @@ impl Mechanics {
     }
 }
 
-fn quad<T: Scalar>(a: &DMatrix<T>, x: &[T]) -> T {
+fn quad<T: Real>(a: &DMatrix<T>, x: &[T]) -> T {
     let n = x.len();
     let mut s = T::zero();
     for i in 0..n {

@@ -12,6 +12,8 @@ use crate::friction::Leuven;
 use crate::mechanics::{Actuation, Actuator, Mechanics, Structure};
 use crate::params::Params;
 use crate::piezo::{piezo_force, PiezoHysteresis};
+use crate::lane_real::{LaneExp, Lanes, Lanewise};
+use crate::real::Real;
 use crate::scalar::Scalar;
 
 /// Dispatch on the state size: `$fixed!(N, D)` for a plain state (see [`Model::is_plain`]) of
@@ -36,7 +38,7 @@ pub(crate) use with_state_size;
 pub const N_ACCOUNTING: usize = 7;
 
 /// Where each quantity lives in the flat state vector.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Layout {
     /// nodes (node 0 main body, node dof-1 weight)
     pub dof: usize,
@@ -112,7 +114,7 @@ impl Layout {
 /// on: `f64` for plain runs, a dual number when derivatives with respect to parameters are
 /// asked for (see [`Model::build`]); `params` and `effects` keep the plain values either way.
 #[derive(Clone, Debug)]
-pub struct Model<T: Scalar = f64> {
+pub struct Model<T: Real = f64> {
     pub params: Params,
     pub effects: Effects,
     pub structure: Structure,
@@ -136,6 +138,74 @@ pub struct Model<T: Scalar = f64> {
     pub external: Option<ExternalForce<T>>,
     /// whether the library force on the main body, and on the weight, is on
     pub(crate) library: (bool, bool),
+}
+
+/// What every lane of one group must share: all that is not a number (the structure, the state
+/// layout, the mechanism, which parts of the physics are on, the external force's body and knot
+/// times). Models of one shape differ only in values, so one [`Model`] over lanes holds them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Shape {
+    structure: Structure,
+    layout: Layout,
+    actuator: Actuator,
+    hysteresis: bool,
+    library: (bool, bool),
+    external: Option<(Body, Vec<f64>)>,
+}
+
+impl<T: Real> Model<T> {
+    /// This model's [`Shape`].
+    pub fn shape(&self) -> Shape {
+        Shape {
+            structure: self.structure,
+            layout: self.layout,
+            actuator: self.actuator,
+            hysteresis: self.hysteresis.is_some(),
+            library: self.library,
+            external: self.external.as_ref().map(|x| (x.body, x.knots.times().to_vec())),
+        }
+    }
+}
+
+/// `L` models of one [`Shape`] as one model over lanes (the plain values, `params` and
+/// `effects`, are lane 0's).
+impl<const L: usize, E: LaneExp> Lanewise<Model> for Model<Lanes<L, E>> {
+    fn splat(m: &Model) -> Self {
+        Model {
+            params: m.params,
+            effects: m.effects,
+            structure: m.structure,
+            mech: Lanewise::splat(&m.mech),
+            friction: Lanewise::splat(&m.friction),
+            layout: m.layout,
+            values: Lanewise::splat(&m.values),
+            effect_values: Lanewise::splat(&m.effect_values),
+            hysteresis: Lanewise::splat(&m.hysteresis),
+            actuator: m.actuator,
+            kp: Lanewise::splat(&m.kp),
+            d33: Lanewise::splat(&m.d33),
+            f_constant: Lanewise::splat(&m.f_constant),
+            inv_tau: Lanewise::splat(&m.inv_tau),
+            pe_mass_sums: Lanewise::splat(&m.pe_mass_sums),
+            external: Lanewise::splat(&m.external),
+            library: m.library,
+        }
+    }
+
+    fn set_lane(&mut self, i: usize, m: &Model) {
+        debug_assert!(self.shape() == m.shape(), "lanes of one shape");
+        self.mech.set_lane(i, &m.mech);
+        self.friction.set_lane(i, &m.friction);
+        self.values.set_lane(i, &m.values);
+        self.effect_values.set_lane(i, &m.effect_values);
+        self.hysteresis.set_lane(i, &m.hysteresis);
+        self.kp.set_lane(i, &m.kp);
+        self.d33.set_lane(i, &m.d33);
+        self.f_constant.set_lane(i, &m.f_constant);
+        self.inv_tau.set_lane(i, &m.inv_tau);
+        self.pe_mass_sums.set_lane(i, &m.pe_mass_sums);
+        self.external.set_lane(i, &m.external);
+    }
 }
 
 impl Model {
@@ -200,7 +270,7 @@ impl<T: Scalar + ComplexField> Model<T> {
     }
 }
 
-impl<T: Scalar> Model<T> {
+impl<T: Real> Model<T> {
     /// This model with a sampled external force on one of its bodies (see `external_force.rs`).
     /// A rig has one body: only `Body::Main` there.
     pub fn with_external_force(mut self, force: ExternalForce<T>) -> Result<Self, String> {
@@ -211,9 +281,21 @@ impl<T: Scalar> Model<T> {
         Ok(self)
     }
 
+    /// The library forces [N] on the main body and on the weight (each 0 when off). Out of line:
+    /// only discovery's runs have them, and every copy of the right-hand side the lane drivers
+    /// inline would otherwise carry them.
+    #[inline(never)]
+    fn library_forces(&self, t: T::Value, q: &[T], v: &[T], volt: T, dvolt: T, ff: T) -> (T, T) {
+        let s = self.library_states(t, q, v, volt, dvolt, ff);
+        let main = if self.library.0 { self.effect_values.library_force_main(&s).0 } else { T::zero() };
+        let weight = if self.library.1 { self.effect_values.library_force_weight(&s).0 } else { T::zero() };
+        (main, weight)
+    }
+
     /// The sampled external force [N] on the main body and on the last node at time `t` [s].
-    #[inline(always)]
-    fn timed_forces(&self, t: f64) -> (T, T) {
+    /// Out of line, as `library_forces`.
+    #[inline(never)]
+    fn timed_forces(&self, t: T::Value) -> (T, T) {
         let mut f = (T::zero(), T::zero());
         if let Some(x) = &self.external {
             let (v, _) = x.at(t);
@@ -268,20 +350,12 @@ impl<T: Scalar> Model<T> {
         Ok(())
     }
 
-    /// The divergence criterion: the state is no longer finite where it matters, or |Fh| left
-    /// its bound [N] (which a correct solution never does; see MODEL.md's invariants).
-    #[inline(always)]
-    pub fn is_diverged(&self, y: &[T], fh_bound: f64) -> bool {
-        let l = &self.layout;
-        !(y[l.fh].value().abs() <= fh_bound) || !y[l.dof].value().is_finite() || !y[0].value().is_finite()
-    }
-
     /// PE voltage and its rate [V, V/s] given the commanded ones (the amplifier may lag).
     #[inline(always)]
-    fn pe_voltage(&self, v_cmd: T, dv_cmd: f64, y: &[T]) -> (T, T) {
+    fn pe_voltage(&self, v_cmd: T, dv_cmd: T::Value, y: &[T]) -> (T, T) {
         match self.layout.lags[AMPLIFIER] {
             Some(i) => (y[i], first_order_rate(v_cmd, y[i], self.inv_tau[AMPLIFIER])),
-            None => (v_cmd, T::from(dv_cmd)),
+            None => (v_cmd, T::of_value(dv_cmd)),
         }
     }
 
@@ -314,14 +388,6 @@ impl<T: Scalar> Model<T> {
         s
     }
 
-    /// Piezo force Fp [N] in state `y` at commanded voltage `v_cmd`.
-    #[inline(always)]
-    pub fn piezo_force(&self, v_cmd: f64, y: &[T]) -> T {
-        let (v, _) = self.pe_voltage(T::from(v_cmd), 0.0, y);
-        let xc = self.layout.lags[CREEP].map_or(T::zero(), |i| y[i]);
-        piezo_force(self.kp, self.d33, v, xc, y[self.layout.h])
-    }
-
     /// Friction force Ff [N] on the main body in state `y`.
     #[inline(always)]
     pub fn friction_force(&self, y: &[T]) -> T {
@@ -331,16 +397,9 @@ impl<T: Scalar> Model<T> {
         self.friction.force(v1, fh, gdot)
     }
 
-    /// What the sensor reads [m] at time `t` [s] in state `y`.
-    #[inline(always)]
-    pub fn reading(&self, t: f64, y: &[T]) -> T {
-        let x = self.layout.lags[SENSOR].map_or(y[0], |i| y[i]);
-        x + self.effect_values.drift_rate * t
-    }
-
     /// What the library forces read at time `t` [s].
     #[inline(always)]
-    pub(crate) fn library_states(&self, t: f64, q: &[T], v: &[T], volt: T, dvolt: T, ff: T) -> LibraryStates<T> {
+    pub(crate) fn library_states(&self, t: T::Value, q: &[T], v: &[T], volt: T, dvolt: T, ff: T) -> LibraryStates<T> {
         let n = q.len();
         LibraryStates {
             x1: q[0],
@@ -361,12 +420,6 @@ impl<T: Scalar> Model<T> {
         self.layout.dim == 2 * self.layout.dof + 3
     }
 
-    /// dy/dt at time `t` [s] and commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s].
-    #[inline(always)]
-    pub fn rhs(&self, t: f64, v_cmd: f64, dv_cmd: f64, y: &[T], dy: &mut [T]) {
-        self.rhs_impl::<0, true>(t, T::from(v_cmd), dv_cmd, y, dy);
-    }
-
     /// The right-hand side. `N` > 0 fixes the node count at compile time; `EXTRAS = false`
     /// promises a plain state (see [`Model::is_plain`]). Both only let the compiler keep the
     /// state in registers; the physics is the same code. Returns (Ff [N], dg/dt [m/s]) at `y`,
@@ -374,9 +427,9 @@ impl<T: Scalar> Model<T> {
     #[inline(always)]
     pub fn rhs_impl<const N: usize, const EXTRAS: bool>(
         &self,
-        t: f64,
+        t: T::Value,
         v_cmd: T,
-        dv_cmd: f64,
+        dv_cmd: T::Value,
         y: &[T],
         dy: &mut [T],
     ) -> (T, T) {
@@ -387,7 +440,7 @@ impl<T: Scalar> Model<T> {
         let (v_pe, dv_pe) = if EXTRAS {
             self.pe_voltage(v_cmd, dv_cmd, y)
         } else {
-            (v_cmd, T::from(dv_cmd))
+            (v_cmd, T::of_value(dv_cmd))
         };
         let h = y[ih];
         dy[ih] = self.hysteresis.map_or(T::zero(), |hy| hy.rate(dv_pe, h));
@@ -424,12 +477,12 @@ impl<T: Scalar> Model<T> {
             f_ext_weight += b;
         }
         if self.library.0 || self.library.1 {
-            let s = self.library_states(t, q, v, v_pe, dv_pe, ff);
+            let (a, b) = self.library_forces(t, q, v, v_pe, dv_pe, ff);
             if self.library.0 {
-                f_ext_main += self.effect_values.library_force_main(&s).0;
+                f_ext_main += a;
             }
             if self.library.1 {
-                f_ext_weight += self.effect_values.library_force_weight(&s).0;
+                f_ext_weight += b;
             }
         }
         for i in 0..n {
@@ -456,5 +509,38 @@ impl<T: Scalar> Model<T> {
             }
         }
         (ff, gdot)
+    }
+}
+
+/// What needs the value as one `f64` (a scalar or a dual number, not lanes).
+impl<T: Scalar> Model<T> {
+
+    /// The divergence criterion: the state is no longer finite where it matters, or |Fh| left
+    /// its bound [N] (which a correct solution never does; see MODEL.md's invariants).
+    #[inline(always)]
+    pub fn is_diverged(&self, y: &[T], fh_bound: f64) -> bool {
+        let l = &self.layout;
+        !(y[l.fh].value().abs() <= fh_bound) || !y[l.dof].value().is_finite() || !y[0].value().is_finite()
+    }
+
+    /// Piezo force Fp [N] in state `y` at commanded voltage `v_cmd`.
+    #[inline(always)]
+    pub fn piezo_force(&self, v_cmd: f64, y: &[T]) -> T {
+        let (v, _) = self.pe_voltage(T::from(v_cmd), 0.0, y);
+        let xc = self.layout.lags[CREEP].map_or(T::zero(), |i| y[i]);
+        piezo_force(self.kp, self.d33, v, xc, y[self.layout.h])
+    }
+
+    /// What the sensor reads [m] at time `t` [s] in state `y`.
+    #[inline(always)]
+    pub fn reading(&self, t: f64, y: &[T]) -> T {
+        let x = self.layout.lags[SENSOR].map_or(y[0], |i| y[i]);
+        x + self.effect_values.drift_rate * t
+    }
+
+    /// dy/dt at time `t` [s] and commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s].
+    #[inline(always)]
+    pub fn rhs(&self, t: f64, v_cmd: f64, dv_cmd: f64, y: &[T], dy: &mut [T]) {
+        self.rhs_impl::<0, true>(t, T::from(v_cmd), dv_cmd, y, dy);
     }
 }

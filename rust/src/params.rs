@@ -43,6 +43,15 @@ macro_rules! table1 {
         /// Every parameter name, in the order of the fields of [`Params`].
         pub const PARAM_NAMES: [&str; N_PARAMS] = [$(stringify!($field),)*];
 
+        impl<T: crate::lane_real::Lanewise<f64>> crate::lane_real::Lanewise<Params> for Params<T> {
+            fn splat(src: &Params) -> Self {
+                Params { $($field: T::splat(&src.$field),)* }
+            }
+            fn set_lane(&mut self, i: usize, src: &Params) {
+                $(self.$field.set_lane(i, &src.$field);)*
+            }
+        }
+
         impl Params {
             /// Every value as a `T` made by `lift(name, value)`: a dual number seeded for the
             /// parameters a derivative is asked for, a constant for the others.

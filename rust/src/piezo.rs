@@ -1,6 +1,8 @@
 //! Piezo element force with Bouc-Wen hysteresis (MODEL.md eqs. 14, 15).
 
-use crate::scalar::{sign0, Scalar};
+use crate::lane_real::{LaneExp, Lanes, Lanewise};
+use crate::real::Real;
+use crate::scalar::Scalar;
 
 /// Bouc-Wen piezo hysteresis constants.
 #[derive(Clone, Copy, Debug)]
@@ -13,7 +15,7 @@ pub struct PiezoHysteresis<T = f64> {
     cp: T,
 }
 
-impl<T: Scalar> PiezoHysteresis<T> {
+impl<T: Real> PiezoHysteresis<T> {
     pub fn new(ap: T, bp: T, cp: T, d33: T) -> Self {
         PiezoHysteresis {
             ap_d33: ap * d33,
@@ -32,9 +34,20 @@ impl<T: Scalar> PiezoHysteresis<T> {
     #[inline(always)]
     pub fn rate_partials(&self, dv: T, h: T) -> (T, T) {
         (
-            self.ap_d33 - self.bp * sign0(dv) * h - self.cp * h.abs(),
-            -self.bp * dv.abs() - self.cp * dv * sign0(h),
+            self.ap_d33 - self.bp * dv.sign0() * h - self.cp * h.abs(),
+            -self.bp * dv.abs() - self.cp * dv * h.sign0(),
         )
+    }
+}
+
+impl<const L: usize, E: LaneExp> Lanewise<PiezoHysteresis> for PiezoHysteresis<Lanes<L, E>> {
+    fn splat(h: &PiezoHysteresis) -> Self {
+        PiezoHysteresis { ap_d33: Lanewise::splat(&h.ap_d33), bp: Lanewise::splat(&h.bp), cp: Lanewise::splat(&h.cp) }
+    }
+    fn set_lane(&mut self, i: usize, h: &PiezoHysteresis) {
+        self.ap_d33.set_lane(i, &h.ap_d33);
+        self.bp.set_lane(i, &h.bp);
+        self.cp.set_lane(i, &h.cp);
     }
 }
 
@@ -61,7 +74,7 @@ impl crate::mechanics::Actuation for PiezoElement {
     }
 
     #[inline(always)]
-    fn forces<T: Scalar>(&self, fp: T, _u: T, _du: T, _x: T, _v: T) -> (T, T) {
+    fn forces<T: Real>(&self, fp: T, _u: T, _du: T, _x: T, _v: T) -> (T, T) {
         (fp, -fp)
     }
 
@@ -72,7 +85,7 @@ impl crate::mechanics::Actuation for PiezoElement {
 
     /// The piezo force's work on both ends.
     #[inline(always)]
-    fn power<T: Scalar>(&self, f_main: T, v_main: T, v_last: T) -> T {
+    fn power<T: Real>(&self, f_main: T, v_main: T, v_last: T) -> T {
         f_main * (v_main - v_last)
     }
 
@@ -85,7 +98,7 @@ impl crate::mechanics::Actuation for PiezoElement {
 /// Fp = kp (d33 V + xc - h) [N]: pushes the main body forward and the weight back. `xc` [m] is
 /// an extra free extension (creep; 0 in the paper's model).
 #[inline(always)]
-pub fn piezo_force<T: Scalar>(kp: T, d33: T, voltage: T, xc: T, h: T) -> T {
+pub fn piezo_force<T: Real>(kp: T, d33: T, voltage: T, xc: T, h: T) -> T {
     kp * (d33 * voltage + xc - h)
 }
 

@@ -10,6 +10,7 @@ use nalgebra::DMatrix;
 
 use crate::effects::Effects;
 use crate::params::Params;
+use crate::real::Real;
 use crate::scalar::Scalar;
 
 /// How the input drives the body.
@@ -80,20 +81,15 @@ impl RigDrive {
     /// `v` [m/s], beyond the spring's restoring part (which the stiffness matrix carries):
     /// k u + c du/dt for a position drive, u for a force drive, the loop's output for a servo.
     #[inline(always)]
-    pub fn drive_force<T: Scalar>(&self, u: T, du: T, x: T, v: T) -> T {
+    pub fn drive_force<T: Real>(&self, u: T, du: T, x: T, v: T) -> T {
         match *self {
             RigDrive::Position { stiffness, damping } => u * stiffness + du * damping,
             RigDrive::Force => u,
             RigDrive::ClosedLoop { kp, kv, gain, limit } => {
                 let command = ((u - x) * kp - v) * kv;
                 // saturated on the value: past the limit the force is constant
-                let out = if command.value() < -limit {
-                    T::from(-limit)
-                } else if command.value() > limit {
-                    T::from(limit)
-                } else {
-                    command
-                };
+                let upper = T::select(command.above(limit), T::from(limit), command);
+                let out = T::select(command.below(-limit), T::from(-limit), upper);
                 out * gain
             }
         }
@@ -150,7 +146,7 @@ impl crate::mechanics::Actuation for RigDrive {
 
     /// The drive's force on the body; the rig has no last node of its own.
     #[inline(always)]
-    fn forces<T: Scalar>(&self, _fp: T, u: T, du: T, x: T, v: T) -> (T, T) {
+    fn forces<T: Real>(&self, _fp: T, u: T, du: T, x: T, v: T) -> (T, T) {
         (self.drive_force(u, du, x, v), T::zero())
     }
 
@@ -162,7 +158,7 @@ impl crate::mechanics::Actuation for RigDrive {
 
     /// The drive's work on the body.
     #[inline(always)]
-    fn power<T: Scalar>(&self, f_main: T, v_main: T, _v_last: T) -> T {
+    fn power<T: Real>(&self, f_main: T, v_main: T, _v_last: T) -> T {
         f_main * v_main
     }
 
