@@ -731,23 +731,28 @@ def _second_effect(pb: _Problem, cal: _Calibration, lead: _Refit, heldout: _Held
 
 def _rescanned(pb: _Problem, null: _Calibration, eff: Effect, best: _Refit) -> _Refit:
     """A supported pair (`best`: the second effect `eff` beside the first, scored against `null`,
-    the first alone) that leaves a systematic residual, fitted again from the 1-D scans of its
-    own model centred on its values (`calibration.scan_starts`, as the calibration does). With
-    two large effects missing, the calibration can sit in the side basin of a mass that sets a
-    resonance, and a local fit with both effects in the model does not leave it (two-effect
-    pair 9 of bench_confusion_beyond: a drag on the weight and thermal drift, m1 mis-set by
-    12 %: the true pair stopped at 1.70 x noise); a 1-D scan of m2 with the pair in the model
-    finds the basin, and from there the fit reaches the truth in 10 evaluations. Returns the
-    better of the two (unchanged when the pair already explains the data)."""
+    the first alone, whose calibrated parameters are centred on the nominal values) that leaves a
+    systematic residual, fitted again from the 1-D scans of its own model (`calibration.
+    scan_starts`, as the calibration does) centred twice: on the pair's values, and on the
+    nominal values with the effects at the pair's sizes. With two large effects missing, the
+    calibration can sit in the side basin of a mass that sets a resonance, and a local fit with
+    both effects in the model does not leave it (two-effect pair 9 of bench_confusion_beyond: a
+    drag on the weight and thermal drift, m1 mis-set by 12 %: the true pair stopped at 1.70 x
+    noise); from the nominal values with the effects near their sizes a 1-D scan of m2 finds the
+    basin and the fit reaches the truth in 10 evaluations. Returns the best of these fits and
+    `best` (unchanged when the pair already explains the data)."""
     if _explains(pb, best.candidate):
         return best
+    nominal = {f.name: f for f in null.free if f.name in CALIBRATED}
+    centres = [best.free, [nominal.get(f.name, f) for f in best.free]]
     out = best
-    for _, u in scan_starts(pb.obj, best.base, best.free, progress=pb.tick):
-        start = [f.at(f.value(float(x))) for f, x in zip(best.free, u)]
-        r = fit(pb.obj, best.base, start, max_nfev=POLISH_NFEV, progress=pb.tick)
-        if r.chi2 < out.candidate.chi2:
-            out = _Refit(_candidate(pb, null, eff, r, screened_only=False), best.base,
-                         [f.at(r.values[f.name]) for f in best.free])
+    for centre in centres:
+        for _, u in scan_starts(pb.obj, best.base, centre, progress=pb.tick):
+            start = [f.at(f.value(float(x))) for f, x in zip(centre, u)]
+            r = fit(pb.obj, best.base, start, max_nfev=POLISH_NFEV, progress=pb.tick)
+            if r.chi2 < out.candidate.chi2:
+                out = _Refit(_candidate(pb, null, eff, r, screened_only=False), best.base,
+                             [f.at(r.values[f.name]) for f in best.free])
     return out
 
 
