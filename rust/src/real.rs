@@ -214,14 +214,7 @@ impl<T: Scalar> Real for T {
     }
     #[inline(always)]
     fn sign0(&self) -> f64 {
-        let v = Scalar::value(self);
-        if v > 0.0 {
-            1.0
-        } else if v < 0.0 {
-            -1.0
-        } else {
-            0.0
-        }
+        crate::scalar::sign0(*self)
     }
     #[inline(always)]
     fn choose(m: bool, a: impl FnOnce() -> Self, b: impl FnOnce() -> Self) -> Self {
