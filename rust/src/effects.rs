@@ -94,11 +94,11 @@ macro_rules! effects {
             }
         }
 
-        impl<T: crate::lane_real::Lanewise<f64>> crate::lane_real::Lanewise<Effects> for Effects<T> {
-            fn splat(src: &Effects) -> Self {
+        impl<S, T: crate::lane_real::Lanewise<S>> crate::lane_real::Lanewise<Effects<S>> for Effects<T> {
+            fn splat(src: &Effects<S>) -> Self {
                 Effects { $($($field: T::splat(&src.$field),)*)* }
             }
-            fn set_lane(&mut self, i: usize, src: &Effects) {
+            fn set_lane(&mut self, i: usize, src: &Effects<S>) {
                 $($(self.$field.set_lane(i, &src.$field);)*)*
             }
         }

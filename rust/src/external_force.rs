@@ -5,7 +5,7 @@
 //! like parameters (`sensitivity::Seed::ForceKnot`): the derivative of a run with respect to
 //! the force at each knot, which is what infers an unknown force from a recording.
 
-use crate::lane_real::{LaneExp, Lanes, Lanewise};
+use crate::lane_real::Lanewise;
 use crate::real::Real;
 use crate::waveform::PiecewiseLinear;
 
@@ -68,11 +68,11 @@ impl ExternalForce {
     }
 }
 
-impl<const L: usize, E: LaneExp> Lanewise<ExternalForce> for ExternalForce<Lanes<L, E>> {
-    fn splat(x: &ExternalForce) -> Self {
+impl<S, T: Lanewise<S>> Lanewise<ExternalForce<S>> for ExternalForce<T> {
+    fn splat(x: &ExternalForce<S>) -> Self {
         ExternalForce { body: x.body, knots: x.knots.clone(), values: Lanewise::splat(&x.values) }
     }
-    fn set_lane(&mut self, i: usize, x: &ExternalForce) {
+    fn set_lane(&mut self, i: usize, x: &ExternalForce<S>) {
         // one body and one set of knot times in every lane (the lane gate's shape)
         self.values.set_lane(i, &x.values);
     }

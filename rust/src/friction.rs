@@ -2,7 +2,7 @@
 //! Bouc-Wen presliding force Fh driven by the asperity deformation g.
 
 use crate::params::Params;
-use crate::lane_real::{LaneExp, Lanes, Lanewise};
+use crate::lane_real::Lanewise;
 use crate::real::{Mask, Real};
 
 /// Leuven friction constants, precomputed once per run (`T` = f64, or a dual number when
@@ -130,8 +130,11 @@ impl<T: Real> Leuven<T> {
     }
 }
 
-impl<const L: usize, E: LaneExp> Lanewise<Leuven> for Leuven<Lanes<L, E>> {
-    fn splat(m: &Leuven) -> Self {
+impl<S: Real, T: Real + Lanewise<S>> Lanewise<Leuven<S>> for Leuven<T>
+where
+    T::Mask: Lanewise<S::Mask>,
+{
+    fn splat(m: &Leuven<S>) -> Self {
         Leuven {
             fc: Lanewise::splat(&m.fc),
             fs_minus_fc: Lanewise::splat(&m.fs_minus_fc),
@@ -150,7 +153,7 @@ impl<const L: usize, E: LaneExp> Lanewise<Leuven> for Leuven<Lanes<L, E>> {
             n_is_one: Lanewise::splat(&m.n_is_one),
         }
     }
-    fn set_lane(&mut self, i: usize, m: &Leuven) {
+    fn set_lane(&mut self, i: usize, m: &Leuven<S>) {
         self.fc.set_lane(i, &m.fc);
         self.fs_minus_fc.set_lane(i, &m.fs_minus_fc);
         self.inv_vs.set_lane(i, &m.inv_vs);

@@ -410,13 +410,23 @@ impl<S, T: Lanewise<S>> Lanewise<Option<S>> for Option<T> {
     }
 }
 
-impl<const L: usize, E: LaneExp> Lanewise<nalgebra::DMatrix<f64>> for nalgebra::DMatrix<Lanes<L, E>> {
-    fn splat(src: &nalgebra::DMatrix<f64>) -> Self {
-        src.map(Lanes::splat)
+impl<S: nalgebra::Scalar, T: nalgebra::Scalar + Lanewise<S>> Lanewise<nalgebra::DMatrix<S>> for nalgebra::DMatrix<T> {
+    fn splat(src: &nalgebra::DMatrix<S>) -> Self {
+        src.map(|x| T::splat(&x))
     }
-    fn set_lane(&mut self, i: usize, src: &nalgebra::DMatrix<f64>) {
+    fn set_lane(&mut self, i: usize, src: &nalgebra::DMatrix<S>) {
         for (a, b) in self.iter_mut().zip(src.iter()) {
-            a.0[i] = *b;
+            a.set_lane(i, b);
         }
+    }
+}
+
+/// A one-lane number is its own lane (the number types of one lane convert field by field).
+impl Lanewise<bool> for bool {
+    fn splat(src: &bool) -> Self {
+        *src
+    }
+    fn set_lane(&mut self, _i: usize, src: &bool) {
+        *self = *src;
     }
 }

@@ -32,6 +32,7 @@ pub mod simulate;
 pub mod stepper;
 pub mod stiffness;
 pub mod switching;
+pub mod tangent;
 pub mod waveform;
 
 #[cfg(test)]

@@ -7,7 +7,7 @@ use crate::effects::Effects;
 use crate::params::Params;
 use crate::piezo::PiezoElement;
 use crate::rig::RigDrive;
-use crate::lane_real::{LaneExp, Lanes, Lanewise};
+use crate::lane_real::Lanewise;
 use crate::real::Real;
 use crate::scalar::Scalar;
 use nalgebra::{ComplexField, DMatrix};
@@ -282,8 +282,8 @@ impl<T: Real> Mechanics<T> {
     }
 }
 
-impl<const L: usize, E: LaneExp> Lanewise<Mechanics> for Mechanics<Lanes<L, E>> {
-    fn splat(m: &Mechanics) -> Self {
+impl<S: Real + nalgebra::Scalar, T: Real + nalgebra::Scalar + Lanewise<S>> Lanewise<Mechanics<S>> for Mechanics<T> {
+    fn splat(m: &Mechanics<S>) -> Self {
         Mechanics {
             dof: m.dof,
             mass: Lanewise::splat(&m.mass),
@@ -296,7 +296,7 @@ impl<const L: usize, E: LaneExp> Lanewise<Mechanics> for Mechanics<Lanes<L, E>> 
             minv_weight: Lanewise::splat(&m.minv_weight),
         }
     }
-    fn set_lane(&mut self, i: usize, m: &Mechanics) {
+    fn set_lane(&mut self, i: usize, m: &Mechanics<S>) {
         debug_assert_eq!(self.dof, m.dof, "lanes of one shape");
         self.mass.set_lane(i, &m.mass);
         self.damping.set_lane(i, &m.damping);

@@ -12,7 +12,7 @@ use crate::friction::Leuven;
 use crate::mechanics::{Actuation, Actuator, Mechanics, Structure};
 use crate::params::Params;
 use crate::piezo::{piezo_force, PiezoHysteresis};
-use crate::lane_real::{LaneExp, Lanes, Lanewise};
+use crate::lane_real::Lanewise;
 use crate::real::Real;
 use crate::scalar::Scalar;
 
@@ -169,8 +169,11 @@ impl<T: Real> Model<T> {
 
 /// `L` models of one [`Shape`] as one model over lanes (the plain values, `params` and
 /// `effects`, are lane 0's).
-impl<const L: usize, E: LaneExp> Lanewise<Model> for Model<Lanes<L, E>> {
-    fn splat(m: &Model) -> Self {
+impl<S: Real + nalgebra::Scalar, T: Real + nalgebra::Scalar + Lanewise<S>> Lanewise<Model<S>> for Model<T>
+where
+    T::Mask: Lanewise<S::Mask>,
+{
+    fn splat(m: &Model<S>) -> Self {
         Model {
             params: m.params,
             effects: m.effects,
@@ -192,7 +195,7 @@ impl<const L: usize, E: LaneExp> Lanewise<Model> for Model<Lanes<L, E>> {
         }
     }
 
-    fn set_lane(&mut self, i: usize, m: &Model) {
+    fn set_lane(&mut self, i: usize, m: &Model<S>) {
         debug_assert!(self.shape() == m.shape(), "lanes of one shape");
         self.mech.set_lane(i, &m.mech);
         self.friction.set_lane(i, &m.friction);
@@ -512,8 +515,8 @@ impl<T: Real> Model<T> {
     }
 }
 
-/// What needs the value as one `f64` (a scalar or a dual number, not lanes).
-impl<T: Scalar> Model<T> {
+/// What needs the value as one `f64` (a scalar, a dual number or a tangent; not lanes).
+impl<T: Real<Value = f64>> Model<T> {
 
     /// The divergence criterion: the state is no longer finite where it matters, or |Fh| left
     /// its bound [N] (which a correct solution never does; see MODEL.md's invariants).

@@ -43,11 +43,11 @@ macro_rules! table1 {
         /// Every parameter name, in the order of the fields of [`Params`].
         pub const PARAM_NAMES: [&str; N_PARAMS] = [$(stringify!($field),)*];
 
-        impl<T: crate::lane_real::Lanewise<f64>> crate::lane_real::Lanewise<Params> for Params<T> {
-            fn splat(src: &Params) -> Self {
+        impl<S, T: crate::lane_real::Lanewise<S>> crate::lane_real::Lanewise<Params<S>> for Params<T> {
+            fn splat(src: &Params<S>) -> Self {
                 Params { $($field: T::splat(&src.$field),)* }
             }
-            fn set_lane(&mut self, i: usize, src: &Params) {
+            fn set_lane(&mut self, i: usize, src: &Params<S>) {
                 $(self.$field.set_lane(i, &src.$field);)*
             }
         }

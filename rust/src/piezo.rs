@@ -1,6 +1,6 @@
 //! Piezo element force with Bouc-Wen hysteresis (MODEL.md eqs. 14, 15).
 
-use crate::lane_real::{LaneExp, Lanes, Lanewise};
+use crate::lane_real::Lanewise;
 use crate::real::Real;
 use crate::scalar::Scalar;
 
@@ -40,11 +40,11 @@ impl<T: Real> PiezoHysteresis<T> {
     }
 }
 
-impl<const L: usize, E: LaneExp> Lanewise<PiezoHysteresis> for PiezoHysteresis<Lanes<L, E>> {
-    fn splat(h: &PiezoHysteresis) -> Self {
+impl<S, T: Lanewise<S>> Lanewise<PiezoHysteresis<S>> for PiezoHysteresis<T> {
+    fn splat(h: &PiezoHysteresis<S>) -> Self {
         PiezoHysteresis { ap_d33: Lanewise::splat(&h.ap_d33), bp: Lanewise::splat(&h.bp), cp: Lanewise::splat(&h.cp) }
     }
-    fn set_lane(&mut self, i: usize, h: &PiezoHysteresis) {
+    fn set_lane(&mut self, i: usize, h: &PiezoHysteresis<S>) {
         self.ap_d33.set_lane(i, &h.ap_d33);
         self.bp.set_lane(i, &h.bp);
         self.cp.set_lane(i, &h.cp);

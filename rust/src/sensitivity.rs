@@ -11,17 +11,20 @@
 //! exactly on a kink for a finite time (the rest state before the drive starts) contributes
 //! nothing through it.
 
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use num_dual::{Dual64, DualSVec64};
 
 use crate::stepper::Held;
 use crate::drive::{run_tasks_one_by_one, LaneEnd, Method, Observer, SimError, Task};
 use crate::effects::{EFFECTS, EFFECT_NAMES, LAGS};
+use crate::lane_real::Lanewise;
 use crate::model::Model;
 use crate::params::PARAM_NAMES;
+use crate::real::Real;
 use crate::scalar::Seedable as Dual;
-use crate::waveform::PiecewiseLinear;
+use crate::tangent::Tangent;
+use crate::waveform::{Cursor, PiecewiseLinear};
 
 /// Widest dual number one pass carries; more names take several passes.
 pub const MAX_PER_PASS: usize = 8;
@@ -171,7 +174,10 @@ pub fn derivatives(
             let run = Pass { model, wave, t_start, t_end, y0, method, held, schedule, seeds: group, normal_force_derived };
             let pass = match group.len() {
                 1 => run.go::<Dual64>(cancel),
-                _ => run.go::<DualSVec64<MAX_PER_PASS>>(cancel),
+                _ => match method.fixed_step() {
+                    Some(dt) => run.go_tangent::<MAX_PER_PASS>(dt, cancel),
+                    None => run.go::<DualSVec64<MAX_PER_PASS>>(cancel),
+                },
             }?;
             let (readings, fin) = match pass {
                 Ok(x) => x,
@@ -212,14 +218,15 @@ struct Pass<'a> {
 type PassOutput = (Vec<f64>, Vec<f64>);
 
 impl Pass<'_> {
-    fn go<D: Dual>(&self, cancel: &AtomicBool) -> Option<Result<PassOutput, SimError>> {
+    /// The model with the seeds lifted to `D`, and the initial state likewise.
+    fn lifted<D: Dual>(&self) -> Result<(Model<D>, Vec<D>), SimError> {
         let m = self.model;
         let seeds = self.seeds;
         let lift = |name: &str, v: f64| match seeds.iter().position(|s| s.names(name)) {
             Some(j) => D::seed(v, j),
             None => D::from(v),
         };
-        let mut dual = match Model::build(
+        let mut dual = Model::build(
             m.params,
             m.effects,
             m.structure,
@@ -227,10 +234,8 @@ impl Pass<'_> {
             m.layout.accounting.is_some(),
             lift,
             self.normal_force_derived,
-        ) {
-            Ok(d) => d,
-            Err(e) => return Some(Err(SimError::Input(e))),
-        };
+        )
+        .map_err(SimError::Input)?;
         dual.external = m.external.as_ref().map(|x| {
             x.lift(|k, v| match seeds.iter().position(|s| *s == Seed::ForceKnot(k)) {
                 Some(j) => D::seed(v, j),
@@ -246,28 +251,72 @@ impl Pass<'_> {
                 None => D::from(x),
             })
             .collect();
-        let task = Task { model: &dual, wave: self.wave, t_start: self.t_start, t_end: self.t_end, y0: &y0 };
-        let mut rec = Recorder {
-            model: &dual,
+        Ok((dual, y0))
+    }
+
+    fn recorder<'m, D: Carries>(&self, model: &'m Model<D>) -> Recorder<'m, D> {
+        Recorder {
+            model,
+            halt: None,
             schedule: self.schedule,
             until: self.schedule.every,
-            k: seeds.len(),
+            k: self.seeds.len(),
             out: Vec::new(),
             blew_up: None,
             v_peak: 0.0,
+        }
+    }
+
+    /// A pass through the generic drivers, on num-dual's numbers (any method). The driver
+    /// watches a flag of the pass's own, which the recorder raises when the caller cancels or
+    /// when a derivative stops being finite (the rest of such a pass would be thrown away).
+    fn go<D: Dual>(&self, cancel: &AtomicBool) -> Option<Result<PassOutput, SimError>> {
+        let (dual, y0) = match self.lifted::<D>() {
+            Ok(x) => x,
+            Err(e) => return Some(Err(e)),
         };
-        let mut ends = run_tasks_one_by_one(&[task], self.method, self.held, &mut rec, cancel)?;
+        let task = Task { model: &dual, wave: self.wave, t_start: self.t_start, t_end: self.t_end, y0: &y0 };
+        let stop = AtomicBool::new(cancel.load(Ordering::Relaxed));
+        let mut rec = self.recorder(&dual);
+        rec.halt = Some((cancel, &stop));
+        let Some(mut ends) = run_tasks_one_by_one(&[task], self.method, self.held, &mut rec, &stop) else {
+            return match rec.blew_up {
+                Some(t) if !cancel.load(Ordering::Relaxed) => Some(Err(unbounded(self.model, t, rec.v_peak, self.method))),
+                _ => None,
+            };
+        };
         let (end, y) = ends.pop().expect("one task");
-        Some(match end {
+        Some(self.finish(rec, end, &y))
+    }
+
+    /// An RK4 pass on [`Tangent`] numbers (the model built on num-dual's, then converted):
+    /// the same values and derivatives as [`Pass::go`] on `DualSVec64<K>`, several times
+    /// faster, and stopped at the first derivative that is not finite (the rest of such a pass
+    /// is thrown away).
+    fn go_tangent<const K: usize>(&self, dt: f64, cancel: &AtomicBool) -> Option<Result<PassOutput, SimError>> {
+        let (dual, y0) = match self.lifted::<DualSVec64<K>>() {
+            Ok(x) => x,
+            Err(e) => return Some(Err(e)),
+        };
+        let model: Model<Tangent<K>> = Lanewise::splat(&dual);
+        let y0: Vec<Tangent<K>> = y0.iter().map(Lanewise::splat).collect();
+        let mut rec = self.recorder(&model);
+        let (end, y) = rk4_pass(&model, self.wave, self.t_start, self.t_end, &y0, dt, &mut rec, cancel)?;
+        Some(self.finish(rec, end, &y))
+    }
+
+    /// The pass's output from how its run ended.
+    fn finish<D: Carries>(&self, rec: Recorder<D>, end: LaneEnd, y: &[D]) -> Result<PassOutput, SimError> {
+        match end {
             LaneEnd::Finished { .. } if rec.blew_up.is_some() => {
-                Err(unbounded(m, rec.blew_up.unwrap_or_default(), rec.v_peak, self.method))
+                Err(unbounded(self.model, rec.blew_up.unwrap_or_default(), rec.v_peak, self.method))
             }
             LaneEnd::Finished { .. } => {
-                let k = seeds.len();
+                let k = self.seeds.len();
                 let mut fin = vec![0.0; y.len() * k];
                 let mut d = [0.0; MAX_PER_PASS];
                 for (c, yc) in y.iter().enumerate() {
-                    yc.derivatives(&mut d[..D::WIDTH]);
+                    yc.parts(&mut d[..D::WIDTH]);
                     fin[c * k..(c + 1) * k].copy_from_slice(&d[..k]);
                 }
                 Ok((rec.out, fin))
@@ -279,7 +328,107 @@ impl Pass<'_> {
                     why.unwrap_or_else(|| "its state left the model's bounds".into())
                 ),
             }),
-        })
+        }
+    }
+}
+
+/// Fixed-step RK4 of one tangent run, step for step as the generic driver takes it with one
+/// lane (`drive::drive_lanes`, `rk4.rs`): step k from t = k dt, the input through the step from
+/// the breakpoint cursor at its midpoint, the four stages and the update in the same order,
+/// the same divergence check; the recorder sees each accepted step. Stops early (as
+/// `Finished`, with the recorder holding the time) once a recorded derivative is not finite.
+/// `None` if cancelled.
+#[allow(clippy::too_many_arguments)]
+fn rk4_pass<const K: usize>(
+    model: &Model<Tangent<K>>,
+    wave: &PiecewiseLinear,
+    t_start: f64,
+    t_end: f64,
+    y0: &[Tangent<K>],
+    dt: f64,
+    rec: &mut Recorder<Tangent<K>>,
+    cancel: &AtomicBool,
+) -> Option<(LaneEnd, Vec<Tangent<K>>)> {
+    let n = y0.len();
+    let dof = model.layout.dof;
+    let bound = model.presliding_bound() * (1.0 + RK4_BOUND_SLACK) + 1e-12;
+    let mut y = y0.to_vec();
+    let zero = Tangent::constant(0.0);
+    let (mut k1, mut k2, mut k3, mut k4, mut tmp) = (vec![zero; n], vec![zero; n], vec![zero; n], vec![zero; n], vec![zero; n]);
+    let (h2, h6) = (0.5 * dt, dt / 6.0);
+    let mut k = (t_start / dt).round() as usize;
+    let k_end = k + ((t_end - t_start) / dt).round() as usize;
+    let mut cursor = Cursor::at(wave, t_start);
+    let mut v_last = y[dof].re;
+    let mut steps = 0u64;
+    rec.record(t_start, &y);
+    loop {
+        if steps % CANCEL_CHECK_STEPS == 0 && cancel.load(Ordering::Relaxed) {
+            return None;
+        }
+        let t0 = k as f64 * dt;
+        let probe = t0 + 0.5 * dt;
+        cursor.advance(wave, probe);
+        let (v0, s) = cursor.input(wave, t0, probe);
+        let f = |tau: f64, y: &[Tangent<K>], dy: &mut [Tangent<K>]| {
+            model.rhs_impl::<0, true>(t0 + tau, Tangent::constant(v0 + s * tau), s, y, dy);
+        };
+        f(0.0, &y, &mut k1);
+        axpy(&mut tmp, &y, h2, &k1);
+        f(h2, &tmp, &mut k2);
+        axpy(&mut tmp, &y, h2, &k2);
+        f(h2, &tmp, &mut k3);
+        axpy(&mut tmp, &y, dt, &k3);
+        f(dt, &tmp, &mut k4);
+        for j in 0..n {
+            y[j] += (k1[j] + (k2[j] + k3[j]) * 2.0 + k4[j]) * h6;
+        }
+        k += 1;
+        let t_new = k as f64 * dt;
+        if model.is_diverged(&y, bound) {
+            return Some((LaneEnd::Diverged { t: t_new, why: None, v_last }, y));
+        }
+        v_last = y[dof].re;
+        steps += 1;
+        let done = k == k_end;
+        rec.on_step(t_new, &y, done);
+        if done || rec.blew_up.is_some() {
+            return Some((LaneEnd::Finished { steps, min_step: dt }, y));
+        }
+    }
+}
+
+/// out = y + h k (as `rk4.rs`)
+#[inline(always)]
+fn axpy<const K: usize>(out: &mut [Tangent<K>], y: &[Tangent<K>], h: f64, k: &[Tangent<K>]) {
+    for j in 0..out.len() {
+        out[j] = y[j] + k[j] * h;
+    }
+}
+
+/// RK4's slack on the presliding bound (`Rk4::bound_slack`).
+const RK4_BOUND_SLACK: f64 = 1e-6;
+/// Steps between checks of the cancel flag.
+const CANCEL_CHECK_STEPS: u64 = 1 << 14;
+
+/// A number a pass records: a value and `WIDTH` derivative parts.
+pub trait Carries: Real<Value = f64> {
+    const WIDTH: usize;
+    /// The derivative parts, into `out` (length `WIDTH`).
+    fn parts(&self, out: &mut [f64]);
+}
+
+impl<D: Dual> Carries for D {
+    const WIDTH: usize = <D as Dual>::WIDTH;
+    fn parts(&self, out: &mut [f64]) {
+        self.derivatives(out)
+    }
+}
+
+impl<const K: usize> Carries for Tangent<K> {
+    const WIDTH: usize = K;
+    fn parts(&self, out: &mut [f64]) {
+        out.copy_from_slice(&self.eps)
     }
 }
 
@@ -307,8 +456,11 @@ fn unbounded(model: &Model, t: f64, v_peak: f64, method: &Method) -> SimError {
 
 /// Records the first `k` derivatives of the reading on the schedule of the plain run's saver,
 /// the first time a derivative is not finite, and the peak |v1| [m/s].
-struct Recorder<'a, D: Dual> {
+struct Recorder<'a, D: Carries> {
     model: &'a Model<D>,
+    /// (the caller's cancel flag, the flag the driver watches): raise the second when the
+    /// first is raised or a derivative blew up
+    halt: Option<(&'a AtomicBool, &'a AtomicBool)>,
     schedule: Schedule,
     until: usize,
     k: usize,
@@ -317,14 +469,29 @@ struct Recorder<'a, D: Dual> {
     v_peak: f64,
 }
 
-impl<D: Dual> Recorder<'_, D> {
+impl<D: Carries> Recorder<'_, D> {
     fn record(&mut self, t: f64, y: &[D]) {
         let mut d = [0.0; MAX_PER_PASS];
-        self.model.reading(t, y).derivatives(&mut d[..D::WIDTH]);
+        self.model.reading(t, y).parts(&mut d[..D::WIDTH]);
         if self.blew_up.is_none() && d.iter().any(|x| !x.is_finite()) {
             self.blew_up = Some(t);
         }
         self.out.extend_from_slice(&d[..self.k]);
+    }
+
+    /// An accepted step ending at `t` [s] in state `y`; `last` marks the run's final step.
+    fn on_step(&mut self, t: f64, y: &[D], last: bool) {
+        self.v_peak = self.v_peak.max(y[self.model.layout.dof].value().abs());
+        self.until -= 1;
+        if self.until == 0 || (last && self.schedule.also_last) {
+            self.record(t, y);
+            self.until = self.schedule.every;
+        }
+        if let Some((outer, stop)) = self.halt {
+            if self.blew_up.is_some() || outer.load(Ordering::Relaxed) {
+                stop.store(true, Ordering::Relaxed);
+            }
+        }
     }
 }
 
@@ -343,12 +510,7 @@ impl<D: Dual> Observer<D> for Recorder<'_, D> {
         _s: Option<(D, D)>,
         last: bool,
     ) {
-        self.v_peak = self.v_peak.max(y[self.model.layout.dof].value().abs());
-        self.until -= 1;
-        if self.until == 0 || (last && self.schedule.also_last) {
-            self.record(t, y);
-            self.until = self.schedule.every;
-        }
+        self.on_step(t, y, last);
     }
 }
 
@@ -488,6 +650,98 @@ mod tests {
                 assert!(passed, "{name}: engine and central differences disagree: {}", verdicts.join("; "));
             }
         }
+    }
+
+    /// One pass over `names` on num-dual's 8-wide numbers and on `Tangent<8>`.
+    fn both_passes(c: &Case, names: &[&str], y0: &[f64]) -> (Result<PassOutput, SimError>, Result<PassOutput, SimError>) {
+        let m = c.model();
+        let names_s: Vec<String> = names.iter().map(|s| s.to_string()).collect();
+        let seeds = parse_seeds(&m, &names_s, c.derived_fn).unwrap();
+        let held = Held::default();
+        let dt = c.method.fixed_step().unwrap();
+        let pass = Pass {
+            model: &m, wave: &c.wave, t_start: 0.0, t_end: c.t_end, y0, method: &c.method, held: &held,
+            schedule: Schedule { every: c.every, also_last: true }, seeds: &seeds, normal_force_derived: c.derived_fn,
+        };
+        (pass.go::<DualSVec64<MAX_PER_PASS>>(&NEVER).unwrap(), pass.go_tangent::<MAX_PER_PASS>(dt, &NEVER).unwrap())
+    }
+
+    /// Equal, a -0.0 for a +0.0 allowed (num-dual's "no derivative" is 0 in a tangent).
+    fn assert_same(a: &[f64], b: &[f64], what: &str) {
+        assert_eq!(a.len(), b.len(), "{what}");
+        for (i, (x, y)) in a.iter().zip(b).enumerate() {
+            assert!(x.to_bits() == y.to_bits() || (*x == 0.0 && *y == 0.0), "{what} [{i}]: {x:e} vs {y:e}");
+        }
+    }
+
+    #[test]
+    fn tangent_passes_are_num_duals_bit_for_bit_on_every_kind_of_model() {
+        let lags = {
+            let mut e = Effects::default();
+            e.kappa = 0.05;
+            e.tau_creep = 2e-4;
+            e.tau_sensor = 5e-6;
+            e.c_weight = 30.0;
+            e.drift_rate = 1e-4;
+            e
+        };
+        let mut cases = vec![
+            (paper(Structure::Lps, Effects::default()), vec!["mu_k", "mu_s", "m2", "fric_alpha", "sigma1", "d33", "hyst_alpha", "stribeck_velocity"]),
+            (paper(Structure::Dps(3), Effects::default()), vec!["m1", "pe_youngs", "pe_density", "rayleigh_alpha", "normal_force", "stribeck_exponent"]),
+            (paper(Structure::Lps, lags), vec!["kappa", "tau_creep", "tau_sensor", "c_weight", "drift_rate", "m1", "fric_n"]),
+        ];
+        let mut derived = paper(Structure::Lps, Effects::default());
+        derived.derived_fn = true;
+        derived.hyst = false;
+        cases.push((derived, vec!["m1", "m2", "mu_k"]));
+        for (c, names) in cases.iter_mut() {
+            // coarser steps than the central-difference tests: equality needs no accuracy
+            c.method = Method::Rk4 { dt: 5e-8 };
+            c.every = 400;
+            let rest = c.model().rest_state();
+            let (a, b) = both_passes(c, names, &rest);
+            let ((ra, fa), (rb, fb)) = (a.unwrap(), b.unwrap());
+            assert!(ra.iter().any(|x| *x != 0.0), "{names:?}: the pass carried no derivative");
+            assert_same(&ra, &rb, &format!("readings {names:?}"));
+            assert_same(&fa, &fb, &format!("final state {names:?}"));
+        }
+        // initial-state seeds
+        let c = paper(Structure::Lps, Effects::default());
+        let mut y0 = c.model().rest_state();
+        y0[0] = 1e-7;
+        y0[2] = -1e-3;
+        let (a, b) = both_passes(&c, &["q0", "v0", "mu_k"], &y0);
+        let ((ra, _), (rb, _)) = (a.unwrap(), b.unwrap());
+        assert_same(&ra, &rb, "initial-state seeds");
+    }
+
+    #[test]
+    fn a_tangent_pass_that_blows_up_stops_there_with_the_reason() {
+        // a step far beyond the friction state's stability limit while sliding: the run stays
+        // bounded, its derivatives do not
+        let mut c = paper(Structure::Lps, Effects::default());
+        c.hyst = false;
+        c.method = Method::Rk4 { dt: 2e-7 };
+        c.every = 10;
+        c.t_end = 5e-3;
+        c.wave = PiecewiseLinear::triangle(100.0, 2e-4, 1e-6, 0.0).unwrap();
+        let rest = c.model().rest_state();
+        let (a, b) = both_passes(&c, &["mu_k", "m1", "sigma1"], &rest);
+        let (ea, eb) = (a.unwrap_err().to_string(), b.unwrap_err().to_string());
+        let at = |e: &str| e.split("from t = ").nth(1).map(|x| x.split(' ').next().unwrap().to_string());
+        assert!(eb.contains("not finite") && eb.contains("smaller dt"), "{eb}");
+        assert_eq!(at(&ea), at(&eb), "the same first time: {ea} | {eb}");
+        // a one-name pass (num-dual's scalar dual, the generic driver) stops there too
+        let m = c.model();
+        let seeds = parse_seeds(&m, &["mu_k".to_string()], false).unwrap();
+        let (_, held) = c.readings(&rest);
+        let schedule = Schedule { every: c.every, also_last: true };
+        let one = derivatives(&m, &c.wave, 0.0, c.t_end, &rest, &c.method, &held, schedule, &seeds, false, &NEVER).unwrap();
+        let e1 = one.unwrap_err().to_string();
+        assert!(e1.contains("not finite"), "{e1}");
+        // a pass cancelled from outside is cancelled, not an error
+        let cancelled = AtomicBool::new(true);
+        assert!(derivatives(&m, &c.wave, 0.0, c.t_end, &rest, &c.method, &held, schedule, &seeds, false, &cancelled).is_none());
     }
 
     fn rel_step(c: &Case, name: &str) -> f64 {
