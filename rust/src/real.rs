@@ -142,6 +142,59 @@ pub(crate) fn interpolate_one<T: Copy + Add<Output = T> + Sub<Output = T> + Mul<
     (a + (b - a) * w, (b - a) / span)
 }
 
+/// The branch methods of a [`Real`] of one lane (`Value = f64`, `Mask = bool`): decided on the
+/// value, a scalar evaluating only the side it takes. Shared by the scalars (below) and
+/// `tangent::Tangent`.
+macro_rules! one_lane_branches {
+    () => {
+        #[inline(always)]
+        fn below(&self, x: f64) -> bool {
+            Real::value(self) < x
+        }
+        #[inline(always)]
+        fn above(&self, x: f64) -> bool {
+            Real::value(self) > x
+        }
+        #[inline(always)]
+        fn equals(&self, x: f64) -> bool {
+            Real::value(self) == x
+        }
+        #[inline(always)]
+        fn sign0(&self) -> f64 {
+            crate::scalar::sign0(Real::value(self))
+        }
+        #[inline(always)]
+        fn choose(m: bool, a: impl FnOnce() -> Self, b: impl FnOnce() -> Self) -> Self {
+            if m {
+                a()
+            } else {
+                b()
+            }
+        }
+        #[inline(always)]
+        fn select(m: bool, a: Self, b: Self) -> Self {
+            if m {
+                a
+            } else {
+                b
+            }
+        }
+        #[inline(always)]
+        fn choose_n<const M: usize>(m: bool, a: impl FnOnce() -> [Self; M], b: impl FnOnce() -> [Self; M]) -> [Self; M] {
+            if m {
+                a()
+            } else {
+                b()
+            }
+        }
+        #[inline]
+        fn interpolate(values: &[Self], times: &[f64], t: f64) -> (Self, Self) {
+            $crate::real::interpolate_one(values, times, t, <Self as Real>::zero())
+        }
+    };
+}
+pub(crate) use one_lane_branches;
+
 /// Every scalar (f64 and the dual numbers) is a [`Real`] of one lane, its branches decided on
 /// its value; each method is the one the physics called before it was written over `Real`.
 impl<T: Scalar> Real for T {
@@ -200,48 +253,5 @@ impl<T: Scalar> Real for T {
     fn is_exactly(&self, x: f64) -> bool {
         Scalar::is_exactly(self, x)
     }
-    #[inline(always)]
-    fn below(&self, x: f64) -> bool {
-        Scalar::value(self) < x
-    }
-    #[inline(always)]
-    fn above(&self, x: f64) -> bool {
-        Scalar::value(self) > x
-    }
-    #[inline(always)]
-    fn equals(&self, x: f64) -> bool {
-        Scalar::value(self) == x
-    }
-    #[inline(always)]
-    fn sign0(&self) -> f64 {
-        crate::scalar::sign0(*self)
-    }
-    #[inline(always)]
-    fn choose(m: bool, a: impl FnOnce() -> Self, b: impl FnOnce() -> Self) -> Self {
-        if m {
-            a()
-        } else {
-            b()
-        }
-    }
-    #[inline(always)]
-    fn select(m: bool, a: Self, b: Self) -> Self {
-        if m {
-            a
-        } else {
-            b
-        }
-    }
-    #[inline(always)]
-    fn choose_n<const K: usize>(m: bool, a: impl FnOnce() -> [Self; K], b: impl FnOnce() -> [Self; K]) -> [Self; K] {
-        if m {
-            a()
-        } else {
-            b()
-        }
-    }
-    #[inline]
-    fn interpolate(values: &[Self], times: &[f64], t: f64) -> (Self, Self) {
-        interpolate_one(values, times, t, <Self as Real>::zero())
-    }
+    one_lane_branches!();
 }

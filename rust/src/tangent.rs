@@ -19,7 +19,7 @@ use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
 use num_dual::DualSVec64;
 
 use crate::lane_real::Lanewise;
-use crate::real::{interpolate_one, Real};
+use crate::real::Real;
 
 /// A value and `K` derivatives [unit of the value per unit of each seed].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -287,50 +287,7 @@ impl<const K: usize> Real for Tangent<K> {
     fn is_exactly(&self, x: f64) -> bool {
         self.re == x && self.eps.iter().all(|d| *d == 0.0)
     }
-    #[inline(always)]
-    fn below(&self, x: f64) -> bool {
-        self.re < x
-    }
-    #[inline(always)]
-    fn above(&self, x: f64) -> bool {
-        self.re > x
-    }
-    #[inline(always)]
-    fn equals(&self, x: f64) -> bool {
-        self.re == x
-    }
-    #[inline(always)]
-    fn sign0(&self) -> f64 {
-        crate::scalar::sign0(self.re)
-    }
-    #[inline(always)]
-    fn choose(m: bool, a: impl FnOnce() -> Self, b: impl FnOnce() -> Self) -> Self {
-        if m {
-            a()
-        } else {
-            b()
-        }
-    }
-    #[inline(always)]
-    fn select(m: bool, a: Self, b: Self) -> Self {
-        if m {
-            a
-        } else {
-            b
-        }
-    }
-    #[inline(always)]
-    fn choose_n<const N: usize>(m: bool, a: impl FnOnce() -> [Self; N], b: impl FnOnce() -> [Self; N]) -> [Self; N] {
-        if m {
-            a()
-        } else {
-            b()
-        }
-    }
-    #[inline]
-    fn interpolate(values: &[Self], times: &[f64], t: f64) -> (Self, Self) {
-        interpolate_one(values, times, t, Tangent::constant(0.0))
-    }
+    crate::real::one_lane_branches!();
 }
 
 #[cfg(test)]
