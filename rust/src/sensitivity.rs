@@ -301,7 +301,8 @@ impl Pass<'_> {
         let model: Model<Tangent<K>> = Lanewise::splat(&dual);
         let y0: Vec<Tangent<K>> = y0.iter().map(Lanewise::splat).collect();
         let mut rec = self.recorder(&model);
-        let (end, y) = rk4_pass(&model, self.wave, self.t_start, self.t_end, &y0, dt, &mut rec, cancel)?;
+        let run = TangentRun { model: &model, wave: self.wave, t_start: self.t_start, t_end: self.t_end, y0: &y0, dt, rec: &mut rec, cancel };
+        let (end, y) = crate::lanes::simd_arch().dispatch(run)?;
         Some(self.finish(rec, end, &y))
     }
 
@@ -332,6 +333,28 @@ impl Pass<'_> {
     }
 }
 
+/// [`rk4_pass`] as one operation for `pulp` to compile per instruction set (as the lane
+/// drivers are: `drive::PlainGroups`): a tangent's K derivatives are K-wide vector arithmetic,
+/// and IEEE operations give the same bits at any width.
+struct TangentRun<'r, 'm, const K: usize> {
+    model: &'r Model<Tangent<K>>,
+    wave: &'r PiecewiseLinear,
+    t_start: f64,
+    t_end: f64,
+    y0: &'r [Tangent<K>],
+    dt: f64,
+    rec: &'r mut Recorder<'m, Tangent<K>>,
+    cancel: &'r AtomicBool,
+}
+
+impl<const K: usize> pulp::WithSimd for TangentRun<'_, '_, K> {
+    type Output = Option<(LaneEnd, Vec<Tangent<K>>)>;
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
+        rk4_pass(self.model, self.wave, self.t_start, self.t_end, self.y0, self.dt, self.rec, self.cancel)
+    }
+}
+
 /// Fixed-step RK4 of one tangent run, step for step as the generic driver takes it with one
 /// lane (`drive::drive_lanes`, `rk4.rs`): step k from t = k dt, the input through the step from
 /// the breakpoint cursor at its midpoint, the four stages and the update in the same order,
@@ -339,6 +362,7 @@ impl Pass<'_> {
 /// `Finished`, with the recorder holding the time) once a recorded derivative is not finite.
 /// `None` if cancelled.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn rk4_pass<const K: usize>(
     model: &Model<Tangent<K>>,
     wave: &PiecewiseLinear,
@@ -370,16 +394,14 @@ fn rk4_pass<const K: usize>(
         let probe = t0 + 0.5 * dt;
         cursor.advance(wave, probe);
         let (v0, s) = cursor.input(wave, t0, probe);
-        let f = |tau: f64, y: &[Tangent<K>], dy: &mut [Tangent<K>]| {
-            model.rhs_impl::<0, true>(t0 + tau, Tangent::constant(v0 + s * tau), s, y, dy);
-        };
-        f(0.0, &y, &mut k1);
+        // plain calls, not a closure: code left out of line runs as baseline (see `Real::select`)
+        stage_rate(model, t0, v0, s, 0.0, &y, &mut k1);
         axpy(&mut tmp, &y, h2, &k1);
-        f(h2, &tmp, &mut k2);
+        stage_rate(model, t0, v0, s, h2, &tmp, &mut k2);
         axpy(&mut tmp, &y, h2, &k2);
-        f(h2, &tmp, &mut k3);
+        stage_rate(model, t0, v0, s, h2, &tmp, &mut k3);
         axpy(&mut tmp, &y, dt, &k3);
-        f(dt, &tmp, &mut k4);
+        stage_rate(model, t0, v0, s, dt, &tmp, &mut k4);
         for j in 0..n {
             y[j] += (k1[j] + (k2[j] + k3[j]) * 2.0 + k4[j]) * h6;
         }
@@ -396,6 +418,13 @@ fn rk4_pass<const K: usize>(
             return Some((LaneEnd::Finished { steps, min_step: dt }, y));
         }
     }
+}
+
+/// The right-hand side at `tau` [s] into the step from `t0` [s], the input `v0 + s tau` [V]
+/// (as `drive::ModelRhs::eval`).
+#[inline(always)]
+fn stage_rate<const K: usize>(model: &Model<Tangent<K>>, t0: f64, v0: f64, s: f64, tau: f64, y: &[Tangent<K>], dy: &mut [Tangent<K>]) {
+    model.rhs_impl::<0, true>(t0 + tau, Tangent::constant(v0 + s * tau), s, y, dy);
 }
 
 /// out = y + h k (as `rk4.rs`)
