@@ -2,9 +2,9 @@
 //! (`[f64; K]`), with no `Option` and no generality to pay for.
 //!
 //! Why it exists: num-dual's `DualSVec64<K>` keeps its derivatives in an `Option` of a static
-//! vector, and a pass over 8 names cost 5-8 plain runs on one lane and ~17 plain runs on the
-//! vector lanes the diagnosis's predictions use (benches/RESULTS.md §7, §18) — the passes were a
-//! third of a diagnosis. `Tangent` is a [`Real`] (branches decided on the value), so the one
+//! vector, and a pass over 8 names cost 5-8 plain runs on one lane and 7-11 plain predictions
+//! on the vector lanes the diagnosis's predictions use (benches/RESULTS.md §7, §18) — the passes
+//! were about a quarter of a diagnosis. `Tangent` is a [`Real`] (branches decided on the value), so the one
 //! right-hand side (`Model::rhs_impl`) runs on it as it runs on f64, duals and lanes.
 //!
 //! Every operation is num-dual's formula for `DualVec`, term for term and in its order (the
