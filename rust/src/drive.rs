@@ -28,7 +28,7 @@ use crate::waveform::{Cursor, PiecewiseLinear};
 /// RK4's stability limit on the imaginary axis is 2 sqrt 2; keep a margin.
 pub const RK4_STABLE_OMEGA_DT: f64 = 2.5;
 /// How often (in attempts) a running group looks at the cancel flag.
-const CANCEL_CHECK_ATTEMPTS: usize = 1 << 14;
+pub(crate) const CANCEL_CHECK_ATTEMPTS: usize = 1 << 14;
 /// Smallest step an adaptive method may take before the run counts as diverged [s].
 const ADAPTIVE_H_MIN: f64 = 1e-14;
 

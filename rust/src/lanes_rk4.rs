@@ -13,11 +13,8 @@ use std::sync::atomic::AtomicBool;
 
 use crate::drive::{LaneEnd, Observer, Task};
 use crate::lanes::{refill_lanes, LaneExp, PlainLanes, Queue};
+use crate::rk4::BOUND_SLACK;
 use crate::waveform::Cursor;
-
-/// Attempts between checks of the cancel flag.
-/// RK4's slack on the presliding bound (as `Rk4::bound_slack`).
-const BOUND_SLACK: f64 = 1e-6;
 
 /// What one lane is running.
 #[derive(Clone, Copy)]

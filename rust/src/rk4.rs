@@ -11,6 +11,9 @@
 use crate::scalar::Scalar;
 use crate::stepper::{Attempt, Rhs, State, Stepper};
 
+/// RK4's slack on the presliding bound [relative]: it may overshoot by its truncation error.
+pub const BOUND_SLACK: f64 = 1e-6;
+
 /// Step size and stage buffers for `L` lanes, allocated once per run.
 #[derive(Clone, Debug)]
 pub struct Rk4<S, const L: usize = 1> {
@@ -103,7 +106,7 @@ impl<S: State, const L: usize> Stepper<S, L> for Rk4<S, L> {
 
     /// RK4 may overshoot the bound by its truncation error.
     fn bound_slack(&self) -> f64 {
-        1e-6
+        BOUND_SLACK
     }
 
     fn restart(&mut self, _lane: usize) {}

@@ -375,7 +375,7 @@ fn rk4_pass<const K: usize>(
 ) -> Option<(LaneEnd, Vec<Tangent<K>>)> {
     let n = y0.len();
     let dof = model.layout.dof;
-    let bound = model.presliding_bound() * (1.0 + RK4_BOUND_SLACK) + 1e-12;
+    let bound = model.presliding_bound() * (1.0 + crate::rk4::BOUND_SLACK) + 1e-12;
     let mut y = y0.to_vec();
     let zero = Tangent::constant(0.0);
     let (mut k1, mut k2, mut k3, mut k4, mut tmp) = (vec![zero; n], vec![zero; n], vec![zero; n], vec![zero; n], vec![zero; n]);
@@ -387,7 +387,7 @@ fn rk4_pass<const K: usize>(
     let mut steps = 0u64;
     rec.record(t_start, &y);
     loop {
-        if steps % CANCEL_CHECK_STEPS == 0 && cancel.load(Ordering::Relaxed) {
+        if steps % crate::drive::CANCEL_CHECK_ATTEMPTS as u64 == 0 && cancel.load(Ordering::Relaxed) {
             return None;
         }
         let t0 = k as f64 * dt;
@@ -435,10 +435,6 @@ fn axpy<const K: usize>(out: &mut [Tangent<K>], y: &[Tangent<K>], h: f64, k: &[T
     }
 }
 
-/// RK4's slack on the presliding bound (`Rk4::bound_slack`).
-const RK4_BOUND_SLACK: f64 = 1e-6;
-/// Steps between checks of the cancel flag.
-const CANCEL_CHECK_STEPS: u64 = 1 << 14;
 
 /// A number a pass records: a value and `WIDTH` derivative parts.
 pub trait Carries: Real<Value = f64> {
