@@ -62,7 +62,8 @@ def main(argv=None) -> int:
                 e = np.abs(ds["final_position"].values - ref)
                 row = dict(model=model, corner=name, method=method, tol=tol, max_err_m=float(e.max()),
                            points_over_1nm=int((e > 1e-9).sum()), median_steps=float(np.median(ds.steps.values)),
-                           wall_s=wall, points_per_s=e.size / wall, statuses=np.bincount(ds.status.values.ravel()).tolist())
+                           wall_s=wall, points_per_s=e.size / wall,
+                           statuses=np.bincount(ds.status.values.ravel()).tolist())
                 out.append(row)
                 print(f"{model} | {name} | {method} {tol if tol else '(own)'}: max |dx1| {e.max():.2e} m, > 1 nm: "
                       f"{row['points_over_1nm']}, median steps {row['median_steps']:.0f}, {row['points_per_s']:.0f} "

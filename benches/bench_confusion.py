@@ -39,7 +39,7 @@ from typing import Any, Optional
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_false_alarm import CALIBRATED, EXPERIMENTS, null_case  # noqa: E402
+from bench_false_alarm import CALIBRATED, EXPERIMENTS, null_case
 
 #: the two sizes: RMS of the effect's signal after a linearised refit, in noise units
 SIZES = {"small": 3.0, "large": 8.0}
@@ -288,7 +288,8 @@ def table(rows: list[dict[str, Any]]) -> str:
         for t in truths:
             tr = [r for r in sel if r["truth"] == t]
             if tr:
-                lines.append(f"| {t} | " + " | ".join(str(sum(r["verdict"] == v for r in tr)) or "" for v in verdicts) + " |")
+                counts = (str(sum(r["verdict"] == v for r in tr)) or "" for v in verdicts)
+                lines.append(f"| {t} | " + " | ".join(counts) + " |")
         reached = []
         for t in truths:
             sizes = [r.get("size_after_refit") for r in sel if r["truth"] == t]

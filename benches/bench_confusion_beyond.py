@@ -39,7 +39,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
-from bench_confusion import (EXPERIMENTS, SIZES, _misset, _nominal_of, _true_device, _tuned)  # noqa: E402
+from bench_confusion import EXPERIMENTS, SIZES, _misset, _nominal_of, _true_device, _tuned  # noqa: E402
 
 #: two-effect devices (the first three: issue 31's unseen ones)
 PAIRS: tuple[tuple[str, str], ...] = (
@@ -187,7 +187,8 @@ def table(rows: list[dict[str, Any]]) -> str:
     offlib = [r for r in rows if r["kind"] == "offcat" and not r["in_library"]]
     wrong_terms = sum(r["verdict"] not in ("unexplained", "not_converged") for r in offlib)
     lines += ["", f"- both effects named: {_bound(sum(r['right'] for r in pairs), len(pairs))}",
-              f"- in-library forces discovered with the right variable: {_bound(sum(r['right'] for r in inlib), len(inlib))}",
+              "- in-library forces discovered with the right variable: "
+              f"{_bound(sum(r['right'] for r in inlib), len(inlib))}",
               f"- off-library forces given a term or an effect (must be 0): {_bound(wrong_terms, len(offlib))}"]
     if rows:
         secs = [r["seconds"] for r in rows]

@@ -83,10 +83,12 @@ def table(rows: list[dict[str, Any]]) -> str:
     times = sorted(r["seconds"] for r in rows)
     med = times[len(times) // 2] if times else math.nan
     lines.append("")
+    named = sum(r['verdict'] not in ('none', 'unexplained', 'not_converged') for r in healthy)
     lines.append(f"{right} of {len(rows)} right; healthy devices: {len(healthy)}, false alarms (an effect named on a "
-                 f"healthy device) {sum(r['verdict'] not in ('none', 'unexplained', 'not_converged') for r in healthy)}, "
+                 f"healthy device) {named}, "
                  f"not 'none' {false_alarms}; discovered on {sum(bool(r.get('discovered')) for r in rows)} "
-                 f"(on a healthy device {sum(bool(r.get('discovered')) for r in healthy)}); time median {med:.0f} s, max {max(times) if times else math.nan:.0f} s")
+                 f"(on a healthy device {sum(bool(r.get('discovered')) for r in healthy)}); time median {med:.0f} s, "
+                 f"max {max(times) if times else math.nan:.0f} s")
     return "\n".join(lines)
 
 
@@ -113,8 +115,8 @@ def main(argv: Optional[list[str]] = None) -> int:
                 continue
             r = run_case(s / name, keys[name])
             rows.append(r)
-            print(f"{r['set']}/{r['case']}: {r['verdict']} ({'right' if r['right'] else 'WRONG'}) in {r['seconds']:.0f} s",
-                  flush=True)
+            print(f"{r['set']}/{r['case']}: {r['verdict']} ({'right' if r['right'] else 'WRONG'}) "
+                  f"in {r['seconds']:.0f} s", flush=True)
             if a.jsonl:
                 with a.jsonl.open("a") as f:
                     f.write(json.dumps(r) + "\n")

@@ -69,7 +69,7 @@ def kernel_resources() -> list[dict]:
     rows = []
     for spec in (Spec(2, True), Spec(5, True)):
         mod = cp.RawModule(code=kernel_source(spec), options=NVRTC_OPTIONS)
-        for method, name in ENTRY.items():
+        for name in ENTRY.values():
             f = mod.get_function(name)
             row = dict(nodes=spec.nodes, kernel=name, registers=f.num_regs, local_bytes=f.local_size_bytes,
                        shared_bytes=f.shared_size_bytes, block=spec.block)
@@ -239,7 +239,8 @@ def stiff_row(backend: str, side: int) -> dict:
     reasons = ds["reason"].values.ravel().astype(str)
     rerun = int(np.count_nonzero(np.char.startswith(reasons, "failed on the kernel")))
     hi = ds.isel(fric_alpha=slice(side - side // 10, None))
-    hi_rerun = int(np.count_nonzero(np.char.startswith(hi["reason"].values.ravel().astype(str), "failed on the kernel")))
+    hi_reasons = hi["reason"].values.ravel().astype(str)
+    hi_rerun = int(np.count_nonzero(np.char.startswith(hi_reasons, "failed on the kernel")))
     return dict(backend=backend, grid=f"stiff {side}x{side}: fric_alpha 2e10-2e11 x V 40-120", points=side * side,
                 wall_s=round(wall, 3), rerun_on_cpu=rerun, rerun_in_top_decile_of_fric_alpha=hi_rerun,
                 statuses=np.bincount(ds.status.values.ravel(), minlength=5).tolist(),
@@ -283,8 +284,9 @@ def main(argv=None) -> int:
         for item in filter(None, spec.split(",")):
             model, method = item.split(":")
             key = f"row_{model}_{method}" + ("" if variant == "default" else f" [{variant}]")
-            print(json.dumps(stage(key, lambda: dict(gpu_row(a.backend, model, method, a), variant=variant))),
-                  flush=True)
+            row = stage(key, lambda model=model, method=method: dict(gpu_row(a.backend, model, method, a),
+                                                                     variant=variant))
+            print(json.dumps(row), flush=True)
         if a.backend == "cuda":
             use_variant("default")
 

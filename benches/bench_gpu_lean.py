@@ -9,13 +9,17 @@ then the full 1,000 x 1,000 sweeps (bench_gpu.gpu_row) of the old kernel and the
     python benches/bench_gpu_lean.py --before before.cu --cpu --ab 4 --size 2 --rk4-ms 0.2   # dry run, CPU build
 
 Results (NVIDIA H200): benches/results/gpu_h200_run5_lean.{json,log}, benches/RESULTS.md."""
-import argparse, json, sys, time
+import argparse
+import json
+import sys
+import time
 from pathlib import Path
+
 import numpy as np
-import idm_rs
+
 from idm_rs import engine, methods
 from idm_rs.batch import Structure, param_row
-from idm_rs.gpu import backend, Spec, pack, wave_columns
+from idm_rs.gpu import Spec, backend, pack, wave_columns
 
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
@@ -54,7 +58,8 @@ def regs():
     m = backend._MODULES.get(Spec(2, True))
     if m is None:
         return {}
-    return {n: (m.get_function(n).num_regs, m.get_function(n).local_size_bytes) for n in ("idm_rk4_sweep", "idm_dopri5_sweep")}
+    return {n: (m.get_function(n).num_regs, m.get_function(n).local_size_bytes)
+            for n in ("idm_rk4_sweep", "idm_dopri5_sweep")}
 
 
 def gpu_vs_cpu():
@@ -64,7 +69,8 @@ def gpu_vs_cpu():
     out = {}
     for method in ("rk4", "dopri5"):
         waves = ("triangle", dict(amplitude=np.linspace(40, 120, 64), rise=0.5e-3, fall=1.5e-3, delay=0.0))
-        b = prepare(Structure("lps", 1).config(method="rk4", dt=5e-8), rows, waves, 2e-3, 5e-8, method=method, spec=Spec(2, True))
+        b = prepare(Structure("lps", 1).config(method="rk4", dt=5e-8), rows, waves, 2e-3, 5e-8, method=method,
+                    spec=Spec(2, True))
         g, c = backend.run_cuda(b), backend.run_cpu(b)
         out[method] = float(np.max(np.abs(g["final_position"] - c["final_position"])))
     out["pass"] = out["rk4"] <= 1e-12 and out["dopri5"] <= 1e-10
@@ -85,9 +91,12 @@ def main():
     global ORIG
     ORIG = Path(a.before).read_text()
     run = backend.run_cpu if a.cpu else backend.run_cuda
-    out = {"card": bench.card() if not a.cpu else "cpu", "ab": [], "rows": [], "equal": [], "regs": {}, "gpu_vs_cpu": {}}
+    out = {"card": bench.card() if not a.cpu else "cpu", "ab": [], "rows": [], "equal": [], "regs": {},
+           "gpu_vs_cpu": {}}
     print(json.dumps(out["card"]), flush=True)
-    save = lambda: Path(a.json).write_text(json.dumps(out, indent=1, default=str))
+
+    def save() -> None:
+        Path(a.json).write_text(json.dumps(out, indent=1, default=str))
 
     # kernel only: the LPS grid, hysteresis on (as the sweep), CUDA events
     size = a.ab
@@ -113,13 +122,19 @@ def main():
                     except Exception as exc:
                         out["regs"][label] = repr(exc)
                 if a.cpu:
-                    t0 = time.perf_counter(); r = run(b); ks = time.perf_counter() - t0
+                    t0 = time.perf_counter()
+                    r = run(b)
+                    ks = time.perf_counter() - t0
                 else:
-                    h = backend.launch_cuda(b); r = h.result(); ks = h.kernel_s
+                    h = backend.launch_cuda(b)
+                    r = h.result()
+                    ks = h.kernel_s
                 res[(label, method)] = r
-                row = dict(variant=label, method=method, rep=rep, points=b.points, t_end=b.t_end if method == "dopri5" else b.steps * b.dt,
+                row = dict(variant=label, method=method, rep=rep, points=b.points,
+                           t_end=b.t_end if method == "dopri5" else b.steps * b.dt,
                            kernel_s=round(ks, 4), points_per_s=round(b.points / ks), ok=int((r["status"] == 1).sum()))
-                out["ab"].append(row); print(json.dumps(row), flush=True)
+                out["ab"].append(row)
+                print(json.dumps(row), flush=True)
             if rep == 0 and not a.cpu:
                 try:
                     out["gpu_vs_cpu"][label] = gpu_vs_cpu()
@@ -130,11 +145,13 @@ def main():
     for label in labels:
         for method in batches:
             r0, r1 = res[("orig", method)], res[(label, method)]
-            eq = {k: float(np.nanmax(np.abs(r1[k].astype(float) - r0[k].astype(float)))) if r0[k].dtype != bool else int((r0[k] != r1[k]).sum())
+            eq = {k: float(np.nanmax(np.abs(r1[k].astype(float) - r0[k].astype(float))))
+                  if r0[k].dtype != bool else int((r0[k] != r1[k]).sum())
                   for k in r0 if k != "diverged_at"}
             bits = int(np.count_nonzero(r1["final_position"].view(np.int64) != r0["final_position"].view(np.int64)))
             row = dict(variant=label, method=method, max_abs_diff_vs_orig=eq, final_position_bits_differ=bits)
-            out["equal"].append(row); print(json.dumps(row), flush=True)
+            out["equal"].append(row)
+            print(json.dumps(row), flush=True)
     save()
 
     # the full sweeps (wall, host included), as benches/RESULTS.md measures them
@@ -157,9 +174,14 @@ def main():
         try:
             row = bench.gpu_row("kernel-cpu" if a.cpu else "cuda", "lps", method, ns)
         except Exception as exc:
-            import traceback; traceback.print_exc(); row = {"failed": repr(exc)}
+            import traceback
+
+            traceback.print_exc()
+            row = {"failed": repr(exc)}
         row["variant"] = label
-        out["rows"].append(row); print(json.dumps(row), flush=True); save()
+        out["rows"].append(row)
+        print(json.dumps(row), flush=True)
+        save()
     use("lean")
     backend.kernel_source = _shipped_source
     return 0

@@ -7,7 +7,8 @@ ratio, and |Δx1(10 ms)| [m]. The two must agree to 1e-12 m (asserted), so that 
 compares the same computation.
 
 Each timing is the best of ``--repeats`` end-to-end calls, the two implementations alternating
-call by call (the setup, under 0.1 % of a call, is included for both): ``idm_rs.simulate(...)`` and ``numba_baseline.simulate_x1(...)``.
+call by call (the setup, under 0.1 % of a call, is included for both): ``idm_rs.simulate(...)`` and
+``numba_baseline.simulate_x1(...)``.
 The numba kernel is compiled (or loaded from its cache) and idm-rs called once before timing.
 
     python benches/bench_step_cost.py [--repeats 5] [--json PATH]
@@ -35,7 +36,7 @@ import numpy as np
 import idm_rs
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import numba_baseline  # noqa: E402
+import numba_baseline
 
 T_END = 10e-3  # s
 DT = 1e-8  # s
@@ -97,7 +98,7 @@ def main(argv=None) -> int:
     for label, model in CASES:
         run_idm_rs(model)
         (t_rs, x_rs, all_rs), (t_nb, x_nb, all_nb) = best_of_interleaved(
-            lambda: run_idm_rs(model), lambda: run_numba(params, model), args.repeats
+            lambda model=model: run_idm_rs(model), lambda model=model: run_numba(params, model), args.repeats
         )
         rows.append(
             {

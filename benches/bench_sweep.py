@@ -29,22 +29,23 @@ time, rate, statuses and peak memory (``resource.getrusage(...).ru_maxrss``).
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import sys
 
 # numba's thread pool is sized from the environment at import; --threads caps it afterwards.
 os.environ.setdefault("NUMBA_NUM_THREADS", str(max(2, os.cpu_count() or 2)))
 
-import json  # noqa: E402
-import platform  # noqa: E402
-import resource  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import json
+import platform
+import resource
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
-import xarray  # noqa: E402,F401  (imported before any timing: sweep() returns an xarray Dataset)
+import numpy as np
+import xarray  # noqa: F401  (imported before any timing: sweep() returns an xarray Dataset)
 
-import idm_rs  # noqa: E402
+import idm_rs
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -114,7 +115,8 @@ def reference(g, threads: int, model: str = "lps") -> np.ndarray:
     cache = CACHE_DIR / ("ref_1e-8.npz" if model == "lps" else f"ref_{model}4_1e-8.npz")
     if cache.exists():
         with np.load(cache) as z:
-            if z["key"].shape == key.shape and np.array_equal(z["key"], key) and str(z["version"]) == idm_rs.__version__:
+            same_key = z["key"].shape == key.shape and np.array_equal(z["key"], key)
+            if same_key and str(z["version"]) == idm_rs.__version__:
                 print(f"reference: {cache} (idm-rs RK4, dt = {REF_DT:g} s)")
                 return z["final_position"]
     print(f"reference: computing idm-rs RK4 at dt = {REF_DT:g} s on {g['mass_ratio'].size * g['voltage'].size} points "
@@ -203,7 +205,9 @@ def bench_256(a, model: str = "lps") -> dict:
     points, bps = grid_points(g)
     rows = []
 
-    def err(x: np.ndarray, idx=slice(None)) -> float:
+    every = slice(None)
+
+    def err(x: np.ndarray, idx=every) -> float:
         d = np.abs(np.asarray(x).ravel() - ref[idx])
         return float(np.nanmax(d)) if np.isfinite(d).any() else float("nan")
 
@@ -233,19 +237,17 @@ def bench_256(a, model: str = "lps") -> dict:
             idm_cases.append((f"idm-rs {method}", method, RK4_DT, tol, f"rtol = atol = {tol:g}"))
     for label, method, dt, tol, setting in idm_cases:
         print(f"{label} ({setting}), {a.threads} threads ...", flush=True)
-        wall, ds, walls = best_time(
-            lambda: run_idm_rs(g, method=method, dt=dt, tol=tol, threads=a.threads, model=model), a.repeats)
+        case = dict(method=method, dt=dt, tol=tol, model=model)
+        wall, ds, walls = best_time(functools.partial(run_idm_rs, g, threads=a.threads, **case), a.repeats)
         print(f"{label} ({setting}), 1 thread ...", flush=True)
-        wall1, ds1, walls1 = best_time(
-            lambda: run_idm_rs(g, method=method, dt=dt, tol=tol, threads=1, model=model), a.repeats)
+        wall1, ds1, walls1 = best_time(functools.partial(run_idm_rs, g, threads=1, **case), a.repeats)
         same = all(ds[v].values.tobytes() == ds1[v].values.tobytes() for v in ds.data_vars)
         # the same run with the lanes' vector code forced to scalar (SIMD against scalar dispatch)
         level = idm_rs.engine.simd_level()
         print(f"{label} ({setting}), {a.threads} threads, scalar dispatch (SIMD: {level}) ...", flush=True)
         idm_rs.engine.set_simd_level("scalar")
         try:
-            wall_sc, ds_sc, _ = best_time(
-                lambda: run_idm_rs(g, method=method, dt=dt, tol=tol, threads=a.threads, model=model), a.repeats)
+            wall_sc, ds_sc, _ = best_time(functools.partial(run_idm_rs, g, threads=a.threads, **case), a.repeats)
         finally:
             idm_rs.engine.set_simd_level(level)
         x, x_sc = ds["final_position"].values, ds_sc["final_position"].values
@@ -303,7 +305,8 @@ def bench_256(a, model: str = "lps") -> dict:
         idm_rs_retries0_max_err_status1_m=err(np.where(st0 == 1, ds0["final_position"].values.ravel(), np.nan)),
         idm_rs_retries2_statuses=np.bincount(st2, minlength=5).tolist(),
         idm_rs_retries2_max_err_m=err(ds2["final_position"].values),
-        diverged_points=[[float(g["mass_ratio"][k // 16]), float(g["voltage"][k % 16])] for k in np.flatnonzero(st0 == 3)],
+        diverged_points=[[float(g["mass_ratio"][k // 16]), float(g["voltage"][k % 16])]
+                         for k in np.flatnonzero(st0 == 3)],
     )
     return dict(model=model, rows=rows, divergence=divergence, numba_points_per_s=numba_rate)
 
@@ -335,7 +338,8 @@ def print_256(res: dict, threads: int) -> None:
                   f"{r['bitwise_same_1_vs_n_threads']}")
             print(f"    {r['simd_level']} lanes {r['points_per_s']:.1f} points/s against scalar dispatch "
                   f"{r['scalar_points_per_s']:.1f} ({r['simd_vs_scalar']:.2f}x); final positions "
-                  + ("bitwise equal" if r["simd_scalar_bitwise"] else f"differ by at most {r['simd_scalar_max_diff_m']:.1e} m"))
+                  + ("bitwise equal" if r["simd_scalar_bitwise"]
+                     else f"differ by at most {r['simd_scalar_max_diff_m']:.1e} m"))
     d = res["divergence"]
     if d is None:
         return
@@ -343,7 +347,8 @@ def print_256(res: dict, threads: int) -> None:
     print(f"  numba: NaN/inf on {d['numba_diverged']}; NaN/inf or > 1 nm off the reference on "
           f"{d['numba_diverged_or_off_by_1nm']} (largest finite error {d['numba_max_err_finite_m']:.2e} m)")
     print(f"  idm-rs, retries=0: {d['idm_rs_retries0_status3']} flagged diverged (status 3; every numba NaN among "
-          f"them: {d['idm_rs_flags_every_numba_nan']}); largest error of the rest {d['idm_rs_retries0_max_err_status1_m']:.2e} m")
+          f"them: {d['idm_rs_flags_every_numba_nan']}); largest error of the rest "
+          f"{d['idm_rs_retries0_max_err_status1_m']:.2e} m")
     print(f"  idm-rs, retries=2: statuses {d['idm_rs_retries2_statuses']} (not run, ok, ok at dt/2^k, diverged, "
           f"invalid), largest error {d['idm_rs_retries2_max_err_m']:.2e} m")
 

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
-from conftest import interrupt_main_when
 
 import idm_rs
+from conftest import interrupt_main_when
 from idm_rs.cli import main
 from idm_rs.rigs import RigData
 from idm_rs.rigs.diagnosis import _linear_rig, diagnose_spring_slider
@@ -26,7 +26,8 @@ P = idm_rs.Params()
 def test_simulate_options_reach_the_run(tmp_path, capsys):
     out = tmp_path / "r.nc"
     assert main(["simulate", "--model", "dps", "--n-elements", "3", "--dt", "2e-8", "--t-end", "1e-3", "--save-every",
-                 "7", "--amplitude", "60", "--rise", "2e-4", "--fall", "8e-4", "--no-hysteresis", "--out", str(out)]) == 0
+                 "7", "--amplitude", "60", "--rise", "2e-4", "--fall", "8e-4", "--no-hysteresis",
+                 "--out", str(out)]) == 0
     api = idm_rs.simulate(P, idm_rs.Triangle(60.0, 2e-4, 8e-4), t_end=1e-3, dt=2e-8, model="dps", n_elements=3,
                           save_every=7, piezo_hysteresis=False)
     with xr.open_dataset(out) as ds:

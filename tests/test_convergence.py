@@ -24,10 +24,12 @@ SHORT_WAVE = idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=0.5e-3)
 
 
 def final_state(t_end: float, dt: float, model: str = "lps", n_elements: int = 4) -> np.ndarray:
-    return idm_rs.simulate(PAPER, SHORT_WAVE, t_end, dt, model=model, n_elements=n_elements, save_every=10**9).final_state
+    return idm_rs.simulate(PAPER, SHORT_WAVE, t_end, dt, model=model, n_elements=n_elements,
+                           save_every=10**9).final_state
 
 
-def observed_order(t_end: float, model: str, component: int, dts=(4e-8, 2e-8), ref_dt=1.25e-9) -> tuple[float, float, float]:
+def observed_order(t_end: float, model: str, component: int, dts=(4e-8, 2e-8),
+                   ref_dt=1.25e-9) -> tuple[float, float, float]:
     """(order, error at dts[0], error at dts[1]) of state component ``component`` at t_end."""
     ref = final_state(t_end, ref_dt, model)
     e1, e2 = (abs(final_state(t_end, dt, model)[component] - ref[component]) for dt in dts)
@@ -72,7 +74,8 @@ def test_rk4_error_is_tiny_over_stick_slip_cycles():
     reason=(
         "MODEL.md says 'RK4 converges at order 4 in dt'; over 1 ms of the paper-like case "
         "(rise 0.5 ms, fall 0.5 ms) the observed order of x1 between dt = 4e-8 and 2e-8 s is "
-        "~1.7 (errors 3.37e-14, 1.06e-14 m vs a 2.5e-9 s reference; 1.17 between 2e-8 and 1e-8 s), because the friction law "
+        "~1.7 (errors 3.37e-14, 1.06e-14 m vs a 2.5e-9 s reference; 1.17 between 2e-8 and 1e-8 s), "
+        "because the friction law "
         "is not smooth (|v|, |dg/dt|) at stick-slip transitions. A property of the model with a "
         "fixed-step method, not a code bug."
     ),

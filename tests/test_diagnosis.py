@@ -52,7 +52,7 @@ def test_a_ground_spring_is_named_and_fitted(spring_diagnosis):
     assert d.noise.sigma == pytest.approx(NOISE, rel=0.15)
     # the missing spring showed before: calibration alone leaves a systematic residual
     assert d.rms_calibrated > 1.2 * d.noise.sigma
-    assert any(l.systematic for l in d.locations)
+    assert any(loc.systematic for loc in d.locations)
 
 
 def test_the_fit_figures_show_the_reports_residuals(spring_diagnosis):

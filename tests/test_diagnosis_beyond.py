@@ -13,7 +13,6 @@ import pytest
 
 import idm_rs
 from idm_rs.synthetic import make_case
-
 from offcatalogue import make_offcatalogue_case
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "recordings"
@@ -250,8 +249,8 @@ def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_a
     import numpy as np
 
     dg = importlib.import_module("idm_rs.diagnosis.diagnose")
-    from idm_rs.diagnosis.catalogue import CALIBRATED, by_id
     from idm_rs.diagnosis.case_model import ModelSpec, Structure
+    from idm_rs.diagnosis.catalogue import CALIBRATED, by_id
     from idm_rs.diagnosis.fitting import FitResult
 
     sigma, n = 1e-9, 4_000
@@ -316,7 +315,8 @@ def test_a_form_that_fails_only_the_held_out_check_gets_the_drive_that_would_dec
 
     dg = importlib.import_module("idm_rs.diagnosis.diagnose")
     sigma = 1e-9
-    pb = SimpleNamespace(sigma=sigma, rec=SimpleNamespace(experiments=[SimpleNamespace(name=f"e{i}") for i in range(4)]))
+    experiments = [SimpleNamespace(name=f"e{i}") for i in range(4)]
+    pb = SimpleNamespace(sigma=sigma, rec=SimpleNamespace(experiments=experiments))
     monkeypatch.setattr(dg, "_heldout_index", lambda rec: 2)
     asked = []
 

@@ -10,7 +10,6 @@ import importlib
 import math
 from types import SimpleNamespace
 
-import numpy as np
 import pytest
 
 import idm_rs

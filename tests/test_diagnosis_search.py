@@ -20,14 +20,14 @@ from idm_rs.diagnosis.fitting import FreeParam, Objective, apply, fit, set_param
 from idm_rs.diagnosis.multistart import Start, leaves_noise, multistart
 from idm_rs.diagnosis.noise import cross_check, estimate_noise, residual_sigma
 from idm_rs.diagnosis.results import Candidate
-from idm_rs.diagnosis.thresholds import SEPARATION
 from idm_rs.diagnosis.screening import Screened, near_degenerate, screen
+from idm_rs.diagnosis.thresholds import SEPARATION
 from idm_rs.recording import load_case
 from idm_rs.synthetic import make_case
+from test_diagnosis_fairness import LONG, NOISE, NOMINAL  # the same synthetic device and records
 
 diagnose_module = importlib.import_module("idm_rs.diagnosis.diagnose")
 
-from test_diagnosis_fairness import LONG, NOISE, NOMINAL  # the same synthetic device and records
 SHORT = ({"amplitude_V": 80, "frequency_Hz": 200, "direction": "forward", "cycles": 3},
          {"amplitude_V": 60, "frequency_Hz": 200, "direction": "backward", "cycles": 3})
 SPEC = ModelSpec(Structure("lps", 1, False), NOMINAL.to_dict(resolved=False), {})
@@ -246,7 +246,8 @@ def test_near_degenerate_effects_are_alternatives_not_a_second_verdict():
     b[:2] = [0.99, math.sqrt(1 - 0.99**2)]
     c = np.zeros(100)
     c[2] = 1.0
-    sc = [Screened(by_id("incline"), (0.0,), 50.0, [0.0], a), Screened(by_id("friction_asymmetry"), (0.0,), 49.0, [0.0], b),
+    sc = [Screened(by_id("incline"), (0.0,), 50.0, [0.0], a),
+          Screened(by_id("friction_asymmetry"), (0.0,), 49.0, [0.0], b),
           Screened(by_id("thermal_drift"), (0.0,), 5.0, [0.0], c)]
     pairs = near_degenerate(sc)
     assert [(p[0], p[1]) for p in pairs] == [("incline", "friction_asymmetry")]

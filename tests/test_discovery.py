@@ -13,13 +13,20 @@ import numpy as np
 import pytest
 
 from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
-from idm_rs.diagnosis.diagnose import _HeldOut, _Problem, _calibration_params
-from idm_rs.diagnosis.discovery import (MAIN_TERMS, InferredForce, Trajectory, _choose, _gcv_solve,
-                                        _second_differences, discover, find_terms)
+from idm_rs.diagnosis.diagnose import _calibration_params, _HeldOut, _Problem
+from idm_rs.diagnosis.discovery import (
+    MAIN_TERMS,
+    InferredForce,
+    Trajectory,
+    _choose,
+    _gcv_solve,
+    _second_differences,
+    discover,
+    find_terms,
+)
 from idm_rs.diagnosis.fitting import Objective
 from idm_rs.diagnosis.noise import estimate_noise
 from idm_rs.recording import load_case
-
 from offcatalogue import make_offcatalogue_case
 
 
@@ -186,8 +193,8 @@ def test_the_regression_names_the_term_the_force_is_made_of():
         v2 = np.roll(v1, 5) * rng.uniform(0.5, 2.0, n)
         ff = 3.0 * np.tanh(v1 / 1e-3) + 1.5 * np.sin(2 * np.pi * t / 0.013 + j)  # sliding, and presliding in stick
         tr = Trajectory(t, np.cumsum(v1) * 1e-4, v1, np.cumsum(v2) * 1e-4, v2, ff,
-                        80 * np.abs(np.sin(2 * np.pi * t / 0.01)), np.gradient(80 * np.abs(np.sin(2 * np.pi * t / 0.01)), t),
-                        1e-3)
+                        80 * np.abs(np.sin(2 * np.pi * t / 0.01)),
+                        np.gradient(80 * np.abs(np.sin(2 * np.pi * t / 0.01)), t), 1e-3)
         B = np.stack([np.interp(t, knots, np.eye(k)[i]) for i in range(k)], axis=1)
         force = -2e4 * (tr.x1 - tr.x2) + 0.03 * tr.ff
         values = np.linalg.lstsq(B, force, rcond=None)[0]
@@ -210,7 +217,6 @@ def test_the_whole_diagnosis_discovers_off_catalogue_physics(tmp_path):
     right variable and the refit reaches 1.2 x noise on at least 3 of 4; nothing on the healthy
     device. (About 15 minutes on 2 cores; benches/bench_discovery.py prints the table.)"""
     import idm_rs
-
     from offcatalogue import OFF_CATALOGUE_CASES
 
     found = 0

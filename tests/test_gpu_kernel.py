@@ -6,7 +6,6 @@ else. The GPU itself is tested only where CuPy finds one (skipped otherwise)."""
 
 from __future__ import annotations
 
-import math
 import os
 import shutil
 from concurrent.futures import ThreadPoolExecutor
@@ -17,8 +16,8 @@ from hypothesis import HealthCheck, given, note, settings
 from hypothesis import strategies as st
 
 import idm_rs
-from idm_rs import engine, methods
-from idm_rs.batch import Point, Structure, param_row, run
+from idm_rs import engine
+from idm_rs.batch import Structure, param_row
 from idm_rs.gpu import GpuUnavailable, Spec, all_specs, kernel_source, prepare, run_cpu, run_cuda
 from idm_rs.gpu.backend import ENTRY, NVRTC_OPTIONS
 

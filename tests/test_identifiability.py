@@ -18,7 +18,8 @@ def test_a_tight_parameter_is_determined_and_a_loose_one_is_not():
     s = {p.name: p for p in assess(values, std, corr, ["kappa", "tau_creep", "mu_k"])}
     assert not s["kappa"].determined and s["kappa"].partner == "tau_creep"
     assert s["kappa"].correlation == pytest.approx(-0.97)
-    assert s["kappa"].low == pytest.approx(0.009 - Z95 * 0.009) and s["kappa"].high == pytest.approx(0.009 + Z95 * 0.009)
+    assert s["kappa"].low == pytest.approx(0.009 - Z95 * 0.009)
+    assert s["kappa"].high == pytest.approx(0.009 + Z95 * 0.009)
     assert s["tau_creep"].determined and s["mu_k"].determined
     assert "NOT determined" in s["kappa"].words() and "tau_creep" in s["kappa"].words()
     assert "determined" in s["mu_k"].words() and "NOT" not in s["mu_k"].words()

@@ -6,12 +6,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import (MAX_SLEW_FOR_DT_2E8, any_input, fastest_slew, grid_times, presliding_bound, some_effects,
-                      wide_params)
 from hypothesis import given, note, settings
 from hypothesis import strategies as st
 
 import idm_rs
+from conftest import (
+    MAX_SLEW_FOR_DT_2E8,
+    any_input,
+    fastest_slew,
+    grid_times,
+    presliding_bound,
+    some_effects,
+    wide_params,
+)
 from idm_rs.batch import Point, Structure, run
 
 LONG = settings(max_examples=300)

@@ -109,7 +109,8 @@ def test_the_raw_difference_bounds_the_separation_from_above(rec):
     free = _calibration_params(p0)[:3]
     a = (ModelSpec(s, p0, {"k_ground": 2e4}), free)
     b = (ModelSpec(s, p0, {}), free)
-    v = virtual_recording(rec, [Drive("forward", 80.0, 100.0, 2, 5e-4, 2e-3), Drive("backward", 40.0, 200.0, 2, 5e-4, 2e-3)])
+    v = virtual_recording(rec, [Drive("forward", 80.0, 100.0, 2, 5e-4, 2e-3),
+                                Drive("backward", 40.0, 200.0, 2, 5e-4, 2e-3)])
     raw = raw_differences(v, 1.5e-9, a, b)
     sep = separations(v, 1.5e-9, a, b)
     assert all(0.0 < x <= r * (1 + 1e-9) for x, r in zip(sep, raw))

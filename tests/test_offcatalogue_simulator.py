@@ -22,8 +22,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import idm_rs  # noqa: E402
-import offcatalogue as oc  # noqa: E402
+import idm_rs
+import offcatalogue as oc
 
 #: max |x1 - engine| allowed [m] (see the module docstring)
 ENGINE_TOL = 0.25e-9

@@ -95,7 +95,8 @@ def test_identification_recovers_known_parameters_from_simulated_servo_data():
 def test_frame_friction_scales_with_the_normal_load():
     """The four discs load the contact with 250-550 g: the identified Fc/k grows with the load
     while the frame's own mode (f0) stays, and Fc/(k N) is one contact property (within 10 %)."""
-    fits = [rig_fit(load(REAL / "marino_frame_friction" / f"s_b_{w}g_x.mat"), simulate=False) for w in (250, 350, 450, 550)]
+    fits = [rig_fit(load(REAL / "marino_frame_friction" / f"s_b_{w}g_x.mat"), simulate=False)
+            for w in (250, 350, 450, 550)]
     fc_k = [f.params["fc_over_k_m"] for f in fits]
     assert all(np.diff(fc_k) > 0)
     f0 = [f.params["f0_Hz"] for f in fits]
@@ -140,12 +141,14 @@ def test_spring_slider_features_recover_known_static_and_kinetic_friction():
     p = idm_rs.Params(m1=ENSL_SLIDER_MASS, normal_force=n_force, mu_s=0.36, mu_k=0.30, stribeck_velocity=1e-4,
                       sigma2=0.0, sigma1=0.0, fric_alpha=a, fric_beta=a / (100 * 0.36 * n_force), fric_gamma=0.0)
     t = np.arange(0.0, 2.0, 5e-4)
-    r = idm_rs.simulate(p, idm_rs.Sampled([0.0, 2.0], [0.0, 2.0 * speed]), t_end=2.0, model=Rig("position", stiffness=k),
-                        piezo_hysteresis=False, method="rodas4", rtol=1e-8, atol=1e-8, save_every=1, first_step=1e-6)
+    r = idm_rs.simulate(p, idm_rs.Sampled([0.0, 2.0], [0.0, 2.0 * speed]), t_end=2.0,
+                        model=Rig("position", stiffness=k), piezo_hysteresis=False, method="rodas4", rtol=1e-8,
+                        atol=1e-8, save_every=1, first_step=1e-6)
     force = k * (speed * t - np.interp(t, r.t, r.main_body))
     rng = np.random.default_rng(1)
     spikes = np.where(rng.random(t.size) < 0.002, 0.05 * rng.standard_normal(t.size), 0.0)
-    meta = {"stiffness_N_per_m": k, "drive_speed_m_per_s": speed, "mass_kg": ENSL_SLIDER_MASS, "normal_force_N": n_force}
+    meta = {"stiffness_N_per_m": k, "drive_speed_m_per_s": speed, "mass_kg": ENSL_SLIDER_MASS,
+            "normal_force_N": n_force}
     data = RigData("spring_slider", "synthetic", t, speed * t, force + spikes, force + spikes, meta)
     fit = fit_spring_slider(data, simulate=False)
     assert fit.metrics["slip_events"] >= 5
@@ -200,5 +203,6 @@ def test_cli_diagnoses_a_rig_data_file(tmp_path, capsys):
     d = json.loads(out.read_text())
     # the documented result (docs/realdata/EMPS.md): a force of the position, ΔBIC 964
     assert d["rig"] == "emps" and d["verdict"] == "position_force"
-    assert d["ranking"][0]["effect"] == "position_force" and d["ranking"][0]["delta_bic"] == pytest.approx(964.2, abs=0.5)
+    assert d["ranking"][0]["effect"] == "position_force"
+    assert d["ranking"][0]["delta_bic"] == pytest.approx(964.2, abs=0.5)
     assert "Where the residual lives" in capsys.readouterr().out

@@ -13,10 +13,9 @@ import numpy as np
 import pytest
 
 import idm_rs
+from conftest import interrupt_main_when
 from idm_rs.cli import main
 from idm_rs.cli_figures import _waveform_title
-
-from conftest import interrupt_main_when
 
 P = idm_rs.Params()
 W = idm_rs.Triangle()
@@ -152,7 +151,8 @@ def test_cli_sets_an_effect_and_drives_with_a_measured_voltage(tmp_path, capsys)
 
 def test_heat_map_title_shows_swept_fields_as_swept():
     text = "Triangle(amplitude=80.0, rise=0.0005, fall=0.0095, delay=0.0)"
-    assert _waveform_title(text, ["mass_ratio", "voltage"]) == "Triangle(amplitude=swept, rise=0.0005, fall=0.0095, delay=0.0)"
+    swept = "Triangle(amplitude=swept, rise=0.0005, fall=0.0095, delay=0.0)"
+    assert _waveform_title(text, ["mass_ratio", "voltage"]) == swept
     assert "rise=swept" in _waveform_title(text, ["rise"])
 
 

@@ -15,9 +15,8 @@ import pytest
 import xarray  # noqa: F401  (imported here so that the Ctrl-C test does not interrupt an import)
 
 import idm_rs
-from idm_rs.sweep import METRICS
-
 from conftest import interrupt_main_when
+from idm_rs.sweep import METRICS
 
 P = idm_rs.Params()
 WAVE = idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)

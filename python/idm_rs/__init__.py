@@ -10,17 +10,17 @@ typed Python API. Quick start::
     r.final_position                                      # x1(10 ms) [m]
 """
 
-from .engine import __version__
 from . import methods
+from .diagnosis import Diagnosis, diagnose
 from .effects import Effects
+from .engine import __version__
 from .external_force import ExternalForce
 from .params import Params
+from .recording import Recording, RecordingError, load_case
 from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate
 from .state import State
 from .sweep import METRICS, sweep
 from .waveforms import Sampled, Sawtooth, Triangle, Waveform
-from .recording import Recording, RecordingError, load_case
-from .diagnosis import Diagnosis, diagnose
 
 __all__ = [
     "__version__",

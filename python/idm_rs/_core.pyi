@@ -136,12 +136,12 @@ class BatchRun:
         ``peak_friction`` [N], ``slip_fraction`` [-], the steady-state metrics of sawtooth trains
         (``mean_velocity`` [m/s], ``step_mean``, ``step_std``, ``backslip`` [m],
         ``backslip_ratio`` [-], ``direction`` (+1, -1, 0 stalled); NaN for other inputs),
-        ``diverged_at`` [s], ``dt_used`` [s] (float64 arrays); ``steps`` (uint64); ``status`` (uint8: 0 not run, 1 ok, 2 retried at a
-        smaller dt, 3 diverged, 4 invalid point); ``reasons`` (a list of str: why each point's
-        status is not ok, empty where it is); ``traces`` (a list of float64 arrays, the
-        sensor reading [m]) when readings were recorded; ``final_states`` (a list of arrays, one per
-        point, empty where it did not finish) when the config asked for them. A second call
-        raises RuntimeError."""
+        ``diverged_at`` [s], ``dt_used`` [s] (float64 arrays); ``steps`` (uint64); ``status``
+        (uint8: 0 not run, 1 ok, 2 retried at a smaller dt, 3 diverged, 4 invalid point);
+        ``reasons`` (a list of str: why each point's status is not ok, empty where it is);
+        ``traces`` (a list of float64 arrays, the sensor reading [m]) when readings were recorded;
+        ``final_states`` (a list of arrays, one per point, empty where it did not finish) when
+        the config asked for them. A second call raises RuntimeError."""
 
 def simulate(
     params: dict[str, float],

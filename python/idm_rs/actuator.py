@@ -25,9 +25,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, Optional, Sequence
+from typing import TYPE_CHECKING, Any, Iterable, Literal, Optional, Sequence, Union
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .batch import Point, Structure, run
 from .effects import Effects
@@ -37,6 +38,9 @@ from .waveforms import STARTUP_CYCLES, Sawtooth
 
 if TYPE_CHECKING:
     import xarray
+
+#: numbers given as a sequence or a float array
+Floats = Union[Sequence[float], NDArray[np.float64]]
 
 #: steady-state metric -> (units, meaning)
 STEADY_METRICS: dict[str, tuple[str, str]] = {
@@ -80,7 +84,7 @@ def _check_train(waveform: Any, skip_cycles: int) -> Sawtooth:
     return waveform
 
 
-def _run_trains(params: Sequence[Params], waves: Sequence[Sawtooth], *, model: str, n_elements: int,
+def _run_trains(params: Sequence[Params], waves: Sequence[Sawtooth], *, model: Literal["lps", "dps"], n_elements: int,
                 effects: Optional[Effects], skip_cycles: int, method: MethodName, threads: Optional[int],
                 piezo_hysteresis: bool = True, t_end: Optional[float] = None, **how: Any) -> dict[str, Any]:
     """One batch of trains (each point to its own train's end, or to ``t_end``)."""
@@ -89,8 +93,8 @@ def _run_trains(params: Sequence[Params], waves: Sequence[Sawtooth], *, model: s
     method_name, rtol, atol = methods.resolve(method, how.pop("rtol", None), how.pop("atol", None))
     effects = effects or Effects()
     points = [Point(p, effects, w, t_end=t_end or w.duration) for p, w in zip(params, waves)]
-    longest = max(pt.t_end for pt in points)  # type: ignore[type-var]
-    return run(points, Structure(model, int(n_elements), bool(piezo_hysteresis)),  # type: ignore[arg-type]
+    longest = max(pt.t_end for pt in points if pt.t_end is not None)  # every point has one
+    return run(points, Structure(model, int(n_elements), bool(piezo_hysteresis)),
                t_end=longest, method=method_name, rtol=rtol, atol=atol, skip_cycles=int(skip_cycles),
                threads=threads, **how)
 
@@ -150,7 +154,7 @@ def stall_force(params: Params, waveform: Sawtooth, *, model: Literal["lps", "dp
               threads=threads, **how)
     base = params.load_force
 
-    def velocities(forces: Sequence[float], sign: float) -> np.ndarray:
+    def velocities(forces: Iterable[float], sign: float) -> np.ndarray:
         ps = [replace(params, load_force=base - sign * f) for f in forces]
         out = _run_trains(ps, [waveform] * len(ps), **kw)
         return np.array([_steady(out, i).mean_velocity for i in range(len(ps))])
@@ -174,9 +178,9 @@ def stall_force(params: Params, waveform: Sawtooth, *, model: Literal["lps", "dp
 
 
 def characterize(params: Optional[Params] = None, *, model: Literal["lps", "dps"] = "dps", n_elements: int = 4,
-                 effects: Optional[Effects] = None, frequencies: Optional[Sequence[float]] = None,
-                 voltages: Sequence[float] = (40.0, 60.0, 80.0, 100.0, 120.0),
-                 step_voltages: Optional[Sequence[float]] = None, frequency: float = 100.0,
+                 effects: Optional[Effects] = None, frequencies: Optional[Floats] = None,
+                 voltages: Floats = (40.0, 60.0, 80.0, 100.0, 120.0),
+                 step_voltages: Optional[Floats] = None, frequency: float = 100.0,
                  voltage: float = 80.0, rise: float = 0.5e-3, cycles: int = 6, skip_cycles: int = STARTUP_CYCLES,
                  loads: int = 9, method: MethodName = "auto", threads: Optional[int] = None,
                  progress: bool = True) -> "xarray.Dataset":
@@ -205,8 +209,8 @@ def characterize(params: Optional[Params] = None, *, model: Literal["lps", "dps"
     step_voltages = np.linspace(20.0, 120.0, 11) if step_voltages is None else step_voltages
     train = Sawtooth(amplitude=voltage, frequency=frequency, cycles=cycles, rise=rise)
     _check_train(train, skip_cycles)
-    common = dict(model=model, n_elements=n_elements, effects=effects, method=method, threads=threads,
-                  skip_cycles=skip_cycles, progress=progress)
+    common: dict[str, Any] = dict(model=model, n_elements=n_elements, effects=effects, method=method,
+                                  threads=threads, skip_cycles=skip_cycles, progress=progress)
     done: dict[str, Any] = {}
     try:
         vmap = done["vmap"] = sweep(params, train, {"voltage": np.asarray(voltages, float),

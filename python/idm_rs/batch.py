@@ -18,7 +18,7 @@ import functools
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any, Literal, Mapping, Optional, Sequence, Union
+from typing import Any, Literal, Mapping, Optional, Sequence, Union, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,6 +65,7 @@ class Structure:
         """From ``simulate``'s keywords: ``model`` is "lps", "dps" or a :class:`Rig`."""
         if isinstance(model, Rig):
             return cls("rig", 1, bool(piezo_hysteresis), model)
+        # ignore: any name; engine.RunConfig refuses one other than "lps" or "dps" with a ValueError
         return cls(str(model), int(n_elements), bool(piezo_hysteresis))  # type: ignore[arg-type]
 
     def config(self, **how: Any) -> Any:
@@ -97,7 +98,11 @@ class Point:
 
 def param_row(params: ParamValues) -> list[float]:
     """A point's parameter row in the engine's order; NaN normal force = derived."""
-    given = params.to_dict(resolved=False) if isinstance(params, Params) else dict(params)
+    given: Mapping[str, Optional[float]]
+    if isinstance(params, Params):
+        given = params.to_dict(resolved=False)
+    else:
+        given = dict(params)
     defaults = _table1()
     row = []
     for name in engine.param_names():
@@ -107,8 +112,8 @@ def param_row(params: ParamValues) -> list[float]:
 
 
 @functools.lru_cache(maxsize=1)
-def _table1() -> dict[str, Optional[float]]:
-    """Table 1 (normal force None: derived), built once: rows of many points reuse it."""
+def _table1() -> dict[str, float]:
+    """Table 1 (normal force absent: derived), built once: rows of many points reuse it."""
     return Params().to_dict(resolved=False)
 
 
@@ -133,10 +138,11 @@ class Tables:
     def from_points(cls, points: Sequence[Point], waveform: Optional[Waveform] = None) -> "Tables":
         """Tables of `points` (each with its own waveform, or `waveform` for all); every waveform
         must be of one family."""
-        waves = [p.waveform or waveform for p in points]
-        if any(w is None for w in waves):
+        given = [p.waveform or waveform for p in points]
+        if any(w is None for w in given):
             raise ValueError("every point needs a waveform (or give one for all)")
-        kinds = {w.batch_kind for w in waves}  # type: ignore[union-attr]
+        waves = [w for w in given if w is not None]  # all of them
+        kinds = {w.batch_kind for w in waves}
         if len(kinds) != 1:
             raise ValueError(f"the points of one batch need one waveform family, got {sorted(kinds)}")
         kind = kinds.pop()
@@ -145,10 +151,11 @@ class Tables:
         if kind == "sampled":
             first = waves[0]
             assert isinstance(first, Sampled)
-            if any(not (np.array_equal(w.t, first.t) and np.array_equal(w.voltage, first.voltage)) for w in waves):
+            if any(not (isinstance(w, Sampled)  # always: one kind
+                        and np.array_equal(w.t, first.t) and np.array_equal(w.voltage, first.voltage)) for w in waves):
                 raise ValueError("the points of one batch share one sampled waveform")
             sampled = (first.t, first.voltage)
-        fields = np.array([[w.batch_fields()[n] for n in names] for w in waves], dtype=float)  # type: ignore[union-attr]
+        fields = np.array([[w.batch_fields()[n] for n in names] for w in waves], dtype=np.float64)
         enames = engine.effect_names()
         effects = np.array([[getattr(p.effects, n) for n in enames] for p in points], dtype=float)
         params = np.array([param_row(p.params) for p in points], dtype=float)
@@ -199,7 +206,8 @@ def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: 
     left out of the steady-state metrics, default :data:`~idm_rs.waveforms.STARTUP_CYCLES` = 2),
     ``sensitivities`` (names, as for :func:`idm_rs.simulate`; needs ``record_every``): then
     ``sensitivities`` is an array (points x names x samples) of d trace / d name (NaN where a
-    point did not finish or its derivatives could not be taken, with the reason in ``reasons``), and ``sensitivity_names``."""
+    point did not finish or its derivatives could not be taken, with the reason in ``reasons``), and
+    ``sensitivity_names``."""
     tables = points if isinstance(points, Tables) else Tables.from_points(points)
     handle = start(tables, structure, t_end=t_end, **how)
     try:
@@ -247,6 +255,14 @@ def _stack_states(states: list[NDArray[np.float64]]) -> Union[NDArray[np.float64
         return states if sizes else np.full((len(states), 0), np.nan)
     dim = sizes.pop()
     return np.stack([s if s.size else np.full(dim, np.nan) for s in states])
+
+
+@overload
+def _c(a: NDArray[np.float64]) -> NDArray[np.float64]: ...
+
+
+@overload
+def _c(a: Optional[NDArray[np.float64]]) -> Optional[NDArray[np.float64]]: ...
 
 
 def _c(a: Optional[NDArray[np.float64]]) -> Optional[NDArray[np.float64]]:

@@ -14,17 +14,17 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional, Sequence
+from typing import TYPE_CHECKING, Literal, Optional, Sequence
 
 import numpy as np
 
+from .cli_figures import plot_result, plot_sweep
+from .effects import Effects
 from .engine import __version__
 from .methods import METHODS
-from .effects import Effects
 from .params import Params
 from .simulation import DivergenceError, SimulationResult, simulate
 from .sweep import METRICS, STEADY_METRICS
-from .cli_figures import plot_result, plot_sweep
 from .waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
 
 if TYPE_CHECKING:
@@ -34,6 +34,8 @@ EXIT_ERROR = 2
 #: every command stopped by Ctrl-C exits with this (128 + SIGINT), after saying what it kept
 EXIT_INTERRUPTED = 130
 CSV_COLUMNS = ("t", "voltage", "x1", "x2", "friction", "fh")
+#: the xarray netCDF writers the CLI uses (netCDF4 when installed, else scipy's netCDF3)
+NetcdfEngine = Literal["netcdf4", "scipy"]
 
 
 class CliError(ValueError):
@@ -84,7 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="run the paper case, print the comparison table, write Figs. 6a-7d",
         description=(
             "Run the paper case (LPS and DPS n = 4, triangle 0 -> 80 V in 0.5 ms, back to 0 V at 10 ms), "
-            "print x1(10 ms) beside the paper's and the reference values of docs/MODEL.md, and write fig6a.png ... fig7d.png "
+            "print x1(10 ms) beside the paper's and the reference values of docs/MODEL.md, "
+            "and write fig6a.png ... fig7d.png "
             "and paper_case.csv (the trajectories) into DIR."
         ),
     )
@@ -128,20 +131,25 @@ def build_parser() -> argparse.ArgumentParser:
             "Steady state = the cycles after --skip-cycles start-up cycles. Defaults suit the paper's device."
         ),
     )
-    ch.add_argument("--out", default="idm-rs-characteristics", metavar="DIR", help="output folder (default: %(default)s)")
+    ch.add_argument("--out", default="idm-rs-characteristics", metavar="DIR",
+                    help="output folder (default: %(default)s)")
     ch.add_argument("--model", choices=("lps", "dps"), default="dps", help="lumped or FEM model (default: dps)")
-    ch.add_argument("--n-elements", type=_positive_int, default=4, metavar="N", help="FEM elements of the DPS (default: 4)")
+    ch.add_argument("--n-elements", type=_positive_int, default=4, metavar="N",
+                    help="FEM elements of the DPS (default: 4)")
     ch.add_argument("--frequencies", default=None, metavar="SPEC",
-                    help="drive frequencies [Hz]: A:B:N (log-spaced) or F1,F2,... (default: 12 from 20 Hz to 0.9/(2 rise), "
-                         "at most 1.5 kHz)")
+                    help="drive frequencies [Hz]: A:B:N (log-spaced) or F1,F2,... "
+                         "(default: 12 from 20 Hz to 0.9/(2 rise), at most 1.5 kHz)")
     ch.add_argument("--voltages", default="40,60,80,100,120", metavar="V1,V2,...",
                     help="amplitudes of the velocity curves [V] (default: %(default)s)")
     ch.add_argument("--step-voltages", default="20:120:11", metavar="SPEC",
-                    help="amplitudes of the step/back-slip curve [V]: A:B:N (linear) or V1,V2,... (default: %(default)s)")
+                    help="amplitudes of the step/back-slip curve [V]: A:B:N (linear) or V1,V2,... "
+                         "(default: %(default)s)")
     ch.add_argument("--frequency", type=_positive_float, default=100.0, metavar="HZ",
                     help="design frequency of the step and load curves (default: 100)")
-    ch.add_argument("--voltage", type=float, default=80.0, metavar="V", help="design amplitude of the load curve (default: 80)")
-    ch.add_argument("--rise", type=_positive_float, default=0.5e-3, metavar="S", help="fast-edge time [s] (default: 5e-4)")
+    ch.add_argument("--voltage", type=float, default=80.0, metavar="V",
+                    help="design amplitude of the load curve (default: 80)")
+    ch.add_argument("--rise", type=_positive_float, default=0.5e-3, metavar="S",
+                    help="fast-edge time [s] (default: 5e-4)")
     ch.add_argument("--cycles", type=_positive_int, default=6, metavar="N", help="periods per run (default: 6)")
     ch.add_argument("--skip-cycles", type=_non_negative_int, default=STARTUP_CYCLES, metavar="K",
                     help="start-up cycles the steady-state metrics leave out (default: %(default)s, as sweep)")
@@ -150,7 +158,8 @@ def build_parser() -> argparse.ArgumentParser:
     ch.add_argument("--method", choices=METHODS, default="auto", help="integration method (default: auto)")
     ch.add_argument("--param", action="extend", nargs="+", default=[], metavar="NAME=VALUE",
                     help="override a parameter (SI units), e.g. --param m2=0.4")
-    ch.add_argument("--threads", type=_positive_int, default=None, metavar="N", help="worker threads (default: all cores)")
+    ch.add_argument("--threads", type=_positive_int, default=None, metavar="N",
+                    help="worker threads (default: all cores)")
     ch.add_argument("--no-progress", action="store_true", help="no progress bars")
 
     rf = sub.add_parser(
@@ -163,7 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
             "and not_identifiable; --plots writes measured vs simulated figures."
         ),
     )
-    rf.add_argument("path", metavar="PATH", help="a data file of one of the measured sets (docs/REALDATA.md says where to get them), e.g. DATA_EMPS.mat")
+    rf.add_argument("path", metavar="PATH",
+                    help="a data file of one of the measured sets (docs/REALDATA.md says where to get them), "
+                         "e.g. DATA_EMPS.mat")
     rf.add_argument("--json", default=None, metavar="OUT", help="write the result as JSON")
     rf.add_argument("--plots", default=None, metavar="DIR", help="write figures into DIR")
     rf.add_argument("--no-simulation", action="store_true", help="identify only (skip the closed-loop simulations)")
@@ -228,9 +239,11 @@ def _add_diagnose_parser(sub: "argparse._SubParsersAction") -> None:
             "Compare the recordings of CASE_DIR (format idm-recording/1: meta.json and one CSV per "
             "experiment) with their nominal model: calibrate the plausibly-off parameters, locate the "
             "residual, try every catalogue effect, and print the verdict (a catalogue id, two of them as "
-            "'first+second', 'none', 'discovered' or 'unexplained') with the evidence. When no catalogue effect explains the residual, "
+            "'first+second', 'none', 'discovered' or 'unexplained') with the evidence. "
+            "When no catalogue effect explains the residual, "
             "discovery infers the missing force from the data, finds its form in a library of terms, refits "
-            "it, and names it when it stands ('discovered'). Given a measured rig data file instead (see docs/REALDATA.md), "
+            "it, and names it when it stands ('discovered'). "
+            "Given a measured rig data file instead (see docs/REALDATA.md), "
             "diagnose the rig's identified friction model against the rig-effect catalogue."
         ),
     )
@@ -366,7 +379,8 @@ def sampled_from_csv(path: Path) -> Sampled:
                 header_seen = True
                 continue
             col = 1 if not _is_number(cells[0]) else 2
-            raise CliError(f"{where}, line {lineno}, column {col}: cannot read {cells[col - 1]!r} as a number") from None
+            raise CliError(f"{where}, line {lineno}, column {col}: "
+                           f"cannot read {cells[col - 1]!r} as a number") from None
     if len(rows) < 2:
         raise CliError(f"{where}: {len(rows)} sample(s); a sampled input needs at least 2 (time [s], voltage [V])")
     data = np.array(rows)
@@ -439,6 +453,7 @@ def write_csv(result: SimulationResult, path: Path) -> None:
 
 def write_netcdf(result: SimulationResult, path: Path) -> None:
     ds = result.to_xarray()
+    engine: NetcdfEngine
     try:
         import netCDF4  # noqa: F401
 
@@ -517,7 +532,7 @@ def parse_grid(items: Sequence[str]) -> dict[str, np.ndarray]:
     return grid
 
 
-def write_sweep_netcdf(ds: "xarray.Dataset", path: Path, engine: Optional[str] = None) -> str:
+def write_sweep_netcdf(ds: "xarray.Dataset", path: Path, engine: Optional[NetcdfEngine] = None) -> str:
     """Save a sweep Dataset as netCDF, with the netCDF4 engine when it is installed, else scipy's
     netCDF3 writer (which has no unsigned or 64-bit integers: ``steps`` is then stored as float64,
     exact below 2**53, and ``status`` as int8). Returns the engine used."""
@@ -764,9 +779,9 @@ def _values(spec: str, name: str, log: bool = False, positive: bool = False) -> 
         if log and not (a > 0 and b > 0):
             zero = "A" if not a > 0 else "B"
             raise CliError(f"--{name} {spec}: the values are log-spaced, so A and B must be > 0 (got {zero} = "
-                           f"{a if zero == 'A' else b:g}); e.g. {max(a, 1e-12) if a > 0 else 20:g}:{b if b > 0 else 1000:g}"
-                           f":{parts[2]}")
-        values = (np.geomspace if log else np.linspace)(a, b, int(parts[2]))
+                           f"{a if zero == 'A' else b:g}); "
+                           f"e.g. {max(a, 1e-12) if a > 0 else 20:g}:{b if b > 0 else 1000:g}:{parts[2]}")
+        values = np.geomspace(a, b, int(parts[2])) if log else np.linspace(a, b, int(parts[2]))
     else:
         try:
             values = np.array([float(x) for x in spec.split(",") if x.strip()])
@@ -805,7 +820,8 @@ def cmd_characterize(a: argparse.Namespace) -> int:
     print(f"design point {at['design_frequency_Hz']:g} Hz, {at['design_voltage_V']:g} V ({at['model'].upper()}, "
           f"rise {at['rise_s']:g} s, {at['method']}): mean velocity {at['velocity_at_design_m_per_s'] * 1e3:.4g} mm/s, "
           f"stall force {at['stall_force_N']:.4g} N")
-    print(f"steady state: the cycles after the first {at['skip_cycles']} of {at['cycles']} (--skip-cycles), as in sweep")
+    print(f"steady state: the cycles after the first {at['skip_cycles']} of {at['cycles']} (--skip-cycles), "
+          "as in sweep")
     print(f"wrote {out / 'characteristics.nc'} and " + ", ".join(p.name for p in paths) + f" in {out} "
           f"({time.perf_counter() - t0:.1f} s)")
     return 0

@@ -4,7 +4,7 @@ heat map or line plot (``idm-rs sweep --plot``), with the titles that say what w
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
@@ -108,7 +108,7 @@ def plot_sweep(ds: "xarray.Dataset", metric: str, path: Path) -> None:
     from matplotlib.patches import Patch, Rectangle
 
     da = ds[metric]
-    dims = list(da.dims)
+    dims = [str(d) for d in da.dims]  # a sweep's axes are named by str
     if len(dims) not in (1, 2):
         raise PlotError(f"--plot draws sweeps of 1 or 2 axes; this one has {len(dims)} ({', '.join(dims)})")
     scale, units = _display_scale(da.attrs.get("units", ""))
@@ -118,7 +118,7 @@ def plot_sweep(ds: "xarray.Dataset", metric: str, path: Path) -> None:
     not_run = status == 0
     label = f"{metric} [{units}]" if units and units != "1" else metric
     long_name = da.attrs.get("long_name", metric)
-    hatch = dict(facecolor="0.75", edgecolor="0.35", hatch="///", lw=0.0)
+    hatch: dict[str, Any] = dict(facecolor="0.75", edgecolor="0.35", hatch="///", lw=0.0)
 
     fig, ax = plt.subplots(figsize=(8, 6) if len(dims) == 2 else (8, 4.5), layout="constrained")
     if len(dims) == 2:
@@ -178,7 +178,7 @@ def sweep_title(ds: "xarray.Dataset", metric: str) -> str:
     step = f"dt = {a.get('dt_s'):g} s" if a.get("method") == "rk4" else f"rtol = {a.get('rtol'):g}"
     on = [k[len("effect_"):] + f" = {v:g}" for k, v in a.items() if k.startswith("effect_")]
     details = (f"{model}, {a.get('method')} ({step}), t_end = {a.get('t_end_s'):g} s, "
-               f"{_waveform_title(str(a.get('waveform')), list(ds[metric].dims))}"
+               f"{_waveform_title(str(a.get('waveform')), [str(d) for d in ds[metric].dims])}"
                + (f"; effects: {', '.join(on)}" if on else ""))
     return ds[metric].attrs.get("long_name", metric) + "\n" + textwrap.fill(details, 95)
 

@@ -1,4 +1,5 @@
-"""Optional physics beyond the paper's model (the catalogue of ``docs/RECORDINGS.md``, declared in ``rust/src/effects.rs``).
+"""Optional physics beyond the paper's model (the catalogue of ``docs/RECORDINGS.md``, declared in
+``rust/src/effects.rs``).
 
 Each effect parameter is off at 0. They run inside the Rust engine (extra forces or states),
 so fits and sweeps with an effect run at engine speed. The effects and their parameters are
@@ -12,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import fields
+from typing import Mapping
 
 import numpy as np
 
@@ -54,7 +56,7 @@ def _field(effect: str, d: ParamDecl) -> tuple[str, type, dataclasses.Field]:
 BENCH_FIXED: frozenset[str] = frozenset({"theta_rad"})
 
 
-def oriented(values: dict[str, float], reversed_: bool) -> dict[str, float]:
+def oriented(values: Mapping[str, float], reversed_: bool) -> dict[str, float]:
     """Effect parameters as they act in the device's frame: ``values`` with the bench-fixed
     ones (:data:`BENCH_FIXED`) negated when the rig is turned end for end."""
     if not reversed_:

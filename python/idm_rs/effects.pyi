@@ -2,6 +2,7 @@
 declarations in the Rust core. Same fields, in the same order (tests/test_declarations.py checks)."""
 
 from dataclasses import dataclass
+from typing import Mapping
 
 @dataclass(frozen=True)
 class Effects:
@@ -45,5 +46,9 @@ class Effects:
     drift_rate: float = ...
 
     def active(self) -> dict[str, float]: ...
+
+BENCH_FIXED: frozenset[str]
+
+def oriented(values: Mapping[str, float], reversed_: bool) -> dict[str, float]: ...
 
 __all__ = ["Effects"]

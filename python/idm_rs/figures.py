@@ -9,19 +9,20 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional, Sequence, Union
+from typing import Any, Callable, Optional, Sequence, Union
 
 import matplotlib
 
 matplotlib.use("Agg")  # files only, never a display
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.ticker import FormatStrFormatter  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.ticker import FormatStrFormatter
 
-from .paper import (  # noqa: E402
+from .methods import MethodName
+from .paper import (
     FIG7_CHECK_CASE_NAME,
     PAPER_DPS_UM,
     PAPER_LPS_UM,
@@ -36,14 +37,14 @@ from .paper import (  # noqa: E402
     run_dense,
     run_sweep,
 )
-from .simulation import SimulationResult  # noqa: E402
+from .simulation import SimulationResult
 
 PathLike = Union[str, "os.PathLike[str]"]
 
 DPI = 150
-DPS_STYLE = dict(color="C0", lw=1.4)
-LPS_STYLE = dict(color="C3", lw=1.2, ls="--")
-VOLT_STYLE = dict(color="0.45", lw=1.0)
+DPS_STYLE: dict[str, Any] = dict(color="C0", lw=1.4)
+LPS_STYLE: dict[str, Any] = dict(color="C3", lw=1.2, ls="--")
+VOLT_STYLE: dict[str, Any] = dict(color="0.45", lw=1.0)
 FIG6_NAMES = ("fig6a", "fig6b", "fig6c", "fig6d")
 FIG7_NAMES = ("fig7a", "fig7b", "fig7c", "fig7d")
 
@@ -115,7 +116,7 @@ def fig6b(
     ax.legend(loc="upper left", fontsize=9)
     ax.set_title("Fig. 6b — Friction force vs main body velocity near v = 0")
 
-    ins = ax.inset_axes([0.64, 0.07, 0.34, 0.36])
+    ins = ax.inset_axes((0.64, 0.07, 0.34, 0.36))
     for r in (dps, lps):
         ins.plot(r.main_body_velocity * 1e3, r.friction, **{**_style(r), "lw": 0.7})
     ins.axvline(0, color="0.6", lw=0.5)
@@ -149,7 +150,9 @@ def fig6c(
 
 def _time_colored(ax: Any, x: np.ndarray, y: np.ndarray, t: np.ndarray, cmap: str) -> LineCollection:
     pts = np.column_stack([x, y]).reshape(-1, 1, 2)
-    lc = LineCollection(np.concatenate([pts[:-1], pts[1:]], axis=1), cmap=cmap, lw=1.0, capstyle="round")
+    # an (N, 2, 2) array of segments, as documented; matplotlib's stub wants a Sequence
+    lc = LineCollection(np.concatenate([pts[:-1], pts[1:]], axis=1),  # type: ignore[arg-type]
+                        cmap=cmap, lw=1.0, capstyle="round")
     lc.set_array(t[:-1])
     ax.add_collection(lc)
     ax.set_xlim(float(x.min()), float(x.max()))
@@ -202,13 +205,13 @@ def fig7(
     n = len(runs)
     for i, run in enumerate(runs):
         r = run.result
-        l = r.params.pe_length
+        length = r.params.pe_length
         label = sweep.fmt.format(run.value)
         if np.isclose(run.value, sweep.reference):
             label += " (paper case)"
         if run.dt != runs[0].dt:
             label += f" [dt = {run.dt:g} s]"
-        ax.plot(r.t * 1e3, r.main_body / l * 1e5, color=cmap(i / max(1, n - 1) * 0.9), lw=1.2, label=label)
+        ax.plot(r.t * 1e3, r.main_body / length * 1e5, color=cmap(i / max(1, n - 1) * 0.9), lw=1.2, label=label)
     ax.set_xlabel("time t [ms]")
     ax.set_ylabel("x1 / l  [×10⁻⁵]")
     ax.set_xlim(0, PAPER_T_END * 1e3)
@@ -255,7 +258,7 @@ class FiguresReport:
     paths: dict[str, Path] = field(default_factory=dict)  #: figure name → PNG
     fig7_dt: float = 0.0  #: the step used for Fig. 7 (before any halving) [s]
     fig7_dt_check: float = 0.0  #: |x1(2e-8) − x1(1e-8)| on the check case [m] (nan: unchecked)
-    dense_method: str = "rk4"  #: the method of the final-position summary sweeps
+    dense_method: MethodName = "rk4"  #: the method of the final-position summary sweeps
     sweeps: dict[str, list[SweepRun]] = field(default_factory=dict)
     dense: dict[str, list[FinalPoint]] = field(default_factory=dict)
 
@@ -274,12 +277,14 @@ class FiguresReport:
             lines.append(f"  final-position summaries: {npts} points through idm_rs.sweep ({how})")
         for key, runs in self.sweeps.items():
             dense = self.dense.get(key, []) if self.dense_method == "rk4" else []  # dopri5's dt is its own
-            halved = [f"{r.value:g}: dt {r.dt:g}" for r in [*runs, *dense] if r.dt != self.fig7_dt]
+            both: list[Union[SweepRun, FinalPoint]] = [*runs, *dense]
+            halved = [f"{r.value:g}: dt {r.dt:g}" for r in both if r.dt != self.fig7_dt]
             diverged = [f"{p.value:g}" for p in self.dense.get(key, []) if p.status == 3]
             if diverged:
                 halved.append("diverged at every step tried: " + ", ".join(diverged))
             finals = ", ".join(f"{r.value:g} -> {r.result.final_position * 1e6:+.3f}" for r in runs)
-            lines.append(f"  {key} x1(10 ms) [um]: {finals}" + (f"  (halved dt: {'; '.join(halved)})" if halved else ""))
+            lines.append(f"  {key} x1(10 ms) [um]: {finals}"
+                         + (f"  (halved dt: {'; '.join(halved)})" if halved else ""))
         return "\n".join(lines)
 
 
@@ -296,7 +301,7 @@ def write_figures(
     fig7_dt: Optional[float] = None,
     bar: Any = None,
     progress: bool = True,
-    dense_method: Optional[str] = None,
+    dense_method: Optional[MethodName] = None,
     threads: Optional[int] = None,
 ) -> FiguresReport:
     """Write fig6a.png … fig7d.png into ``out_dir`` from the paper case and the Fig. 7 sweeps.
@@ -329,7 +334,8 @@ def write_figures(
             rep.fig7_dt_check = float("nan")
         rep.fig7_dt = fig7_dt
         lps, dps = case
-        for name, fn in zip(FIG6_NAMES, (fig6a, fig6b, fig6c, fig6d)):
+        fig6: tuple[Callable[[SimulationResult, SimulationResult, PathLike], Path], ...] = (fig6a, fig6b, fig6c, fig6d)
+        for name, fn in zip(FIG6_NAMES, fig6):
             bar.set_postfix_str(name)
             rep.paths[name] = fn(lps, dps, out / f"{name}.png")
             bar.update(1)

@@ -26,7 +26,7 @@ count or the lane width. Rust: ``stiffness.rs``, ``switching.rs``.
 from __future__ import annotations
 
 import math
-from typing import Literal, Optional
+from typing import Literal, Optional, cast
 
 MethodName = Literal["rk4", "dopri5", "rodas4", "auto"]
 
@@ -51,7 +51,8 @@ def check(method: object) -> str:
 DEFAULT_TOLERANCE: float = 1e-7
 
 
-def resolve(method: str, rtol: Optional[float] = None, atol: Optional[float] = None) -> tuple[str, float, float]:
+def resolve(method: str, rtol: Optional[float] = None,
+            atol: Optional[float] = None) -> tuple[MethodName, float, float]:
     """(engine method, rtol, atol) for ``method``. A tolerance left out (None) is the method's
     own: :data:`AUTO`'s for "auto" (the setting measured to keep 1 nm), :data:`DEFAULT_TOLERANCE`
     for the others. A tolerance given is honoured, by "auto" too (its implicit part then runs at
@@ -61,4 +62,5 @@ def resolve(method: str, rtol: Optional[float] = None, atol: Optional[float] = N
         if value is not None and (isinstance(value, bool) or not float(value) > 0 or not math.isfinite(float(value))):
             raise ValueError(f"parameter '{name}' must be a positive number, got {value!r}")
     default = AUTO[1] if method == "auto" else DEFAULT_TOLERANCE
-    return method, float(default if rtol is None else rtol), float(default if atol is None else atol)
+    name = cast(MethodName, method)  # check() accepted it
+    return name, float(default if rtol is None else rtol), float(default if atol is None else atol)

@@ -16,12 +16,13 @@ import dataclasses
 import math
 import textwrap
 from dataclasses import dataclass
-from typing import Callable, NamedTuple, Optional, Sequence
+from typing import Any, Callable, NamedTuple, Optional
 
 import numpy as np
 
+from .methods import MethodName
 from .params import Params
-from .simulation import DivergenceError, SimulationResult, simulate
+from .simulation import DivergenceError, Model, SimulationResult, simulate
 from .waveforms import Triangle, Waveform
 
 # --- the paper's reported values (Section 3, Fig. 6a) -------------------------------------------
@@ -74,7 +75,7 @@ def run_paper_case(dt: float = PAPER_DT, save_every: int = 100) -> PaperCase:
     """Run the paper case (10 ms, ``Triangle(80, 0.5e-3, 9.5e-3)``, Table 1, piezo hysteresis on)
     with the LPS and the DPS of four elements; returns ``PaperCase(lps, dps)``."""
     p = paper_params()
-    common = dict(t_end=PAPER_T_END, dt=dt, save_every=save_every, piezo_hysteresis=True)
+    common: dict[str, Any] = dict(t_end=PAPER_T_END, dt=dt, save_every=save_every, piezo_hysteresis=True)
     lps = simulate(p, PAPER_WAVEFORM, model="lps", **common)
     dps = simulate(p, PAPER_WAVEFORM, model="dps", n_elements=PAPER_N_ELEMENTS, **common)
     return PaperCase(lps, dps)
@@ -98,7 +99,8 @@ def comparison_table(lps: SimulationResult, dps: SimulationResult) -> str:
     ]
     for name, ours, paper, ref in rows:
         lines.append(
-            f"{name:<16}{ours:>10.3f}{paper:>10.3f}{ref:>10.3f}{_signed(ours - paper, 12, 3)}{_signed(ours - ref, 10, 3)}"
+            f"{name:<16}{ours:>10.3f}{paper:>10.3f}{ref:>10.3f}"
+            f"{_signed(ours - paper, 12, 3)}{_signed(ours - ref, 10, 3)}"
         )
     gap = (ours_d - ours_l) * 1e3
     paper_gap = (PAPER_DPS_UM - PAPER_LPS_UM) * 1e3
@@ -121,7 +123,7 @@ class Case:
 
     params: Params
     waveform: Waveform
-    model: str = "dps"
+    model: Model = "dps"
     n_elements: int = PAPER_N_ELEMENTS
 
 
@@ -275,7 +277,7 @@ def run_dense(
     dt: float,
     on_done: Optional[Callable[[], None]] = None,
     *,
-    method: str = "rk4",
+    method: MethodName = "rk4",
     rtol: Optional[float] = None,
     atol: Optional[float] = None,
     max_halvings: int = 4,

@@ -22,7 +22,7 @@ import math
 import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Iterator, Mapping, Optional, Sequence, Union
+from typing import Any, Iterator, Literal, Mapping, Optional, Sequence, Union
 
 import numpy as np
 from numpy.typing import NDArray
@@ -146,7 +146,7 @@ class Experiment:
             frequency=self.frequency_Hz,
             cycles=self.cycles,
             rise=self.edge_s,
-            direction=self.direction,  # type: ignore[arg-type]
+            direction=self.direction,  # type: ignore[arg-type]  # not "sampled" here
             delay=self.rest_s,
         )
 
@@ -181,7 +181,7 @@ class Nominal:
     ``n_elements`` is the number of PE elements for ``"dps"`` and 1 for ``"lps"`` (as in
     :class:`idm_rs.SimulationResult`)."""
 
-    model: str  #: "lps" or "dps"
+    model: Literal["lps", "dps"]  #: "lps" or "dps"
     n_elements: int
     piezo_hysteresis: bool
     params: Params
@@ -371,7 +371,7 @@ def _parse_experiment_meta(e: Any, i: int, meta: Path) -> dict[str, Any]:
     cycles = e["cycles"]
     if isinstance(cycles, bool) or not isinstance(cycles, (int, float)) or cycles != int(cycles) or cycles < 1:
         raise RecordingError(meta, f"must be a positive integer, got {cycles!r}", column=f"{where}.cycles")
-    out = {
+    out: dict[str, Any] = {
         "file": name,
         "amplitude_V": _number(e, "amplitude_V", meta, where),
         "frequency_Hz": _number(e, "frequency_Hz", meta, where, positive=True),
@@ -388,7 +388,8 @@ def _parse_experiment_meta(e: Any, i: int, meta: Path) -> dict[str, Any]:
         )
     m = _NAME_PATTERN.match(name)
     if m is not None:  # a name in the usual pattern must agree with its meta entry
-        said = {"direction": m["direction"], "amplitude_V": float(m["amp"]), "frequency_Hz": float(m["freq"])}
+        said: dict[str, Any] = {"direction": m["direction"], "amplitude_V": float(m["amp"]),
+                                "frequency_Hz": float(m["freq"])}
         for key, value in said.items():
             if (value != out[key]) if key == "direction" else not math.isclose(value, out[key], rel_tol=1e-9):
                 raise RecordingError(
@@ -508,7 +509,8 @@ def _check_experiment(
     if np.any(d <= 0):
         k = int(np.flatnonzero(d <= 0)[0])
         raise RecordingError(
-            csv, f"time does not increase: t = {float(t[k + 1])!r} s after t = {float(t[k])!r} s", line=k + 3, column="t"
+            csv, f"time does not increase: t = {float(t[k + 1])!r} s after t = {float(t[k])!r} s", line=k + 3,
+            column="t",
         )
     file_step = float(np.median(d))
     if abs(file_step - step) > tol:
@@ -569,7 +571,7 @@ def _check_experiment(
     if off.any():
         k = int(np.flatnonzero(off)[0])
         hint = ""
-        other = "backward" if e["direction"] == "forward" else "forward"
+        other: Literal["forward", "backward"] = "backward" if e["direction"] == "forward" else "forward"
         alt = voltage_at(Sawtooth(amp, e["frequency_Hz"], e["cycles"], e["edge_s"], other, e["rest_s"]),
                          np.arange(n) * step)
         if np.all(np.abs(v - alt) <= max(WAVEFORM_TOLERANCE * abs(amp), 1e-6)):

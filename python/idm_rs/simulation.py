@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, Optional, Sequence, Union
-
 import math
 import warnings
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal, Optional, Sequence, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -24,9 +23,9 @@ from .waveforms import STARTUP_CYCLES, Waveform
 LONG_RUN_STEPS = 1e8
 
 if TYPE_CHECKING:
-    from .actuator import SteadyState
     import xarray
 
+    from .actuator import SteadyState
     from .batch import Rig
 
 Model = Literal["lps", "dps"]
@@ -181,8 +180,10 @@ class SimulationResult:
         if self.t[0] != 0.0:
             raise ValueError("steady_state() re-runs the train from rest; this run started at "
                              f"t = {self.t[0]:g} s from a given state")
-        how: dict[str, float] = (
+        how: dict[str, Any] = (
             {"dt": self.dt} if self.method == "rk4" else {"rtol": self.rtol, "atol": self.atol, "first_step": self.dt})
+        # ignores: this run's own waveform, model and method, typed wider than steady_state()'s; it
+        # refuses a waveform that is not a Sawtooth train with a ValueError
         return steady_state(self.params, self.waveform, model=self.model, n_elements=self.n_elements,  # type: ignore[arg-type]
                             effects=self.effects, skip_cycles=skip_cycles, method=self.method,  # type: ignore[arg-type]
                             piezo_hysteresis=self.piezo_hysteresis, t_end=float(self.t[-1]), **how)

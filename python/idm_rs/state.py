@@ -119,5 +119,6 @@ def _components(params: Params, model: str, n_elements: int, piezo_hysteresis: b
                 effects: Optional[Effects], energy: bool) -> list[tuple[str, str]]:
     from .batch import Structure
 
+    # ignore: any name; engine.RunConfig refuses one other than "lps", "dps" or "rig" with a ValueError
     config = Structure(model, int(n_elements), bool(piezo_hysteresis)).config()  # type: ignore[arg-type]
     return engine.state_components(params._given(), (effects or Effects()).active(), config, bool(energy))

@@ -75,7 +75,7 @@ class _Plan:
     values: tuple[NDArray[np.float64], ...]
     t_end: float
     dt: float
-    model: str
+    model: Literal["lps", "dps"]
     n_elements: int
     piezo_hysteresis: bool
     method: str
@@ -97,7 +97,7 @@ class _Plan:
 
     @property
     def structure(self) -> Structure:
-        return Structure(self.model, self.n_elements, self.piezo_hysteresis)  # type: ignore[arg-type]
+        return Structure(self.model, self.n_elements, self.piezo_hysteresis)
 
     def tables(self, start: int, stop: int) -> Tables:
         """The engine's tables of flat points [start, stop)."""
@@ -155,7 +155,8 @@ def snap_to_steps(t: Any, dt: float) -> Any:
 def _durations(waveform: Waveform, fields: Mapping[str, Any]) -> NDArray[np.float64]:
     """The end of each point's waveform [s] from its batch fields (arrays or scalars)."""
     if isinstance(waveform, Sawtooth):
-        d = np.asarray(fields["delay"], float) + np.asarray(fields["cycles"], float) / np.asarray(fields["frequency"], float)
+        d = (np.asarray(fields["delay"], float)
+             + np.asarray(fields["cycles"], float) / np.asarray(fields["frequency"], float))
     elif isinstance(waveform, Triangle):
         d = np.asarray(fields["delay"], float) + np.asarray(fields["rise"], float) + np.asarray(fields["fall"], float)
     else:
@@ -194,7 +195,8 @@ def _axis_info(name: str) -> tuple[str, str]:
     return unit, f"effect parameter {name}"
 
 
-def _check_grid(grid: Mapping[str, ArrayLike], waveform: Waveform) -> tuple[tuple[str, ...], tuple[NDArray[np.float64], ...]]:
+def _check_grid(grid: Mapping[str, ArrayLike],
+                waveform: Waveform) -> tuple[tuple[str, ...], tuple[NDArray[np.float64], ...]]:
     if not grid:
         raise ValueError("grid is empty: give at least one axis, e.g. {'mass_ratio': np.linspace(0.25, 2, 8)}")
     known = set(PARAM_INFO) | set(DERIVED_AXES) | set(WAVE_FIELDS) | {f.name for f in fields(Effects)}
@@ -395,7 +397,8 @@ def sweep(
         slack = 0.5 * float(dt) if method == "rk4" else 1e-12 * longest
         if isinstance(waveform, Sawtooth) and float(t_end) < longest - slack:
             at = " of the point " + ", ".join(f"{k} = {v:g}" for k, v in where.items()) if where else ""
-            raise ValueError(f"t_end = {float(t_end):g} s ends before the sawtooth train{at} (it ends at {longest:g} s): "
+            raise ValueError(f"t_end = {float(t_end):g} s ends before the sawtooth train{at} "
+                             f"(it ends at {longest:g} s): "
                              "its cycles would be cut short and its steady state and step per cycle silently wrong. "
                              f"Give t_end >= {longest:g} s, or leave t_end out so that each point runs to the end "
                              "of its own train")
@@ -404,9 +407,9 @@ def sweep(
     if kernel:
         _check_kernel_admits(plan, backend)
         if own:
-            raise ValueError(f"backend={backend!r} runs every point to one t_end, and this grid's waveforms end between "
-                             f"{shortest:g} and {longest:g} s: give t_end={longest:g} (the shorter ones then rest "
-                             "until it) or use backend='cpu', which runs each point to its own end")
+            raise ValueError(f"backend={backend!r} runs every point to one t_end, and this grid's waveforms end "
+                             f"between {shortest:g} and {longest:g} s: give t_end={longest:g} (the shorter ones then "
+                             "rest until it) or use backend='cpu', which runs each point to its own end")
     if out is None:
         _check_memory(plan.size, out_hint=True)
     _validate_axes(plan)
@@ -492,13 +495,14 @@ def _run_in_memory(plan: _Plan, run: _Run, bar: Any) -> tuple["xarray.Dataset", 
     for name, vals in zip(names, plan.values):
         units, long_name = _axis_info(name)
         coords[name] = (name, vals, {"units": units, "long_name": long_name})
-    data_vars = {}
+    data_vars: dict[str, tuple[Any, ...]] = {}
     for m in run.metrics:
         units, long_name = METRICS[m]
         data_vars[m] = (names, out[m].reshape(shape), {"units": units, "long_name": long_name})
     data_vars["status"] = (names, out["status"].reshape(shape), {
         "long_name": "point status", "flag_values": np.arange(5, dtype=np.uint8), "flag_meanings": STATUS_MEANINGS})
-    data_vars["diverged_at"] = (names, out["diverged_at"].reshape(shape), {"units": "s", "long_name": "time of divergence"})
+    data_vars["diverged_at"] = (names, out["diverged_at"].reshape(shape),
+                                {"units": "s", "long_name": "time of divergence"})
     data_vars["dt_used"] = (names, out["dt_used"].reshape(shape), {
         "units": "s", "long_name": "step used (rk4) or smallest accepted step (adaptive)"})
     data_vars["steps"] = (names, out["steps"].reshape(shape), {"long_name": "integration steps taken"})
@@ -562,7 +566,7 @@ def _run_to_store(plan: _Plan, run: _Run, path: Path, progress: bool) -> "xarray
     if path.exists():
         raise ValueError(f"parameter 'out': {str(path)!r} exists; remove it or name another store")
     try:
-        import zarr  # noqa: F401
+        import zarr
     except ImportError:
         raise ImportError("sweep(..., out=...) writes a Zarr store: pip install 'idm-rs[store]' (zarr)") from None
     shape, first = plan.shape, plan.names[0]
@@ -776,7 +780,7 @@ def _run_kernel(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_s
     engine with the plan's own method (``"auto"`` changes a stiff point to Rodas4 there) when
     ``plan.retries`` > 0. Ctrl-C keeps the finished blocks."""
     from .gpu import Spec, launch_cuda, pack, run_cpu, wave_columns
-    from .gpu.backend import Finished
+    from .gpu.backend import Finished, Launched
 
     adaptive = plan.method != "rk4"
     config = plan.structure.config(method="rk4", dt=plan.dt)  # the constants do not depend on the method
@@ -788,10 +792,10 @@ def _run_kernel(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_s
         for start in range(0, n, block_size):
             stop = min(n, start + block_size)
             params, rows, fields, invalid = _kernel_block(plan, start, stop)
-            batch = pack(config, spec, params, rows, wave_columns(kind, fields), plan.t_end, plan.dt,
-                         **(dict(method="dopri5", rtol=plan.rtol, atol=plan.atol, first_step=plan.first_step)
-                            if adaptive else {}))
-            handle = launch_cuda(batch) if backend == "cuda" else Finished(run_cpu(batch))
+            how: dict[str, Any] = (dict(method="dopri5", rtol=plan.rtol, atol=plan.atol, first_step=plan.first_step)
+                                   if adaptive else {})
+            batch = pack(config, spec, params, rows, wave_columns(kind, fields), plan.t_end, plan.dt, **how)
+            handle: Union[Launched, Finished] = launch_cuda(batch) if backend == "cuda" else Finished(run_cpu(batch))
             previous, pending = pending, (handle, start, stop, invalid)
             if previous is not None:
                 _finish_kernel_block(plan, out, *previous, threads, bar)

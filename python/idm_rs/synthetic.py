@@ -24,7 +24,7 @@ import numpy as np
 from .effects import Effects, oriented
 from .params import Params
 from .recording import FORMAT_ID, HEADER, META, ORIENTATIONS
-from .simulation import simulate
+from .simulation import Model, simulate
 from .waveforms import Sampled, Sawtooth, voltage_at
 
 __all__ = ["DEFAULT_EXPERIMENTS", "make_case"]
@@ -53,10 +53,10 @@ def make_case(
     *,
     nominal_params: Params,
     true_params: Optional[Params] = None,
-    model: str = "lps",
+    model: Model = "lps",
     n_elements: int = 4,
     piezo_hysteresis: bool = False,
-    true_model: Optional[str] = None,
+    true_model: Optional[Model] = None,
     true_n_elements: Optional[int] = None,
     true_piezo_hysteresis: Optional[bool] = None,
     effects: Optional[Effects] = None,
@@ -165,7 +165,7 @@ def make_case(
             wave,
             t_end=t[-1],
             dt=dt,
-            model=true_model,  # type: ignore[arg-type]
+            model=true_model,
             n_elements=true_n_elements,
             save_every=save_every,
             piezo_hysteresis=true_piezo_hysteresis,
@@ -208,7 +208,7 @@ def make_case(
     nominal["piezo_hysteresis"] = bool(piezo_hysteresis)
     resolved = nominal_params.to_dict(resolved=True)
     nominal["params"] = {f.name: resolved[f.name] for f in fields(Params)}  # the Params order
-    meta = {
+    meta: dict[str, Any] = {
         "format": FORMAT_ID,
         "nominal": nominal,
         "experiments": meta_exps,
@@ -220,7 +220,7 @@ def make_case(
     return out
 
 
-def _sampled_experiment(out: Path, i: int, e: Mapping[str, Any], params: Params, model: str, n_elements: int,
+def _sampled_experiment(out: Path, i: int, e: Mapping[str, Any], params: Params, model: Model, n_elements: int,
                         hysteresis: bool, effects: Optional[Effects], offset: float, noise_rms: float,
                         resolution: float, rng: np.random.Generator, dt: float, save_every: int,
                         sample_rate_Hz: float) -> dict[str, Any]:
@@ -230,7 +230,7 @@ def _sampled_experiment(out: Path, i: int, e: Mapping[str, Any], params: Params,
         raise TypeError(f"experiments[{i}]['sampled'] must be an idm_rs.Sampled")
     n = int(round(wave.duration * sample_rate_Hz)) + 1
     t = np.arange(n) / sample_rate_Hz
-    sim = simulate(params, wave, t_end=t[-1], dt=dt, model=model, n_elements=n_elements,  # type: ignore[arg-type]
+    sim = simulate(params, wave, t_end=t[-1], dt=dt, model=model, n_elements=n_elements,
                    save_every=save_every, piezo_hysteresis=hysteresis, effects=effects)
     x = sim.reading + offset
     if noise_rms > 0:

@@ -57,7 +57,8 @@ class Calibration:
     def summary(self) -> str:
         verdict = "converged" if self.converged else "NOT CONVERGED"
         ms = self.multistart.summary() if self.multistart is not None else ""
-        return f"population search ({self.evaluations} models over the first {SEARCH_CYCLES} cycle(s)); {ms} ({verdict})"
+        return (f"population search ({self.evaluations} models over the first {SEARCH_CYCLES} cycle(s)); "
+                f"{ms} ({verdict})")
 
 
 def search(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, seed: int = 0,

@@ -11,9 +11,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import engine
-from ..effects import BENCH_FIXED, oriented
 from ..batch import Structure, Tables, param_row
 from ..batch import run as run_batch
+from ..effects import BENCH_FIXED, oriented
 from ..recording import Recording
 from ..waveforms import Sawtooth
 
@@ -51,8 +51,7 @@ class CaseSimulator:
         # sampled family shares one set of samples across its points)
         self._wave_rows = [
             None if e.is_sampled else
-            [Sawtooth(e.amplitude_V, e.frequency_Hz, e.cycles, e.edge_s, e.direction, e.rest_s).batch_fields()[c]
-             for c in names]
+            [e.waveform.batch_fields()[c] for c in names]  # a Sawtooth here
             for e in recording.experiments
         ]
         #: experiments recorded with the rig turned end for end: bench-fixed effect parameters

@@ -20,12 +20,12 @@ from numpy.typing import NDArray
 from ..declarations import GRAVITY
 from ..engine import DivergenceError
 from ..recording import Recording, load_case
-from .case_model import FIT_DT, CaseSimulator, ModelSpec, Structure
 from .calibration import Calibration, scan_starts, search
 from .calibration import calibrate as global_calibration
+from .case_model import FIT_DT, CaseSimulator, ModelSpec, Structure
+from .catalogue import CALIBRATED, CALIBRATION_RANGE, CALIBRATION_SCALE, CATALOGUE, Effect, EffectParam
 from .discovery import Discovery, NumericalFailure
 from .discovery import discover as run_discovery
-from .catalogue import CALIBRATED, CALIBRATION_RANGE, CALIBRATION_SCALE, CATALOGUE, Effect, EffectParam
 from .fitting import FitResult, FreeParam, Objective, apply, fit, set_effect, set_param
 from .identifiability import assess
 from .locate import Location, locate, merge_windows
@@ -33,8 +33,8 @@ from .multistart import Start, agree, multistart
 from .next_experiment import ParameterProposal, Proposal, propose, propose_for_heldout, propose_for_parameter
 from .noise import NoiseEstimate, cross_check, estimate_noise, whiteness_z
 from .results import Alternative, Candidate, Diagnosis, SecondSearch
-from .thresholds import BIC_THRESHOLD, LR_ALPHA, NOISE_RATIO_OK, REFIT_TOP, SEPARATION, WHITENESS_Z
 from .screening import Screened, near_degenerate, screen
+from .thresholds import BIC_THRESHOLD, LR_ALPHA, NOISE_RATIO_OK, REFIT_TOP, SEPARATION, WHITENESS_Z
 
 #: leading candidates whose nominal parameters seed a refit of the null model
 NULL_REFITS = 1
@@ -265,16 +265,18 @@ def _candidate_starts(pb: _Problem, cal: _Calibration, eff: Effect, sc: Optional
     if sc is not None and sc.nominal_step is not None:
         nominal.append(("score step", [f.at(f.value(float(d))) for f, d in zip(cal.at, sc.nominal_step)]))
     grids = [_magnitudes(ep) for ep in eff.params]
-    combos = [tuple(c) for c in np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(grids), -1).T] if grids else [()]
+    combos = ([tuple(c) for c in np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(grids), -1).T]
+              if grids else [()])
     starts = []
     for label, nom in nominal:
         for c in combos:
             what = ", ".join(f"{ep.name}={v:.3g}" for ep, v in zip(eff.params, c))
-            starts.append(Start(f"{label}; {what}" if what else label, list(nom) + [ep.free(v) for ep, v in zip(eff.params, c)], label))
+            starts.append(Start(f"{label}; {what}" if what else label,
+                                list(nom) + [ep.free(v) for ep, v in zip(eff.params, c)], label))
     if sc is not None and sc.nominal_step is not None and eff.params:
         what = ", ".join(f"{ep.name}={v:.3g}" for ep, v in zip(eff.params, sc.estimate))
-        starts.append(Start(f"score step; {what}", nominal[-1][1] + [ep.free(v) for ep, v in zip(eff.params, sc.estimate)],
-                            "score step"))
+        starts.append(Start(f"score step; {what}",
+                            nominal[-1][1] + [ep.free(v) for ep, v in zip(eff.params, sc.estimate)], "score step"))
     return starts
 
 
@@ -307,8 +309,8 @@ def _fit_candidates(pb: _Problem, cal: _Calibration, order: list[Effect], screen
             chi2 = max(cal.fit.chi2 - sc.delta_chi2, 0.0)
             values = dict(cal.fit.values)
             values.update({ep.name: v for ep, v in zip(eff.params, sc.estimate)})
-            r = FitResult(values, {k: math.inf for k in values}, chi2, pb.obj.n, cal.fit.residuals, [], apply(base, free, np.zeros(len(free))),
-                          0, True, "screened: the score's linearised step only")
+            r = FitResult(values, {k: math.inf for k in values}, chi2, pb.obj.n, cal.fit.residuals, [],
+                          apply(base, free, np.zeros(len(free))), 0, True, "screened: the score's linearised step only")
             c = _candidate(pb, cal, eff, r, screened_only=True)
             c.score = sc.delta_chi2
             out.append(_Refit(c, base, free))
@@ -386,11 +388,13 @@ def _candidate(pb: _Problem, cal: _Calibration, eff: Effect, r: FitResult, scree
     bic = r.chi2 + k * pb.ln_n
     reported = eff.reported(r.values, r.std)
     names = [ep.name for ep in eff.params]
-    significance = {ep.name: float(abs(r.values[ep.name] - ep.none) / r.std[ep.name] if r.std[ep.name] > 0 else math.inf)
+    significance = {ep.name: float(abs(r.values[ep.name] - ep.none) / r.std[ep.name]
+                                   if r.std[ep.name] > 0 else math.inf)
                     for ep in eff.params}
     corr = {a: {b: r.corr.get(a, {}).get(b, math.nan) for b in names} for a in names} if len(names) > 1 else {}
     return Candidate(
-        eff.id, eff.description, {n: v for n, (v, _) in reported.items()}, {ep.name: r.std[ep.name] for ep in eff.params},
+        eff.id, eff.description, {n: v for n, (v, _) in reported.items()},
+        {ep.name: r.std[ep.name] for ep in eff.params},
         {n: r.values[n] for n in CALIBRATED}, r.chi2, k, bic, cal.bic - bic, r.rms, math.nan,
         whiteness_z(r.residuals), screened_only, r.residuals, r.spec,
         reported_std={n: s for n, (_, s) in reported.items() if s is not None},
@@ -409,9 +413,10 @@ def _at_null(cal: _Calibration, eff: Effect, base: ModelSpec) -> Optional[FitRes
     values.update({ep.name: ep.none for ep in eff.params})
     std = dict(cal.fit.std)
     std.update({ep.name: math.inf for ep in eff.params})
-    spec = ModelSpec(base.structure, dict(cal.fit.spec.params), dict(cal.fit.spec.effects))
+    params, effects = dict(cal.fit.spec.params), dict(cal.fit.spec.effects)
+    spec = ModelSpec(base.structure, params, effects)
     for ep in eff.params:
-        (ep.setter or set_effect(ep.name))(spec.params, spec.effects, ep.none)  # type: ignore[arg-type]
+        (ep.setter or set_effect(ep.name))(params, effects, ep.none)
     return FitResult(values, std, cal.fit.chi2, cal.fit.n, cal.fit.residuals, cal.fit.offsets, spec, 0, True,
                      "the null model it contains")
 
@@ -473,7 +478,9 @@ def _polish_leader(pb: _Problem, cal: _Calibration, refits: list[_Refit]) -> Non
     lead_bic = eligible[0].candidate.delta_bic
     for r0 in [r for r in eligible if lead_bic - r.candidate.delta_bic < SEPARATION][:POLISH_CLOSE]:
         eff = next(e for e in CATALOGUE if e.id == r0.candidate.effect)
-        base = ModelSpec(r0.base.structure, dict(r0.candidate.spec.params), dict(r0.candidate.spec.effects))
+        spec = r0.candidate.spec
+        assert spec is not None  # a fitted candidate has its model
+        base = ModelSpec(r0.base.structure, dict(spec.params), dict(spec.effects))
         r = fit(pb.obj, base, r0.free, max_nfev=POLISH_NFEV, progress=pb.tick)
         if r.chi2 < r0.candidate.chi2:
             c = _candidate(pb, cal, eff, r, screened_only=False)
@@ -564,11 +571,12 @@ def _alone_explains(pb: _Problem, cal: _Calibration, heldout: _HeldOut, ho_cal: 
     if not tried:
         return None
     best = min(tried, key=lambda t: t.rms_after)
+    assert best.form is not None  # tried keeps found forms only
     r0, lib = _term_alone(pb, cal, best)
     delta_bic = cal.fit.chi2 - r0.chi2 - len(lib) * pb.ln_n
     ho = heldout.rms(r0.spec, [f.at(r0.values[f.name]) for f in list(cal.free) + lib])
     sigma = pb.sigma
-    terms = ", ".join(t.symbol for t in best.form.terms)  # type: ignore[union-attr]
+    terms = ", ".join(t.symbol for t in best.form.terms)
     if not (delta_bic >= BIC_THRESHOLD and r0.rms <= NOISE_RATIO_OK * sigma and ho <= NOISE_RATIO_OK * sigma
             and ho < ho_cal):
         found.reason += (f"; without {lead.candidate.effect}, the form {terms} alone leaves RMS "
@@ -583,9 +591,9 @@ def _alone_explains(pb: _Problem, cal: _Calibration, heldout: _HeldOut, ho_cal: 
                   rms_before=cal.fit.rms, heldout_rms_before=ho_cal, heldout_rms_after=ho, tried=[])
     vals = {f.name: r0.values[f.name] for f in lib}
     out.values = {n: (x, r0.std.get(n)) for n, x in vals.items()}
-    out.equation = _equation(best.form, vals)  # type: ignore[arg-type]
+    out.equation = _equation(best.form, vals)
     if best.body in best.forces:
-        out.description = describe(best.form, vals, best.forces[best.body])  # type: ignore[arg-type]
+        out.description = describe(best.form, vals, best.forces[best.body])
     where = "main body" if best.body == "main" else "weight"
     out.reason = (f"a force on the {where} of the form {terms}, found from the model with {lead.candidate.effect} "
                   f"(where it did not stand: {best.reason}), refitted without it: it improves BIC by "
@@ -614,7 +622,8 @@ def _travel_experiment(pb: _Problem, found: Discovery) -> Optional[ParameterProp
     if "lib_wavelength" in best.refit.values:
         name = "lib_wavelength"
     else:
-        name = max(lib, key=lambda n: (best.refit.std.get(n) or math.inf) / max(abs(best.refit.values[n]), 1e-300))
+        refit = best.refit
+        name = max(lib, key=lambda n: (refit.std.get(n) or math.inf) / max(abs(refit.values[n]), 1e-300))
     p = propose_for_heldout(pb.rec, pb.sigma, name, (best.refit.spec, best.free), _heldout_index)
     terms = ", ".join(t.symbol for t in best.form.terms)
     if p is not None and p.heldout_now <= NOISE_RATIO_OK:
@@ -702,6 +711,7 @@ def _second_effect(pb: _Problem, cal: _Calibration, lead: _Refit, heldout: _Held
     # 13-15 % to mimic them and the pair stopped at 5.5 x noise)
     calibrated_names = {f.name for f in cal.free}
     nominal_start = list(cal.free) + [f for f in at1 if f.name not in calibrated_names]
+    # ignore: no population search behind this null (search None, which _candidate_starts handles)
     with_first = _Calibration(nominal_start, r1, at1, r1, at1, bic1, whiteness_z(r1.residuals), None)  # type: ignore[arg-type]
     structure = r1.spec.structure
     effects = [e for e in CATALOGUE if e.id != first.effect and e.applies(structure, r1.spec.params)]
@@ -797,9 +807,12 @@ def _joint_pair(pb: _Problem, cal: _Calibration, first_round: list[_Refit], held
     if not _finite(first.heldout_rms):
         first = replace(first, heldout_rms=heldout.rms(ra.base, ra.free))
     # the first effect alone, as fitted in the first round, is the null the pair is scored against
-    r1 = FitResult({f.name: f.x0 for f in ra.free}, {}, first.chi2, pb.obj.n, first.residuals, [], first.spec, 0, True, "the first round's fit")
-    with_first = _Calibration([f for f in start if f.name not in {ep.name for ep in eb.params}], r1, ra.free, r1, ra.free,
-                              first.bic, first.whiteness_z, None)  # type: ignore[arg-type]
+    assert first.spec is not None  # a fitted candidate has its model
+    r1 = FitResult({f.name: f.x0 for f in ra.free}, {}, first.chi2, pb.obj.n, first.residuals, [], first.spec, 0, True,
+                   "the first round's fit")
+    # ignore: no population search behind this null (search None, which _candidate_starts handles)
+    with_first = _Calibration([f for f in start if f.name not in {ep.name for ep in eb.params}], r1, ra.free, r1,
+                              ra.free, first.bic, first.whiteness_z, None)  # type: ignore[arg-type]
     refit = _rescanned(pb, with_first, eb, _Refit(_candidate(pb, with_first, eb, r, screened_only=False), base,
                                                    [f.at(r.values[f.name]) for f in start]))
     out = SecondSearch(first=first, first_heldout_rms=first.heldout_rms, joint=True, ranking=[refit.candidate])
@@ -820,7 +833,8 @@ def _judge_pair(pb: _Problem, cal: _Calibration, out: SecondSearch, best: _Refit
     # values with the first at "no effect"
     second_eff = next(e for e in CATALOGUE if e.id == pair.effect)
     alone = next((r for r in first_round if r.candidate.effect == pair.effect and not r.candidate.screened_only), None)
-    base2 = ModelSpec(second_eff.structure(cal.fit.spec.structure), dict(cal.fit.spec.params), dict(cal.fit.spec.effects))
+    base2 = ModelSpec(second_eff.structure(cal.fit.spec.structure), dict(cal.fit.spec.params),
+                      dict(cal.fit.spec.effects))
     start2 = [f.at(pair.calibrated.get(f.name, f.x0)) for f in cal.free] + [
         next(p for p in best.free if p.name == ep.name) for ep in second_eff.params]
     r2 = fit(pb.obj, base2, start2, max_nfev=POLISH_NFEV, progress=pb.tick)
@@ -884,7 +898,8 @@ def _better_of(a: list[_Refit], b: list[_Refit]) -> list[_Refit]:
     out = {r.candidate.effect: r for r in a}
     for r in b:
         old = out.get(r.candidate.effect)
-        if old is None or (not r.candidate.screened_only and (old.candidate.screened_only or r.candidate.chi2 < old.candidate.chi2)):
+        if old is None or (not r.candidate.screened_only
+                           and (old.candidate.screened_only or r.candidate.chi2 < old.candidate.chi2)):
             out[r.candidate.effect] = r
     return list(out.values())
 
@@ -1083,7 +1098,8 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
             if joint is not None and joint.named:
                 second = joint
             elif joint is not None:
-                second.reason += f"; fitted jointly, {joint.first.effect} with {joint.pair.effect if joint.pair else '-'}: {joint.reason}"
+                second.reason += (f"; fitted jointly, {joint.first.effect} with "
+                                  f"{joint.pair.effect if joint.pair else '-'}: {joint.reason}")
         if second.named and second.pair is not None:
             verdict, reason, rms_after = f"{second.first.effect}+{second.pair.effect}", second.reason, \
                 second.pair.rms_after
@@ -1149,7 +1165,8 @@ def _diagnose(rec: Recording, noise: NoiseEstimate, sim: CaseSimulator, bar: Opt
                                   f"beside it: ΔBIC {without:.0f} < {BIC_THRESHOLD:g} against the term alone, "
                                   f"refitted from the calibrated model: RMS {r0.rms / pb.sigma:.2f} x noise)")
             else:
-                alone = _alone_explains(pb, cal, heldout, ho_cal, lead, found) if d_lead is not None else None
+                # d_lead is lead when set (_discovery_start)
+                alone = _alone_explains(pb, cal, heldout, ho_cal, d_lead, found) if d_lead is not None else None
                 if alone is not None:
                     found = alone
                     verdict, reason, rms_after = "discovered", found.reason, found.rms_after
@@ -1228,9 +1245,10 @@ def _alternatives(ranking: list[Candidate], verdict: str, degenerate: list[tuple
         other = b if a == verdict else a if b == verdict else None
         if other is None or other in out:
             continue
-        c = next((x for x in ranking if x.effect == other), None)
-        if c is not None and _eligible(c):
-            out[other] = Alternative(other, c.delta_bic, f"its signature is parallel to the leader's (|cos| = {cos:.3f})")
+        match = next((x for x in ranking if x.effect == other), None)
+        if match is not None and _eligible(match):
+            out[other] = Alternative(other, match.delta_bic,
+                                     f"its signature is parallel to the leader's (|cos| = {cos:.3f})")
     return list(out.values())
 
 
@@ -1252,7 +1270,8 @@ def _verdict(ranking: list[Candidate], cal: _Calibration, noise: NoiseEstimate, 
     if best is None:
         if cal_is_noise:
             return ("none", f"after calibration the residual is noise ({residual}) and no effect is supported "
-                    f"(ΔBIC ≥ {BIC_THRESHOLD:g} and a likelihood-ratio test against 'no effect' at {LR_ALPHA:g})", fit.rms)
+                    f"(ΔBIC ≥ {BIC_THRESHOLD:g} and a likelihood-ratio test against 'no effect' at {LR_ALPHA:g})",
+                    fit.rms)
         if not cal.search.converged:
             return ("not_converged", f"the calibration did not converge ({cal.search.summary()}) and a systematic "
                     f"residual remains ({residual}); no verdict on missing physics", fit.rms)

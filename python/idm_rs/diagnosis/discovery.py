@@ -262,7 +262,7 @@ def knot_times(rec: Recording, j: int, dt: float, per_cycle: int = KNOTS_PER_CYC
     period = 1.0 / e.frequency_Hz if not e.is_sampled and e.frequency_Hz > 0 else e.duration / 10.0
     step = max(round(period / per_cycle / dt), 1) * dt
     n = int(math.ceil(e.duration / step - 1e-9))
-    return np.arange(n + 1) * step
+    return np.arange(n + 1, dtype=np.float64) * step
 
 
 def _second_differences(k: int) -> NDArray[np.float64]:
@@ -381,7 +381,8 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
                 _repair_columns(out, lambda v: run_with_force(rec, j, at, body, knots[j], v)[0]["reading"],
                                 vals[j])
                 par = sens[:, k:]
-                dpar = (chain.T @ np.where(np.isfinite(par), par, 0.0).T if free else np.zeros((0, sens.shape[0])))
+                dpar = (chain.T @ np.where(np.isfinite(par), par, 0.0).T if chain is not None  # i.e. free
+                        else np.zeros((0, sens.shape[0])))
                 if free and not usable_derivative(dpar, out["reading"]):
                     # the parameters' derivatives blew up in a fast slip (as the fits' do at their
                     # step): forward differences of runs, as the fits take them
@@ -410,7 +411,8 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
     def view(runs) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
         """d(residual / sigma) / d(force at each knot) and / d(parameter, fit units), per
         experiment (samples x knots, samples x parameters)."""
-        A, S = [], []
+        A: list[NDArray[np.float64]] = []
+        S: list[NDArray[np.float64]] = []
         for j, (out, _) in enumerate(runs):
             n = objs[j].samples[j]
             for key, cols, into in (("sensitivities", knots[j].size, A), ("parameters", len(free), S)):
@@ -560,7 +562,7 @@ def _repair_columns(out: dict[str, Any], reading: Callable[[NDArray[np.float64]]
 def _gcv_solve(A: list[NDArray[np.float64]], b: list[NDArray[np.float64]], D: list[NDArray[np.float64]],
                mu: float = 0.0, current: Optional[list[NDArray[np.float64]]] = None,
                S: Optional[list[NDArray[np.float64]]] = None, u: Optional[NDArray[np.float64]] = None
-               ) -> tuple[list[NDArray[np.float64]], NDArray[np.float64], float, float]:
+               ) -> tuple[list[NDArray[np.float64]], NDArray[np.float64], float, float, float]:
     """argmin over the knots c_j and the shared parameters v of
     sum_j ||A_j c_j + S_j v - b_j||^2 + lam ||D_j c_j||^2 + mu ||W (x - x_current)||^2
     (W^2 Marquardt's diagonal of the normal matrix, floored at its mean per block: a knot the
@@ -582,6 +584,7 @@ def _gcv_solve(A: list[NDArray[np.float64]], b: list[NDArray[np.float64]], D: li
         g[sl] = a.T @ b[j]
         P[sl, sl] = D[j].T @ D[j]
         if p:
+            assert S is not None  # p > 0
             G[sl, kt:] = a.T @ S[j]
             G[kt:, sl] = G[sl, kt:].T
             G[kt:, kt:] += S[j].T @ S[j]
@@ -614,7 +617,11 @@ def _gcv_solve(A: list[NDArray[np.float64]], b: list[NDArray[np.float64]], D: li
         if p:
             floor[kt:] = float(np.mean(dg[kt:]))
         damp = mu * np.diag(dg + floor + 1e-300)
-        x0 = np.concatenate(list(current) + ([u] if p else []))
+        parts = list(current)
+        if p:
+            assert u is not None  # the parameters' current values come with S
+            parts.append(u)
+        x0 = np.concatenate(parts)
         x = _lstsq(G + best[1] * scale * P + damp, g + damp @ x0, "the inferred force's damped step", None)[0]
     cs = np.split(x[:kt], np.cumsum(sizes)[:-1])
     return list(cs), x[kt:], best[1], best[3], best[4]
@@ -943,9 +950,10 @@ def _refit(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[Free
            progress: Optional[Callable[..., Any]]) -> tuple[FitResult, list[FreeParam]]:
     """The whole model refitted with the form's coefficients (and wavelength) free."""
     lib = _free_library(form)
-    base = ModelSpec(spec.structure, dict(spec.params), dict(spec.effects))
+    effects = dict(spec.effects)
+    base = ModelSpec(spec.structure, dict(spec.params), effects)
     if form.wavelength > 0:
-        base.effects["lib_wavelength"] = form.wavelength  # type: ignore[index]
+        effects["lib_wavelength"] = form.wavelength
     r = fit(objective, base, list(calibrated_free) + lib, max_nfev=REFIT_NFEV, progress=progress)
     return r, lib
 
@@ -1054,7 +1062,7 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
                                                nuisance=calibrated_free, progress=progress), bool(calibrated_free)))
                 except NumericalFailure as e:
                     failures.append(f"the direct view of the {body}: {e}")
-            forms = []
+            forms: list[FoundForm] = []
             for view, project in views:
                 try:
                     f_ = find_terms(view, project=project)
@@ -1162,9 +1170,10 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
         best = max(standing, key=lambda x: x.delta_bic)
         others = [x for x in standing if x is not best]
         if others:
-            best.reason += "; " + "; ".join(
+            best.reason += "; " + "; ".join(  # every standing trial has its form (the `else ()` never runs)
                 f"the form on the {'main body' if x.body == 'main' else 'weight'} "
-                f"({', '.join(t.symbol for t in x.form.terms)}) also stands but gains less (ΔBIC {x.delta_bic:.0f})"
+                f"({', '.join(t.symbol for t in (x.form.terms if x.form is not None else ()))}) also stands "
+                f"but gains less (ΔBIC {x.delta_bic:.0f})"
                 for x in others)
         best.seconds = time.perf_counter() - t0
         return best

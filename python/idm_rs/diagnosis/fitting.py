@@ -243,8 +243,8 @@ class Objective:
         spec = apply(base, free, u)
         skip = unbounded if unbounded is not None else set()
         exact = [j for j in self.experiments if j not in skip]
-        preds, sens, _ = self.sim.predict_with_sensitivities([spec], names, self.cycles, experiments=exact)
-        preds, sens = list(preds[0]), sens[0]
+        pred_sets, sens_sets, _ = self.sim.predict_with_sensitivities([spec], names, self.cycles, experiments=exact)
+        preds, sens = list(pred_sets[0]), sens_sets[0]
         dpred: list[NDArray[np.float64]] = [np.zeros((len(free), 0))] * len(preds)
         bad = [j for j in self.experiments if j in skip]
         for j in exact:
@@ -332,8 +332,8 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     d = np.sqrt(np.maximum(np.diag(cov_u), 1e-300))
     corr = {f.name: {g.name: float(np.clip(cov_u[a, b] / (d[a] * d[b]), -1.0, 1.0)) for b, g in enumerate(free)}
             for a, f in enumerate(free)}
-    return FitResult(values, std, chi2, objective.n, res, offs, spec, int(sol.nfev), bool(sol.success), str(sol.message),
-                     corr, np.asarray(J))
+    return FitResult(values, std, chi2, objective.n, res, offs, spec, int(sol.nfev), bool(sol.success),
+                     str(sol.message), corr, np.asarray(J))
 
 
 #: drive cycles fitted at each stage of a progressive fit (None: all). Stick-slip makes the

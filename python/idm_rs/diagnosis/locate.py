@@ -98,7 +98,7 @@ def locate(rec: Recording, residuals: Sequence[NDArray[np.float64]], sigma: floa
             rms = float(math.sqrt(np.mean(r * r))) if r.size else 0.0
             out.append(Location(e.name, phase, t0, t1, int(r.size), rms, rms / sigma, max(excess, 0.0) / total, z,
                                 z > SYSTEMATIC_Z))
-        return sorted(out, key=lambda l: -l.excess_share)
+        return sorted(out, key=lambda loc: -loc.excess_share)
 
     return build(items), build(windows)
 
@@ -112,7 +112,8 @@ def merge_windows(windows: Sequence[Location], sigma: float) -> list[Location]:
             n = a.n + w.n
             rms = math.sqrt((a.rms**2 * a.n + w.rms**2 * w.n) / n)
             spans[-1] = Location(a.experiment, "window", a.t_start, w.t_end, n, rms, rms / sigma,
-                                 a.excess_share + w.excess_share, (a.z * math.sqrt(a.n) + w.z * math.sqrt(w.n)) / math.sqrt(n), True)
+                                 a.excess_share + w.excess_share,
+                                 (a.z * math.sqrt(a.n) + w.z * math.sqrt(w.n)) / math.sqrt(n), True)
         else:
             spans.append(w)
     return spans

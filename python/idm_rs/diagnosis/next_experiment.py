@@ -159,7 +159,7 @@ def virtual_recording(rec: Recording, drive_list: Sequence[Drive]) -> Recording:
     for i, d in enumerate(drive_list):
         duration = d.rest_s + d.cycles / d.frequency_Hz
         n = int(round(duration / step)) + 1
-        t = np.arange(n) * step
+        t = np.arange(n, dtype=np.float64) * step
         name = f"proposed{i + 1}_{d.direction}_{d.amplitude_V:g}V_{d.frequency_Hz:g}Hz.csv"
         exps.append(Experiment(name, rec.path / name, d.amplitude_V, d.frequency_Hz, d.direction, d.cycles, d.rest_s,
                                d.edge_s, t, np.zeros(n), np.zeros(n), orientation=d.orientation))

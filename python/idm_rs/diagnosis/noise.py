@@ -31,9 +31,9 @@ class NoiseEstimate:
 def estimate_noise(rec: Recording) -> NoiseEstimate:
     """The sensor noise given in meta.json (``sensor.noise_rms_m``) when there is one. Else:
     before the first cycle the body is at rest, so the reading there is offset + noise: the
-    spread about each file's mean is the noise; without any rest, the second differences. Second differences over whole files give a
-    robust cross-check (motion is smooth on the 10 us sample scale except at edges; the median
-    ignores those)."""
+    spread about each file's mean is the noise; without any rest, the second differences. Second
+    differences over whole files give a robust cross-check (motion is smooth on the 10 us sample
+    scale except at edges; the median ignores those)."""
     rest = []
     for e in rec.experiments:
         x = e.x[e.rest_mask]
@@ -99,7 +99,8 @@ def cross_check(noise: NoiseEstimate, residuals: Sequence[NDArray[np.float64]]) 
     a, ua = noise.rest_sigma, noise.relative_uncertainty * noise.rest_sigma
     b, ub = s_res, rel_res * s_res
     if abs(a - b) > DISAGREE_SIGMAS * math.hypot(ua, ub):
-        return replace(noise, sigma=b, residual_sigma=b, relative_uncertainty=rel_res, source="residual (rest disagrees)")
+        return replace(noise, sigma=b, residual_sigma=b, relative_uncertainty=rel_res,
+                       source="residual (rest disagrees)")
     w_a, w_b = 1.0 / ua**2, 1.0 / ub**2
     pooled = (w_a * a + w_b * b) / (w_a + w_b)
     return replace(noise, sigma=pooled, residual_sigma=b, relative_uncertainty=1.0 / math.sqrt(w_a + w_b) / pooled,

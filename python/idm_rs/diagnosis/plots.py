@@ -15,8 +15,9 @@ from .locate import PHASES
 from .thresholds import BIC_THRESHOLD, NOISE_RATIO_OK
 
 if TYPE_CHECKING:
-    from .results import Candidate, Diagnosis
     from matplotlib.figure import Figure
+
+    from .results import Candidate, Diagnosis
 
 DPI = 120
 C_DATA = "0.45"
@@ -189,17 +190,17 @@ def plot_residual_phases(d: Diagnosis, directory: Path) -> Path:
     import matplotlib.pyplot as plt
 
     names = [e.name for e in d.recording.experiments]
-    cells = {(l.experiment, l.phase): l for l in d.locations if l.phase in PHASES}
+    cells = {(cell.experiment, cell.phase): cell for cell in d.locations if cell.phase in PHASES}
     fig, ax = plt.subplots(figsize=(max(6.0, 1.9 * len(names) + 2), 4.5), constrained_layout=True)
     width = 0.8 / len(PHASES)
     x = np.arange(len(names))
     for k, phase in enumerate(PHASES):
         shares, ratios, sys_ = [], [], []
         for n in names:
-            l = cells.get((n, phase))
-            shares.append(100 * l.excess_share if l else 0.0)
-            ratios.append(l.rms_over_noise if l else math.nan)
-            sys_.append(bool(l and l.systematic))
+            cell = cells.get((n, phase))
+            shares.append(100 * cell.excess_share if cell else 0.0)
+            ratios.append(cell.rms_over_noise if cell else math.nan)
+            sys_.append(bool(cell and cell.systematic))
         pos = x + (k - (len(PHASES) - 1) / 2) * width
         bars = ax.bar(pos, shares, width, color=PHASE_COLOURS.get(phase), label=phase,
                       edgecolor=["black" if s else "none" for s in sys_], linewidth=1.2)
@@ -276,6 +277,7 @@ def plot_rms_story(d: Diagnosis, directory: Path) -> Path:
         colours.append(C_CALIBRATED)
         hatches.append(None)
     if found is not None:
+        assert d.discovery is not None  # found is its refit
         labels.append("with the\ndiscovered term")
         values.append(d.discovery.rms_after)
         colours.append(C_REFIT)
@@ -341,7 +343,8 @@ def plot_diagnosis(d: Diagnosis, directory: Path) -> list[Path]:
         paths.append(plot_ranking(d, directory))
     if math.isfinite(d.rms_before):
         paths.append(plot_rms_story(d, directory))
-    if getattr(d, "discovery", None) is not None and d.discovery.form is not None:
+    discovery = getattr(d, "discovery", None)
+    if discovery is not None and discovery.form is not None:
         paths.append(plot_discovery(d, directory))
     return paths
 
@@ -368,6 +371,7 @@ def plot_discovery(d: Diagnosis, directory: Path) -> Path:
     from .discovery import library_columns
 
     f = d.discovery
+    assert f is not None and f.form is not None  # plot_diagnosis draws this for a found form only
     force = f.forces[f.body]
     form = f.form
     values = {n: v for n, (v, _) in f.values.items()} if f.values else dict(form.coefficients)

@@ -13,6 +13,8 @@ from .catalogue import CALIBRATION_RANGE, CATALOGUE, by_id
 from .thresholds import BIC_THRESHOLD
 
 if TYPE_CHECKING:
+    from typing_extensions import TypeGuard  # typing.TypeGuard from Python 3.10
+
     from .results import Candidate, Diagnosis
 
 #: experiment x phase locations listed in the report
@@ -30,7 +32,7 @@ def _unit(name: str) -> str:
     return "" if u in ("1", "") else u
 
 
-def _finite(x: Optional[float]) -> bool:
+def _finite(x: Optional[float]) -> TypeGuard[float]:
     return x is not None and isinstance(x, (int, float)) and math.isfinite(x)
 
 
@@ -184,7 +186,8 @@ def _table(headers: Sequence[str], rows: Sequence[Sequence[str]], align: str) ->
     widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(headers)]
 
     def line(cells: Sequence[str]) -> str:
-        return "  " + "  ".join(c.ljust(w) if a == "l" else c.rjust(w) for c, w, a in zip(cells, widths, align)).rstrip()
+        padded = (c.ljust(w) if a == "l" else c.rjust(w) for c, w, a in zip(cells, widths, align))
+        return "  " + "  ".join(padded).rstrip()
 
     return [line(headers), "  " + "  ".join("-" * w for w in widths)] + [line(r) for r in rows]
 
@@ -209,7 +212,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
     moved = sorted(((n, v / p_meta[n] - 1.0) for n, v in d.calibrated.items()
                     if _finite(p_meta.get(n)) and p_meta[n]), key=lambda kv: -abs(kv[1]))
     biggest = f"; the largest change is {moved[0][0]} {100 * moved[0][1]:+.1f} % against meta.json" if moved else ""
-    where = next((l for l in d.locations if l.systematic), None)
+    where = next((loc for loc in d.locations if loc.systematic), None)
     alts = getattr(d, "alternatives", []) or []
     lines = ["In plain words"]
     if sec is not None and sec.named and best is not None:
@@ -267,6 +270,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
                      "setting of the device.")
     elif d.verdict.endswith("discovered") and getattr(d, "discovery", None) is not None:
         f = d.discovery
+        assert f is not None  # the condition above
         lines.append(f"  Found: physics the catalogue does not list — {f.description}. Inferred from the data as a "
                      f"force on the {'main body' if f.body == 'main' else 'weight'}, its form found in a library of "
                      f"terms and refitted with the nominal values: the model now matches the recordings to "
@@ -282,8 +286,8 @@ def plain_summary(d: Diagnosis) -> list[str]:
         lines.append(f"  Found: the recordings disagree with the model in a way no catalogue effect explains: "
                      f"{ratio(d.rms_after):.2f} × the noise remains"
                      + (f", most of it in {where.experiment} ({where.phase})" if where is not None else "") + ".")
-        lines.append(f"  How sure: the residual is systematic, not noise (whiteness z = {d.whiteness_z_calibrated:.1f}; "
-                     "noise gives |z| < 3).")
+        lines.append("  How sure: the residual is systematic, not noise "
+                     f"(whiteness z = {d.whiteness_z_calibrated:.1f}; noise gives |z| < 3).")
         todo = ("  What to do: look at the located windows and the fit figures: the missing physics is not "
                 "among the catalogue's effects")
         pp = getattr(d, "parameter_proposal", None)
@@ -365,22 +369,22 @@ def text_report(d: Diagnosis) -> str:
 
     # --- where the residual lives
     lines += ["", "Where the residual lives (calibrated model; share of the residual energy above the noise)"]
-    locs = [l for l in d.locations if l.phase != "window"]
+    locs = [loc for loc in d.locations if loc.phase != "window"]
     if locs:
         rows = []
-        for l in locs[:TOP_LOCATIONS]:
-            rows.append([l.experiment, l.phase, f"{1e3 * l.t_start:.2f}–{1e3 * l.t_end:.2f}",
-                         f"{100 * l.excess_share:.1f} %", f"{l.rms_over_noise:.2f}",
-                         f"yes (z = {l.z:.0f})" if l.systematic else "no"])
+        for loc in locs[:TOP_LOCATIONS]:
+            rows.append([loc.experiment, loc.phase, f"{1e3 * loc.t_start:.2f}–{1e3 * loc.t_end:.2f}",
+                         f"{100 * loc.excess_share:.1f} %", f"{loc.rms_over_noise:.2f}",
+                         f"yes (z = {loc.z:.0f})" if loc.systematic else "no"])
         lines += _table(["experiment", "phase", "span [ms]", "share", "RMS/noise", "systematic"], rows, "llrrrl")
-        n_sys = sum(l.systematic for l in locs)
+        n_sys = sum(loc.systematic for loc in locs)
         lines.append(f"  {n_sys} of {len(locs)} experiment × phase cells hold a systematic residual")
     if d.windows:
         total = sum(w.t_end - w.t_start for w in d.windows)
-        top = sorted(d.windows, key=lambda w: -w.excess_share)[:TOP_WINDOWS]
+        largest = sorted(d.windows, key=lambda w: -w.excess_share)[:TOP_WINDOWS]
         lines.append(f"  systematic time windows: {len(d.windows)} spans, {1e3 * total:.1f} ms in all; largest: "
                      + "; ".join(f"{w.experiment} {1e3 * w.t_start:.1f}–{1e3 * w.t_end:.1f} ms "
-                                 f"({100 * w.excess_share:.0f} %, {w.rms_over_noise:.1f} × noise)" for w in top))
+                                 f"({100 * w.excess_share:.0f} %, {w.rms_over_noise:.1f} × noise)" for w in largest))
     elif not d.complete:
         lines.append("  systematic time windows: not computed (interrupted)")
     else:
@@ -459,13 +463,14 @@ def _discovery_and_second_lines(d: Diagnosis, sigma: float) -> list[str]:
             form = found.form
             lines.append(f"  form on the {found.body}: " + (", ".join(t.symbol for t in form.terms) or "no term")
                          + (f" (lambda scanned, chosen {form.wavelength * 1e6:.3g} µm)" if form.wavelength > 0 else "")
-                         + f"; leave-one-experiment-out error by number of terms: "
+                         + "; leave-one-experiment-out error by number of terms: "
                          + ", ".join(f"{e:.3f}" for e in form.cv_by_size))
         if found.values:
             lines.append("  refitted: " + ", ".join(f"{n} = {pm(v, sd)}" for n, (v, sd) in found.values.items()))
             lines.append(f"  ΔBIC {found.delta_bic:.0f}; RMS {_nm(found.rms_before)} → {_nm(found.rms_after)} "
                          f"({_ratio(found.rms_before, sigma)} → {_ratio(found.rms_after, sigma)}); held-out "
-                         f"{found.heldout_experiment}: {_nm(found.heldout_rms_before)} → {_nm(found.heldout_rms_after)}")
+                         f"{found.heldout_experiment}: "
+                         f"{_nm(found.heldout_rms_before)} → {_nm(found.heldout_rms_after)}")
         lines.append(f"  {'DISCOVERED' if found.discovered else 'not discovered'}: {found.reason}")
 
     sec = getattr(d, "second", None)

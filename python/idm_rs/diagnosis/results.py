@@ -18,7 +18,6 @@ from .case_model import CaseSimulator, ModelSpec
 from .identifiability import ParamStatus
 from .locate import Location
 from .noise import NoiseEstimate
-
 from .thresholds import LR_ALPHA
 
 if TYPE_CHECKING:
@@ -151,7 +150,8 @@ class SecondSearch:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "first": self.first.effect, "joint": self.joint, "second": self.pair.effect if self.pair else None, "named": self.named,
+            "first": self.first.effect, "joint": self.joint, "second": self.pair.effect if self.pair else None,
+            "named": self.named,
             "reason": self.reason, "shares": self.shares, "heldout_rms": self.heldout_rms,
             "first_heldout_rms": self.first_heldout_rms, "delta_bic_over_first": self.over_first,
             "delta_bic_over_second_alone": self.over_second_alone,
@@ -260,7 +260,7 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
             "noise": self.noise.__dict__,
             "calibrated": self.calibrated,
             "calibrated_std": self.calibrated_std,
-            "locations": [l.to_dict() for l in self.locations],
+            "locations": [loc.to_dict() for loc in self.locations],
             "systematic_windows": [w.to_dict() for w in self.windows],
             "heldout_experiment": self.heldout_experiment,
             "heldout_rms_calibrated": self.heldout_rms_calibrated,

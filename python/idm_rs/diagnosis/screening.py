@@ -124,7 +124,7 @@ def _columns(obj: Objective, base: ModelSpec, eff: Effect, progress: Optional[Ca
     if progress:
         progress(len(specs))
     out = []
-    for probe, free, spec, p, sn in zip(probes(eff), frees, specs, preds, sens):
+    for probe, free, _spec, p, sn in zip(probes(eff), frees, specs, preds, sens):
         _, D = engine_chain(base, free, np.zeros(len(free)))
         dpred = [D.T @ x for x in sn]
         bad = [j for j, (d, x) in enumerate(zip(dpred, p)) if x.size and not usable_derivative(d, x)]

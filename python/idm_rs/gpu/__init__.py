@@ -7,8 +7,20 @@ What the kernel admits is declared in the engine (``engine.kernel_accepts()``: T
 parameters including ``load_force``, no effects, Triangle and Sawtooth inputs, the LPS and the
 DPS up to 5 elements, the per-point metrics); the sweep refuses anything else by name."""
 
-from .backend import (GpuUnavailable, KernelBatch, Launched, Spec, all_specs, kernel_source, launch_cuda, pack,
-                      prepare, run_cpu, run_cuda, wave_columns)
+from .backend import (
+    GpuUnavailable,
+    KernelBatch,
+    Launched,
+    Spec,
+    all_specs,
+    kernel_source,
+    launch_cuda,
+    pack,
+    prepare,
+    run_cpu,
+    run_cuda,
+    wave_columns,
+)
 
 __all__ = ["GpuUnavailable", "KernelBatch", "Launched", "Spec", "all_specs", "kernel_source", "launch_cuda", "pack",
            "prepare", "run_cpu", "run_cuda", "wave_columns"]

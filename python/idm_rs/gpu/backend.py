@@ -1,10 +1,10 @@
 """Packing sweep points for the kernel, and running it on a GPU (CuPy, NVRTC) or on the CPU (the
 same source compiled by the system C compiler, loaded with ctypes).
 
-The kernel is specialised at compile time (``Spec``: node count, hysteresis on/off), so its state lives in registers. Its inputs are columns: the per-point
-constants of each distinct parameter row (the engine packs them: ``engine.kernel_constants``),
-indexed per point by ``rows``, and the wave's six numbers per point; a column equal over the
-whole batch is sent once (step 0)."""
+The kernel is specialised at compile time (``Spec``: node count, hysteresis on/off), so its state
+lives in registers. Its inputs are columns: the per-point constants of each distinct parameter
+row (the engine packs them: ``engine.kernel_constants``), indexed per point by ``rows``, and the
+wave's six numbers per point; a column equal over the whole batch is sent once (step 0)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -156,9 +156,9 @@ def pack(config: Any, spec: Spec, param_rows: NDArray[np.float64], rows: NDArray
     _check_layout()
     consts = engine.kernel_constants(config, np.ascontiguousarray(param_rows, dtype=float))
     consts = np.ascontiguousarray(consts[:, constant_columns(spec.nodes)])
-    rows = np.ascontiguousarray(rows, dtype=np.int32)
-    data, off, step = _columns(list(wave), rows.size)
-    return KernelBatch(spec, consts, rows, data, off, step, float(dt), int(round(t_end / dt)), method,
+    rows32 = np.ascontiguousarray(rows, dtype=np.int32)
+    data, off, step = _columns(list(wave), rows32.size)
+    return KernelBatch(spec, consts, rows32, data, off, step, float(dt), int(round(t_end / dt)), method,
                        float(t_end), float(rtol), float(atol), float(first_step))
 
 
@@ -321,8 +321,9 @@ def launch_cuda(batch: KernelBatch) -> Launched:
         common = (d["consts"], d["rows"], d["data"], d["off"], d["step"])
         f = _MODULES[spec].get_function(ENTRY[batch.method])
         if batch.method == "dopri5":
-            args = common + (np.float64(batch.t_end), np.float64(batch.rtol), np.float64(batch.atol),
-                             np.float64(batch.first_step), np.int64(0), np.int64(batch.points), out)
+            args: tuple[Any, ...] = common + (np.float64(batch.t_end), np.float64(batch.rtol),
+                                              np.float64(batch.atol), np.float64(batch.first_step), np.int64(0),
+                                              np.int64(batch.points), out)
         else:
             args = common + (np.float64(batch.dt), np.int64(batch.steps), np.int64(0), np.int64(batch.points), out)
         start, end = cp.cuda.Event(), cp.cuda.Event()

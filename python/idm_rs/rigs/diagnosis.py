@@ -282,8 +282,9 @@ def _verdict(ranking: list[RigCandidate], rms0: float, noise: float) -> tuple[st
         return "unexplained", (f"a residual of {ratio:.1f} x the noise estimate remains and no catalogue effect "
                                f"lowers BIC by {BIC_THRESHOLD:g} with its amplitudes beyond {NULL_SIGMAS:g} σ"), rms0
     best = eligible[0]
-    return best.effect, (f"{best.effect} lowers BIC by {best.delta_bic:.0f} (amplitudes beyond {NULL_SIGMAS:g} σ) and the "
-                         f"residual RMS from {rms0:.4g} to {best.rms_after:.4g}"), best.rms_after
+    return best.effect, (f"{best.effect} lowers BIC by {best.delta_bic:.0f} "
+                         f"(amplitudes beyond {NULL_SIGMAS:g} σ) and the residual RMS from {rms0:.4g} "
+                         f"to {best.rms_after:.4g}"), best.rms_after
 
 
 def _locate_by(e: NDArray[np.float64], labels: dict[str, NDArray[np.bool_]]) -> list[str]:
@@ -304,7 +305,8 @@ def _linear_rig(rig: str, name: str, X0: NDArray[np.float64], y: NDArray[np.floa
     sg = np.sign(v)
     stroke = float(np.ptp(q))
     qc = (q - 0.5 * (q.max() + q.min())) / (0.5 * stroke)  # -1 .. 1 over the stroke: amplitudes in y's unit
-    columns: dict[str, list[tuple[str, list[str], Callable[[], NDArray[np.float64]]]]] = {
+    # each column builder is called without arguments (Callable[..., ...]: the loop values are bound as defaults)
+    columns: dict[str, list[tuple[str, list[str], Callable[..., NDArray[np.float64]]]]] = {
         "stribeck_peak": [(f"vs = {vs:g} m/s", ["s"], (lambda vs=vs: force_sign * np.exp(-((v / vs) ** 2)) * sg))
                           for vs in STRIBECK_VS],
         "position_dependent": [("", ["p1", "p2"], lambda: np.column_stack([qc * sg, qc ** 2 * sg]))],

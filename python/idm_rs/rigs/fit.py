@@ -27,8 +27,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .data import RealDataError, RigData
-from .regressors import (EMPS_BORDER, EMPS_DECIMATE, EMPS_FILTER_HZ, EMPS_FILTER_ORDER, SLIDER_MIN_GAP,
-                         SLIDER_PROMINENCE, Regression, emps_regression, frame_regression, slider_events)
+from .regressors import (
+    EMPS_BORDER,
+    EMPS_DECIMATE,
+    EMPS_FILTER_HZ,
+    EMPS_FILTER_ORDER,
+    SLIDER_MIN_GAP,
+    SLIDER_PROMINENCE,
+    Regression,
+    emps_regression,
+    frame_regression,
+    slider_events,
+)
 from .signals import low_pass_derivatives, lstsq, slips
 
 #: the benchmark's published reference model (Janot, Gautier & Brunot 2019, Simulation_EMPS.m)
@@ -122,8 +132,8 @@ class RigFit:
             shown = f" {u}" if u and u != "1" else ""
             lines.append(f"    {k:<8} = {v:12.5g} ± {self.params_std[k]:.2g}{shown}"
                          + (f"   (benchmark reference {ref:g}{shown})" if ref else "") + caveat)
-        noise = (f"{self.noise_rms:.4g} {unit} (robust estimate)" if math.isfinite(self.noise_rms) and self.noise_rms > 0
-                 else "could not be estimated")
+        noise = (f"{self.noise_rms:.4g} {unit} (robust estimate)"
+                 if math.isfinite(self.noise_rms) and self.noise_rms > 0 else "could not be estimated")
         lines.append(f"  residual RMS {self.rms:.4g} {unit}, noise RMS {noise}")
         for k, v in self.metrics.items():
             words, u = METRIC_WORDS.get(k, (k.replace("_", " "), ""))
@@ -137,7 +147,8 @@ class RigFit:
                 "rms": self.rms, "noise_rms": self.noise_rms, "not_identifiable": self.not_identifiable,
                 "correlation": self.correlation, "metrics": self.metrics,
                 "metric_words": {k: METRIC_WORDS.get(k, (k, ""))[0] for k in self.metrics},
-                "metric_units": {k: METRIC_WORDS.get(k, ("", ""))[1] for k in self.metrics}, "reference": self.reference,
+                "metric_units": {k: METRIC_WORDS.get(k, ("", ""))[1] for k in self.metrics},
+                "reference": self.reference,
                 "describes": self.describes, "judgement": self.judgement}
 
 
@@ -217,7 +228,8 @@ def fit_emps(data: RigData, *, simulate: bool = True) -> RigFit:
             fit.metrics["force_relative_error_pct"] = relative_error(data.force, f_sim)
         q_ref, f_ref = simulate_emps(data, EMPS_REFERENCE)
         fit.metrics["reference_model_position_relative_error_pct"] = relative_error(qf, q_ref)
-        fit.metrics["reference_model_force_relative_error_pct"] = relative_error(data.force, f_ref)
+        if data.force is not None:
+            fit.metrics["reference_model_force_relative_error_pct"] = relative_error(data.force, f_ref)
         fit.arrays = {"t": data.t, "q": data.response, "q_sim": q_sim, "force": data.force if data.force is not None
                       else np.full_like(data.t, np.nan), "force_sim": f_sim}
     return fit

@@ -60,7 +60,8 @@ def plot_rig_fit(fit: RigFit, directory: Any) -> list[Any]:
         for x in (ax, axr):
             x.grid(alpha=0.3)
         p = fit.params
-        ax.set_title(f"{fit.name}: f0 = {p['f0_Hz']:.3g} Hz, zeta = {p['zeta']:.3g}, Fc/k = {p['fc_over_k_m'] * 1e3:.3g} mm;"
+        ax.set_title(f"{fit.name}: f0 = {p['f0_Hz']:.3g} Hz, zeta = {p['zeta']:.3g}, "
+                     f"Fc/k = {p['fc_over_k_m'] * 1e3:.3g} mm;"
                      f" simulated position error {fit.metrics.get('position_relative_error_pct', math.nan):.3g} %",
                      fontsize=9)
         return [_save_fit(fig, fit, out)]

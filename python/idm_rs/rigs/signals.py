@@ -5,6 +5,7 @@ estimate of a record's white noise."""
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,7 +21,7 @@ def lstsq(X: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[np.fl
     e = y - X @ beta
     # pinv: a candidate's columns may be nearly collinear with the base model's (the diagnosis)
     cov = np.var(e, ddof=X.shape[1]) * np.linalg.pinv(X.T @ X)
-    return beta, e, cov
+    return cast("NDArray[np.float64]", beta), e, cov  # numpy's stub types it floating[Any]
 
 
 def low_pass_derivatives(q: NDArray[np.float64], t: NDArray[np.float64], cutoff_hz: float,
