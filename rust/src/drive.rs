@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use crate::dopri5::Dopri5;
 use crate::stepper::{AdaptiveOptions, Held};
 use crate::lanes::{simd_arch, LaneExp, LibmExp, PlainLanes};
-use crate::lanes_dopri5::run_dopri5_lanes;
+use crate::lanes_dopri5::{run_dopri5_lanes, Handoff};
 use crate::lanes_rk4::run_rk4_lanes;
 use crate::model::{with_state_size, Model};
 use crate::rk4::Rk4;
@@ -744,90 +744,124 @@ impl<T: Scalar, O: Observer<T>> Observer<T> for Renumbered<'_, '_, O> {
     }
 }
 
-/// Every lane group of plain f64 tasks with `N` nodes and `D` state components, as one
-/// operation for `pulp` to compile once per instruction set: its `with_simd` runs inside a
-/// function with that set's features enabled, and everything it calls is inlined into it
+/// The vector drivers' part of a lane group run (see [`PlainGroups`]): every task's end, and the
+/// runs `method="auto"` handed over to the implicit method; or `Fallback` when the vector drivers
+/// do not run these tasks (another shape, or Rodas4).
+enum LaneRun {
+    Fallback,
+    Ran { ends: Vec<Option<(LaneEnd, Vec<f64>)>>, handoffs: Vec<Handoff> },
+}
+
+/// The vector lane drivers over f64 tasks with `N` nodes and `D` state components (`EXTRAS`:
+/// lag states beside the plain ones, see [`Model::lane_lags`](crate::model::Model::lane_lags)),
+/// as one operation for `pulp` to compile once per instruction set: its `with_simd` runs inside
+/// a function with that set's features enabled, and everything it calls is inlined into it
 /// (closures are not: the call through `FnOnce` stays out of line, compiled for the baseline).
-struct PlainGroups<'t, 'a, O, E, const N: usize, const D: usize, const L: usize> {
+/// Only the two SoA drivers are in it: the lane-interleaved scalar code of the hand-overs and of
+/// the fallback (`run_fixed`) gains nothing from vector instructions, so it is compiled once,
+/// not once per instruction set (build time; the bits are the same either way).
+struct PlainGroups<'t, 'a, O, E, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> {
     tasks: &'t [Task<'a>],
     method: &'t Method,
     observer: &'t mut O,
     cancel: &'t AtomicBool,
-    out: &'t mut Vec<(LaneEnd, Vec<f64>)>,
     _exp: PhantomData<E>,
 }
 
-impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pulp::WithSimd
-    for PlainGroups<'_, '_, O, E, N, D, L>
+impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> pulp::WithSimd
+    for PlainGroups<'_, '_, O, E, N, D, EXTRAS, L>
 {
-    type Output = Option<()>;
+    type Output = Option<LaneRun>;
 
     #[inline(always)]
-    fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<()> {
+    fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<LaneRun> {
         let shape = self.tasks[0].model.shape();
-        if self.tasks.iter().all(|t| PlainLanes::<N, L, E>::accepts(t.model) && t.model.shape() == shape) {
-            // the state stored component by component, lanes refilled from the queue
-            let ends = match *self.method {
-                Method::Rk4 { dt } => Some(run_rk4_lanes::<O, E, N, D, L>(self.tasks, dt, self.observer, self.cancel)?),
-                Method::Dopri5 { rtol, atol, first_step } | Method::Auto { rtol, atol, first_step } => {
-                    let auto = matches!(self.method, Method::Auto { .. });
-                    let mut handoffs = Vec::new();
-                    let mut ends = run_dopri5_lanes::<O, E, N, D, L>(
-                        self.tasks, rtol, atol, first_step, self.observer, self.cancel, auto, &mut handoffs,
-                    )?;
-                    // lanes that turned stiff go on with the implicit method, L at a time
-                    for group in handoffs.chunks(L) {
-                        let chunk: Vec<Task> = group
-                            .iter()
-                            .map(|h| Task { t_start: h.t, y0: &h.y, ..self.tasks[h.task] })
-                            .collect();
-                        let resume: Vec<Resume> = group.iter().map(|h| h.resume).collect();
-                        let index: Vec<usize> = group.iter().map(|h| h.task).collect();
-                        let mut done = Vec::with_capacity(group.len());
-                        run_group::<[f64; D], _, _, D, L>(
-                            &chunk,
-                            0,
-                            self.method,
-                            &Held::default(),
-                            [0.0; D],
-                            // lane-interleaved scalar code: the vector right-hand side lives in
-                            // the two SoA drivers only (each of its inlined copies costs build
-                            // time; Rodas4's cost is its Jacobian and LU, not the stages)
-                            |c, slack| ModelRhs::<f64, N, false, L>::for_tasks(c, slack),
-                            &mut Renumbered { inner: &mut *self.observer, index: &index },
-                            self.cancel,
-                            &mut done,
-                            Some(&resume),
-                        )?;
-                        for (h, end) in group.iter().zip(done) {
-                            ends[h.task] = Some(end);
-                        }
-                    }
-                    Some(ends.into_iter().map(|o| o.expect("every task ends")).collect::<Vec<_>>())
+        if !self.tasks.iter().all(|t| PlainLanes::<N, L, E>::accepts(t.model) && t.model.shape() == shape && t.model.layout.dim == D) {
+            return Some(LaneRun::Fallback);
+        }
+        // the state stored component by component, lanes refilled from the queue
+        Some(match *self.method {
+            Method::Rk4 { dt } => {
+                let ends = run_rk4_lanes::<O, E, N, D, EXTRAS, L>(self.tasks, dt, self.observer, self.cancel)?;
+                LaneRun::Ran { ends: ends.into_iter().map(Some).collect(), handoffs: Vec::new() }
+            }
+            Method::Dopri5 { rtol, atol, first_step } | Method::Auto { rtol, atol, first_step } => {
+                let auto = matches!(self.method, Method::Auto { .. });
+                let mut handoffs = Vec::new();
+                let ends = run_dopri5_lanes::<O, E, N, D, EXTRAS, L>(
+                    self.tasks, rtol, atol, first_step, self.observer, self.cancel, auto, &mut handoffs,
+                )?;
+                LaneRun::Ran { ends, handoffs }
+            }
+            Method::Rodas4 { .. } => LaneRun::Fallback,
+        })
+    }
+}
+
+/// Run `tasks` of one fixed-size state layout (`N` nodes, `D` components, `EXTRAS`: lag states)
+/// into `out`: on the vector lanes where they run there (`PlainGroups`, under `pulp`'s dispatch),
+/// the runs that turned stiff then with the implicit method, `L` at a time; else `L` at a time
+/// as lane-interleaved scalar code. `None` if cancelled.
+fn run_fixed<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool, const L: usize>(
+    tasks: &[Task],
+    method: &Method,
+    observer: &mut O,
+    cancel: &AtomicBool,
+    out: &mut Vec<(LaneEnd, Vec<f64>)>,
+) -> Option<()> {
+    // a vector step costs about what L/2 to L/3 lanes cost one by one, busy or not (measured:
+    // three runs of a lag model on 8 lanes 1.07-1.36x their time one by one, nine 0.52x), so a
+    // group that fills less than half its lanes runs lane by lane (the same bits either way)
+    let run = if 2 * tasks.len() >= L {
+        let groups = PlainGroups::<O, E, N, D, EXTRAS, L> { tasks, method, observer: &mut *observer, cancel, _exp: PhantomData };
+        simd_arch().dispatch(groups)?
+    } else {
+        LaneRun::Fallback
+    };
+    match run {
+        LaneRun::Ran { mut ends, handoffs } => {
+            // lanes that turned stiff go on with the implicit method, L at a time
+            for group in handoffs.chunks(L) {
+                let chunk: Vec<Task> = group.iter().map(|h| Task { t_start: h.t, y0: &h.y, ..tasks[h.task] }).collect();
+                let resume: Vec<Resume> = group.iter().map(|h| h.resume).collect();
+                let index: Vec<usize> = group.iter().map(|h| h.task).collect();
+                let mut done = Vec::with_capacity(group.len());
+                run_group::<[f64; D], _, _, D, L>(
+                    &chunk,
+                    0,
+                    method,
+                    &Held::default(),
+                    [0.0; D],
+                    |c, slack| ModelRhs::<f64, N, EXTRAS, L>::for_tasks(c, slack),
+                    &mut Renumbered { inner: &mut *observer, index: &index },
+                    cancel,
+                    &mut done,
+                    Some(&resume),
+                )?;
+                for (h, end) in group.iter().zip(done) {
+                    ends[h.task] = Some(end);
                 }
-                Method::Rodas4 { .. } => None,
-            };
-            if let Some(ends) = ends {
-                self.out.extend(ends);
-                return Some(());
+            }
+            out.extend(ends.into_iter().map(|o| o.expect("every task ends")));
+        }
+        LaneRun::Fallback => {
+            for (c, chunk) in tasks.chunks(L).enumerate() {
+                run_group::<[f64; D], O, _, D, L>(
+                    chunk,
+                    c * L,
+                    method,
+                    &Held::default(),
+                    [0.0; D],
+                    |c, slack| ModelRhs::<f64, N, EXTRAS, L>::for_tasks(c, slack),
+                    observer,
+                    cancel,
+                    out,
+                    None,
+                )?;
             }
         }
-        for (c, chunk) in self.tasks.chunks(L).enumerate() {
-            run_group::<[f64; D], O, _, D, L>(
-                chunk,
-                c * L,
-                self.method,
-                &Held::default(),
-                [0.0; D],
-                |c, slack| ModelRhs::<f64, N, false, L>::for_tasks(c, slack),
-                self.observer,
-                self.cancel,
-                self.out,
-                None,
-            )?;
-        }
-        Some(())
     }
+    Some(())
 }
 
 /// Run `tasks` (one state layout) with `method`, `L` at a time when their state is plain and of
@@ -857,13 +891,14 @@ pub fn run_tasks_exp<O: Observer, E: LaneExp, const L: usize>(
     // the plain models' lanes as vectors (lanes.rs), compiled for the processor's widest
     // vector instructions and chosen at run time (`simd_arch`)
     macro_rules! fixed {
-        ($n:literal, $d:literal) => {{
-            let groups = PlainGroups::<O, E, $n, $d, L> { tasks, method, observer, cancel, out: &mut out, _exp: PhantomData };
-            simd_arch().dispatch(groups)?
-        }};
+        ($n:literal, $d:literal, $x:literal) => {
+            run_fixed::<O, E, $n, $d, $x, L>(tasks, method, observer, cancel, &mut out)?
+        };
     }
-    let plain = tasks.iter().all(|t| t.model.is_plain());
-    with_state_size!(plain, tasks[0].model.layout.dof, fixed, {
+    // one state layout for the fixed-size path: every task's, when all have the same size
+    let dim = tasks[0].model.layout.dim;
+    let lags = tasks[0].model.lane_lags().filter(|_| tasks.iter().all(|t| t.model.layout.dim == dim && t.model.lane_lags().is_some()));
+    with_state_size!(lags, tasks[0].model.layout.dof, fixed, {
         return run_tasks_one_by_one(tasks, method, &Held::default(), observer, cancel);
     });
     Some(out)

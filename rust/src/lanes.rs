@@ -5,10 +5,11 @@
 //! component (`y[j][i]`: component j of lane i), the layout the vector instructions want, and
 //! run under `pulp`'s runtime dispatch (`drive.rs`).
 //!
-//! Which models run on lanes is [`PlainLanes::accepts`]: a plain state (nodes, g, Fh, h: what
-//! the drivers' fixed-size state holds) and no sampled external force (the lane drivers do not
-//! end steps at its knots); the models of one group share a [`Shape`](crate::model::Shape).
-//! Anything else runs lane by lane through the scalar model.
+//! Which models run on lanes is [`PlainLanes::accepts`]: a state the drivers' fixed-size state
+//! holds (nodes, g, Fh, h and the lag effects' states, no accounting: [`Model::lane_lags`]) and
+//! no sampled external force (the lane drivers do not end steps at its knots); the models of
+//! one group share a [`Shape`](crate::model::Shape). Anything else runs lane by lane through
+//! the scalar model.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -25,9 +26,10 @@ pub struct PlainLanes<const N: usize, const L: usize, E: LaneExp = LibmExp> {
 }
 
 impl<const N: usize, const L: usize, E: LaneExp> PlainLanes<N, L, E> {
-    /// Whether the lane drivers run `m`: a plain state of `N` nodes, no sampled external force.
+    /// Whether the lane drivers run `m`: `N` nodes, no accounting states (the lag effects'
+    /// states are held), no sampled external force.
     pub fn accepts(m: &Model) -> bool {
-        m.is_plain() && m.external.is_none() && m.layout.dof == N
+        m.lane_lags().is_some() && m.external.is_none() && m.layout.dof == N
     }
 
     /// The lanes of `models`, or `None` when one is not accepted or the shapes differ.
@@ -56,9 +58,9 @@ impl<const N: usize, const L: usize, E: LaneExp> PlainLanes<N, L, E> {
     }
 
     /// dy/dt of every lane at times `t` [s], commanded voltage `v_cmd` [V] rising at `dv_cmd`
-    /// [V/s], the lanes' states stored lane by lane (`S` an array of D = 2 N + 3 components):
-    /// transposed to and from [`PlainLanes::rhs_soa`]. Returns each lane's (Ff [N], dg/dt
-    /// [m/s]), as `Model::rhs_impl` does.
+    /// [V/s], the lanes' states stored lane by lane (`S` an array of the D = 2 N + 3 components
+    /// of a plain state): transposed to and from [`PlainLanes::rhs_soa`]. Returns each lane's
+    /// (Ff [N], dg/dt [m/s]), as `Model::rhs_impl` does.
     #[inline(always)]
     pub fn rhs<S: State<Elem = f64>, const D: usize>(
         &self,
@@ -70,7 +72,7 @@ impl<const N: usize, const L: usize, E: LaneExp> PlainLanes<N, L, E> {
     ) -> ([f64; L], [f64; L]) {
         let y: [[f64; L]; D] = std::array::from_fn(|j| std::array::from_fn(|i| ys[i].as_ref()[j]));
         let mut dy = [[0.0; L]; D];
-        let out = self.rhs_soa::<D>(t, v_cmd, dv_cmd, &y, &mut dy);
+        let out = self.rhs_soa::<D, false>(t, v_cmd, dv_cmd, &y, &mut dy);
         for i in 0..L {
             let d = dys[i].as_mut();
             for j in 0..D {
@@ -81,9 +83,10 @@ impl<const N: usize, const L: usize, E: LaneExp> PlainLanes<N, L, E> {
     }
 
     /// [`PlainLanes::rhs`] on states stored component by component: `y[j][i]` is component j
-    /// of lane i. The model's own right-hand side, over lanes.
+    /// of lane i, D = 2 N + 3 + the lag states, `EXTRAS` whether there are lag states. The
+    /// model's own right-hand side, over lanes.
     #[inline(always)]
-    pub fn rhs_soa<const D: usize>(
+    pub fn rhs_soa<const D: usize, const EXTRAS: bool>(
         &self,
         t: &[f64; L],
         v_cmd: &[f64; L],
@@ -91,8 +94,9 @@ impl<const N: usize, const L: usize, E: LaneExp> PlainLanes<N, L, E> {
         y: &[[f64; L]; D],
         dy: &mut [[f64; L]; D],
     ) -> ([f64; L], [f64; L]) {
-        // the plain state: rhs_impl writes every one of the D components
-        let (ff, gdot) = self.model.rhs_impl::<N, false>(
+        // rhs_impl writes every one of the D components (no accounting states on lanes)
+        debug_assert_eq!(D, self.model.layout.dim);
+        let (ff, gdot) = self.model.rhs_impl::<N, EXTRAS>(
             Lanes::new(*t),
             Lanes::new(*v_cmd),
             Lanes::new(*dv_cmd),
@@ -115,7 +119,8 @@ pub struct LanesRhs<'a, E: LaneExp, const N: usize, const D: usize, const L: usi
 
 impl<'a, E: LaneExp, const N: usize, const D: usize, const L: usize> LanesRhs<'a, E, N, D, L> {
     pub fn new(inner: ModelRhs<'a, f64, N, false, L>) -> Self {
-        let lanes = PlainLanes::new(&inner.models);
+        // `inner` and `PlainLanes::rhs` take the state as plain (no lag states)
+        let lanes = PlainLanes::new(&inner.models).filter(|_| inner.models.iter().all(|m| m.is_plain()));
         LanesRhs { inner, lanes, _exp: std::marker::PhantomData }
     }
 
@@ -345,11 +350,15 @@ mod tests {
     }
 
     fn run_with(models: &[Model], wave: &PiecewiseLinear, lanes8: bool, method: &Method) -> Vec<Vec<f64>> {
+        run_for(models, wave, lanes8, method, 2e-3)
+    }
+
+    fn run_for(models: &[Model], wave: &PiecewiseLinear, lanes8: bool, method: &Method, t_end: f64) -> Vec<Vec<f64>> {
         let y0: Vec<Vec<f64>> = models.iter().map(|m| m.rest_state()).collect();
         let tasks: Vec<Task> = models
             .iter()
             .zip(&y0)
-            .map(|(m, y)| Task { model: m, wave, t_start: 0.0, t_end: 2e-3, y0: y })
+            .map(|(m, y)| Task { model: m, wave, t_start: 0.0, t_end, y0: y })
             .collect();
         let cancel = AtomicBool::new(false);
         let ends = if lanes8 {
@@ -501,12 +510,55 @@ mod tests {
         assert!(PlainLanes::<2, 2>::new(&[&plain, &odd]).is_some());
         assert!(PlainLanes::<2, 2>::new(&[&plain, &hyst]).is_none());
         let mut e = Effects::default();
-        e.tau_sensor = 1e-5; // a lag: not a plain state
+        e.tau_sensor = 1e-5; // a lag: another state layout, on lanes
         let lagged = Model::new(Params::paper(), e, Structure::Lps, false, false).unwrap();
-        assert!(!PlainLanes::<2, 2>::accepts(&lagged));
+        assert!(PlainLanes::<2, 2>::accepts(&lagged));
+        assert!(PlainLanes::<2, 2>::new(&[&plain, &lagged]).is_none());
+        // accounting states are not held by the lane drivers
+        let counted = Model::new(Params::paper(), Effects::default(), Structure::Lps, false, true).unwrap();
+        assert!(!PlainLanes::<2, 2>::accepts(&counted));
         let ms = vec![plain.clone(), hyst.clone(), odd, hyst, plain, lagged];
         let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
         assert_eq!(run(&ms, &wave, true), run(&ms, &wave, false));
+    }
+
+    #[test]
+    fn lag_states_on_vector_lanes_are_bitwise_the_scalar_model() {
+        // each lag effect (one extra state) on the eleven devices, its time constant per lane;
+        // RK4 and auto (Dormand-Prince, whose stiff lanes hand over to Rodas4); every lag on
+        // the LPS, the sensor's on the DPS4 (1 ms: the unoptimised CI build runs it)
+        let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
+        let methods = [Method::Rk4 { dt: 5e-8 }, Method::Auto { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 }];
+        let cases = [(Structure::Lps, "tau_amp"), (Structure::Lps, "tau_creep"), (Structure::Lps, "tau_sensor"),
+                     (Structure::Dps(4), "tau_sensor")];
+        for (structure, lag) in cases {
+            let ms: Vec<Model> = models(structure)
+                .into_iter()
+                .enumerate()
+                .map(|(k, m)| {
+                    let mut e = m.effects;
+                    let tau = 2e-6 * (1.0 + 0.3 * k as f64);
+                    match lag {
+                        "tau_amp" => e.tau_amp = tau,
+                        "tau_creep" => (e.kappa, e.tau_creep) = (0.02 * (1.0 + 0.1 * k as f64), 100.0 * tau),
+                        _ => e.tau_sensor = tau,
+                    }
+                    Model::new(m.params, e, structure, false, false).unwrap()
+                })
+                .collect();
+            assert_eq!(ms[0].lane_lags(), Some(1), "{lag}");
+            let group: [&Model; 8] = std::array::from_fn(|i| &ms[i]);
+            assert!(PlainLanes::<2, 8>::new(&group).is_some() || structure != Structure::Lps);
+            for method in &methods {
+                let reference = run_for(&ms, &wave, false, method, 1e-3);
+                assert!(reference.iter().all(|y| y.len() == ms[0].layout.dim && y[0].abs() > 1e-8), "{lag}: moved");
+                for level in ["scalar", "avx2"] {
+                    set_simd_level(level);
+                    assert_eq!(run_for(&ms, &wave, true, method, 1e-3), reference, "{structure:?} {lag} {method:?} {level}");
+                }
+                set_simd_level("avx2");
+            }
+        }
     }
 
     #[test]

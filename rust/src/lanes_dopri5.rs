@@ -44,7 +44,8 @@ pub struct Handoff {
     pub resume: Resume,
 }
 
-/// Run `tasks` (each accepted by [`PlainLanes::accepts`], `N` nodes, `D` = 2 N + 3 components)
+/// Run `tasks` (each accepted by [`PlainLanes::accepts`], `N` nodes, `D` = 2 N + 3 components
+/// and the lag states, `EXTRAS` whether there are lag states)
 /// with Dormand-Prince at tolerances `rtol`, `atol` from a first step `first_step` [s], `L`
 /// lanes at a time, refilling lanes from the queue. Returns each task's end and final state in
 /// task order; `None` if cancelled. With `auto`, Hairer's stiffness test runs on every
@@ -53,7 +54,7 @@ pub struct Handoff {
 /// vector width.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize, const L: usize>(
+pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize, const EXTRAS: bool, const L: usize>(
     tasks: &[Task],
     rtol: f64,
     atol: f64,
@@ -167,7 +168,7 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
                     (tau, &tmp, &mut k[st])
                 }
             };
-            p.rhs_soa::<D>(&t_at(&tau), &v_at(&tau), &slope, src, dst);
+            p.rhs_soa::<D, EXTRAS>(&t_at(&tau), &v_at(&tau), &slope, src, dst);
             if st == 0 {
                 for j in 0..D {
                     for i in 0..L {

@@ -29,13 +29,14 @@ struct Slot {
     steps: u64,
 }
 
-/// Run `tasks` (each accepted by [`PlainLanes::accepts`], `N` nodes, `D` = 2 N + 3 components)
+/// Run `tasks` (each accepted by [`PlainLanes::accepts`], `N` nodes, `D` = 2 N + 3 components
+/// and the lag states, `EXTRAS` whether there are lag states)
 /// with RK4 steps of `dt` [s], `L` lanes at a time, refilling lanes from the queue. The
 /// observer sees task indices into `tasks`. Returns each task's end and final state, in task
 /// order; `None` if cancelled. Always inlined: the caller compiles it for the processor's
 /// vector width.
 #[inline(always)]
-pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize>(
+pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool, const L: usize>(
     tasks: &[Task],
     dt: f64,
     observer: &mut O,
@@ -110,7 +111,7 @@ pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, co
                 2 => (&tmp, &mut k3),
                 _ => (&tmp, &mut k4),
             };
-            let out = p.rhs_soa::<D>(&t_at(tau), &v_at(tau), &slope, src, dst);
+            let out = p.rhs_soa::<D, EXTRAS>(&t_at(tau), &v_at(tau), &slope, src, dst);
             match st {
                 0 => {
                     (ff, gdot) = out;

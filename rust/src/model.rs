@@ -16,18 +16,26 @@ use crate::lane_real::Lanewise;
 use crate::real::Real;
 use crate::scalar::Scalar;
 
-/// Dispatch on the state size: `$fixed!(N, D)` for a plain state (see [`Model::is_plain`]) of
-/// a common node count N (D = 2N + 3 components), `$dynamic` otherwise. The fixed sizes let
-/// the compiler keep a step's state in registers; the physics is the same code either way.
+/// Dispatch on the state size: `$fixed!(N, D, EXTRAS)` for a state of a common node count N
+/// that the fixed-size paths hold (see [`Model::lane_lags`]: `$lags` is `Some(k)` with k lag
+/// states, D = 2N + 3 + k components, EXTRAS whether k > 0), `$dynamic` otherwise. The fixed
+/// sizes let the compiler keep a step's state in registers (and put the runs on the vector
+/// lanes); the physics is the same code either way. Every size is compiled once per
+/// instruction set and costs build time: a plain state for 1-6 nodes (the rig, the LPS, the
+/// DPS up to n = 5), and one lag state for the LPS and the DPS with n = 4 (2 and 5 nodes) — the
+/// structures of the diagnosis, whose lag-effect candidates (amplifier, creep, sensor) each add
+/// one state.
 macro_rules! with_state_size {
-    ($plain:expr, $dof:expr, $fixed:ident, $dynamic:expr) => {
-        match ($plain, $dof) {
-            (true, 1) => $fixed!(1, 5),
-            (true, 2) => $fixed!(2, 7),
-            (true, 3) => $fixed!(3, 9),
-            (true, 4) => $fixed!(4, 11),
-            (true, 5) => $fixed!(5, 13),
-            (true, 6) => $fixed!(6, 15),
+    ($lags:expr, $dof:expr, $fixed:ident, $dynamic:expr) => {
+        match ($lags, $dof) {
+            (Some(0), 1) => $fixed!(1, 5, false),
+            (Some(0), 2) => $fixed!(2, 7, false),
+            (Some(0), 3) => $fixed!(3, 9, false),
+            (Some(0), 4) => $fixed!(4, 11, false),
+            (Some(0), 5) => $fixed!(5, 13, false),
+            (Some(0), 6) => $fixed!(6, 15, false),
+            (Some(1), 2) => $fixed!(2, 8, true),
+            (Some(1), 5) => $fixed!(5, 14, true),
             _ => $dynamic,
         }
     };
@@ -417,10 +425,18 @@ impl<T: Real> Model<T> {
         }
     }
 
-    /// True when the state is just nodes, g, Fh and h (no lagged effects, no accounting): the
-    /// driver then runs a fixed-size, register-resident path.
+    /// True when the state is just nodes, g, Fh and h (no lagged effects, no accounting).
     pub fn is_plain(&self) -> bool {
         self.layout.dim == 2 * self.layout.dof + 3
+    }
+
+    /// The number of lag states when the state is nodes, g, Fh, h and the lag effects' states
+    /// (no accounting states): the states the fixed-size paths (the vector lanes among them)
+    /// hold; `None` when the state has accounting states.
+    pub fn lane_lags(&self) -> Option<usize> {
+        let l = &self.layout;
+        let lags = l.lags.iter().flatten().count();
+        (l.accounting.is_none() && l.dim == 2 * l.dof + 3 + lags).then_some(lags)
     }
 
     /// The right-hand side. `N` > 0 fixes the node count at compile time; `EXTRAS = false`

@@ -274,6 +274,15 @@ fn run_chunk(
     out
 }
 
+/// Points per rayon task for a batch of `n` points on `threads` threads: a lane group
+/// ([`CHUNK`]), or fewer when the batch has fewer than a group per thread, so that every thread
+/// gets some (a fit's prediction of one model on three experiments is three points: one task
+/// of three would leave the other threads idle). Grouping changes no result (every point runs
+/// alone, bitwise, on lanes or not).
+fn chunk_size(n: usize, threads: usize) -> usize {
+    CHUNK.min(n.div_ceil(threads.max(1))).max(1)
+}
+
 /// Run every point on the current rayon pool. Unfinished points (after `cancel`) come back as
 /// `Status::NotRun` with NaN metrics; `done` counts finished points as they finish.
 pub fn run_batch(
@@ -284,8 +293,22 @@ pub fn run_batch(
 ) -> Result<Vec<PointOutput>, SimError> {
     cfg.validate().map_err(SimError::Input)?;
     Ok(specs
-        .par_chunks(CHUNK)
+        .par_chunks(chunk_size(specs.len(), rayon::current_num_threads()))
         .flat_map_iter(|chunk| run_chunk(cfg, chunk, cancel, done))
         .map(|m| m.unwrap_or_else(|| PointOutput::with_status(Status::NotRun)))
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn small_batches_are_spread_over_the_threads_and_large_ones_go_a_lane_group_at_a_time() {
+        assert_eq!(chunk_size(3, 2), 2); // [2, 1]: both threads busy
+        assert_eq!(chunk_size(9, 2), 5); // [5, 4] rather than [8, 1]
+        assert_eq!(chunk_size(1_000, 2), CHUNK);
+        assert_eq!(chunk_size(5, 1), CHUNK.min(5));
+        assert_eq!(chunk_size(0, 2), 1); // par_chunks needs a positive size
+    }
 }
