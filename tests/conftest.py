@@ -2,7 +2,9 @@
 
 Profiles (choose with the environment variable ``HYPOTHESIS_PROFILE``, default ``ci``):
 
-* ``ci``  – 15 examples per property, no deadline, derandomized (reproducible in CI);
+* ``ci``  – 15 examples per property, no deadline, new random draws every run: the run's seed
+  is printed at the end of pytest's report, and ``--hypothesis-seed=N`` (or the environment
+  variable ``IDM_RS_HYPOTHESIS_SEED=N``) repeats exactly that run's draws;
 * ``dev`` – 200 examples per property, random, for local bug hunting.
 
 Strategies draw *physical* parameter ranges around the paper's Table 1 and short runs
@@ -35,7 +37,6 @@ settings.register_profile(
     "ci",
     max_examples=15,
     deadline=None,
-    derandomize=True,
     print_blob=True,
     suppress_health_check=[HealthCheck.too_slow],
 )
@@ -49,7 +50,37 @@ settings.register_profile(
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
+#: the seed of this run's hypothesis draws (set in pytest_configure, printed in the summary)
+_HYPOTHESIS_SEED: Optional[int] = None
+
+
+def _choose_hypothesis_seed(config) -> None:
+    # Every run draws new examples (a fixed set of 15 draws would test the same 15 devices
+    # forever), from a seed printed at the end so that a failure in CI can be replayed exactly.
+    # An explicit --hypothesis-seed is hypothesis' own option and wins.
+    global _HYPOTHESIS_SEED
+    from hypothesis import core
+
+    given = config.getoption("hypothesis_seed", None)
+    if given is not None:
+        _HYPOTHESIS_SEED = int(given)
+        return
+    env = os.environ.get("IDM_RS_HYPOTHESIS_SEED")
+    _HYPOTHESIS_SEED = int(env) if env else int.from_bytes(os.urandom(4), "little")
+    core.global_force_seed = _HYPOTHESIS_SEED
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    if _HYPOTHESIS_SEED is not None:
+        terminalreporter.write_line(
+            f"hypothesis seed {_HYPOTHESIS_SEED}: repeat these draws with --hypothesis-seed={_HYPOTHESIS_SEED} "
+            f"(or IDM_RS_HYPOTHESIS_SEED={_HYPOTHESIS_SEED})"
+        )
+
+
 def pytest_configure(config):
+    _choose_hypothesis_seed(config)
+
     # A shell starts background jobs with SIGINT ignored, and Python then keeps it ignored: the
     # Ctrl-C tests' `_thread.interrupt_main()` would do nothing (measured: `bash -c 'pytest ... &'`
     # failed all three, in the foreground they pass). Give such a run Python's usual handler.
