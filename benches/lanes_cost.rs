@@ -87,7 +87,7 @@ fn rhs_only(models: &[Model]) {
                 for k in 0..self.n {
                     self.y[2][k % 8] = k as f64 * 1e-12;
                     self.y[5][(k + 3) % 8] = 0.01 * (k % 7) as f64;
-                    self.p.rhs_soa::<D>(&t0, &v, &dv, &self.y, &mut dy);
+                    self.p.rhs_soa::<D, false>(&t0, &v, &dv, &self.y, &mut dy);
                     acc += dy[3][0];
                 }
                 (t.elapsed().as_secs_f64(), acc)

@@ -36,8 +36,10 @@ impl CrawlWatch {
     /// need more than [`MAX_ADAPTIVE_STEPS`] in all; checked only every CRAWL_CHECK_STEPS steps.
     /// `hint` names what to do instead.
     #[inline(always)]
+    // true for NaN as well: a non-finite projection counts as beyond the bound
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn observe(&mut self, steps: u64, t: f64, t_end: f64, hint: &str) -> Option<String> {
-        if steps == 0 || steps % CRAWL_CHECK_STEPS != 0 {
+        if steps == 0 || !steps.is_multiple_of(CRAWL_CHECK_STEPS) {
             return None;
         }
         let pace = (t - self.t_last) / CRAWL_CHECK_STEPS as f64;

@@ -531,7 +531,7 @@ where
     }
     let mut attempts = 0usize;
     loop {
-        if attempts % CANCEL_CHECK_ATTEMPTS == 0 && cancel.load(Ordering::Relaxed) {
+        if attempts.is_multiple_of(CANCEL_CHECK_ATTEMPTS) && cancel.load(Ordering::Relaxed) {
             return None;
         }
         attempts += 1;
@@ -832,7 +832,7 @@ fn run_fixed<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTR
                     method,
                     &Held::default(),
                     [0.0; D],
-                    |c, slack| ModelRhs::<f64, N, EXTRAS, L>::for_tasks(c, slack),
+                    ModelRhs::<f64, N, EXTRAS, L>::for_tasks,
                     &mut Renumbered { inner: &mut *observer, index: &index },
                     cancel,
                     &mut done,
@@ -852,7 +852,7 @@ fn run_fixed<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTR
                     method,
                     &Held::default(),
                     [0.0; D],
-                    |c, slack| ModelRhs::<f64, N, EXTRAS, L>::for_tasks(c, slack),
+                    ModelRhs::<f64, N, EXTRAS, L>::for_tasks,
                     observer,
                     cancel,
                     out,

@@ -8,7 +8,7 @@
 //! -745: a difference below 3e-308 in absolute terms); above 709.78, infinity; NaN stays NaN.
 
 const LOG2E: f64 = std::f64::consts::LOG2_E;
-const LN2_HI: f64 = 6.931_471_803_691_238_2e-1;
+const LN2_HI: f64 = 6.931_471_803_691_238e-1;
 const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
 /// 1.5 * 2^52: adding and subtracting it rounds a double of magnitude < 2^51 to an integer
 const SHIFT: f64 = 6_755_399_441_055_744.0;

@@ -236,7 +236,7 @@ mod tests {
     fn rate_partials_match_finite_differences() {
         let p = Params::paper();
         for (eps, n, delta) in [(0.0, 1.0, 2.0), (0.1, 1.7, 0.8), (-0.05, 1.0, 1.3)] {
-            let mut q = p.clone();
+            let mut q = p;
             q.fric_n = n;
             q.stribeck_exponent = delta;
             let f = Leuven::new(&q, q.normal_force, eps);

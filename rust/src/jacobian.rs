@@ -15,6 +15,8 @@ use crate::scalar::{Scalar, Seedable};
 impl<T: Scalar> Model<T> {
     /// Fill `jac` (dim x dim, row-major) with df/dy and `dfdt` (dim) with df/dt at time `t` [s],
     /// state `y`, commanded voltage `v_cmd` [V] rising at `dv_cmd` [V/s] (constant over the step).
+    // the damping matrix is indexed (i, j) beside v[i], term for term as in rhs_impl
+    #[allow(clippy::needless_range_loop)]
     pub fn jacobian(&self, t: f64, v_cmd: f64, dv_cmd: f64, y: &[T], jac: &mut [T], dfdt: &mut [T]) {
         let l = &self.layout;
         let (n, dim) = (l.dof, l.dim);

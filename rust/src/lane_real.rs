@@ -6,6 +6,9 @@
 //! choice is `exp`: the C library's per lane ([`LibmExp`], bitwise) or a vectorised polynomial
 //! ([`PolyExp`], within 2 ulp; `fast_exp.rs`), fixed by the type parameter `E`.
 
+// lane loops index several [f64; L] arrays by the same lane on purpose (the vectorised layout)
+#![allow(clippy::needless_range_loop)]
+
 use std::fmt::Debug;
 use std::iter::Sum;
 use std::marker::PhantomData;
@@ -241,7 +244,7 @@ impl<const L: usize, E: LaneExp> Real for Lanes<L, E> {
     fn pow(self, e: Self) -> Self {
         // Scalar::pow for f64: powf, whose base <= 0 the physics never passes but which is 0 there
         // for the exponents it uses
-        self.zip(e, |x, y| <f64 as Real>::pow(x, y))
+        self.zip(e, <f64 as Real>::pow)
     }
     #[inline(always)]
     fn is_exactly(&self, x: f64) -> LaneMask<L> {
@@ -305,43 +308,6 @@ impl<const L: usize, E: LaneExp> Real for Lanes<L, E> {
             (v[i], s[i]) = interpolate_one(&one, times, t.0[i], 0.0);
         }
         (Lanes::new(v), Lanes::new(s))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    type L4 = Lanes<4>;
-
-    #[test]
-    fn each_lane_is_the_scalar_operation() {
-        let x = L4::new([-1.5, 0.0, 2.25, 1e-300]);
-        let y = L4::new([3.0, -0.0, -7.5, 2.0]);
-        for (i, (a, b)) in x.0.iter().zip(y.0).enumerate() {
-            assert_eq!((x * y + 1.0).0[i].to_bits(), (a * b + 1.0).to_bits());
-            assert_eq!((x / y - x).0[i].to_bits(), (a / b - a).to_bits());
-            assert_eq!(x.abs().exp().0[i].to_bits(), a.abs().exp().to_bits());
-            assert_eq!(x.sign0().0[i], <f64 as Real>::sign0(a));
-        }
-    }
-
-    #[test]
-    fn choose_keeps_each_lanes_side_and_skips_a_side_no_lane_takes() {
-        let x = L4::new([-1.0, 2.0, 0.0, 3.0]);
-        let picked = L4::choose(x.above(0.0), || x * 10.0, || -x);
-        assert_eq!(picked.0, [1.0, 20.0, -0.0, 30.0]);
-        let only_a = L4::choose(LaneMask([true; 4]), || x, || panic!("no lane takes this side"));
-        assert_eq!(only_a, x);
-    }
-
-    #[test]
-    fn interpolation_is_per_lane() {
-        let times = [0.0, 1.0, 2.0];
-        let values = [L4::new([0.0, 0.0, 1.0, 5.0]), L4::new([2.0, 4.0, 1.0, 5.0]), L4::new([2.0, 0.0, 3.0, 5.0])];
-        let (v, s) = L4::interpolate(&values, &times, L4::new([0.5, 1.5, -1.0, 9.0]));
-        assert_eq!(v.0, [1.0, 2.0, 1.0, 5.0]);
-        assert_eq!(s.0, [2.0, -4.0, 0.0, 0.0]);
     }
 }
 
@@ -428,5 +394,42 @@ impl Lanewise<bool> for bool {
     }
     fn set_lane(&mut self, _i: usize, src: &bool) {
         *self = *src;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    type L4 = Lanes<4>;
+
+    #[test]
+    fn each_lane_is_the_scalar_operation() {
+        let x = L4::new([-1.5, 0.0, 2.25, 1e-300]);
+        let y = L4::new([3.0, -0.0, -7.5, 2.0]);
+        for (i, (a, b)) in x.0.iter().zip(y.0).enumerate() {
+            assert_eq!((x * y + 1.0).0[i].to_bits(), (a * b + 1.0).to_bits());
+            assert_eq!((x / y - x).0[i].to_bits(), (a / b - a).to_bits());
+            assert_eq!(x.abs().exp().0[i].to_bits(), a.abs().exp().to_bits());
+            assert_eq!(x.sign0().0[i], <f64 as Real>::sign0(a));
+        }
+    }
+
+    #[test]
+    fn choose_keeps_each_lanes_side_and_skips_a_side_no_lane_takes() {
+        let x = L4::new([-1.0, 2.0, 0.0, 3.0]);
+        let picked = L4::choose(x.above(0.0), || x * 10.0, || -x);
+        assert_eq!(picked.0, [1.0, 20.0, -0.0, 30.0]);
+        let only_a = L4::choose(LaneMask([true; 4]), || x, || panic!("no lane takes this side"));
+        assert_eq!(only_a, x);
+    }
+
+    #[test]
+    fn interpolation_is_per_lane() {
+        let times = [0.0, 1.0, 2.0];
+        let values = [L4::new([0.0, 0.0, 1.0, 5.0]), L4::new([2.0, 4.0, 1.0, 5.0]), L4::new([2.0, 0.0, 3.0, 5.0])];
+        let (v, s) = L4::interpolate(&values, &times, L4::new([0.5, 1.5, -1.0, 9.0]));
+        assert_eq!(v.0, [1.0, 2.0, 1.0, 5.0]);
+        assert_eq!(s.0, [2.0, -4.0, 0.0, 0.0]);
     }
 }

@@ -255,6 +255,8 @@ pub(crate) enum Queue {
 /// into `y`, the observer told it starts; `slot(lane, task)` builds what the driver keeps of it).
 /// Every [`CANCEL_CHECK_ATTEMPTS`] attempts it also looks at `cancel`.
 #[allow(clippy::too_many_arguments)]
+// a lane's column of the component-major state is written by component index, beside y0
+#[allow(clippy::needless_range_loop)]
 #[inline(always)]
 pub(crate) fn refill_lanes<Sl, O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize>(
     tasks: &[Task],
@@ -282,7 +284,7 @@ pub(crate) fn refill_lanes<Sl, O: Observer, E: LaneExp, const N: usize, const D:
     if slots.iter().all(|s| s.is_none()) {
         return Queue::Done;
     }
-    if *attempts % CANCEL_CHECK_ATTEMPTS == 0 && cancel.load(Ordering::Relaxed) {
+    if (*attempts).is_multiple_of(CANCEL_CHECK_ATTEMPTS) && cancel.load(Ordering::Relaxed) {
         return Queue::Cancelled;
     }
     *attempts += 1;
@@ -509,8 +511,7 @@ mod tests {
         let hyst = Model::new(Params::paper(), Effects::default(), Structure::Lps, true, false).unwrap();
         assert!(PlainLanes::<2, 2>::new(&[&plain, &odd]).is_some());
         assert!(PlainLanes::<2, 2>::new(&[&plain, &hyst]).is_none());
-        let mut e = Effects::default();
-        e.tau_sensor = 1e-5; // a lag: another state layout, on lanes
+        let e = Effects { tau_sensor: 1e-5, ..Effects::default() }; // a lag: another state layout, on lanes
         let lagged = Model::new(Params::paper(), e, Structure::Lps, false, false).unwrap();
         assert!(PlainLanes::<2, 2>::accepts(&lagged));
         assert!(PlainLanes::<2, 2>::new(&[&plain, &lagged]).is_none());

@@ -44,6 +44,9 @@ pub struct Handoff {
     pub resume: Resume,
 }
 
+/// Each task's end and final state in task order, `None` for a task handed off.
+type TaskEnds = Vec<Option<(LaneEnd, Vec<f64>)>>;
+
 /// Run `tasks` (each accepted by [`PlainLanes::accepts`], `N` nodes, `D` = 2 N + 3 components
 /// and the lag states, `EXTRAS` whether there are lag states)
 /// with Dormand-Prince at tolerances `rtol`, `atol` from a first step `first_step` [s], `L`
@@ -54,6 +57,8 @@ pub struct Handoff {
 /// vector width.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
+// lane loops index several [f64; L] arrays by the same lane/component on purpose
+#[allow(clippy::needless_range_loop)]
 pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize, const EXTRAS: bool, const L: usize>(
     tasks: &[Task],
     rtol: f64,
@@ -63,8 +68,8 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
     cancel: &AtomicBool,
     auto: bool,
     handoffs: &mut Vec<Handoff>,
-) -> Option<Vec<Option<(LaneEnd, Vec<f64>)>>> {
-    let mut out: Vec<Option<(LaneEnd, Vec<f64>)>> = vec![None; tasks.len()];
+) -> Option<TaskEnds> {
+    let mut out: TaskEnds = vec![None; tasks.len()];
     if tasks.is_empty() {
         return Some(Vec::new());
     }

@@ -263,6 +263,8 @@ impl<T: Real> Mechanics<T> {
         }
     }
 
+    // row i indexes acc, minv_weight and minv_main together, as in the fixed-size version above
+    #[allow(clippy::needless_range_loop)]
     fn accelerations_dyn(&self, q: &[T], v: &[T], f_main: T, f_weight: T, acc: &mut [T]) {
         let n = self.dof;
         for i in 0..n {

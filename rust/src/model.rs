@@ -504,6 +504,9 @@ impl<T: Real> Model<T> {
                 f_ext_weight += b;
             }
         }
+        // a loop, not copy_from_slice: on the lane path a memcpy call the compiler leaves out of
+        // line runs as baseline code outside pulp's dispatch (see `Real::select`)
+        #[allow(clippy::manual_memcpy)]
         for i in 0..n {
             dy[i] = v[i];
         }
@@ -537,6 +540,8 @@ impl<T: Real<Value = f64>> Model<T> {
     /// The divergence criterion: the state is no longer finite where it matters, or |Fh| left
     /// its bound [N] (which a correct solution never does; see MODEL.md's invariants).
     #[inline(always)]
+    // true for NaN as well: a non-finite value counts as beyond the bound
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn is_diverged(&self, y: &[T], fh_bound: f64) -> bool {
         let l = &self.layout;
         !(y[l.fh].value().abs() <= fh_bound) || !y[l.dof].value().is_finite() || !y[0].value().is_finite()

@@ -44,6 +44,8 @@ impl RigDrive {
     }
 
     /// Refuse a spring or damper that is negative or not finite (the message names it).
+    // true for NaN as well: a NaN limit is refused like a non-positive one
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn validate(&self) -> Result<(), String> {
         let non_negative: &[(&str, f64)] = match self {
             RigDrive::Position { stiffness, damping } => &[("rig_stiffness", *stiffness), ("rig_damping", *damping)],

@@ -19,6 +19,8 @@ const GAMMA: f64 = 0.25;
 const C: [f64; 6] = [0.0, 0.386, 0.21, 0.63, 1.0, 1.0];
 /// df/dt weights of each stage
 const DT_WEIGHT: [f64; 6] = [0.25, -0.1043, 0.1035, -0.3620000000000023e-01, 0.0, 0.0];
+// Hairer & Wanner's coefficients in their printed 16-digit form (trailing zeros included)
+#[allow(clippy::excessive_precision)]
 const A51: [f64; 4] = [
     0.1221224509226641e+01,
     0.6019134481288629e+01,
@@ -27,6 +29,8 @@ const A51: [f64; 4] = [
 ];
 /// stage-value coefficients a_sj (row s, j < s); the last stage is the fifth plus its own
 /// increment (stiff accuracy)
+// as A51: the printed 16-digit form
+#[allow(clippy::excessive_precision)]
 const A: [&[f64]; 6] = [
     &[],
     &[0.1544000000000000e+01],
@@ -36,6 +40,8 @@ const A: [&[f64]; 6] = [
     &[A51[0], A51[1], A51[2], A51[3], 1.0],
 ];
 /// increment coefficients c_sj / h
+// as A51: the printed 16-digit form
+#[allow(clippy::excessive_precision)]
 const CC: [&[f64]; 6] = [
     &[],
     &[-0.5668800000000000e+01],
@@ -321,6 +327,8 @@ fn lu_factor<T: Scalar, const D: usize>(a: &mut [T], pivot: &mut [usize], d: usi
 
 /// Solve A x = b in place with the factors of [`lu_factor`].
 #[inline(always)]
+// the row swaps by pivot index, in the factorisation's order, like the loops below
+#[allow(clippy::needless_range_loop)]
 fn lu_solve<T: Scalar, const D: usize>(lu: &[T], pivot: &[usize], b: &mut [T]) {
     let d = if D > 0 { D } else { b.len() };
     let (lu, pivot, b) = (&lu[..d * d], &pivot[..d], &mut b[..d]);

@@ -154,6 +154,6 @@ mod tests {
         assert!((d[0] - 1.3 * 1.7f64.powf(0.3)).abs() < 1e-13);
         assert!((d[1] - 1.7f64.powf(1.3) * 1.7f64.ln()).abs() < 1e-13);
         assert_eq!(DualSVec64::<2>::from(0.0).pow(e).re, 0.0);
-        assert!(e.is_exactly(1.3) == false && DualSVec64::<2>::from(1.3).is_exactly(1.3));
+        assert!(!e.is_exactly(1.3) && DualSVec64::<2>::from(1.3).is_exactly(1.3));
     }
 }

@@ -387,7 +387,7 @@ fn rk4_pass<const K: usize>(
     let mut steps = 0u64;
     rec.record(t_start, &y);
     loop {
-        if steps % crate::drive::CANCEL_CHECK_ATTEMPTS as u64 == 0 && cancel.load(Ordering::Relaxed) {
+        if steps.is_multiple_of(crate::drive::CANCEL_CHECK_ATTEMPTS as u64) && cancel.load(Ordering::Relaxed) {
             return None;
         }
         let t0 = k as f64 * dt;
@@ -548,7 +548,7 @@ mod tests {
     use crate::rig::RigDrive;
     use crate::simulate::simulate_keeping;
 
-    const NEVER: AtomicBool = AtomicBool::new(false);
+    static NEVER: AtomicBool = AtomicBool::new(false);
 
     /// A device: parameters, effects, structure, input, span, RK4 step or adaptive method.
     #[derive(Clone)]
@@ -701,14 +701,13 @@ mod tests {
 
     #[test]
     fn tangent_passes_are_num_duals_bit_for_bit_on_every_kind_of_model() {
-        let lags = {
-            let mut e = Effects::default();
-            e.kappa = 0.05;
-            e.tau_creep = 2e-4;
-            e.tau_sensor = 5e-6;
-            e.c_weight = 30.0;
-            e.drift_rate = 1e-4;
-            e
+        let lags = Effects {
+            kappa: 0.05,
+            tau_creep: 2e-4,
+            tau_sensor: 5e-6,
+            c_weight: 30.0,
+            drift_rate: 1e-4,
+            ..Effects::default()
         };
         let mut cases = vec![
             (paper(Structure::Lps, Effects::default()), vec!["mu_k", "mu_s", "m2", "fric_alpha", "sigma1", "d33", "hyst_alpha", "stribeck_velocity"]),

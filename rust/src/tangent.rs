@@ -126,6 +126,8 @@ impl<const K: usize> Mul for Tangent<K> {
     type Output = Self;
     /// a' b + b' a
     #[inline(always)]
+    // both operands' eps indexed by the same k: num-dual's formula term for term
+    #[allow(clippy::needless_range_loop)]
     fn mul(self, o: Self) -> Self {
         let mut eps = [0.0; K];
         for k in 0..K {
@@ -139,6 +141,8 @@ impl<const K: usize> Div for Tangent<K> {
     type Output = Self;
     /// (a' b - b' a) / b / b, through inv = 1/b
     #[inline(always)]
+    // both operands' eps indexed by the same k: num-dual's formula term for term
+    #[allow(clippy::needless_range_loop)]
     fn div(self, o: Self) -> Self {
         let inv = o.re.recip();
         let mut eps = [0.0; K];
@@ -300,7 +304,7 @@ mod tests {
     fn dual(re: f64, eps: [f64; 3]) -> D {
         let mut d = D::from(re);
         for (k, e) in eps.iter().enumerate() {
-            d = d + D::from(0.0).derivative(k) * *e;
+            d += D::from(0.0).derivative(k) * *e;
         }
         d
     }

@@ -97,7 +97,7 @@ impl BatchRunner {
                 .lock()
                 .unwrap()
                 .as_ref()
-                .map_or(true, |h| h.is_finished());
+                .is_none_or(|h| h.is_finished());
             if finished {
                 return true;
             }

@@ -150,7 +150,7 @@ impl CycleStats {
         if t < tr.boundary(self.next) - 1e-9 * tr.period {
             return;
         }
-        if self.next >= 1 && self.next - 1 >= self.first_counted {
+        if self.next >= 1 && self.next > self.first_counted {
             let step = x - self.x_start;
             self.n += 1.0;
             self.step_sum += step;
