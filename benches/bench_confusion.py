@@ -39,7 +39,8 @@ from typing import Any, Optional
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_false_alarm import CALIBRATED, EXPERIMENTS, null_case
+from bench_false_alarm import EXPERIMENTS, null_case
+from idm_rs.diagnosis.thresholds import CALIBRATED
 
 #: the two sizes: RMS of the effect's signal after a linearised refit, in noise units
 SIZES = {"small": 3.0, "large": 8.0}
@@ -136,8 +137,9 @@ def _tuned(effect: str, device: str, target: float, noise: float) -> tuple[float
     the calibrated subset, has RMS `target` x `noise` on the EXPERIMENTS of `device` (secant in
     log space, within half its fit bounds); (nan, nan) for pe_mass (a structure)."""
     from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
-    from idm_rs.diagnosis.catalogue import CALIBRATION_SCALE, by_id
+    from idm_rs.diagnosis.catalogue import by_id
     from idm_rs.diagnosis.fitting import FreeParam, Objective, set_param
+    from idm_rs.diagnosis.thresholds import CALIBRATION_SCALE
     from idm_rs.recording import load_case
     from idm_rs.synthetic import make_case
 
@@ -315,7 +317,7 @@ def table(rows: list[dict[str, Any]]) -> str:
                  + (f"; its time: max {max(r.get('discovery_seconds', 0.0) for r in ran):.0f} s" if ran else ""))
     margins = [r["best_other_delta_bic"] for r in healthy if r.get("best_other_delta_bic") is not None]
     if margins:
-        from idm_rs.diagnosis.results import BIC_THRESHOLD
+        from idm_rs.diagnosis.thresholds import BIC_THRESHOLD
 
         top = max((r for r in healthy if r.get("best_other_delta_bic") is not None),
                   key=lambda r: r["best_other_delta_bic"])

@@ -63,7 +63,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--jsonl", type=Path)
     a = ap.parse_args(argv)
     import idm_rs
-    from idm_rs.diagnosis.results import BIC_THRESHOLD
+    from idm_rs.diagnosis.thresholds import BIC_THRESHOLD
 
     rows: list[dict[str, Any]] = []
     if a.jsonl and a.jsonl.exists():

@@ -6,16 +6,17 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use idm_rs::stepper::AdaptiveOptions;
-use idm_rs::drive::{Method, ModelRhs};
-use idm_rs::effects::Effects;
-use idm_rs::mechanics::Structure;
+use idm_rs::integrate::stepper::AdaptiveOptions;
+use idm_rs::integrate::method::Method;
+use idm_rs::integrate::model_rhs::ModelRhs;
+use idm_rs::physics::effects::Effects;
+use idm_rs::physics::mechanics::Structure;
 use idm_rs::model::Model;
-use idm_rs::params::Params;
-use idm_rs::rodas4::Rodas4;
+use idm_rs::physics::params::Params;
+use idm_rs::integrate::rodas4::Rodas4;
 use idm_rs::simulate::simulate;
-use idm_rs::stepper::{Rhs, Stepper};
-use idm_rs::waveform::PiecewiseLinear;
+use idm_rs::integrate::stepper::{Rhs, Stepper};
+use idm_rs::physics::waveform::PiecewiseLinear;
 use num_dual::Dual64;
 
 /// The model's right-hand side with the derived Jacobian in place of the analytic one.

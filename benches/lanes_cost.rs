@@ -1,17 +1,19 @@
-//! Throughput of the lane groups (`lanes_rk4.rs`): scalar (SSE2), AVX2 and AVX-512 code, the C
+//! Throughput of the lane groups (`lanes/rk4.rs`): scalar (SSE2), AVX2 and AVX-512 code, the C
 //! library's exp vs the polynomial, 8 to 32 lanes, and the right-hand side alone. 64 LPS / DPS4 paper-case points (m2 and V varied), 2 ms of the
 //! paper's triangle, RK4 at dt = 5e-8 s, one thread. `cargo bench --bench lanes_cost`.
 
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
-use idm_rs::drive::{run_tasks_exp, Method, Observer, Task};
-use idm_rs::effects::Effects;
+use idm_rs::drive::run_tasks_exp;
+use idm_rs::integrate::method::Method;
+use idm_rs::integrate::task::{Observer, Task};
+use idm_rs::physics::effects::Effects;
 use idm_rs::lanes::{set_simd_level, LaneExp, LibmExp, PolyExp};
-use idm_rs::mechanics::Structure;
+use idm_rs::physics::mechanics::Structure;
 use idm_rs::model::Model;
-use idm_rs::params::Params;
-use idm_rs::waveform::PiecewiseLinear;
+use idm_rs::physics::params::Params;
+use idm_rs::physics::waveform::PiecewiseLinear;
 
 struct Nothing;
 impl Observer for Nothing {
@@ -34,9 +36,9 @@ fn time<E: LaneExp, const L: usize>(tasks: &[Task], method: &Method) -> (f64, Ve
 
 /// The right-hand side alone: 8 lanes of the scalar model one by one vs the vector lanes.
 fn rhs_only(models: &[Model]) {
-    use idm_rs::drive::{LaneInputs, ModelRhs};
+    use idm_rs::integrate::model_rhs::{LaneInputs, ModelRhs};
     use idm_rs::lanes::LanesRhs;
-    use idm_rs::stepper::Rhs;
+    use idm_rs::integrate::stepper::Rhs;
     const D: usize = 7;
     let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap();
     let y0 = models[0].rest_state();

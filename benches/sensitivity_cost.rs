@@ -5,14 +5,14 @@
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
-use idm_rs::drive::Method;
-use idm_rs::effects::Effects;
-use idm_rs::mechanics::Structure;
+use idm_rs::integrate::method::Method;
+use idm_rs::physics::effects::Effects;
+use idm_rs::physics::mechanics::Structure;
 use idm_rs::model::Model;
-use idm_rs::params::Params;
+use idm_rs::physics::params::Params;
 use idm_rs::sensitivity::{derivatives, parse_seeds, Schedule};
 use idm_rs::simulate::simulate;
-use idm_rs::waveform::PiecewiseLinear;
+use idm_rs::physics::waveform::PiecewiseLinear;
 
 fn best<F: FnMut()>(mut f: F) -> f64 {
     (0..5)

@@ -1,8 +1,7 @@
 //! Paper case from Rust alone (used for profiling): `cargo run --release --example paper_case`.
-use idm_rs::{
-    effects::Effects, mechanics::Structure, model::Model, params::Params, simulate::simulate_from_rest,
-    waveform::PiecewiseLinear,
-};
+use idm_rs::model::Model;
+use idm_rs::physics::{effects::Effects, mechanics::Structure, params::Params, waveform::PiecewiseLinear};
+use idm_rs::simulate::simulate_from_rest;
 
 fn main() {
     let structure = match std::env::args().nth(1).as_deref() {

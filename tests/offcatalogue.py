@@ -1,7 +1,7 @@
 """An independent simulator of the lumped (LPS) IDM, for recordings with physics the engine lacks.
 
 Nothing here calls the idm_rs engine: the equations below are written out from docs/MODEL.md
-(checked term by term against rust/src/friction.rs, mechanics.rs and model.rs ``rhs_impl``) and
+(checked term by term against rust/src/physics/friction.rs, physics/mechanics.rs and model/mod.rs ``rhs_impl``) and
 integrated with ``scipy.integrate.solve_ivp`` (LSODA, analytic Jacobian). Its purpose is to
 write ``idm-recording/1`` cases of devices whose physics is OUTSIDE the engine's effect
 catalogue, so that a "discovery" feature can be tested on answers it could not have been
@@ -23,7 +23,7 @@ The model (no piezo hysteresis, h = 0; state y = [x1, x2, v1, v2, Fh] (+ [xb, vb
 The sensor reads x1 (relative to ground). g itself feeds nothing back, so it is not a state.
 
 Extra mechanisms (``extra``: one of the dataclasses below, or a list of them), none of them in
-the engine's effect catalogue (rust/src/effects.rs):
+the engine's effect catalogue (rust/src/physics/effects.rs):
 
 * :class:`PeriodicFriction` (``"periodic_friction"``): friction varying along the guide,
   m(x1) = 1 + a sin(2 pi x1 / wavelength + phase). ``mode="force"`` (default): the whole

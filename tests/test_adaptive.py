@@ -131,7 +131,7 @@ def test_a_near_frictionless_device_stops_dopri5_with_a_hint_instead_of_crawling
     assert r.complete and math.isfinite(r.final_position)
 
 
-#: accepted steps at the stability limit before `auto` tries Rodas4 (rust/src/stiffness.rs)
+#: accepted steps at the stability limit before `auto` tries Rodas4 (rust/src/integrate/stiffness.rs)
 TRY_IMPLICIT_AFTER = 256
 
 
@@ -142,7 +142,7 @@ def test_auto_runs_a_near_frictionless_device_as_fast_as_rodas4_and_as_accuratel
     ro = idm_rs.simulate(NEAR_FRICTIONLESS, SMALL_TRIANGLE, method="rodas4", rtol=1e-6, atol=1e-6, **kw)
     assert abs(auto.final_position - ref.final_position) < 1e-9
     # the explicit steps before the switch (TRY_IMPLICIT_AFTER = 256 of them at the stability
-    # limit, stiffness.rs), then Rodas4's own (measured: 613 saved times against 181)
+    # limit, integrate/stiffness.rs), then Rodas4's own (measured: 613 saved times against 181)
     assert len(auto.t) < 1.5 * len(ro.t) + 2 * TRY_IMPLICIT_AFTER, (len(auto.t), len(ro.t))
 
 

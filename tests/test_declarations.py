@@ -1,7 +1,7 @@
 """Table 1 and the effect catalogue are declared once, in the Rust core, and everything on the
 Python side reads that one declaration: the ``Params`` and ``Effects`` fields and defaults, the
-sweep's units, the diagnosis catalogue and its report. Also: the diagnosis package has no import
-circle."""
+sweep's units, the diagnosis catalogue and its report. (That no import circle exists is
+tests/test_layers.py.)"""
 
 from __future__ import annotations
 
@@ -126,30 +126,47 @@ def test_stribeck_setter_keeps_mu_s_above_mu_k():
     assert params["mu_s"] == pytest.approx(0.44)
 
 
-def module_imports(path: Path) -> set[str]:
-    """Sibling modules of the diagnosis package that `path` imports when it is loaded (imports
-    inside functions and under TYPE_CHECKING are not run at load)."""
-    out: set[str] = set()
-    for node in ast.parse(path.read_text()).body:
-        if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
-            out.add(node.module.split(".")[0])
-    return out
+
+# --- structures ---------------------------------------------------------------------------------
+
+def test_the_structure_names_in_type_hints_are_the_engines():
+    import typing
+
+    from idm_rs.declarations import IDM_MODELS, STRUCTURES, Model, StructureName
+
+    assert typing.get_args(Model) == IDM_MODELS == ("lps", "dps")
+    assert typing.get_args(StructureName) == tuple(s.name for s in STRUCTURES)
 
 
-def test_diagnosis_modules_import_no_circle():
-    mods = {p.stem: module_imports(p) for p in (PACKAGE / "diagnosis").glob("*.py") if p.stem != "__init__"}
-    state: dict[str, str] = {}
+def test_structure_labels_and_refusals_come_from_the_declarations():
+    from idm_rs.declarations import elements_of, structure, structure_label
 
-    def visit(m: str, path: list[str]) -> None:
-        state[m] = "open"
-        for dep in mods.get(m, ()):
-            assert state.get(dep) != "open", " -> ".join(path + [dep])
-            if dep not in state:
-                visit(dep, path + [dep])
-        state[m] = "done"
+    assert structure_label("lps", 4) == "LPS" and structure_label("dps", 4) == "DPS (n = 4)"
+    assert structure_label("rig", 1) == "rig"
+    assert elements_of("dps", 6) == 6 and elements_of("lps", 6) == 1
+    with pytest.raises(ValueError, match=r"'model' must be one of 'lps', 'dps', got 'fem'"):
+        structure("fem")
+    with pytest.raises(ValueError, match=r"'lps', 'dps', 'rig'"):
+        structure("fem", idm_only=False)
 
-    for m in mods:
-        if m not in state:
-            visit(m, [m])
-    assert "diagnose" not in mods["report"] | mods["plots"] | mods["results"]
 
+def test_the_cli_offers_the_declared_structures():
+    import argparse
+
+    from idm_rs.cli import build_parser
+    from idm_rs.declarations import IDM_MODELS
+
+    parser = build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+    for command in ("simulate", "sweep", "characterize"):
+        model = next(a for a in commands[command]._actions if "--model" in a.option_strings)
+        assert tuple(model.choices) == IDM_MODELS, command
+
+
+def test_the_method_names_in_type_hints_are_the_engines():
+    import typing
+
+    from idm_rs import methods
+
+    assert typing.get_args(methods.MethodName) == methods.METHODS == ("rk4", "dopri5", "rodas4", "auto")
+    assert methods.ADAPTIVE == ("dopri5", "rodas4", "auto")

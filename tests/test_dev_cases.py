@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 import idm_rs
+from idm_rs.diagnosis import text_report
 
 DEV = Path(__file__).resolve().parents[1].parent / "shared" / "recordings" / "dev"
 KEY = DEV / "KEY.json"
@@ -51,10 +52,10 @@ def key_parameter(effect: str, params: dict) -> tuple[str, float] | None:
 def test_dev_case_verdict(case):
     key = _key(case)
     d = idm_rs.diagnose(DEV / case, progress=False)
-    assert d.verdict == key["expected_verdict"], d.report()
-    assert d.rms_after <= 1.1 * d.noise.sigma, d.report()
+    assert d.verdict == key["expected_verdict"], text_report(d)
+    assert d.rms_after <= 1.1 * d.noise.sigma, text_report(d)
     target = key_parameter(key["effect"], key["params"])
     if target is not None:
         name, true = target
         cand = next(c for c in d.ranking if c.effect == d.verdict)
-        assert cand.params[name] == pytest.approx(true, rel=0.25), d.report()
+        assert cand.params[name] == pytest.approx(true, rel=0.25), text_report(d)

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import idm_rs
+from idm_rs.diagnosis import plot_diagnosis, text_report
 from idm_rs.synthetic import make_case
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -44,7 +45,7 @@ def spring_diagnosis(spring_case) -> idm_rs.Diagnosis:
 
 def test_a_ground_spring_is_named_and_fitted(spring_diagnosis):
     d = spring_diagnosis
-    assert d.verdict == "spring_to_ground", d.report()
+    assert d.verdict == "spring_to_ground", text_report(d)
     cand = next(c for c in d.ranking if c.effect == "spring_to_ground")
     assert cand.params["k_ground"] == pytest.approx(K_GROUND, rel=0.25)
     assert d.rms_after <= 1.2 * d.noise.sigma
@@ -71,7 +72,7 @@ def test_a_misset_friction_coefficient_is_not_missing_physics(tmp_path):
     case = make_case(tmp_path / "none_case", nominal_params=NOMINAL, true_params=NOMINAL.replace(mu_k=0.5 * 1.05),
                      experiments=EXPERIMENTS, noise_rms=NOISE, seed=2, dt=2e-8)
     d = idm_rs.diagnose(case, progress=False)
-    assert d.verdict == "none", d.report()
+    assert d.verdict == "none", text_report(d)
     # calibration finds the mis-set coefficient and leaves noise
     assert d.calibrated["mu_k"] == pytest.approx(0.525, rel=0.01)
     assert d.rms_before > 3 * d.noise.sigma
@@ -80,7 +81,7 @@ def test_a_misset_friction_coefficient_is_not_missing_physics(tmp_path):
 
 def test_report_tells_the_story(spring_diagnosis):
     d = spring_diagnosis
-    text = d.report()
+    text = text_report(d)
     assert f"VERDICT: {d.verdict.upper()}" in text
     for part in ("noise floor", "nominal model", "calibrated nominal", "Calibrated nominal parameters",
                  "Where the residual lives", "Candidate effects", "Refit model:", " nm", "N/m"):
@@ -96,7 +97,7 @@ def test_report_tells_the_story(spring_diagnosis):
 
 
 def test_the_report_says_it_in_plain_words_first(spring_diagnosis):
-    text = spring_diagnosis.report()
+    text = text_report(spring_diagnosis)
     plain = text.index("In plain words")
     assert plain < text.index("VERDICT:") < text.index("ΔBIC")
     summary = text[plain:text.index("The numbers behind it")]
@@ -113,7 +114,7 @@ def test_alternatives_are_named_in_report_and_json(spring_diagnosis):
 
     alt = Alternative("incline", 123.0, "its signature is parallel to the leader's (|cos| = 0.999)")
     d = replace(spring_diagnosis, alternatives=[alt])
-    assert "ALTERNATIVE: incline (ΔBIC 123): its signature is parallel" in d.report()
+    assert "ALTERNATIVE: incline (ΔBIC 123): its signature is parallel" in text_report(d)
     assert d.to_dict()["alternatives"] == [{"effect": "incline", "delta_bic": 123.0, "why": alt.why}]
     assert d.verdict == spring_diagnosis.verdict  # the verdict stays the leader
 
@@ -197,15 +198,15 @@ def test_report_shows_unsupported_candidates_as_such(spring_diagnosis):
     worse = copy.copy(d.ranking[-1])
     worse.delta_bic = -93_000.0
     d.ranking = list(d.ranking[:-1]) + [worse]
-    text = d.report()
+    text = text_report(d)
     assert "not supported" in text and "-93000" not in text
 
 
 def test_progress_advances_by_stage_to_the_end():
-    from idm_rs.diagnosis.diagnose import STAGES, _Progress
+    from idm_rs.diagnosis.progress import STAGES, Progress
 
     runs = [0]
-    p = _Progress("test", lambda: runs[0])  # the bar shows the simulator's count of runs
+    p = Progress("test", lambda: runs[0])  # the bar shows the simulator's count of runs
     runs[0] = 40_000  # 10,000 model evaluations of 4 experiments
     p.update(10_000)  # far beyond the stage's typical count: approaches, never passes, its share
     assert STAGES[0][1] * 0.99 < p.bar.n <= STAGES[0][1]
@@ -231,12 +232,12 @@ def test_ctrl_c_keeps_what_was_finished(spring_case, tmp_path, capsys, monkeypat
     def stop(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(module, "_calibrate", stop)
+    monkeypatch.setattr(module, "calibrate_null", stop)
     d = idm_rs.diagnose(spring_case, progress=False)
     assert d.verdict == "interrupted" and not d.complete
     assert "stopped by Ctrl-C during the calibration" in d.reason
     assert d.rms_before > 0 and math.isnan(d.rms_calibrated) and d.ranking == []
-    text = d.report()
+    text = text_report(d)
     assert "Found: no answer yet" in text and "run it again" in text
     out = tmp_path / "d.json"
     assert main(["diagnose", str(spring_case), "--json", str(out), "--no-progress"]) == 130
@@ -248,12 +249,12 @@ def test_ctrl_c_keeps_what_was_finished(spring_case, tmp_path, capsys, monkeypat
 def test_the_report_prints_the_refit_model_whole(spring_diagnosis):
     """'Add this effect with the fitted values (the refit model below)': below are the effect's
     and every refitted nominal parameter with units, ±1σ and [at bound], not the null's values."""
-    from idm_rs.diagnosis.catalogue import CALIBRATED
     from idm_rs.diagnosis.report import _unit, at_bound, pm
+    from idm_rs.diagnosis.thresholds import CALIBRATED
 
     d = spring_diagnosis
     cand = d.verdict_candidate
-    tail = d.report().split("Refit model:")[1].split("every fitted parameter")[1]
+    tail = text_report(d).split("Refit model:")[1].split("every fitted parameter")[1]
     assert "k_ground" in tail and "N/m" in tail
     assert set(cand.calibrated_std) == set(CALIBRATED)
     for name, v in cand.calibrated.items():
@@ -277,15 +278,15 @@ def test_an_interrupted_diagnosis_reports_and_plots_only_what_finished(spring_ca
     def stop(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(module, "_screen", stop)
+    monkeypatch.setattr(module, "screen_candidates", stop)
     d = idm_rs.diagnose(spring_case, progress=False)
     assert not d.complete and math.isfinite(d.rms_calibrated)
-    text = d.report()
+    text = text_report(d)
     assert "unexplained" not in text and "no systematic time window" not in text
     assert "Refit model:\n  not reached (interrupted before a verdict)" in text
     assert "time windows: not computed (interrupted)" in text and "held-out : calibrated" not in text
     assert "Candidate effects: none fitted before the interrupt" in text
-    names = sorted(p.name for p in d.plot(tmp_path / "figs"))
+    names = sorted(p.name for p in plot_diagnosis(d, tmp_path / "figs"))
     assert names == sorted([f"fit_{e.name}.png" for e in d.recording.experiments]
                            + ["residual_phases.png", "rms_story.png"]), names
     # the command line on the same result (one interrupted run is enough: minutes of CI)

@@ -12,6 +12,12 @@ from pathlib import Path
 import pytest
 
 import idm_rs
+import idm_rs.diagnosis.beyond_catalogue as diag_beyond_catalogue
+import idm_rs.diagnosis.candidates as diag_candidates
+import idm_rs.diagnosis.problem as diag_problem
+import idm_rs.diagnosis.proposals as diag_proposals
+import idm_rs.diagnosis.second_effect as diag_second_effect
+from idm_rs.diagnosis import text_report
 from idm_rs.synthetic import make_case
 from offcatalogue import make_offcatalogue_case
 
@@ -57,7 +63,7 @@ def test_two_catalogue_effects_are_named_together(tmp_path):
     assert d.second is not None and d.second.named and set(d.second.shares) == {"incline", "spring_to_ground"}
     assert sum(d.second.shares.values()) == pytest.approx(1.0, abs=0.05)
     assert d.rms_after <= 1.1 * d.noise.sigma
-    text = d.report()
+    text = text_report(d)
     assert "two effects the nominal model lacks" in text and "BOTH NAMED" in text
 
 
@@ -76,7 +82,7 @@ def test_d2_12s_look_alikes_are_separated_by_the_proposed_experiment(tmp_path):
     assert {d.verdict} | {a.effect for a in d.alternatives} >= {"incline", "friction_asymmetry"}
     p = d.proposal
     assert p is not None and p.separates and p.drive.orientation == "reversed"
-    assert "turned end for end" in d.report()
+    assert "turned end for end" in text_report(d)
     d2 = _with_proposed_experiment(case, json.loads((case.parent / "KEY.json").read_text())["d2_12"], p.drive,
                                    tmp_path, shutil)
     again = idm_rs.diagnose(d2, progress=False)
@@ -121,16 +127,16 @@ def test_a_second_effect_is_searched_only_where_the_first_stands_and_leaves_stru
     never when nothing stands (a healthy device stays 'none')."""
     from types import SimpleNamespace
 
-    from idm_rs.diagnosis.diagnose import _partial_leader
+    from idm_rs.diagnosis.second_effect import partial_leader
 
     pb = SimpleNamespace(sigma=1.0)
     refit = lambda c: SimpleNamespace(candidate=c)  # noqa: E731
     leaves_structure = [refit(_candidate("incline", 500.0, 1.5, 20.0)), refit(_candidate("stribeck", 100.0, 1.8, 30.0))]
-    assert _partial_leader(pb, leaves_structure).candidate.effect == "incline"
+    assert partial_leader(pb, leaves_structure).candidate.effect == "incline"
     explains = [refit(_candidate("incline", 500.0, 1.02, 1.0))]
-    assert _partial_leader(pb, explains) is None
+    assert partial_leader(pb, explains) is None
     unsupported = [refit(_candidate("incline", 5.0, 1.5, 20.0))]
-    assert _partial_leader(pb, unsupported) is None
+    assert partial_leader(pb, unsupported) is None
 
 
 def _tried(rms: float, delta_bic: float):
@@ -151,10 +157,8 @@ def test_a_form_spoilt_by_a_spurious_first_effect_is_refitted_alone(monkeypatch)
     held-out experiment is refitted without the first effect; alone it is the discovery only
     when it leaves noise, predicts the held-out experiment to noise and better than the null,
     and pays by BIC — else the reason says how far it got and nothing is claimed."""
-    import importlib
     from types import SimpleNamespace
 
-    dg = importlib.import_module("idm_rs.diagnosis.diagnose")  # the package exports a function of this name
 
     sigma, n = 1e-9, 10_000
     pb = SimpleNamespace(sigma=sigma, ln_n=math.log(n), obj=None, tick=None)
@@ -169,7 +173,7 @@ def test_a_form_spoilt_by_a_spurious_first_effect_is_refitted_alone(monkeypatch)
     def alone(rms: float):
         r0 = SimpleNamespace(chi2=(rms / sigma) ** 2 * n, rms=rms, spec="spec", std={},
                              values={"lib_ff_sin": 0.021, "lib_wavelength": 11.8e-6, "mu_k": 0.2})
-        monkeypatch.setattr(dg, "_term_alone", lambda pb_, cal_, found: (r0, lib))
+        monkeypatch.setattr(diag_beyond_catalogue, "term_alone", lambda pb_, cal_, found: (r0, lib))
 
     class HeldOut:
         def __init__(self, rms: float) -> None:
@@ -182,21 +186,23 @@ def test_a_form_spoilt_by_a_spurious_first_effect_is_refitted_alone(monkeypatch)
     found = _tried(1.04 * sigma, 5000.0)
     found.tried = [_tried(1.11 * sigma, 4000.0)]
     alone(1.0 * sigma)
-    d = dg._alone_explains(pb, cal, HeldOut(1.05 * sigma), 7.5 * sigma, lead, found)
+    d = diag_beyond_catalogue.alone_explains(pb, cal, HeldOut(1.05 * sigma), 7.5 * sigma, lead, found)
     assert d is not None and d.discovered
     assert d.values["lib_ff_sin"][0] == 0.021 and d.heldout_rms_after == 1.05 * sigma
     assert "refitted without it" in d.reason and "friction_asymmetry had mimicked" in d.reason
     assert d.delta_bic > 1000
     # the held-out experiment still not predicted: nothing claimed, the figures in the reason
     found = _tried(1.04 * sigma, 5000.0)
-    d = dg._alone_explains(pb, cal, HeldOut(4.0 * sigma), 7.5 * sigma, lead, found)
+    d = diag_beyond_catalogue.alone_explains(pb, cal, HeldOut(4.0 * sigma), 7.5 * sigma, lead, found)
     assert d is None and "held out 4.00 x noise" in found.reason
     # alone it leaves more than noise: nothing claimed
     alone(1.3 * sigma)
-    assert dg._alone_explains(pb, cal, HeldOut(1.0 * sigma), 7.5 * sigma, lead, _tried(1.04 * sigma, 5000.0)) is None
+    explains = diag_beyond_catalogue.alone_explains
+    assert explains(pb, cal, HeldOut(1.0 * sigma), 7.5 * sigma, lead, _tried(1.04 * sigma, 5000.0)) is None
     # a form that did not gain by BIC is not retried at all
-    monkeypatch.setattr(dg, "_term_alone", lambda *a: pytest.fail("retried a form with no BIC gain"))
-    assert dg._alone_explains(pb, cal, HeldOut(1.0 * sigma), 7.5 * sigma, lead, _tried(1.04 * sigma, 5.0)) is None
+    monkeypatch.setattr(diag_beyond_catalogue, "term_alone",
+                        lambda *a: pytest.fail("retried a form with no BIC gain"))
+    assert explains(pb, cal, HeldOut(1.0 * sigma), 7.5 * sigma, lead, _tried(1.04 * sigma, 5.0)) is None
 
 
 def test_a_found_term_whose_gain_is_a_better_calibration_is_not_discovered(monkeypatch):
@@ -204,10 +210,8 @@ def test_a_found_term_whose_gain_is_a_better_calibration_is_not_discovered(monke
     too): the nominal model refitted from there must leave the term paying by BIC_THRESHOLD.
     When that null does as well, nothing is discovered and the reason gives both figures; when
     it does not, the term stands with its gain taken against the better of the two nulls."""
-    import importlib
     from types import SimpleNamespace
 
-    dg = importlib.import_module("idm_rs.diagnosis.diagnose")
     sigma, n = 1e-9, 10_000
     pb = SimpleNamespace(sigma=sigma, ln_n=math.log(n), obj=None, tick=None)
     mu = SimpleNamespace(name="mu_k", at=lambda v: ("mu_k", v))
@@ -217,7 +221,7 @@ def test_a_found_term_whose_gain_is_a_better_calibration_is_not_discovered(monke
         def fake_fit(obj, spec, start, max_nfev, progress):
             assert spec == "null" and start == [("mu_k", 0.2)]  # from where the term's refit went
             return SimpleNamespace(chi2=(rms / sigma) ** 2 * n, rms=rms)
-        monkeypatch.setattr(dg, "fit", fake_fit)
+        monkeypatch.setattr(diag_beyond_catalogue, "fit", fake_fit)
 
     def found():
         d = _tried(1.0 * sigma, 29_000.0)
@@ -228,11 +232,11 @@ def test_a_found_term_whose_gain_is_a_better_calibration_is_not_discovered(monke
 
     null_reaches(1.0005 * sigma)  # the null from there is as good: a calibration gain
     f = found()
-    dg._found_against_null(pb, cal, f)
+    diag_beyond_catalogue.found_against_null(pb, cal, f)
     assert not f.discovered and "the gain was a better calibration" in f.reason and f.delta_bic < 10
     null_reaches(1.5 * sigma)  # better than the calibration, far from the term: the term stands
     f = found()
-    dg._found_against_null(pb, cal, f)
+    diag_beyond_catalogue.found_against_null(pb, cal, f)
     want = 1.5**2 * n - 1.0 * n - 2 * math.log(n)
     assert f.discovered and f.delta_bic == pytest.approx(want)
 
@@ -243,21 +247,20 @@ def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_a
     as given, each effect at its own fit alone; the best pair is judged by the second round's
     rules, with the better-ranked of the two as the first. Here the true pair (incline and a
     drag on the weight, the runners-up behind piezo creep) leaves noise only together."""
-    import importlib
     from types import SimpleNamespace
 
     import numpy as np
 
-    dg = importlib.import_module("idm_rs.diagnosis.diagnose")
     from idm_rs.diagnosis.case_model import ModelSpec, Structure
-    from idm_rs.diagnosis.catalogue import CALIBRATED, by_id
+    from idm_rs.diagnosis.catalogue import by_id
     from idm_rs.diagnosis.fitting import FitResult
+    from idm_rs.diagnosis.thresholds import CALIBRATED
 
     sigma, n = 1e-9, 4_000
     rng = np.random.default_rng(0)
     p = idm_rs.Params().to_dict(resolved=False)
     structure = Structure("lps", 1, False)
-    nominal_free = dg._calibration_params(p)
+    nominal_free = diag_problem.calibration_params(p)
     truth = {"theta_rad": -0.01, "c_weight": 50.0}
     # chi^2 / n of a fit by the set of effect parameters it holds (the joint pair at noise)
     level = {frozenset(): 40.0, frozenset({"kappa", "tau_creep"}): 20.0, frozenset({"c_weight"}): 26.0,
@@ -273,7 +276,7 @@ def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_a
         return FitResult(values, {k: 0.01 * abs(v) + 1e-12 for k, v in values.items()}, ratio * n, n,
                          [rng.normal(0.0, sigma * math.sqrt(ratio), n)], [0.0], base, 10, True, "fake")
 
-    monkeypatch.setattr(dg, "fit", fake_fit)
+    monkeypatch.setattr(diag_second_effect, "fit", fake_fit)
     pb = SimpleNamespace(sigma=sigma, ln_n=math.log(n), n_offsets=1, obj=SimpleNamespace(n=n), tick=None)
     null = fake_fit(None, ModelSpec(structure, p, {}), nominal_free, 0)
     cal = SimpleNamespace(fit=null, free=nominal_free, bic=null.chi2 + (len(nominal_free) + 1) * pb.ln_n)
@@ -283,13 +286,13 @@ def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_a
         start = [f.at(f.x0 * 0.9) for f in nominal_free] + [ep.free(values[ep.name]) for ep in eff.params]
         r = fake_fit(None, ModelSpec(structure, p, {}), start, 0)
         base = ModelSpec(structure, p, {})
-        return dg._Refit(dg._candidate(pb, cal, eff, r, screened_only=False), base, start)
+        return diag_problem.Refit(diag_candidates.make_candidate(pb, cal, eff, r, screened_only=False), base, start)
 
     refits = [first_round("piezo_creep", {"kappa": 0.43, "tau_creep": 4.8e-3}),
               first_round("weight_friction", {"c_weight": 50.9}), first_round("incline", {"theta_rad": -0.0105})]
     heldout = SimpleNamespace(rms=lambda spec, free: 1.2 * sigma)
     starts.clear()
-    out = dg._joint_pair(pb, cal, refits, heldout)
+    out = diag_second_effect.joint_pair(pb, cal, refits, heldout)
     # three pairs, each from the nominal values as given with its effects at their fits alone
     pairs = starts[:3]  # then the second alone, refitted from the pair (the first pays its way)
     assert [sorted(set(s) - set(CALIBRATED)) for s in pairs] == [
@@ -303,21 +306,19 @@ def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_a
     assert out.pair.rms_after == pytest.approx(sigma, rel=0.05)
     assert set(out.shares) == {"weight_friction", "incline"} and sum(out.shares.values()) == pytest.approx(1.0)
     # fewer than two supported candidates: nothing to pair
-    assert dg._joint_pair(pb, cal, refits[:1], heldout) is None
+    assert diag_second_effect.joint_pair(pb, cal, refits[:1], heldout) is None
 
 
 def test_a_form_that_fails_only_the_held_out_check_gets_the_drive_that_would_decide_it(monkeypatch):
     """Of the forms tried, the one with the lowest RMS among those that leave noise, gain by BIC
     and fail the held-out prediction is the one the drive is proposed for (its wavelength when
     periodic); a form that leaves more than noise, or passes the held-out check, is not."""
-    import importlib
     from types import SimpleNamespace
 
-    dg = importlib.import_module("idm_rs.diagnosis.diagnose")
     sigma = 1e-9
     experiments = [SimpleNamespace(name=f"e{i}") for i in range(4)]
     pb = SimpleNamespace(sigma=sigma, rec=SimpleNamespace(experiments=experiments))
-    monkeypatch.setattr(dg, "_heldout_index", lambda rec: 2)
+    monkeypatch.setattr(diag_proposals, "heldout_index", lambda rec: 2)
     asked = []
 
     now = [3.0]
@@ -326,7 +327,7 @@ def test_a_form_that_fails_only_the_held_out_check_gets_the_drive_that_would_dec
         asked.append((name, model[0]))
         return SimpleNamespace(context="", words=lambda: "", heldout_now=now[0])
 
-    monkeypatch.setattr(dg, "propose_for_heldout", fake)
+    monkeypatch.setattr(diag_proposals, "propose_for_heldout", fake)
 
     def form(rms: float, held: float, spec: str, periodic: bool = True):
         d = _tried(rms * sigma, 5000.0)
@@ -338,19 +339,19 @@ def test_a_form_that_fails_only_the_held_out_check_gets_the_drive_that_would_dec
 
     found = form(1.3, 5.0, "too far")  # more than noise: not this one
     found.tried = [form(1.05, 6.9, "the true form"), form(1.04, 1.05, "passes held out"), form(1.06, 1.2, "runner-up")]
-    p = dg._travel_experiment(pb, found)
+    p = diag_proposals.travel_experiment(pb, found)
     assert p is not None and asked == [("lib_wavelength", "the true form")]
     assert "predicts it at 6.90 x noise" in p.context and "e2" in p.context
     # the experiments determine the form already (held out predicted at noise to first order):
     # no drive is proposed, the reason says the form falls short
     now[0] = 1.02
     asked.clear()
-    assert dg._travel_experiment(pb, found) is None and len(asked) == 1
+    assert diag_proposals.travel_experiment(pb, found) is None and len(asked) == 1
     assert "the form, not the experiments, falls short" in found.reason
     # nothing left noise and failed the held-out check only: no proposal
     asked.clear()
     found.tried = [form(1.04, 1.05, "passes held out")]
-    assert dg._travel_experiment(pb, found) is None and not asked
+    assert diag_proposals.travel_experiment(pb, found) is None and not asked
 
 
 def test_discovery_after_a_calibration_that_did_not_converge_starts_from_the_nominal_values():
@@ -359,22 +360,20 @@ def test_discovery_after_a_calibration_that_did_not_converge_starts_from_the_nom
     subset free around them and the calibrated null's held-out RMS as the bar, and beside no
     first effect; after "unexplained", from the model with the first effect when one stands,
     else from the calibrated null."""
-    import importlib
     from types import SimpleNamespace
 
-    dg = importlib.import_module("idm_rs.diagnosis.diagnose")
     from idm_rs.diagnosis.case_model import ModelSpec, Structure
 
     p = idm_rs.Params().to_dict(resolved=False)
-    free = dg._calibration_params(p)
+    free = diag_problem.calibration_params(p)
     nominal = SimpleNamespace(spec=ModelSpec(Structure("lps", 1, False), p, {}))
     cal_spec = ModelSpec(Structure("lps", 1, False), dict(p, mu_k=0.3), {})
     cal = SimpleNamespace(free=free, at=[f.at(f.x0 * 0.9) for f in free], fit=SimpleNamespace(spec=cal_spec))
     lead = SimpleNamespace(base=cal_spec, free=[f.at(f.x0 * 1.1) for f in free],
                            candidate=SimpleNamespace(heldout_rms=3e-9))
-    spec, start, ho, first = dg._discovery_start("not_converged", lead, cal, nominal, 5e-9)
+    spec, start, ho, first = diag_beyond_catalogue.discovery_start("not_converged", lead, cal, nominal, 5e-9)
     assert spec is nominal.spec and [f.x0 for f in start] == [f.x0 for f in free] and ho == 5e-9 and first is None
-    spec, start, ho, first = dg._discovery_start("unexplained", lead, cal, nominal, 5e-9)
+    spec, start, ho, first = diag_beyond_catalogue.discovery_start("unexplained", lead, cal, nominal, 5e-9)
     assert first is lead and ho == 3e-9 and [f.x0 for f in start] == [f.x0 for f in lead.free]
-    spec, start, ho, first = dg._discovery_start("unexplained", None, cal, nominal, 5e-9)
+    spec, start, ho, first = diag_beyond_catalogue.discovery_start("unexplained", None, cal, nominal, 5e-9)
     assert spec is cal_spec and first is None and [f.x0 for f in start] == [f.x0 for f in cal.at]

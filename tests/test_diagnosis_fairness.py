@@ -6,22 +6,21 @@ it gains; a failed calibration is reported as such, not as missing physics."""
 
 from __future__ import annotations
 
-import importlib
 import math
 from types import SimpleNamespace
 
 import pytest
 
 import idm_rs
+import idm_rs.diagnosis.verdict as diag_verdict
 from idm_rs.batch import Structure
+from idm_rs.diagnosis import text_report
 from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec
 from idm_rs.diagnosis.fitting import FreeParam, Objective, fit, set_param
 from idm_rs.diagnosis.results import Candidate
 from idm_rs.diagnosis.thresholds import BIC_THRESHOLD
 from idm_rs.recording import load_case
 from idm_rs.synthetic import make_case
-
-diagnose_module = importlib.import_module("idm_rs.diagnosis.diagnose")
 
 NOMINAL = idm_rs.Params(normal_force=(0.4 + 0.3) * 9.81)
 NOISE = 1.5e-9
@@ -83,7 +82,7 @@ def _calibration(rms: float, converged: bool = True):
 
 def test_an_effect_its_likelihood_ratio_test_cannot_tell_from_absent_is_never_the_verdict():
     noise = SimpleNamespace(sigma=NOISE)
-    verdict = diagnose_module._verdict
+    verdict = diag_verdict.decide_verdict
     # a BIC gain (against a null found elsewhere), but against the null it contains the
     # likelihood ratio is 5 chi^2 units: below chi2(1)'s 1e-3 point (10.83), indistinguishable from absent
     assert _candidate("incline", 1e4, 0.0).lr_critical == pytest.approx(10.828, abs=1e-3)
@@ -101,7 +100,7 @@ def test_an_effect_its_likelihood_ratio_test_cannot_tell_from_absent_is_never_th
 
 def test_a_failed_calibration_is_not_called_missing_physics():
     noise = SimpleNamespace(sigma=NOISE)
-    verdict = diagnose_module._verdict
+    verdict = diag_verdict.decide_verdict
     # systematic residual, nothing supported: "not_converged" when the searches disagreed ...
     assert verdict([], _calibration(3 * NOISE, converged=False), noise, math.nan)[0] == "not_converged"
     # ... "unexplained" when they agreed
@@ -119,7 +118,7 @@ def healthy_diagnosis(tmp_path_factory):
 
 def test_a_healthy_device_with_misset_nominals_is_healthy(healthy_diagnosis):
     d = healthy_diagnosis
-    assert d.verdict == "none", d.report()
+    assert d.verdict == "none", text_report(d)
     assert d.rms_calibrated <= 1.1 * d.noise.sigma
     assert d.calibrated["mu_k"] == pytest.approx(0.46, rel=0.02)
     # the JSON says how the null was found and whether the independent searches agreed

@@ -13,10 +13,12 @@ import numpy as np
 import pytest
 
 from idm_rs.batch import Structure
+from idm_rs.diagnosis.candidates import against_null, make_candidate
 from idm_rs.diagnosis.case_model import ModelSpec
-from idm_rs.diagnosis.catalogue import CALIBRATED, CATALOGUE
-from idm_rs.diagnosis.diagnose import _against_null, _Calibration, _candidate, _Refit
+from idm_rs.diagnosis.catalogue import CATALOGUE
 from idm_rs.diagnosis.fitting import FitResult
+from idm_rs.diagnosis.problem import CalibratedNull, Refit
+from idm_rs.diagnosis.thresholds import CALIBRATED
 
 
 def _fit(chi2: float, n: int, values: dict[str, float], spec: ModelSpec) -> FitResult:
@@ -34,22 +36,22 @@ def test_a_candidate_above_a_refitted_null_is_reported_at_that_null():
     free = [SimpleNamespace(name=k) for k in CALIBRATED]
     nominal = {k: 1.0 for k in CALIBRATED}
 
-    def calibration(chi2: float, mu_k: float) -> _Calibration:
+    def calibration(chi2: float, mu_k: float) -> CalibratedNull:
         f = _fit(chi2, n, {**nominal, "mu_k": mu_k}, spec)
         bic = chi2 + (len(free) + pb.n_offsets) * pb.ln_n
-        return _Calibration(free, f, [], f, [], bic, 0.0, None)  # type: ignore[arg-type]
+        return CalibratedNull(free, f, [], f, [], bic, 0.0, None)  # type: ignore[arg-type]
 
     first, better = calibration(2600.0, 0.50), calibration(1650.0, 0.46)
     # fitted against the first null: better than it, worse than the refitted one
     values = {**nominal, "mu_k": 0.49, **{ep.name: 3e-4 for ep in eff.params}}
     r = _fit(2400.0, n, values, spec)
     r.std.update({ep.name: 1e-5 for ep in eff.params})  # "30 σ from no effect" on its own
-    c = _candidate(pb, first, eff, r, screened_only=False)
+    c = make_candidate(pb, first, eff, r, screened_only=False)
     assert c.significance[eff.params[0].name] > 10 and c.fit_label == "fitted"
     at = SimpleNamespace(at=lambda v: ("at", v))
-    refit = _Refit(c, spec, [SimpleNamespace(name="mu_k", at=at.at), SimpleNamespace(name=eff.params[0].name,
+    refit = Refit(c, spec, [SimpleNamespace(name="mu_k", at=at.at), SimpleNamespace(name=eff.params[0].name,
                                                                                     at=at.at)])
-    _against_null(pb, better, refit)
+    against_null(pb, better, refit)
     c = refit.candidate
     assert c.at_null and c.fit_label == "at null"
     assert c.chi2 == better.fit.chi2 and c.rms_after == pytest.approx(better.fit.rms)
@@ -60,13 +62,13 @@ def test_a_candidate_above_a_refitted_null_is_reported_at_that_null():
     # the BIC of the null plus the effect's parameters: a few ln n below, not thousands
     assert c.delta_bic == pytest.approx(-len(eff.params) * pb.ln_n)
     # a candidate better than the new null keeps its fit, its ΔBIC taken against the new null
-    good = _candidate(pb, first, eff, _fit(1500.0, n, values, spec), screened_only=False)
-    keep = _Refit(good, spec, [])
-    _against_null(pb, better, keep)
+    good = make_candidate(pb, first, eff, _fit(1500.0, n, values, spec), screened_only=False)
+    keep = Refit(good, spec, [])
+    against_null(pb, better, keep)
     assert keep.candidate is good and not good.at_null and good.chi2 == 1500.0
     assert good.delta_bic == pytest.approx(better.bic - good.bic) and good.lr_chi2 == pytest.approx(150.0)
     # a score-only candidate's linearised numbers, taken at the first null, are capped at the new one
-    lin = _candidate(pb, first, eff, _fit(2000.0, n, values, spec), screened_only=True)
-    capped = _Refit(lin, spec, [])
-    _against_null(pb, better, capped)
+    lin = make_candidate(pb, first, eff, _fit(2000.0, n, values, spec), screened_only=True)
+    capped = Refit(lin, spec, [])
+    against_null(pb, better, capped)
     assert lin.chi2 == better.fit.chi2 and lin.fit_label == "score only"

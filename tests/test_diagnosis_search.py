@@ -6,13 +6,17 @@ effects are reported as alternatives."""
 
 from __future__ import annotations
 
-import importlib
 import math
 
 import numpy as np
 import pytest
 
 import idm_rs
+import idm_rs.diagnosis.candidates as diag_candidates
+import idm_rs.diagnosis.problem as diag_problem
+import idm_rs.diagnosis.rules as diag_rules
+import idm_rs.diagnosis.second_effect as diag_second_effect
+import idm_rs.diagnosis.verdict as diag_verdict
 from idm_rs.batch import Structure
 from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec
 from idm_rs.diagnosis.catalogue import CATALOGUE, by_id
@@ -25,8 +29,6 @@ from idm_rs.diagnosis.thresholds import SEPARATION
 from idm_rs.recording import load_case
 from idm_rs.synthetic import make_case
 from test_diagnosis_fairness import LONG, NOISE, NOMINAL  # the same synthetic device and records
-
-diagnose_module = importlib.import_module("idm_rs.diagnosis.diagnose")
 
 SHORT = ({"amplitude_V": 80, "frequency_Hz": 200, "direction": "forward", "cycles": 3},
          {"amplitude_V": 60, "frequency_Hz": 200, "direction": "backward", "cycles": 3})
@@ -68,7 +70,7 @@ def test_the_fit_jacobian_is_the_engines_exact_one(long_rec):
     obj = Objective(long_rec, sim, NOISE).with_cycles(2)
     # mu_k carries a tied mu_s (as the calibration does without a Stribeck peak): the chain
     # from the fit unit to the engine's two parameters is taken from the setter
-    tied = diagnose_module._set_tied_friction
+    tied = diag_problem.set_tied_friction
     free = [_m2(1.02), FreeParam("mu_k", 0.55, 0.3, 0.7, 0.01, tied)]
     spec = apply(SPEC, free, np.zeros(2))
     unbounded: set[int] = set()
@@ -121,7 +123,8 @@ def test_multistart_reaches_the_optimum_where_one_local_fit_stops_short(long_rec
 def test_local_fits_agree_within_the_best_fits_own_residual_variance():
     # at the noise floor (chi^2 = n) two optima agree within 25 chi^2 units ...
     from idm_rs.diagnosis.fitting import FitResult
-    from idm_rs.diagnosis.multistart import AGREE_CHI2, agree
+    from idm_rs.diagnosis.multistart import agree
+    from idm_rs.diagnosis.thresholds import AGREE_CHI2
 
     def ended(chi2: float, n: int = 5600) -> FitResult:
         return FitResult({}, {}, chi2, n, [], [], SPEC, 0, True, "")
@@ -199,7 +202,7 @@ def spring_problem(tmp_path_factory):
                      effects=idm_rs.Effects(k_ground=K_GROUND), experiments=SHORT, noise_rms=NOISE, seed=7, dt=2e-8)
     rec = load_case(case)
     obj = Objective(rec, CaseSimulator(rec), NOISE)
-    free = diagnose_module._calibration_params(SPEC.params)
+    free = diag_problem.calibration_params(SPEC.params)
     null = fit(obj, SPEC, free, max_nfev=15)
     return rec, obj, null, [f.at(null.values[f.name]) for f in free]
 
@@ -220,14 +223,14 @@ def test_a_candidate_never_ends_worse_than_the_null_it_contains(spring_problem):
     # drift is the wrong effect here; its multistart's starts are built around the null fit and
     # include the null itself, and a fit that ends above the null is reported at the null
     rec, obj, null, at = spring_problem
-    pb = diagnose_module._Problem(rec, estimate_noise(rec), obj.sim, obj, None)
-    cal = diagnose_module._Calibration(at, null, at, null, at, null.chi2, 0.0, None)  # type: ignore[arg-type]
+    pb = diag_problem.Problem(rec, estimate_noise(rec), obj.sim, obj, None)
+    cal = diag_problem.CalibratedNull(at, null, at, null, at, null.chi2, 0.0, None)  # type: ignore[arg-type]
     drift = by_id("thermal_drift")
     # scored above MIN_SCORE (so it is fitted), its step far off: tempting nothing
     sc = Screened(drift, (0.0,), 50.0, [5e-5], None, np.zeros(len(at)))
-    starts = diagnose_module._candidate_starts(pb, cal, drift, sc)
+    starts = diag_candidates.candidate_starts(pb, cal, drift, sc)
     assert any(s.free[-1].x0 == 0.0 and [f.x0 for f in s.free[:-1]] == [f.x0 for f in at] for s in starts)
-    (r,) = diagnose_module._fit_candidates(pb, cal, [drift], {drift.id: sc}, refit_top=1)
+    (r,) = diag_candidates.fit_candidates(pb, cal, [drift], {drift.id: sc}, refit_top=1)
     assert r.candidate.chi2 <= null.chi2 * (1 + 1e-9)
     assert r.candidate.multistart["local_fits"]
 
@@ -252,12 +255,12 @@ def test_near_degenerate_effects_are_alternatives_not_a_second_verdict():
     pairs = near_degenerate(sc)
     assert [(p[0], p[1]) for p in pairs] == [("incline", "friction_asymmetry")]
     ranking = [_cand("incline", 500.0), _cand("friction_asymmetry", 400.0), _cand("thermal_drift", 495.0)]
-    alts = diagnose_module._alternatives(ranking, "incline", pairs)
+    alts = diag_verdict.alternatives_to(ranking, "incline", pairs)
     # asymmetry: parallel signature (although 100 behind in ΔBIC); drift: within SEPARATION
     assert {a.effect for a in alts} == {"friction_asymmetry", "thermal_drift"}
     assert 500.0 - 495.0 < SEPARATION
     # nothing is an alternative to a verdict of "none"
-    assert diagnose_module._alternatives(ranking, "none", pairs) == []
+    assert diag_verdict.alternatives_to(ranking, "none", pairs) == []
 
 
 def test_the_noise_floor_is_cross_checked_against_the_residual(long_rec):
@@ -305,22 +308,21 @@ def test_a_pair_stuck_in_a_side_basin_is_refitted_from_its_own_1d_scans(long_rec
     # 1.70 x noise with a drag on the weight and thermal drift, m1 12 % low)
     from types import SimpleNamespace
 
-    dg = diagnose_module
     obj = Objective(long_rec, CaseSimulator(long_rec), NOISE, segmented=False)
     eff = by_id("weight_friction")
     base = ModelSpec(eff.structure(SPEC.structure), dict(SPEC.params), {})
-    calibrated = [f if f.name != "m2" else _m2(0.85) for f in dg._calibration_params(SPEC.params)]
+    calibrated = [f if f.name != "m2" else _m2(0.85) for f in diag_problem.calibration_params(SPEC.params)]
     free = calibrated + [ep.free(ep.none) for ep in eff.params]
     stuck = fit(obj, base, free, max_nfev=20)
     assert abs(stuck.values["m2"] / NOMINAL.m2 - 1) > 0.03
     pb = SimpleNamespace(obj=obj, sigma=NOISE, ln_n=math.log(obj.n), n_offsets=0, tick=None)
     null = SimpleNamespace(free=calibrated, bic=stuck.chi2 + len(free) * pb.ln_n, fit=stuck)
-    best = dg._Refit(dg._candidate(pb, null, eff, stuck, screened_only=False), base,
+    best = diag_problem.Refit(diag_candidates.make_candidate(pb, null, eff, stuck, screened_only=False), base,
                      [f.at(stuck.values[f.name]) for f in free])
-    assert not dg._explains(pb, best.candidate)
-    out = dg._rescanned(pb, null, eff, best)
+    assert not diag_rules.candidate_explains(pb, best.candidate)
+    out = diag_second_effect.rescanned(pb, null, eff, best)
     assert out.candidate.calibrated["m2"] == pytest.approx(NOMINAL.m2, rel=3e-3)
     assert out.candidate.chi2 < 0.1 * stuck.chi2
-    assert dg._explains(pb, out.candidate)
+    assert diag_rules.candidate_explains(pb, out.candidate)
     # a pair that already explains the data is returned as it is (no scan, no fit)
-    assert dg._rescanned(pb, null, eff, out) is out
+    assert diag_second_effect.rescanned(pb, null, eff, out) is out

@@ -1,4 +1,4 @@
-"""Discovery beyond the catalogue (diagnosis/discovery.py), on recordings written by an
+"""Discovery beyond the catalogue (diagnosis/discovery/), on recordings written by an
 independent simulator (scipy solve_ivp, tests/offcatalogue.py: not the engine's library force,
 so the tests do not assume their answer): the inferred force, the form found, the refit; and
 nothing found on a healthy device. The whole diagnosis on the four full cases is `-m slow`
@@ -12,20 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from idm_rs.diagnosis import plot_diagnosis
 from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
-from idm_rs.diagnosis.diagnose import _calibration_params, _HeldOut, _Problem
-from idm_rs.diagnosis.discovery import (
-    MAIN_TERMS,
-    InferredForce,
-    Trajectory,
-    _choose,
-    _gcv_solve,
-    _second_differences,
-    discover,
-    find_terms,
-)
+from idm_rs.diagnosis.discovery import MAIN_TERMS, InferredForce, Trajectory, discover, find_terms
+from idm_rs.diagnosis.discovery.infer import _gcv_solve, _second_differences
+from idm_rs.diagnosis.discovery.regress import _choose
 from idm_rs.diagnosis.fitting import Objective
 from idm_rs.diagnosis.noise import estimate_noise
+from idm_rs.diagnosis.problem import HeldOut, Problem, calibration_params
 from idm_rs.recording import load_case
 from offcatalogue import make_offcatalogue_case
 
@@ -40,8 +34,8 @@ def _discover(case: Path, bodies=("main", "weight")):
     noise = estimate_noise(rec)
     sim = CaseSimulator(rec)
     obj = Objective(rec, sim, noise.sigma)
-    ho = _HeldOut(_Problem(rec, noise, sim, obj, None))
-    free = _calibration_params(p0)
+    ho = HeldOut(Problem(rec, noise, sim, obj, None))
+    free = calibration_params(p0)
     return discover(rec, spec, free, obj, ho, ho.rms(spec, free), bodies=bodies), noise.sigma
 
 
@@ -117,7 +111,7 @@ def test_the_report_and_the_figures_tell_a_discovery(cases, drag, tmp_path, monk
     drawn = {}
     real_save = plots._save
     monkeypatch.setattr(plots, "_save", lambda fig, path: (drawn.__setitem__(path.name, fig), real_save(fig, path))[1])
-    paths = d.plot(tmp_path)
+    paths = plot_diagnosis(d, tmp_path)
     assert (tmp_path / "discovery.png") in paths and (tmp_path / "discovery.png").stat().st_size > 10_000
     # the force against the found form's variable too (v1 for a quadratic drag), not only time
     labels = [ax.get_xlabel() for ax in drawn["discovery.png"].axes]
@@ -235,16 +229,18 @@ def test_a_non_finite_or_rank_deficient_system_is_named_not_a_verdict():
     """Discovery's linear algebra checks its inputs and names the step that failed (the SVD that
     "did not converge" on a 5 um periodic device was a verdict before); dependent terms are
     said to be dependent."""
-    from idm_rs.diagnosis.discovery import NumericalFailure, _cv_path, _lstsq
+    from idm_rs.diagnosis.discovery import NumericalFailure
+    from idm_rs.diagnosis.discovery.linalg import lstsq
+    from idm_rs.diagnosis.discovery.regress import _cv_path
 
     A = np.ones((6, 2))
     A[2, 1] = np.nan
     with pytest.raises(NumericalFailure, match="the form's coefficients: 1 of 12 entries of A"):
-        _lstsq(A, np.ones(6), "the form's coefficients")
+        lstsq(A, np.ones(6), "the form's coefficients")
     with pytest.raises(NumericalFailure, match="library's effect on the readings"):
         _cv_path([np.full((4, 2), np.inf)] * 2, [np.ones(4)] * 2, 2)
     # two equal columns: least squares by QR with pivoting reports rank 1 (no SVD to fail)
-    x, rank = _lstsq(np.column_stack([np.arange(5.0), np.arange(5.0)]), np.arange(5.0), "dependent")
+    x, rank = lstsq(np.column_stack([np.arange(5.0), np.arange(5.0)]), np.arange(5.0), "dependent")
     assert rank == 1 and np.allclose(np.column_stack([np.arange(5.0)] * 2) @ x, np.arange(5.0))
 
 
@@ -252,7 +248,7 @@ def test_the_direct_regression_reads_the_residual_net_of_its_noise():
     """The direct view's target is the residual itself (white noise in it): its cross-validated
     error counts only what the form leaves of the systematic part, so a form that reproduces
     the systematic part exactly scores ~0, not the noise's share."""
-    from idm_rs.diagnosis.discovery import _cv_path
+    from idm_rs.diagnosis.discovery.regress import _cv_path
 
     rng = np.random.default_rng(5)
     X, y = [], []
@@ -269,7 +265,9 @@ def test_the_direct_regression_reads_the_residual_net_of_its_noise():
 def test_a_periodic_term_is_refitted_with_its_phase_free():
     """A periodic term found alone gets its quadrature partner before the refit (a force
     periodic in position has a phase), started at zero and free over the found term's size."""
-    from idm_rs.diagnosis.discovery import FoundForm, _free_library, with_quadrature
+    from idm_rs.diagnosis.discovery import FoundForm
+    from idm_rs.diagnosis.discovery.refit import _free_library
+    from idm_rs.diagnosis.discovery.regress import with_quadrature
 
     ff_sin = next(t for t in MAIN_TERMS if t.param == "lib_ff_sin")
     vv = next(t for t in MAIN_TERMS if t.param == "lib_vv")

@@ -129,7 +129,7 @@ def test_stub_function_signature_matches_the_extension(fn):
 def test_stub_run_config_constructor_matches_the_extension():
     cls = next(n for n in _stub().body if isinstance(n, ast.ClassDef) and n.name == "RunConfig")
     init = next(n for n in cls.body if isinstance(n, ast.FunctionDef) and n.name == "__init__")
-    # the extension's constructor takes keywords (its fields are declared once in bindings.rs:
+    # the extension's constructor takes keywords (its fields are declared once in python/mod.rs:
     # the struct, its defaults and the keyword parsing come from one list); the stub names each,
     # keyword-only, and the extension refuses any other by name
     stub = _stub_params(init, drop_self=True)

@@ -262,7 +262,7 @@ def test_adaptive_kernel_stops_a_crawling_point_and_the_cpu_finishes_it_with_aut
 
 @needs_cc
 def test_adaptive_kernel_agrees_with_the_engines_dopri5():
-    """The per-thread Dormand-Prince (same tableau, controller and error norm as dopri5.rs):
+    """The per-thread Dormand-Prince (same tableau, controller and error norm as integrate/dopri5.rs):
     not step-for-step identical (breakpoint landing differs in the last bits) but within 1e-10 m
     of the engine's dopri5 and with the same step counts to 5 %."""
     g = {"mass_ratio": [0.5, 0.75, 1.5], "voltage": [50.0, 80.0, 120.0]}

@@ -7,7 +7,8 @@ import math
 
 import pytest
 
-from idm_rs.diagnosis.identifiability import DETERMINED_WITHIN, Z95, assess
+from idm_rs.diagnosis.identifiability import Z95, assess
+from idm_rs.diagnosis.thresholds import DETERMINED_WITHIN
 
 
 def test_a_tight_parameter_is_determined_and_a_loose_one_is_not():

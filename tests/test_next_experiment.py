@@ -11,8 +11,8 @@ import pytest
 
 import idm_rs
 from idm_rs.diagnosis.case_model import ModelSpec, Structure
-from idm_rs.diagnosis.diagnose import _calibration_params
 from idm_rs.diagnosis.next_experiment import Drive, drives, separation, virtual_recording
+from idm_rs.diagnosis.problem import calibration_params
 from idm_rs.recording import load_case
 from idm_rs.synthetic import make_case
 
@@ -49,7 +49,7 @@ def test_separation_is_zero_for_one_model_and_large_for_a_missing_spring(rec):
     s = Structure(nom.model, nom.n_elements, nom.piezo_hysteresis)
     plain = ModelSpec(s, p0, {})
     spring = ModelSpec(s, p0, {"k_ground": 2e4})
-    free = _calibration_params(p0)
+    free = calibration_params(p0)
     one = virtual_recording(rec, [Drive("forward", 80.0, 100.0, 3, 5e-4, 2e-3)])
     sigma = 1.5e-9
     assert separation(one, sigma, (plain, []), (plain, [])) == 0.0
@@ -84,14 +84,14 @@ def test_the_drive_that_determines_a_parameter_lowers_its_sigma(rec, monkeypatch
     from idm_rs.diagnosis.catalogue import by_id
     from idm_rs.diagnosis.next_experiment import propose_for_parameter
 
-    monkeypatch.setattr(next_experiment, "AMPLITUDE_SHARES", (0.25, 1.0))
-    monkeypatch.setattr(next_experiment, "FREQUENCIES", (100.0, 400.0))
+    monkeypatch.setattr(next_experiment, "PROPOSAL_AMPLITUDE_SHARES", (0.25, 1.0))
+    monkeypatch.setattr(next_experiment, "PROPOSAL_FREQUENCIES", (100.0, 400.0))
 
     nom = rec.nominal
     p0 = nom.params.to_dict(resolved=False)
     s = Structure(nom.model, nom.n_elements, nom.piezo_hysteresis)
     k = next(ep for ep in by_id("spring_to_ground").params if ep.name == "k_ground").free(2e3)
-    free = _calibration_params(p0)[:3] + [k]
+    free = calibration_params(p0)[:3] + [k]
     spec = ModelSpec(s, p0, {"k_ground": 2e3})
     pp = propose_for_parameter(rec, 1.5e-9, "k_ground", (spec, free))
     assert pp is not None and pp.value == pytest.approx(2e3)
@@ -106,7 +106,7 @@ def test_the_raw_difference_bounds_the_separation_from_above(rec):
     nom = rec.nominal
     p0 = nom.params.to_dict(resolved=False)
     s = Structure(nom.model, nom.n_elements, nom.piezo_hysteresis)
-    free = _calibration_params(p0)[:3]
+    free = calibration_params(p0)[:3]
     a = (ModelSpec(s, p0, {"k_ground": 2e4}), free)
     b = (ModelSpec(s, p0, {}), free)
     v = virtual_recording(rec, [Drive("forward", 80.0, 100.0, 2, 5e-4, 2e-3),
@@ -189,21 +189,21 @@ def test_the_drive_that_lets_a_found_periodic_form_pass_the_held_out_check(rec, 
     the long ones that would themselves be held out (predicting them is an extrapolation over
     several periods from what the others pin down)."""
     from idm_rs.diagnosis import next_experiment
-    from idm_rs.diagnosis.diagnose import _heldout_index
     from idm_rs.diagnosis.fitting import FreeParam, set_effect
     from idm_rs.diagnosis.next_experiment import propose_for_heldout
+    from idm_rs.diagnosis.problem import heldout_index
 
-    monkeypatch.setattr(next_experiment, "FREQUENCIES", (400.0,))
+    monkeypatch.setattr(next_experiment, "PROPOSAL_FREQUENCIES", (400.0,))
     nom = rec.nominal
     p0 = nom.params.to_dict(resolved=False)
     s = Structure(nom.model, nom.n_elements, nom.piezo_hysteresis)
     wl = 6e-6
     spec = ModelSpec(s, p0, {"lib_ff_sin": 0.03, "lib_ff_cos": 0.01, "lib_wavelength": wl})
-    free = _calibration_params(p0)[:3] + [
+    free = calibration_params(p0)[:3] + [
         FreeParam("lib_ff_sin", 0.03, -0.3, 0.3, 0.003, set_effect("lib_ff_sin")),
         FreeParam("lib_ff_cos", 0.01, -0.3, 0.3, 0.003, set_effect("lib_ff_cos")),
         FreeParam("lib_wavelength", wl, wl / 1.6, wl * 1.6, 0.02, set_effect("lib_wavelength"), log=True)]
-    pp = propose_for_heldout(rec, 1.5e-9, "lib_wavelength", (spec, free), _heldout_index, cycles=(4, 16),
+    pp = propose_for_heldout(rec, 1.5e-9, "lib_wavelength", (spec, free), heldout_index, cycles=(4, 16),
                              shares=(1.0,))
     assert pp is not None and pp.value == pytest.approx(wl)
     assert len(pp.scored) == 8  # 200 (recorded) and 400 Hz, both directions, 4 and 16 cycles

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import idm_rs
+from idm_rs.diagnosis import text_report
 from idm_rs.diagnosis.noise import estimate_noise
 from idm_rs.recording import RecordingError
 from idm_rs.synthetic import make_case
@@ -71,5 +72,5 @@ def test_diagnosis_on_sampled_drives(tmp_path, kind, verdict):
     d = make_case(tmp_path / kind, nominal_params=nominal, true_params=P, model="lps", effects=effects,
                   experiments=[{"sampled": w}, {"sampled": idm_rs.Sampled(w.t, 0.8 * w.voltage)}])
     dg = idm_rs.diagnose(d, progress=False)
-    assert dg.verdict == verdict, dg.report()
+    assert dg.verdict == verdict, text_report(dg)
     assert dg.rms_after <= 1.1 * dg.noise.sigma

@@ -1,4 +1,4 @@
-"""The vector lanes (rust/src/lanes.rs, lanes_rk4.rs): RK4 batches of plain models run several
+"""The vector lanes (rust/src/lanes/mod.rs, lanes/rk4.rs): RK4 batches of plain models run several
 points at once, stored component by component and computed as AVX2 / AVX-512 / scalar code
 chosen at run time. Whatever the instruction set, every point is bitwise the scalar model's run
 (``simulate(energy=True)`` takes the scalar path: its accounting states make the model

@@ -11,7 +11,7 @@ typed Python API. Quick start::
 """
 
 from . import methods
-from .diagnosis import Diagnosis, diagnose
+from .diagnosis import Diagnosis, diagnose, plot_diagnosis, text_report
 from .effects import Effects
 from .engine import __version__
 from .external_force import ExternalForce
@@ -42,6 +42,8 @@ __all__ = [
     "METRICS",
     "diagnose",
     "load_case",
+    "plot_diagnosis",
     "simulate",
     "sweep",
+    "text_report",
 ]

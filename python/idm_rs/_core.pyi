@@ -1,4 +1,4 @@
-"""Type stubs of the private native module (Rust, PyO3; ``rust/src/bindings.rs``).
+"""Type stubs of the private native module (Rust, PyO3; ``rust/src/python/mod.rs``).
 
 The public API is ``idm_rs``; inside the package only ``idm_rs.engine`` imports this module.
 Arrays cross the boundary as numpy arrays: C-contiguous float64 inputs are read in place (a
@@ -271,6 +271,12 @@ def param_declarations() -> list[dict[str, Any]]:
 
 def effect_declarations() -> list[dict[str, Any]]:
     """The effect catalogue: id, kind, physics, term, params (as in `param_declarations`)."""
+
+def method_declarations() -> list[dict[str, Any]]:
+    """The integration methods: name, adaptive (chooses its own steps), meaning."""
+
+def structure_declarations() -> list[dict[str, Any]]:
+    """The structures (`model` names): name, label, meaning, elements (takes n_elements), idm."""
 
 
 def simd_level() -> str:

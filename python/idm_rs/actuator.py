@@ -25,12 +25,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterable, Literal, Optional, Sequence, Union
+from typing import TYPE_CHECKING, Any, Iterable, Optional, Sequence, Union
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .batch import Point, Structure, run
+from .declarations import Model, elements_of
 from .effects import Effects
 from .methods import MethodName
 from .params import Params
@@ -84,7 +85,7 @@ def _check_train(waveform: Any, skip_cycles: int) -> Sawtooth:
     return waveform
 
 
-def _run_trains(params: Sequence[Params], waves: Sequence[Sawtooth], *, model: Literal["lps", "dps"], n_elements: int,
+def _run_trains(params: Sequence[Params], waves: Sequence[Sawtooth], *, model: Model, n_elements: int,
                 effects: Optional[Effects], skip_cycles: int, method: MethodName, threads: Optional[int],
                 piezo_hysteresis: bool = True, t_end: Optional[float] = None, **how: Any) -> dict[str, Any]:
     """One batch of trains (each point to its own train's end, or to ``t_end``)."""
@@ -105,7 +106,7 @@ def _steady(out: dict[str, Any], i: int) -> SteadyState:
     return SteadyState(*(float(out[k][i]) for k in STEADY_METRICS))
 
 
-def steady_state(params: Params, waveform: Sawtooth, *, model: Literal["lps", "dps"] = "dps", n_elements: int = 4,
+def steady_state(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_elements: int = 4,
                  effects: Optional[Effects] = None, skip_cycles: int = STARTUP_CYCLES, method: MethodName = "auto",
                  threads: Optional[int] = None, piezo_hysteresis: bool = True, t_end: Optional[float] = None,
                  **how: Any) -> SteadyState:
@@ -131,7 +132,7 @@ class StallForce:
     direction: float  #: the unloaded motion's direction (+1 or -1)
 
 
-def stall_force(params: Params, waveform: Sawtooth, *, model: Literal["lps", "dps"] = "dps", n_elements: int = 4,
+def stall_force(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_elements: int = 4,
                 effects: Optional[Effects] = None, skip_cycles: int = STARTUP_CYCLES, method: MethodName = "auto",
                 loads: int = 9, xtol: Optional[float] = None, threads: Optional[int] = None,
                 **how: Any) -> StallForce:
@@ -177,7 +178,7 @@ def stall_force(params: Params, waveform: Sawtooth, *, model: Literal["lps", "dp
     return StallForce(float(force), grid, v, xtol, sign)
 
 
-def characterize(params: Optional[Params] = None, *, model: Literal["lps", "dps"] = "dps", n_elements: int = 4,
+def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_elements: int = 4,
                  effects: Optional[Effects] = None, frequencies: Optional[Floats] = None,
                  voltages: Floats = (40.0, 60.0, 80.0, 100.0, 120.0),
                  step_voltages: Optional[Floats] = None, frequency: float = 100.0,
@@ -247,7 +248,7 @@ def characterize(params: Optional[Params] = None, *, model: Literal["lps", "dps"
     ds["stall_force"] = ((), stall.force, {"units": "N", "long_name": "opposing load at zero mean velocity",
                                            "xtol_N": stall.xtol})
     ds.attrs.update({
-        "idm_rs_version": __version__, "model": model, "n_elements": int(n_elements) if model == "dps" else 1,
+        "idm_rs_version": __version__, "model": model, "n_elements": elements_of(model, n_elements),
         "method": vmap.attrs["method"], "rise_s": rise, "cycles": cycles, "skip_cycles": skip_cycles,
         "design_frequency_Hz": frequency, "design_voltage_V": voltage,
         "velocity_at_design_m_per_s": float(ds["load_velocity"].values[0]),
@@ -281,7 +282,7 @@ def _interrupted(done: dict[str, Any], step_voltages: Any, frequency: float, par
     warnings.warn(f"characterize interrupted: kept {kept} (as far as it ran; NaN where not); no stall force "
                   "(attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
     ds.attrs.update({
-        "idm_rs_version": __version__, "model": model, "n_elements": int(n_elements) if model == "dps" else 1,
+        "idm_rs_version": __version__, "model": model, "n_elements": elements_of(model, n_elements),
         "rise_s": rise, "cycles": cycles, "skip_cycles": skip_cycles, "design_frequency_Hz": frequency,
         "design_voltage_V": voltage, "velocity_at_design_m_per_s": math.nan, "stall_force_N": math.nan,
         "complete": 0, "kept": kept,

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import engine
+from .declarations import StructureName
 from .effects import Effects
 from .params import Params
 from .waveforms import STARTUP_CYCLES, Sampled, Waveform
@@ -55,7 +56,7 @@ class Structure:
     ``n_elements`` FEM bar elements) or "rig" (see :class:`Rig`), and whether the piezo
     hysteresis state h runs."""
 
-    model: Literal["lps", "dps", "rig"] = "dps"
+    model: StructureName = "dps"
     n_elements: int = 4
     piezo_hysteresis: bool = True
     rig: Optional[Rig] = None

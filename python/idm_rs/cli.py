@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Literal, Optional, Sequence
 import numpy as np
 
 from .cli_figures import plot_result, plot_sweep
+from .declarations import IDM_MODELS, structure_label
 from .effects import Effects
 from .engine import __version__
 from .methods import METHODS
@@ -105,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="simulate one case and save its trajectory",
         description="Simulate one IDM case from rest and print x1(t_end).",
     )
-    sp.add_argument("--model", choices=("lps", "dps"), default="dps", help="lumped or FEM model (default: dps)")
+    sp.add_argument("--model", choices=IDM_MODELS, default="dps", help="lumped or FEM model (default: dps)")
     sp.add_argument("--n-elements", type=_positive_int, default=4, metavar="N",
                     help="FEM elements of the DPS (default: 4)")
     _add_method_arguments(sp)
@@ -133,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ch.add_argument("--out", default="idm-rs-characteristics", metavar="DIR",
                     help="output folder (default: %(default)s)")
-    ch.add_argument("--model", choices=("lps", "dps"), default="dps", help="lumped or FEM model (default: dps)")
+    ch.add_argument("--model", choices=IDM_MODELS, default="dps", help="lumped or FEM model (default: dps)")
     ch.add_argument("--n-elements", type=_positive_int, default=4, metavar="N",
                     help="FEM elements of the DPS (default: 4)")
     ch.add_argument("--frequencies", default=None, metavar="SPEC",
@@ -202,7 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--grid", action="append", default=[], required=True, metavar="NAME=SPEC",
                     help="a sweep axis: NAME=A:B:N (numpy.linspace(A, B, N)), NAME=V1,V2,... or NAME=V; "
                          "repeat for more axes (dimensions in the given order)")
-    sw.add_argument("--model", choices=("lps", "dps"), default="dps", help="lumped or FEM model (default: dps)")
+    sw.add_argument("--model", choices=IDM_MODELS, default="dps", help="lumped or FEM model (default: dps)")
     sw.add_argument("--n-elements", type=_positive_int, default=4, metavar="N",
                     help="FEM elements of the DPS (default: 4)")
     _add_method_arguments(sw)
@@ -574,7 +575,7 @@ def sweep_summary(ds: "xarray.Dataset", metric: str) -> str:
     axes = " x ".join(f"{d} ({ds.sizes[d]})" for d in ds["status"].dims) or "?"
     n = int(a["points"])
     wall = float(a["wall_time_s"])
-    model = "LPS" if a["model"] == "lps" else f"DPS (n = {a['n_elements']})"
+    model = structure_label(a["model"], a["n_elements"])
     step = f"dt = {a['dt_s']:g} s" if a["method"] == "rk4" else f"rtol = {a['rtol']:g}, atol = {a['atol']:g}"
     counts = np.bincount(ds["status"].values.ravel().astype(np.int64), minlength=len(STATUS_NAMES))
     statuses = ", ".join(f"{name} {int(c)}" for name, c in zip(STATUS_NAMES, counts) if c or name in ("ok", "diverged"))
@@ -632,7 +633,7 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     )
     elapsed = time.perf_counter() - t0
     result = full.thinned(a.save_every // plot_every)
-    label = "LPS" if a.model == "lps" else f"DPS (n = {a.n_elements})"
+    label = structure_label(a.model, a.n_elements)
     t_last = float(result.t[-1])
     how = (f"dt = {dt:g} s" if not adaptive else
            f"{a.method}" + (f" ({result.method})" if result.method != a.method else "")
@@ -850,7 +851,7 @@ def cmd_rig_fit(a: argparse.Namespace) -> int:
 def cmd_diagnose(a: argparse.Namespace) -> int:
     import json
 
-    from .diagnosis import diagnose
+    from .diagnosis import diagnose, plot_diagnosis, text_report
     from .diagnosis.report import json_safe
 
     if Path(a.case_dir).is_file():  # a measured rig data file: the rig diagnosis
@@ -868,7 +869,7 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
             print(f"wrote {len(paths)} figures in {a.plots}: " + ", ".join(p.name for p in paths))
         return 0
     d = diagnose(a.case_dir, progress=not a.no_progress, threads=a.threads, discover=not a.no_discover)
-    print(d.report())
+    print(text_report(d))
     if not d.complete:
         print("interrupted: the report above and the JSON (\"complete\": false) hold what was finished",
               file=sys.stderr)
@@ -879,7 +880,7 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
         out.write_text(json.dumps(json_safe(d.to_dict()), indent=2, allow_nan=False) + "\n", encoding="utf-8")
         print(f"wrote {out}")
     if a.plots:  # what finished, also after Ctrl-C
-        paths = d.plot(a.plots)
+        paths = plot_diagnosis(d, a.plots)
         if paths:
             kept = "" if d.complete else " (of what finished before the interrupt)"
             print(f"wrote {len(paths)} figures{kept} in {a.plots}: " + ", ".join(p.name for p in paths))

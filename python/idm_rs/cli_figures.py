@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
+from .declarations import structure_label
 from .simulation import SimulationResult
 from .waveforms import Sawtooth
 
@@ -22,7 +23,7 @@ class PlotError(ValueError):
 
 def result_title(result: SimulationResult) -> str:
     """The trajectory plot's title: the model, the effects that were on, x1(t_end)."""
-    label = "LPS" if result.model == "lps" else f"DPS (n = {result.n_elements})"
+    label = structure_label(result.model, result.n_elements)
     on = result.effects.active()
     effects = ("; " + ", ".join(f"{k} = {v:g}" for k, v in on.items())) if on else ""
     return f"{label}{effects}: x1(t_end) = {result.final_position * 1e6:.4f} µm"
@@ -174,7 +175,7 @@ def sweep_title(ds: "xarray.Dataset", metric: str) -> str:
     import textwrap
 
     a = ds.attrs
-    model = "LPS" if a.get("model") == "lps" else f"DPS (n = {a.get('n_elements')})"
+    model = structure_label(str(a.get("model")), int(a.get("n_elements", 1)))
     step = f"dt = {a.get('dt_s'):g} s" if a.get("method") == "rk4" else f"rtol = {a.get('rtol'):g}"
     on = [k[len("effect_"):] + f" = {v:g}" for k, v in a.items() if k.startswith("effect_")]
     details = (f"{model}, {a.get('method')} ({step}), t_end = {a.get('t_end_s'):g} s, "

@@ -1,7 +1,9 @@
 """The model's declarations, read once from the Rust core: Table 1 (each parameter's symbol,
-unit, meaning, domain and default) and the effect catalogue (each effect's id, physics, the term
-it adds, and its parameters). ``Params``, ``Effects``, the sweep's units, the diagnosis catalogue
-and its report all read these; none of them repeats a unit, a bound or a term.
+unit, meaning, domain and default), the effect catalogue (each effect's id, physics, the term
+it adds, and its parameters) and the structures (each ``model`` name, its label, whether it
+takes ``n_elements``). ``Params``, ``Effects``, the sweep's units, the diagnosis catalogue and
+its report, the CLI's choices and every figure's label read these; none of them repeats a unit,
+a bound, a term or a structure's name.
 """
 
 from __future__ import annotations
@@ -72,4 +74,58 @@ EFFECTS: tuple[EffectDecl, ...] = tuple(
 #: the parameters of the "term" effects: the fields of :class:`~idm_rs.Effects`, in order
 EFFECT_PARAMS: tuple[ParamDecl, ...] = tuple(p for e in EFFECTS if e.kind == "term" for p in e.params)
 
-__all__ = ["EFFECTS", "EFFECT_PARAMS", "GRAVITY", "TABLE1", "EffectDecl", "EffectKind", "ParamDecl"]
+
+
+@dataclass(frozen=True)
+class StructureDecl:
+    """One structure the engine runs (the ``model`` argument): its label in figures and reports,
+    what it is, whether it takes ``n_elements`` (a FEM bar), and whether it is an IDM (a piezo
+    element between two bodies) rather than a friction rig."""
+
+    name: str
+    label: str
+    meaning: str
+    elements: bool
+    idm: bool
+
+    def label_with(self, n_elements: int) -> str:
+        """The label with the element count where the structure has one ("DPS (n = 4)")."""
+        return f"{self.label} (n = {n_elements})" if self.elements else self.label
+
+
+#: every structure, in the engine's order
+STRUCTURES: tuple[StructureDecl, ...] = tuple(
+    StructureDecl(str(s["name"]), str(s["label"]), str(s["meaning"]), bool(s["elements"]), bool(s["idm"]))
+    for s in engine.structure_declarations()
+)
+#: the IDM's structures: the ``model`` choices of simulate, sweep, the recordings and the CLI
+IDM_MODELS: tuple[str, ...] = tuple(s.name for s in STRUCTURES if s.idm)
+#: the type of an IDM ``model`` argument; spelled out for the type checker, and held equal to
+#: IDM_MODELS by tests/test_declarations.py
+Model = Literal["lps", "dps"]
+#: the type of any structure's name (the rig included), held equal to STRUCTURES likewise
+StructureName = Literal["lps", "dps", "rig"]
+
+
+def structure(name: str, what: str = "model", idm_only: bool = True) -> StructureDecl:
+    """The declaration of structure `name`; a ValueError naming parameter `what` and the choices
+    (the IDM's only, unless `idm_only` is False) when there is none."""
+    choices = [s for s in STRUCTURES if s.idm or not idm_only]
+    for s in choices:
+        if s.name == name:
+            return s
+    raise ValueError(f"parameter '{what}' must be one of {', '.join(repr(s.name) for s in choices)}, got {name!r}")
+
+
+def structure_label(model: str, n_elements: int) -> str:
+    """A structure's label for figures and reports: "LPS", "DPS (n = 4)", "rig"."""
+    return structure(model, idm_only=False).label_with(int(n_elements))
+
+
+def elements_of(model: str, n_elements: int) -> int:
+    """The element count a run of `model` has: `n_elements` for a bar, else 1."""
+    return int(n_elements) if structure(model, idm_only=False).elements else 1
+
+
+__all__ = ["EFFECTS", "EFFECT_PARAMS", "GRAVITY", "IDM_MODELS", "STRUCTURES", "TABLE1", "EffectDecl", "EffectKind",
+           "Model", "ParamDecl", "StructureDecl", "StructureName", "elements_of", "structure", "structure_label"]

@@ -1,9 +1,9 @@
 """Optional physics beyond the paper's model (the catalogue of ``docs/RECORDINGS.md``, declared in
-``rust/src/effects.rs``).
+``rust/src/physics/effects.rs``).
 
 Each effect parameter is off at 0. They run inside the Rust engine (extra forces or states),
 so fits and sweeps with an effect run at engine speed. The effects and their parameters are
-declared once, in the Rust core (``rust/src/effects.rs``); the fields of :class:`Effects` and
+declared once, in the Rust core (``rust/src/physics/effects.rs``); the fields of :class:`Effects` and
 their documentation are built from that declaration (``effects.pyi`` gives type checkers the same
 fields; a test keeps it in step).
 """

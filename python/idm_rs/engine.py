@@ -35,6 +35,8 @@ set_simd_level = _core.set_simd_level
 # declarations of the model (Table 1, the effect catalogue); typed views in `declarations.py`
 param_declarations = _core.param_declarations
 effect_declarations = _core.effect_declarations
+structure_declarations = _core.structure_declarations
+method_declarations = _core.method_declarations
 GRAVITY: float = _core.GRAVITY
 
 __all__ = [
@@ -55,10 +57,12 @@ __all__ = [
     "kernel_accepts",
     "param_declarations",
     "param_names",
+    "method_declarations",
     "metric_columns",
     "resolve_params",
     "simulate",
     "start_batch",
     "state_components",
+    "structure_declarations",
     "wave_fields",
 ]

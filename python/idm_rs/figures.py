@@ -21,6 +21,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.ticker import FormatStrFormatter
 
+from .declarations import structure_label
 from .methods import MethodName
 from .paper import (
     FIG7_CHECK_CASE_NAME,
@@ -50,7 +51,7 @@ FIG7_NAMES = ("fig7a", "fig7b", "fig7c", "fig7d")
 
 
 def _label(r: SimulationResult) -> str:
-    return "LPS" if r.model == "lps" else f"DPS (n = {r.n_elements})"
+    return structure_label(r.model, r.n_elements)
 
 
 def _style(r: SimulationResult) -> dict[str, Any]:

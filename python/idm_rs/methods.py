@@ -20,7 +20,7 @@ steps. A point on Rodas4 runs 8 Dormand-Prince steps every 32 implicit steps (64
 while it stays) and goes back when they have become the cheaper (their mean step times the
 cost ratio reaches Rodas4's): a stiff phase ends when a sliding phase does. Each point
 decides from its own run only, so its result never depends on its neighbours, the thread
-count or the lane width. Rust: ``stiffness.rs``, ``switching.rs``.
+count or the lane width. Rust: ``integrate/stiffness.rs``, ``integrate/switching.rs``.
 """
 
 from __future__ import annotations
@@ -28,12 +28,15 @@ from __future__ import annotations
 import math
 from typing import Literal, Optional, cast
 
-MethodName = Literal["rk4", "dopri5", "rodas4", "auto"]
+from . import engine
 
-#: every method name the engine and the Python API accept
-METHODS: tuple[str, ...] = ("rk4", "dopri5", "rodas4", "auto")
+#: every method name the engine and the Python API accept, as the engine declares them
+METHODS: tuple[str, ...] = tuple(str(d["name"]) for d in engine.method_declarations())
 #: the methods that choose their own step
-ADAPTIVE: tuple[str, ...] = ("dopri5", "rodas4", "auto")
+ADAPTIVE: tuple[str, ...] = tuple(str(d["name"]) for d in engine.method_declarations() if d["adaptive"])
+#: the type of a method name: spelled out for the type checker, held equal to METHODS by
+#: tests/test_declarations.py
+MethodName = Literal["rk4", "dopri5", "rodas4", "auto"]
 
 #: what "auto" resolves to: (engine method, rtol, atol) of its explicit part, from the measurement
 #: described above (the implicit part's tolerances are 10/3 of these)

@@ -1,6 +1,6 @@
 """IDM parameters: the paper's Table 1 as defaults, names as in ``docs/MODEL.md`` (SI units).
 
-Table 1 is declared once, in the Rust core (``rust/src/params.rs``); the fields of
+Table 1 is declared once, in the Rust core (``rust/src/physics/params.rs``); the fields of
 :class:`Params`, their defaults and :data:`PARAM_INFO` are built from that declaration
 (``params.pyi`` gives type checkers the same fields; a test keeps it in step).
 """

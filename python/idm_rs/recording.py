@@ -27,6 +27,7 @@ from typing import Any, Iterator, Literal, Mapping, Optional, Sequence, Union
 import numpy as np
 from numpy.typing import NDArray
 
+from .declarations import IDM_MODELS, Model, structure
 from .params import Params
 from .waveforms import Sampled, Sawtooth, voltage_at
 
@@ -181,7 +182,7 @@ class Nominal:
     ``n_elements`` is the number of PE elements for ``"dps"`` and 1 for ``"lps"`` (as in
     :class:`idm_rs.SimulationResult`)."""
 
-    model: Literal["lps", "dps"]  #: "lps" or "dps"
+    model: Model  #: "lps" or "dps"
     n_elements: int
     piezo_hysteresis: bool
     params: Params
@@ -297,9 +298,10 @@ def _read_meta(case: Path) -> dict:
 def _parse_nominal(nom: Any, meta: Path) -> Nominal:
     _require(nom, ["model", "piezo_hysteresis", "params"], meta, "nominal")
     model = nom["model"]
-    if model not in ("lps", "dps"):
-        raise RecordingError(meta, f"must be \"lps\" or \"dps\", got {model!r}", column="nominal.model")
-    if model == "dps":
+    if model not in IDM_MODELS:
+        raise RecordingError(meta, f"must be one of {', '.join(repr(m) for m in IDM_MODELS)}, got {model!r}",
+                             column="nominal.model")
+    if structure(model).elements:
         if "n_elements" not in nom:
             raise RecordingError(meta, "missing key 'nominal.n_elements' (required for model \"dps\")")
         n = nom["n_elements"]

@@ -6,12 +6,13 @@ import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal, Optional, Sequence, Union
+from typing import TYPE_CHECKING, Any, Optional, Sequence, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import engine, methods
+from .declarations import Model, elements_of, structure_label
 from .effects import Effects
 from .external_force import ExternalForce
 from .methods import MethodName
@@ -28,7 +29,6 @@ if TYPE_CHECKING:
     from .actuator import SteadyState
     from .batch import Rig
 
-Model = Literal["lps", "dps"]
 DivergenceError = engine.DivergenceError
 
 
@@ -116,7 +116,7 @@ class SimulationResult:
 
     def __repr__(self) -> str:
         """A one-line summary (the arrays are attributes: ``result.t``, ``result.nodes``, ...)."""
-        model = "LPS" if self.model == "lps" else f"DPS (n = {self.n_elements})"
+        model = structure_label(self.model, self.n_elements)
         how = (f"rk4, dt = {self.dt:g} s" if self.method == "rk4"
                else f"{self.method}, rtol = {self.rtol:g}, atol = {self.atol:g}")
         span = f"t = {self.t[0]:g}..{self.t[-1]:g} s" if self.t.size else "no saved times"
@@ -390,7 +390,7 @@ def simulate(
         params=params,
         waveform=waveform,
         model=structure.model,
-        n_elements=int(n_elements) if model == "dps" else 1,
+        n_elements=elements_of(structure.model, n_elements),
         dt=step,
         piezo_hysteresis=bool(piezo_hysteresis),
         effects=effects,

@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from . import engine, methods
 from .batch import Structure, Tables, param_row
 from .batch import start as start_batch
-from .declarations import EFFECT_PARAMS, GRAVITY
+from .declarations import EFFECT_PARAMS, GRAVITY, Model, structure
 from .effects import Effects
 from .methods import MethodName
 from .params import PARAM_INFO, Params
@@ -75,7 +75,7 @@ class _Plan:
     values: tuple[NDArray[np.float64], ...]
     t_end: float
     dt: float
-    model: Literal["lps", "dps"]
+    model: Model
     n_elements: int
     piezo_hysteresis: bool
     method: str
@@ -262,7 +262,7 @@ def sweep(
     *,
     t_end: Optional[float] = None,
     dt: Optional[float] = None,
-    model: Literal["lps", "dps"] = "dps",
+    model: Model = "dps",
     n_elements: int = 4,
     metrics: Optional[Sequence[str]] = None,
     method: MethodName = "rk4",
@@ -362,8 +362,7 @@ def sweep(
                              "(use backend='cpu')")
     not_computed = [m for m in METRICS if m not in admitted] if metrics is None else []
     metrics = [m for m in METRICS if m not in not_computed] if metrics is None else metrics
-    if model not in ("lps", "dps"):
-        raise ValueError(f"parameter 'model' must be 'lps' or 'dps', got {model!r}")
+    structure(model)  # an IDM structure, else a ValueError naming the choices
     asked = methods.check(method)
     method, rtol, atol = methods.resolve(method, rtol, atol)
     adaptive = method in methods.ADAPTIVE
@@ -643,7 +642,7 @@ def _check_kernel_admits(plan: _Plan, backend: str) -> None:
     """Refuse by default: a kernel backend runs a sweep only when the structure, the waveform
     family and its fields, and every Table 1 parameter and effect that is swept or differs from
     its default are among what the kernel implements (``engine.kernel_accepts()``, declared in
-    rust/src/kernel.rs beside the packing); anything else is refused by name."""
+    rust/src/gpu/kernel.rs beside the packing); anything else is refused by name."""
     acc = engine.kernel_accepts()
     fix = "(use backend='cpu')"
     nodes = 2 if plan.model == "lps" else plan.n_elements + 1

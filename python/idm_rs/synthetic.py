@@ -21,6 +21,7 @@ from typing import Any, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
+from .declarations import structure
 from .effects import Effects, oriented
 from .params import Params
 from .recording import FORMAT_ID, HEADER, META, ORIENTATIONS
@@ -92,8 +93,7 @@ def make_case(
     """
     if not isinstance(nominal_params, Params):
         raise TypeError(f"nominal_params must be idm_rs.Params, got {type(nominal_params).__name__}")
-    if model not in ("lps", "dps"):
-        raise ValueError(f"model must be 'lps' or 'dps', got {model!r}")
+    structure(model)  # an IDM structure, else a ValueError naming the choices
     true_params = nominal_params if true_params is None else true_params
     true_model = model if true_model is None else true_model
     true_n_elements = n_elements if true_n_elements is None else true_n_elements

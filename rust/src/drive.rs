@@ -5,469 +5,27 @@
 //! accumulating sweep metrics are observers).
 //!
 //! Up to `L` runs ("lanes") of one state layout advance together, stage by stage (see
-//! `stepper.rs`); a lane's arithmetic is exactly that of a run alone, so results do not depend on
+//! `integrate/stepper.rs`); a lane's arithmetic is exactly that of a run alone, so results do not depend on
 //! how runs are grouped.
 
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::dopri5::Dopri5;
-use crate::stepper::{AdaptiveOptions, Held};
+use crate::integrate::crawl::CrawlWatch;
+use crate::integrate::dopri5::Dopri5;
+use crate::integrate::method::Method;
+use crate::integrate::model_rhs::{LaneInputs, ModelRhs};
+use crate::integrate::rk4::Rk4;
+use crate::integrate::rodas4::Rodas4;
+use crate::integrate::stepper::{Attempt, Held, State, Stepper};
+use crate::integrate::switching::Switching;
+use crate::integrate::task::{adaptive_options, LaneEnd, Observer, Resume, Task, CANCEL_CHECK_ATTEMPTS};
+use crate::lanes::dopri5::{run_dopri5_lanes, Handoff};
+use crate::lanes::rk4::run_rk4_lanes;
 use crate::lanes::{simd_arch, LaneExp, LibmExp, PlainLanes};
-use crate::lanes_dopri5::{run_dopri5_lanes, Handoff};
-use crate::lanes_rk4::run_rk4_lanes;
-use crate::model::{with_state_size, Model};
-use crate::rk4::Rk4;
-use crate::rodas4::Rodas4;
-use crate::scalar::Scalar;
-use crate::crawl::CrawlWatch;
-use crate::stepper::{Attempt, Rhs, State, Stepper};
-use crate::switching::Switching;
-use crate::waveform::{Cursor, PiecewiseLinear};
-
-/// RK4's stability limit on the imaginary axis is 2 sqrt 2; keep a margin.
-pub const RK4_STABLE_OMEGA_DT: f64 = 2.5;
-/// How often (in attempts) a running group looks at the cancel flag.
-pub(crate) const CANCEL_CHECK_ATTEMPTS: usize = 1 << 14;
-/// Smallest step an adaptive method may take before the run counts as diverged [s].
-const ADAPTIVE_H_MIN: f64 = 1e-14;
-
-/// Integration method of a run.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Method {
-    /// Fixed-step classical RK4 with step `dt` [s] (the reference).
-    Rk4 { dt: f64 },
-    /// Adaptive Dormand-Prince 5(4); `atol` in units of each state's natural scale (see
-    /// [`Model::state_scales`]), `first_step` [s] the first trial step.
-    Dopri5 { rtol: f64, atol: f64, first_step: f64 },
-    /// Adaptive Rodas4 (linearly implicit, L-stable: steps set by accuracy in the stiff sliding
-    /// phases); tolerances and first step as for `Dopri5`.
-    Rodas4 { rtol: f64, atol: f64, first_step: f64 },
-    /// Dormand-Prince at `rtol`, `atol`; a run that turns stiff tries a Rodas4 step (tolerances
-    /// `switching::IMPLICIT_TOL_FACTOR` times looser) and goes on with Rodas4 if it pays
-    /// (`stiffness.rs`, `switching.rs`).
-    Auto { rtol: f64, atol: f64, first_step: f64 },
-}
-
-impl Method {
-    /// The method called `name` ("rk4", "dopri5") with these settings, validated.
-    pub fn from_name(name: &str, dt: f64, rtol: f64, atol: f64, first_step: f64) -> Result<Self, String> {
-        let m = match name {
-            "rk4" => Method::Rk4 { dt },
-            "dopri5" => Method::Dopri5 {
-                rtol,
-                atol,
-                first_step,
-            },
-            "rodas4" => Method::Rodas4 {
-                rtol,
-                atol,
-                first_step,
-            },
-            "auto" => Method::Auto { rtol, atol, first_step },
-            other => {
-                return Err(format!(
-                    "parameter 'method' must be 'rk4', 'dopri5', 'rodas4' or 'auto', got '{other}'"
-                ))
-            }
-        };
-        m.validate()?;
-        Ok(m)
-    }
-
-    /// The fixed step [s] of a fixed-step method (RK4); `None` for an adaptive one.
-    pub fn fixed_step(&self) -> Option<f64> {
-        match *self {
-            Method::Rk4 { dt } => Some(dt),
-            Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => None,
-        }
-    }
-
-    /// Whether every step is the same, set beforehand (RK4).
-    pub fn is_fixed(&self) -> bool {
-        self.fixed_step().is_some()
-    }
-
-    /// The first step [s]: RK4's step, or an adaptive method's first trial step.
-    pub fn first_step(&self) -> f64 {
-        match *self {
-            Method::Rk4 { dt } => dt,
-            Method::Dopri5 { first_step, .. } | Method::Rodas4 { first_step, .. } | Method::Auto { first_step, .. } => {
-                first_step
-            }
-        }
-    }
-
-    /// Refuse tolerances or steps that are not positive and finite.
-    pub fn validate(&self) -> Result<(), String> {
-        match *self {
-            Method::Rk4 { dt } => {
-                if !(dt.is_finite() && dt > 0.0) {
-                    return Err(format!("parameter 'dt' must be positive and finite, got {dt}"));
-                }
-            }
-            Method::Dopri5 {
-                rtol,
-                atol,
-                first_step,
-            }
-            | Method::Rodas4 {
-                rtol,
-                atol,
-                first_step,
-            }
-            | Method::Auto { rtol, atol, first_step } => {
-                if !(rtol > 0.0 && atol > 0.0 && rtol.is_finite() && atol.is_finite()) {
-                    return Err(format!(
-                        "'rtol' and 'atol' must be positive, got {rtol}, {atol}"
-                    ));
-                }
-                if !(first_step.is_finite() && first_step > 0.0) {
-                    return Err(format!(
-                        "parameter 'first_step' must be positive and finite, got {first_step}"
-                    ));
-                }
-            }
-        }
-        Ok(())
-    }
-}
-
-/// Why a run stopped without a result.
-#[derive(Clone, Debug, PartialEq)]
-pub enum SimError {
-    /// Bad input (parameters, step size, waveform, initial state); the message names what.
-    Input(String),
-    /// The state left its physical bounds or became non-finite at time `t` [s].
-    Diverged { t: f64, message: String },
-}
-
-impl std::fmt::Display for SimError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            SimError::Input(m) => write!(f, "{m}"),
-            SimError::Diverged { message, .. } => write!(f, "{message}"),
-        }
-    }
-}
-
-/// One run: a model under an input from `t_start` to `t_end` [s], starting from `y0`.
-#[derive(Clone, Copy, Debug)]
-pub struct Task<'a, T: Scalar = f64> {
-    pub model: &'a Model<T>,
-    pub wave: &'a PiecewiseLinear,
-    pub t_start: f64,
-    pub t_end: f64,
-    pub y0: &'a [T],
-}
-
-/// How a run ended.
-#[derive(Clone, Debug, PartialEq)]
-pub enum LaneEnd {
-    /// Reached `t_end` after `steps` accepted steps, the smallest `min_step` [s] long.
-    Finished { steps: u64, min_step: f64 },
-    /// Diverged at time `t` [s] (the state there is the run's final state); `why` for adaptive
-    /// methods whose step collapsed; `v_last` [m/s] the main body's velocity at the last state
-    /// within bounds (for step hints).
-    Diverged { t: f64, why: Option<String>, v_last: f64 },
-}
-
-/// Sees a run's states as they are accepted (states of `f64`, or of dual numbers when
-/// derivatives are carried).
-pub trait Observer<T: Scalar = f64> {
-    /// Task `task` starts at time `t` [s] in state `y`.
-    fn start(&mut self, task: usize, t: f64, y: &[T]);
-    /// Task `task` accepted a step of `span` [s] ending at time `t` [s] in state `y`, with the
-    /// commanded voltage `v_cmd` [V] there; `start` is the model's (Ff [N], dg/dt [m/s]) at the
-    /// state the step started from when the integrator evaluated it (RK4's first stage);
-    /// `last` marks the run's final step.
-    #[allow(clippy::too_many_arguments)]
-    fn step(
-        &mut self,
-        task: usize,
-        t: f64,
-        span: f64,
-        y: &[T],
-        v_cmd: f64,
-        start: Option<(T, T)>,
-        last: bool,
-    );
-
-    /// An adaptive method's accepted step [s] for task `task`, exactly as the method took it
-    /// (called before [`Observer::step`]; the span there is the difference of two times).
-    fn accepted_step(&mut self, _task: usize, _step: f64) {}
-
-    /// Task `task` (a `method="auto"` run) changed method after `accepted` accepted steps: to
-    /// the implicit one, or back after a failed probation (the calls alternate).
-    fn switched(&mut self, _task: usize, _accepted: u64) {}
-}
-
-/// Number of RK4 steps of `dt` from `t_start` to `t_end`, refusing a `dt` that does not divide
-/// them into whole steps or the input's breakpoints, or that the structure's highest mode or a
-/// fast effect lag makes unstable. The message names the parameter and a step that works.
-pub fn plan_steps(
-    model: &Model,
-    wave: &PiecewiseLinear,
-    t_start: f64,
-    t_end: f64,
-    dt: f64,
-) -> Result<usize, SimError> {
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(SimError::Input(format!(
-            "parameter 'dt' must be positive and finite, got {dt}"
-        )));
-    }
-    check_span(t_start, t_end)?;
-    let whole = |x: f64| (x / dt - (x / dt).round()).abs() <= 1e-6;
-    let suggestion = || match fitting_step(wave, t_start, t_end, dt) {
-        Some(d) => format!("dt = {d:e} s divides the run and every breakpoint"),
-        None => "choose a dt that divides t_start, t_end and every breakpoint time".into(),
-    };
-    if !whole(t_start) {
-        return Err(SimError::Input(format!(
-            "t_start = {t_start:e} s is not a whole number of steps dt = {dt:e} s; \
-             start on a multiple of dt, or use {}",
-            suggestion()
-        )));
-    }
-    // a breakpoint off the step grid is named first: it is usually the cause (a rise time that
-    // is not a multiple of dt), even when t_end does not divide either
-    if let Some(ti) = wave.misaligned(dt, t_end) {
-        return Err(SimError::Input(format!(
-            "dt = {dt:e} s does not divide the waveform breakpoint at t = {ti:e} s (where the input \
-             changes slope, e.g. the end of a rise; breakpoints must fall on step boundaries); {}",
-            suggestion()
-        )));
-    }
-    if let Some(ti) = model.external.as_ref().and_then(|x| x.knots.misaligned(dt, t_end)) {
-        return Err(SimError::Input(format!(
-            "dt = {dt:e} s does not divide the external force's sample at t = {ti:e} s (its samples \
-             must fall on step boundaries with RK4); sample the force on a multiple of dt, or use an \
-             adaptive method"
-        )));
-    }
-    let steps = ((t_end - t_start) / dt).round();
-    if (steps * dt - (t_end - t_start)).abs() > 1e-6 * dt || steps < 1.0 {
-        return Err(SimError::Input(format!(
-            "dt = {dt:e} s does not divide t_end = {t_end:e} s into whole steps; {}",
-            suggestion()
-        )));
-    }
-    // a first-order lag much faster than the step makes its state stiff: RK4 would diverge
-    for (name, tau) in model.effects.lags() {
-        if tau > 0.0 && tau * RK4_STABLE_OMEGA_DT < dt {
-            return Err(SimError::Input(format!(
-                "effect parameter '{name}' = {tau:e} s is too short for dt = {dt:e} s (RK4 needs dt <= {:.3e} s); \
-                 use a smaller dt, or 0 to switch the effect off",
-                tau * RK4_STABLE_OMEGA_DT
-            )));
-        }
-    }
-    let w = model.mech.highest_frequency();
-    if w * dt > RK4_STABLE_OMEGA_DT {
-        return Err(SimError::Input(format!(
-            "dt = {dt:e} s is unstable for the highest structural mode ({w:.4e} rad/s); \
-             use dt <= {:.3e} s",
-            RK4_STABLE_OMEGA_DT / w
-        )));
-    }
-    Ok(steps as usize)
-}
-
-/// An RK4 step not above `dt` [s] that puts `t_start`, `t_end` and every breakpoint of `wave` in
-/// between on the step grid (steps count from t = 0): the largest round one (1, 2, 2.5, 4 or 5
-/// times a power of ten) within a factor 10 below `dt`, else the largest t_end / k; `None` if
-/// neither is found.
-pub fn fitting_step(wave: &PiecewiseLinear, t_start: f64, t_end: f64, dt: f64) -> Option<f64> {
-    if !(dt.is_finite() && dt > 0.0 && t_end.is_finite() && t_end > 0.0) {
-        return None;
-    }
-    let fits = |d: f64| {
-        let whole = |x: f64| ((x / d) - (x / d).round()).abs() <= 1e-6;
-        whole(t_start) && whole(t_end) && wave.misaligned(d, t_end).is_none()
-    };
-    let decade = dt.log10().floor();
-    let round = (0..3)
-        .flat_map(|k| [5.0, 4.0, 2.5, 2.0, 1.0].map(|m| m * 10f64.powf(decade - k as f64)))
-        .map(|d| format!("{d:.6e}").parse::<f64>().unwrap_or(d)) // exactly the printed value
-        .filter(|&d| d <= dt * (1.0 + 1e-12) && d >= dt / 10.0)
-        .find(|&d| fits(d));
-    if round.is_some() {
-        return round;
-    }
-    let first = (t_end / dt * (1.0 - 1e-12)).ceil().max(1.0);
-    if first > 1e13 {
-        return None;
-    }
-    (0..100_000u64).map(|i| t_end / (first + i as f64)).find(|&d| fits(d))
-}
-
-/// Refuse a time span that is not finite or not increasing.
-pub fn check_span(t_start: f64, t_end: f64) -> Result<(), SimError> {
-    if !(t_end.is_finite() && t_end > 0.0) {
-        return Err(SimError::Input(format!(
-            "parameter 't_end' must be positive and finite, got {t_end}"
-        )));
-    }
-    if !(t_start.is_finite() && t_start >= 0.0 && t_start < t_end) {
-        return Err(SimError::Input(format!(
-            "parameter 't_start' must be finite, non-negative and before t_end = {t_end:e} s, got {t_start}"
-        )));
-    }
-    Ok(())
-}
-
-/// Check a run's settings before any work: the span, and for RK4 the step plan.
-pub fn check_task(task: &Task, method: &Method) -> Result<(), SimError> {
-    method.validate().map_err(SimError::Input)?;
-    task.model
-        .check_state(task.y0)
-        .map_err(SimError::Input)?;
-    match *method {
-        Method::Rk4 { dt } => plan_steps(task.model, task.wave, task.t_start, task.t_end, dt).map(|_| ()),
-        Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => check_span(task.t_start, task.t_end),
-    }
-}
-
-/// The message of a divergence at time `t` [s] in state `y` with RK4 step `dt` [s], `v_last`
-/// [m/s] the main body's velocity at the last state that was still within bounds: where the state
-/// left its bounds and a step to try. The step comes from the stability estimate of the friction
-/// state at `v_last` (the diverged state's own velocity is meaningless), never below dt / 64,
-/// and is fitted to the run's breakpoints and span when `wave` is given.
-pub fn divergence_message(
-    model: &Model,
-    dt: f64,
-    t: f64,
-    y: &[f64],
-    v_last: f64,
-    fit: Option<(&PiecewiseLinear, f64, f64)>,
-) -> String {
-    let l = model.layout;
-    let stiff = model.friction.sliding_stiffness(v_last);
-    let w = model.mech.highest_frequency().max(stiff);
-    let stable = if w.is_finite() && w > 0.0 {
-        RK4_STABLE_OMEGA_DT / w
-    } else {
-        f64::NAN
-    };
-    // RK4 failed at dt: the hint is below it, and a blown-up estimate is not trusted below dt/64
-    let raw = if stable.is_finite() { stable.clamp(dt / 64.0, dt / 2.0) } else { dt / 4.0 };
-    let hint = fit
-        .and_then(|(wave, t0, t1)| fitting_step(wave, t0, t1, raw))
-        .unwrap_or(raw);
-    format!(
-        "integration diverged at t = {t:.6e} s (Fh = {:.4e} N, bound {:.4e} N; v1 = {:.4e} m/s the step \
-         before): dt = {dt:e} s is too large for the friction state's stiffness during sliding \
-         (stability estimate there: dt <= {stable:.2e} s); try dt = {hint:e} s, or method 'rodas4' \
-         (implicit, no such limit)",
-        y[l.fh],
-        model.presliding_bound(),
-        v_last
-    )
-}
-
-/// What the driver needs of a lane group's right-hand side besides evaluating it: each lane's
-/// input over the step (V = v0 + slope tau) and what the evaluation at the step's start found.
-pub trait LaneInputs<T: Scalar, const L: usize>: Rhs<T> {
-    /// Set lane `i`'s input for the next attempt from time `t0` [s]: `v0` [V] at the step's
-    /// start, `slope` [V/s].
-    fn set_input(&mut self, i: usize, t0: f64, v0: f64, slope: f64);
-    /// Lane `i`'s input as set: (v0 [V], slope [V/s]).
-    fn input(&self, i: usize) -> (f64, f64);
-    /// Lane `i`'s (Ff [N], dg/dt [m/s]) at the state its last step started from.
-    fn at_start(&self, i: usize) -> (T, T);
-}
-
-impl<T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> LaneInputs<T, L> for ModelRhs<'_, T, N, EXTRAS, L> {
-    #[inline(always)]
-    fn set_input(&mut self, i: usize, t0: f64, v0: f64, slope: f64) {
-        self.t0[i] = t0;
-        self.v0[i] = v0;
-        self.slope[i] = slope;
-    }
-    #[inline(always)]
-    fn input(&self, i: usize) -> (f64, f64) {
-        (self.v0[i], self.slope[i])
-    }
-    #[inline(always)]
-    fn at_start(&self, i: usize) -> (T, T) {
-        self.at_start[i]
-    }
-}
-
-impl<'a, T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> ModelRhs<'a, T, N, EXTRAS, L> {
-    /// The right-hand side of `tasks` (lane i runs task i; lanes beyond them idle on the last
-    /// one's model), with the presliding bound widened by the stepper's `slack`.
-    pub fn for_tasks(tasks: &[Task<'a, T>], slack: f64) -> Self {
-        let m = tasks.len();
-        let lane = |i: usize| i.min(m - 1);
-        let zero = T::from(0.0);
-        ModelRhs {
-            models: std::array::from_fn(|i| tasks[lane(i)].model),
-            t0: [0.0; L],
-            v0: [0.0; L],
-            slope: [0.0; L],
-            at_start: [(zero, zero); L],
-            bound: std::array::from_fn(|i| tasks[lane(i)].model.presliding_bound() * (1.0 + slack) + 1e-12),
-        }
-    }
-}
-
-/// The model under a linear input over one step, per lane: V = v0 + slope tau. Keeps each
-/// lane's (Ff, dg/dt) from its evaluation at tau = 0, i.e. at the state the step starts from.
-pub struct ModelRhs<'a, T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> {
-    pub models: [&'a Model<T>; L],
-    /// the step's start [s] (the sampled force and the library read absolute time)
-    pub t0: [f64; L],
-    pub v0: [f64; L],
-    pub slope: [f64; L],
-    pub at_start: [(T, T); L],
-    /// |Fh| bound of each lane's domain [N] (with the stepper's slack)
-    pub bound: [f64; L],
-}
-
-impl<T: Scalar, const N: usize, const EXTRAS: bool, const L: usize> Rhs<T> for ModelRhs<'_, T, N, EXTRAS, L> {
-    #[inline(always)]
-    fn eval(&mut self, lane: usize, tau: f64, y: &[T], dy: &mut [T]) {
-        let out = self.models[lane].rhs_impl::<N, EXTRAS>(
-            self.t0[lane] + tau,
-            T::from(self.v0[lane] + self.slope[lane] * tau),
-            self.slope[lane],
-            y,
-            dy,
-        );
-        if tau == 0.0 {
-            self.at_start[lane] = out;
-        }
-    }
-
-    #[inline(always)]
-    fn admissible(&self, lane: usize, y: &[T]) -> bool {
-        !self.models[lane].is_diverged(y, self.bound[lane])
-    }
-
-    #[inline(always)]
-    fn jacobian(&mut self, lane: usize, tau: f64, y: &[T], jac: &mut [T], dfdt: &mut [T]) {
-        let (v0, s) = (self.v0[lane], self.slope[lane]);
-        self.models[lane].jacobian(self.t0[lane] + tau, v0 + s * tau, s, y, jac, dfdt);
-    }
-}
-
-/// Where a run handed over by the vector path (`method="auto"`, a lane whose run turned stiff)
-/// continues: its task starts at the hand-over time and state, and these carry
-/// what the run had counted so far.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Resume {
-    /// accepted steps so far, and the smallest [s]
-    pub steps: u64,
-    pub min_step: f64,
-    /// the main body's velocity at the last state [m/s]
-    pub v_last: f64,
-    /// the explicit step the run had proposed next [s] (its trial step is a multiple)
-    pub h: f64,
-    /// the run's watch on its pace (`crawl.rs`)
-    pub watch: CrawlWatch,
-}
+use crate::model::with_state_size;
+use crate::numbers::scalar::Scalar;
+use crate::physics::waveform::Cursor;
 
 /// Advance up to `L` tasks of one state layout together (`tasks[i]` on lane i; unused lanes idle)
 /// from their initial states in `ys`, which end holding the final states, with `rhs` their
@@ -475,6 +33,9 @@ pub struct Resume {
 /// lane 0; `dt` [s] the step of a fixed-step stepper; `resume`: tasks that continue a run
 /// (their observer was started already, their counts go on). `None` if cancelled. Always
 /// inlined: the caller may compile it for the processor's vector width (`run_tasks`).
+// Long: one step loop whose per-lane state (input cursor, step, counts, crawl watch) stays in
+// locals across the attempt, the divergence check and the observer; split, each part would take a
+// dozen `&mut` arguments and lose the guaranteed inlining the vector dispatch needs.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn drive_lanes<S, St, O, R, const L: usize>(
@@ -637,21 +198,6 @@ where
             .map(|o| o.expect("every lane ends"))
             .collect(),
     )
-}
-
-/// Adaptive options for a task: error scales from the model and the input's peak; `held`
-/// steps to take instead of choosing them (see [`AdaptiveOptions::held`]).
-pub(crate) fn adaptive_options<T: Scalar>(task: &Task<T>, rtol: f64, atol: f64, first_step: f64, held: &Held) -> AdaptiveOptions {
-    let v_max = task.wave.peak();
-    AdaptiveOptions {
-        rtol,
-        atol,
-        scale: task.model.state_scales(v_max),
-        h_init: first_step,
-        h_min: ADAPTIVE_H_MIN,
-        h_max: ((task.t_end - task.t_start) / 10.0).max(first_step),
-        held: held.clone(),
-    }
 }
 
 /// Run one group of up to `L` tasks of one state layout with `method` (`D` components fixed at
@@ -888,7 +434,7 @@ pub fn run_tasks_exp<O: Observer, E: LaneExp, const L: usize>(
     if tasks.is_empty() {
         return Some(out);
     }
-    // the plain models' lanes as vectors (lanes.rs), compiled for the processor's widest
+    // the plain models' lanes as vectors (lanes/mod.rs), compiled for the processor's widest
     // vector instructions and chosen at run time (`simd_arch`)
     macro_rules! fixed {
         ($n:literal, $d:literal, $x:literal) => {

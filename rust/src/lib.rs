@@ -1,42 +1,28 @@
-//! idm-rs core: dynamics of a piezoelectric impact drive mechanism (IDM).
+//! idm-rs core: dynamics of a piezoelectric impact drive mechanism (IDM). Each folder is one
+//! layer and uses only the layers listed above it:
 //!
-//! One physical idea per module; the numerics are plain Rust, testable with `cargo test`.
-//! The Python bindings (`python` feature) are a thin layer in `bindings`.
+//! - [`numbers`]: the number types the physics is written over (f64, duals, lane vectors);
+//! - [`physics`]: parameters, input voltage and every force law (friction, piezo, mechanisms, effects);
+//! - [`model`]: the IDM as one first-order system (state layout, right-hand side, Jacobian);
+//! - [`integrate`]: what a run is, and the integrators (RK4, Dormand-Prince, Rodas4, auto);
+//! - [`lanes`]: the same integrators over `L` runs at once on vector lanes;
+//! - [`drive`]: the one driver every run goes through (groups runs onto lanes or runs them one by one);
+//! - [`simulate`], [`sensitivity`], [`batch`]: one saved run, exact derivatives, many points in parallel;
+//! - [`gpu`] (the CUDA kernel's constants) and `python` (the PyO3 binding, `python` feature).
 
-pub mod batch;
-pub mod crawl;
-pub mod declare;
-pub mod dopri5;
-pub mod drive;
-pub mod effects;
-pub mod external_force;
-pub mod friction;
-pub mod jacobian;
-pub mod fast_exp;
-pub mod kernel;
-pub mod lane_real;
-pub mod lanes;
-pub mod lanes_dopri5;
-pub mod lanes_rk4;
-pub mod mechanics;
+pub mod numbers;
+pub mod physics;
 pub mod model;
-pub mod params;
-pub mod piezo;
-pub mod rig;
-pub mod real;
-pub mod rk4;
-pub mod rodas4;
-pub mod scalar;
+pub mod integrate;
+pub mod lanes;
+pub mod drive;
 pub mod sensitivity;
 pub mod simulate;
-pub mod stepper;
-pub mod stiffness;
-pub mod switching;
-pub mod tangent;
-pub mod waveform;
+pub mod batch;
+pub mod gpu;
 
 #[cfg(test)]
 mod paper_case_tests;
 
 #[cfg(feature = "python")]
-mod bindings;
+mod python;

@@ -1,11 +1,11 @@
 //! End-to-end checks of the paper case against MODEL.md's reference values.
 
-use crate::effects::Effects;
-use crate::mechanics::Structure;
+use crate::physics::effects::Effects;
+use crate::physics::mechanics::Structure;
 use crate::model::Model;
-use crate::params::Params;
+use crate::physics::params::Params;
 use crate::simulate::simulate_from_rest as simulate;
-use crate::waveform::PiecewiseLinear;
+use crate::physics::waveform::PiecewiseLinear;
 
 fn paper_run(structure: Structure, dt: f64) -> f64 {
     let m = Model::new(Params::paper(), Effects::default(), structure, true, false).unwrap();
@@ -35,7 +35,7 @@ fn too_large_step_is_reported_as_divergence() {
     .unwrap();
     let w = PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap();
     match simulate(&m, &w, 10e-3, 5e-7, 100) {
-        Err(crate::drive::SimError::Diverged { t, message }) => {
+        Err(crate::integrate::task::SimError::Diverged { t, message }) => {
             assert!(t > 0.0 && t < 10e-3);
             // a step from the stability estimate, fitted to the run's breakpoints, that works
             let hint: f64 = message
@@ -64,7 +64,7 @@ fn paper_case_final_positions_are_pinned_to_the_bit() {
 #[test]
 fn rk4_batch_outputs_are_pinned_to_the_bit() {
     use crate::batch::*;
-    use crate::drive::Method;
+    use crate::integrate::method::Method;
     use std::sync::atomic::{AtomicBool, AtomicUsize};
     let mut specs = Vec::new();
     for i in 0..9 {

@@ -1,7 +1,7 @@
 //! Parameter sensitivities from the engine: the exact derivative of a run's recorded readings
 //! (and of its final state) with respect to Table 1 parameters, effect parameters and
 //! components of the initial state, by forward-mode dual numbers carried through the same
-//! right-hand side and the same integrator as the plain run (`scalar.rs`). RK4 takes the same
+//! right-hand side and the same integrator as the plain run (`numbers/scalar.rs`). RK4 takes the same
 //! fixed steps; an adaptive method is run again with the steps the plain run accepted held
 //! (`AdaptiveOptions::held`), so what comes back is the derivative of that discrete solution,
 //! step sizes fixed — not a finite difference.
@@ -15,16 +15,18 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use num_dual::{Dual64, DualSVec64};
 
-use crate::stepper::Held;
-use crate::drive::{run_tasks_one_by_one, LaneEnd, Method, Observer, SimError, Task};
-use crate::effects::{EFFECTS, EFFECT_NAMES, LAGS};
-use crate::lane_real::Lanewise;
+use crate::integrate::stepper::Held;
+use crate::drive::run_tasks_one_by_one;
+use crate::integrate::method::Method;
+use crate::integrate::task::{LaneEnd, Observer, SimError, Task};
+use crate::physics::effects::{EFFECTS, EFFECT_NAMES, LAGS};
+use crate::numbers::lane_real::Lanewise;
 use crate::model::Model;
-use crate::params::PARAM_NAMES;
-use crate::real::Real;
-use crate::scalar::Seedable as Dual;
-use crate::tangent::Tangent;
-use crate::waveform::{Cursor, PiecewiseLinear};
+use crate::physics::params::PARAM_NAMES;
+use crate::numbers::real::Real;
+use crate::numbers::scalar::Seedable as Dual;
+use crate::numbers::tangent::Tangent;
+use crate::physics::waveform::{Cursor, PiecewiseLinear};
 
 /// Widest dual number one pass carries; more names take several passes.
 pub const MAX_PER_PASS: usize = 8;
@@ -356,7 +358,7 @@ impl<const K: usize> pulp::WithSimd for TangentRun<'_, '_, K> {
 }
 
 /// Fixed-step RK4 of one tangent run, step for step as the generic driver takes it with one
-/// lane (`drive::drive_lanes`, `rk4.rs`): step k from t = k dt, the input through the step from
+/// lane (`drive::drive_lanes`, `integrate/rk4.rs`): step k from t = k dt, the input through the step from
 /// the breakpoint cursor at its midpoint, the four stages and the update in the same order,
 /// the same divergence check; the recorder sees each accepted step. Stops early (as
 /// `Finished`, with the recorder holding the time) once a recorded derivative is not finite.
@@ -375,7 +377,7 @@ fn rk4_pass<const K: usize>(
 ) -> Option<(LaneEnd, Vec<Tangent<K>>)> {
     let n = y0.len();
     let dof = model.layout.dof;
-    let bound = model.presliding_bound() * (1.0 + crate::rk4::BOUND_SLACK) + 1e-12;
+    let bound = model.presliding_bound() * (1.0 + crate::integrate::rk4::BOUND_SLACK) + 1e-12;
     let mut y = y0.to_vec();
     let zero = Tangent::constant(0.0);
     let (mut k1, mut k2, mut k3, mut k4, mut tmp) = (vec![zero; n], vec![zero; n], vec![zero; n], vec![zero; n], vec![zero; n]);
@@ -387,7 +389,7 @@ fn rk4_pass<const K: usize>(
     let mut steps = 0u64;
     rec.record(t_start, &y);
     loop {
-        if steps.is_multiple_of(crate::drive::CANCEL_CHECK_ATTEMPTS as u64) && cancel.load(Ordering::Relaxed) {
+        if steps.is_multiple_of(crate::integrate::task::CANCEL_CHECK_ATTEMPTS as u64) && cancel.load(Ordering::Relaxed) {
             return None;
         }
         let t0 = k as f64 * dt;
@@ -421,13 +423,13 @@ fn rk4_pass<const K: usize>(
 }
 
 /// The right-hand side at `tau` [s] into the step from `t0` [s], the input `v0 + s tau` [V]
-/// (as `drive::ModelRhs::eval`).
+/// (as `integrate::model_rhs::ModelRhs::eval`).
 #[inline(always)]
 fn stage_rate<const K: usize>(model: &Model<Tangent<K>>, t0: f64, v0: f64, s: f64, tau: f64, y: &[Tangent<K>], dy: &mut [Tangent<K>]) {
     model.rhs_impl::<0, true>(t0 + tau, Tangent::constant(v0 + s * tau), s, y, dy);
 }
 
-/// out = y + h k (as `rk4.rs`)
+/// out = y + h k (as `integrate/rk4.rs`)
 #[inline(always)]
 fn axpy<const K: usize>(out: &mut [Tangent<K>], y: &[Tangent<K>], h: f64, k: &[Tangent<K>]) {
     for j in 0..out.len() {
@@ -464,7 +466,7 @@ impl<const K: usize> Carries for Tangent<K> {
 fn unbounded(model: &Model, t: f64, v_peak: f64, method: &Method) -> SimError {
     let hint = match method.fixed_step() {
         Some(dt) => {
-            let limit = crate::drive::RK4_STABLE_OMEGA_DT / model.friction.sliding_stiffness(v_peak);
+            let limit = crate::integrate::plan::RK4_STABLE_OMEGA_DT / model.friction.sliding_stiffness(v_peak);
             format!(
                 "dt = {dt:e} s is beyond the stability limit of the friction state while sliding at up to {v_peak:.3e} m/s \
                  (dt <= {limit:.2e} s): the run's values stay bounded by the friction law's saturation but chatter \
@@ -542,10 +544,10 @@ impl<D: Dual> Observer<D> for Recorder<'_, D> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::effects::Effects;
-    use crate::mechanics::Structure;
-    use crate::params::Params;
-    use crate::rig::RigDrive;
+    use crate::physics::effects::Effects;
+    use crate::physics::mechanics::Structure;
+    use crate::physics::params::Params;
+    use crate::physics::rig::RigDrive;
     use crate::simulate::simulate_keeping;
 
     static NEVER: AtomicBool = AtomicBool::new(false);

@@ -4,12 +4,15 @@
 
 use std::sync::atomic::AtomicBool;
 
-use crate::stepper::Held;
-use crate::drive::{divergence_message, run_tasks, LaneEnd, Method, Observer, SimError, Task};
+use crate::integrate::stepper::Held;
+use crate::drive::run_tasks;
+use crate::integrate::method::Method;
+use crate::integrate::plan::divergence_message;
+use crate::integrate::task::{LaneEnd, Observer, SimError, Task};
 use crate::model::Model;
-use crate::crawl::CRAWL_PREFIX;
+use crate::integrate::crawl::CRAWL_PREFIX;
 use crate::sensitivity::{derivatives, Derivatives, Schedule, Seed};
-use crate::waveform::PiecewiseLinear;
+use crate::physics::waveform::PiecewiseLinear;
 
 /// Saved trajectory; each per-time array has one entry per saved time.
 #[derive(Clone, Debug, Default)]
@@ -169,7 +172,7 @@ pub fn simulate_keeping(
         t_end,
         y0,
     };
-    crate::drive::check_task(&task, method)?;
+    crate::integrate::plan::check_task(&task, method)?;
     let mut saver = Saver {
         model,
         wave,
@@ -262,9 +265,9 @@ pub fn simulate_from_rest(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::effects::Effects;
-    use crate::mechanics::Structure;
-    use crate::params::Params;
+    use crate::physics::effects::Effects;
+    use crate::physics::mechanics::Structure;
+    use crate::physics::params::Params;
 
     fn paper(structure: Structure, effects: Effects) -> (Model, PiecewiseLinear) {
         let m = Model::new(Params::paper(), effects, structure, true, false).unwrap();
@@ -350,7 +353,7 @@ mod tests {
         let dp = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
         let err = simulate(&m, &w, 0.0, 1e-3, &m.rest_state(), &dp, 100).unwrap_err().to_string();
         assert!(err.starts_with("integration stopped at t = "), "{err}");
-        assert!(err.contains(crate::crawl::CRAWL_PREFIX) && err.contains("stability limit") && err.contains("'rodas4'"),
+        assert!(err.contains(crate::integrate::crawl::CRAWL_PREFIX) && err.contains("stability limit") && err.contains("'rodas4'"),
                 "{err}");
         // once its pace projects more than 1e8 (the step shrinks as the contact speeds up: after
         // 0.74 M steps here, a quarter of a second), not after the 2e8 the run would take
@@ -386,7 +389,7 @@ mod tests {
         let at = *a.held.switches.first().expect("the near-frictionless run switches");
         assert!(a.held.switches.len() % 2 == 1, "and ends implicit: {:?}", a.held.switches);
         // after TRY_IMPLICIT_AFTER steps at the stability limit (measured: 467)
-        assert!(at < 3 * crate::stiffness::TRY_IMPLICIT_AFTER as u64, "switched after {at} steps");
+        assert!(at < 3 * crate::integrate::stiffness::TRY_IMPLICIT_AFTER as u64, "switched after {at} steps");
         let steps = a.t.len() - 1;
         assert!(steps < 20_000, "{steps} steps");
         let tight = Method::Rodas4 { rtol: 1e-9, atol: 1e-9, first_step: 1e-9 };
@@ -403,7 +406,7 @@ mod tests {
         // implicit steps, between each switch to Rodas4 and the next back
         let implicit: u64 = sw.chunks(2).map(|p| p[1] - p[0]).sum();
         let (steps, explicit_steps) = ((a.t.len() - 1) as u64, (d.t.len() - 1) as f64);
-        let cost = (steps - implicit) as f64 + crate::stiffness::implicit_step_cost(m.rest_state().len()) * implicit as f64;
+        let cost = (steps - implicit) as f64 + crate::integrate::stiffness::implicit_step_cost(m.rest_state().len()) * implicit as f64;
         eprintln!("paper auto: switches {sw:?}, {steps} steps ({implicit} implicit), dopri5 {explicit_steps}");
         assert!(cost < 1.2 * explicit_steps, "{cost} Dormand-Prince steps' worth against {explicit_steps}");
         assert!((a.final_state[0] - d.final_state[0]).abs() < 1e-9);

@@ -18,23 +18,16 @@ from numpy.typing import NDArray
 from .case_model import ModelSpec
 from .fitting import FitResult, FreeParam, Objective, apply
 from .multistart import MultiStart, Start, multistart
-
-#: drive cycles of every experiment the population search compares (cheap and smooth)
-SEARCH_CYCLES = 1
-#: population per free parameter and generations of the search
-POPULATION_PER_PARAM = 6
-GENERATIONS = 25
-#: distinct good members the search hands on as starts
-POLISHES = 2
-#: Latin-hypercube starts over the plausible ranges, ranked beside the search's members
-LHS_STARTS = 8
-#: local fits from the best distinct promising ranked starts (the search's best member, the
-#: nominal values and the best 1-D scan start get one each besides)
-LOCAL_FITS = 1
-#: points of each calibrated parameter's 1-D scan over its plausible range (the others at their
-#: nominal values), over SCAN_CYCLES drive cycles
-SCAN_POINTS = 21
-SCAN_CYCLES = 2
+from .thresholds import (
+    CALIBRATION_LOCAL_FITS,
+    LHS_STARTS,
+    SCAN_CYCLES,
+    SCAN_POINTS,
+    SEARCH_CYCLES,
+    SEARCH_GENERATIONS,
+    SEARCH_POLISHES,
+    SEARCH_POPULATION_PER_PARAM,
+)
 
 
 @dataclass
@@ -86,21 +79,21 @@ def search(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, 
 
     # the nominal point itself is one member of the first population
     n = len(free)
-    popsize = population_per_param or POPULATION_PER_PARAM
+    popsize = population_per_param or SEARCH_POPULATION_PER_PARAM
     rng = np.random.default_rng(seed)
     lo = np.array([b[0] for b in bounds])
     hi = np.array([b[1] for b in bounds])
     init = lo + (hi - lo) * _spread_points(popsize * n, n, rng)
     init[0] = np.clip(np.zeros(n), lo, hi)
     res = differential_evolution(chi2_of, bounds, vectorized=True, updating="deferred",
-                                 init=init, maxiter=generations or GENERATIONS, tol=1e-3, mutation=(0.5, 1.0),
+                                 init=init, maxiter=generations or SEARCH_GENERATIONS, tol=1e-3, mutation=(0.5, 1.0),
                                  recombination=0.7, seed=seed, polish=False)
     pop, energies = np.asarray(res.population), np.asarray(res.population_energies)
     order = np.argsort(energies)
     picks = [pop[order[0]]]
     span = hi - lo
     for i in order[1:]:
-        if len(picks) >= POLISHES:
+        if len(picks) >= SEARCH_POLISHES:
             break
         # distinct: at least 5 % of the range away from every pick in some parameter
         if all(np.max(np.abs(pop[i] - p) / span) > 0.05 for p in picks):
@@ -171,7 +164,7 @@ def calibrate(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], 
     # get a local fit: the search optimised the first cycle, which two cycles may rank
     # differently; on a healthy device the nominal values are 5-15 % from the truth, in its
     # basin, however they compare; a scan finds a side basin's way out (see `scan_starts`)
-    ms = multistart(objective, base, starts, local_fits=LOCAL_FITS, horizons=(2, None), max_nfev=(10, 12),
+    ms = multistart(objective, base, starts, local_fits=CALIBRATION_LOCAL_FITS, horizons=(2, None), max_nfev=(10, 12),
                     always=("population search best", "nominal values", "1-D scan"), progress=progress)
     top = ms.best
     # converged: the best optimum was reached from more than one start (or the best local fit

@@ -16,10 +16,7 @@ from ..batch import run as run_batch
 from ..effects import BENCH_FIXED, oriented
 from ..recording import Recording
 from ..waveforms import Sawtooth
-
-#: RK4 step used for fits [s]: within ~1e-11 m of dt = 5e-8 on the dev cases (noise is ~1e-9 m),
-#: divides the 5 and 10 us sample steps and the 0.5 ms edges; a point that diverges is retried at dt/2
-FIT_DT = 2e-7
+from .thresholds import FIT_DT
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """The catalogue of physics a nominal model may lack (docs/RECORDINGS.md), as data.
 
 What each effect *is* (id, one-line physics, the term it adds, its parameters with units and
-physical bounds) is declared once in the Rust core (``rust/src/effects.rs``) and read here through
+physical bounds) is declared once in the Rust core (``rust/src/physics/effects.rs``) and read here through
 :mod:`idm_rs.declarations`. This module adds only how the diagnosis *fits* it: per parameter the
 fit bounds, scale, starting values and log scaling (:data:`FIT`), and per effect how it enters
 the model when it is not a plain engine term (:data:`PLACEMENT`). Adding an effect means
@@ -188,17 +188,10 @@ def _entry(e: EffectDecl) -> Effect:
 
 
 #: the library forces are declared as effects (the engine runs them like any other) but are not
-#: catalogue entries: their terms are what discovery (`discovery.py`) finds and fits
+#: catalogue entries: their terms are what discovery (`discovery/`) finds and fits
 LIBRARY_IDS = frozenset({"library_force", "library_force_weight"})
 
 CATALOGUE: tuple[Effect, ...] = tuple(_entry(e) for e in EFFECTS if e.id not in LIBRARY_IDS)
-
-#: The nominal parameters calibrated before any physics is blamed: the ones a lab knows least
-#: well (friction levels and damping, the piezo constant, the masses).
-CALIBRATED: tuple[str, ...] = ("mu_k", "d33", "sigma1", "sigma2", "fric_alpha", "m1", "m2")
-#: relative bounds and scale of the calibrated parameters
-CALIBRATION_RANGE = (0.6, 1.5)
-CALIBRATION_SCALE = 0.05
 
 
 def by_id(effect_id: str) -> Effect:

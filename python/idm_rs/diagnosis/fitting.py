@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from ..recording import Recording
 from .case_model import CaseSimulator, ModelSpec
 from .segments import segment_starts
+from .thresholds import BLOWN_UP, CHAIN_STEP, FIT_HORIZONS, FTOL_CHI2
 
 Setter = Callable[[dict, dict, float], None]
 
@@ -97,12 +98,6 @@ def _engine_values(spec: ModelSpec) -> dict[str, float]:
     return out
 
 
-#: a derivative of the readings [m per fit unit] beyond this many times the experiment's range of
-#: motion (+1 um) has blown up: one fit unit is a few percent of a parameter, which cannot move
-#: the reading by more than a few times its whole range
-BLOWN_UP = 1e3
-
-
 def usable_derivative(dpred: NDArray[np.float64], pred: NDArray[np.float64]) -> bool:
     """Whether an experiment's reading derivatives (fit units x samples) can be used: finite,
     and not grown without bound (an explicit step beyond the friction state's stability limit
@@ -114,10 +109,6 @@ def usable_derivative(dpred: NDArray[np.float64], pred: NDArray[np.float64]) -> 
     return dpred.size == 0 or float(np.max(np.abs(dpred))) <= BLOWN_UP * scale
 
 
-#: step [fit units] of the central difference of the setters' composition (no simulation:
-#: exact for the linear setters, 1e-13 relative for the log-scaled ones)
-_CHAIN_STEP = 1e-6
-
 
 def engine_chain(base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64]
                  ) -> tuple[list[str], NDArray[np.float64]]:
@@ -128,10 +119,10 @@ def engine_chain(base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float
     cols = []
     for k in range(len(free)):
         up, dn = u.copy(), u.copy()
-        up[k] += _CHAIN_STEP
-        dn[k] -= _CHAIN_STEP
+        up[k] += CHAIN_STEP
+        dn[k] -= CHAIN_STEP
         a, b = _engine_values(apply(base, free, up)), _engine_values(apply(base, free, dn))
-        cols.append({n: (a[n] - b.get(n, a[n])) / (2.0 * _CHAIN_STEP) for n in a})
+        cols.append({n: (a[n] - b.get(n, a[n])) / (2.0 * CHAIN_STEP) for n in a})
     names = sorted({n for c in cols for n, d in c.items() if d != 0.0})
     D = np.array([[c.get(n, 0.0) for c in cols] for n in names]).reshape(len(names), len(free))
     return names, D
@@ -268,14 +259,6 @@ class Objective:
         return r, self.profiled_columns(dpred), runs
 
 
-#: a fit stops when an accepted step gains less than this many chi^2 units times max(1, chi^2/n)
-#: (scipy's `ftol`, relative to the cost, set to FTOL_CHI2 / n). Every decision the diagnosis
-#: takes is 100 times coarser (AGREE_CHI2 = 25, the BIC threshold); at scipy's default (1e-8
-#: relative, 1e-4 chi^2 units here) a fit started at its optimum took all its 16 evaluations
-#: gaining 1e-3 chi^2 each: a third of the candidate-fit time on dev2's d2_02.
-FTOL_CHI2 = 0.1
-
-
 def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max_nfev: int = 40,
         fd_step: float = 1e-3, progress: Optional[Callable[[], None]] = None) -> FitResult:
     """Least squares over `free` (trust-region reflective, bounded, scipy), from u = 0, on the
@@ -336,15 +319,8 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
                      str(sol.message), corr, np.asarray(J))
 
 
-#: drive cycles fitted at each stage of a progressive fit (None: all). Stick-slip makes the
-#: misfit a rugged function of the parameters over many cycles (a slip event more or less
-#: shifts everything after it), but a smooth one over the first cycle; each stage starts in
-#: the basin the shorter one found.
-HORIZONS: tuple[Optional[int], ...] = (1, 2, None)
-
-
 def fit_progressive(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *,
-                    horizons: Sequence[Optional[int]] = HORIZONS, max_nfev: Sequence[int] = (20, 12, 12),
+                    horizons: Sequence[Optional[int]] = FIT_HORIZONS, max_nfev: Sequence[int] = (20, 12, 12),
                     progress: Optional[Callable[[], None]] = None) -> FitResult:
     """`fit` over growing horizons, each stage started from the previous optimum (`max_nfev`
     per stage: the later stages start close to their optimum)."""

@@ -16,12 +16,8 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Optional, Sequence
 
-#: a parameter counts as determined when its 95 % interval's half-width is at most this share of
-#: its value (the datasheet's target: every reported value within 25 % of the truth, or its
-#: interval covering it)
-DETERMINED_WITHIN = 0.25
-#: two parameters whose estimates correlate beyond this are reported as a combination
-STRONG_CORRELATION = 0.9
+from .thresholds import DETERMINED_WITHIN, STRONG_CORRELATION
+
 #: the normal quantile of a two-sided 95 % interval
 Z95 = 1.959963984540054
 

@@ -12,12 +12,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..recording import Experiment, Recording
+from .thresholds import SYSTEMATIC_Z, WINDOW_S
 
 PHASES = ("rest", "rapid edge / slip", "slow edge / stick")
-#: window length for the time localisation [s]
-WINDOW_S = 1e-3
-#: z-score above which residual energy counts as systematic (beyond noise)
-SYSTEMATIC_Z = 4.0
 
 
 @dataclass(frozen=True)

@@ -15,25 +15,7 @@ import numpy as np
 from .case_model import ModelSpec
 from .fitting import FitResult, FreeParam, Objective, apply, fit_progressive
 from .noise import whiteness_z
-
-#: two local fits reached the same optimum when their chi^2 differ by less than this, in units
-#: of the best fit's residual variance (the noise variance, or more where the residual is far
-#: from noise: a model that misses an effect cannot tell optima apart more finely than its own
-#: misfit, the quasi-likelihood scale of least squares)
-AGREE_CHI2 = 25.0
-#: a ranked start is worth a local fit when its chi^2 is within this factor of the best start's:
-#: a start 100x worse does not reach the best basin in a few exact Gauss-Newton steps, and its
-#: local fit costs as much as the best one's
-PROMISING = 4.0
-#: a local fit "leaves noise" when its chi^2 is within NOISE_CHI2_Z standard deviations of the
-#: chi^2 of pure noise (n + z sqrt(2n)) and its residual's lag-1 whiteness z-score is within
-#: NOISE_WHITENESS_Z: no other start can then end better by more than the noise's own
-#: fluctuation, so `multistart(stop_at_noise=True)` fits no more starts. The whiteness test
-#: guards against a noise level estimated a few per cent high, under which a basin that misses
-#: a small effect passes the chi^2 test: the effect's smooth residual still shows in the
-#: autocorrelation (900 chi^2 units over n = 20,000 samples give z ~ 6)
-NOISE_CHI2_Z = 3.0
-NOISE_WHITENESS_Z = 2.0
+from .thresholds import AGREE_CHI2, NOISE_CHI2_Z, NOISE_WHITENESS_Z, PROMISING
 
 
 @dataclass(frozen=True)

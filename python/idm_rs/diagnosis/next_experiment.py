@@ -8,7 +8,7 @@ at their fitted values: the difference of their predicted readings (each segment
 removed, as the diagnosis compares them), less what the other model's fitted parameters could
 absorb by refitting (its exact Jacobian on that experiment, to first order), in noise units
 — taken both ways (either may be the truth) and the smaller kept. The raw difference of every
-drive comes first (predictions only); the absorption is computed for the SHORTLIST drives that
+drive comes first (predictions only); the absorption is computed for the PROPOSAL_SHORTLIST drives that
 differ most (it only lowers a drive's figure). The drive with the largest
 score is proposed, with that figure and the same figure for the recordings already made.
 Where either model has a force fixed to the bench (an incline), each drive is also scored
@@ -27,21 +27,20 @@ from numpy.typing import NDArray
 
 from ..effects import BENCH_FIXED
 from ..recording import Experiment, Recording
-from .case_model import FIT_DT, CaseSimulator, ModelSpec
+from .case_model import CaseSimulator, ModelSpec
 from .fitting import FreeParam, Objective
+from .thresholds import (
+    FIT_DT,
+    PROPOSAL_AMPLITUDE_SHARES,
+    PROPOSAL_CYCLES,
+    PROPOSAL_FREQUENCIES,
+    PROPOSAL_FREQUENCY_SPAN,
+    PROPOSAL_SHORTLIST,
+    SEPARATES,
+    TRAVEL_CYCLES,
+    TRAVEL_SHARES,
+)
 
-#: multiples of the largest recorded amplitude tried (a lab's amplifier reached the largest;
-#: the smallest leave the body in presliding, where friction's shape shows)
-AMPLITUDE_SHARES = (0.1, 0.25, 0.5, 0.75, 1.0)
-#: frequencies tried [Hz]: these within [FREQUENCY_SPAN^-1 x lowest, FREQUENCY_SPAN x highest]
-#: recorded, and the recorded ones themselves
-FREQUENCIES = (10.0, 25.0, 50.0, 100.0, 200.0, 400.0, 800.0)
-FREQUENCY_SPAN = 4.0
-#: a predicted ΔBIC below this separates nothing (the verdict's own threshold)
-SEPARATES = 10.0
-#: drives whose absorbed separation is computed (those with the largest raw difference): the
-#: Jacobians are most of the cost (d2_12: 177 s for 70 drives on a busy machine)
-SHORTLIST = 10
 #: look-alikes no voltage drive can tell apart, and what can (physics, not a search result)
 NOT_BY_DRIVE: dict[tuple[str, str], str] = {
     ("incline", "friction_asymmetry"): (
@@ -50,12 +49,6 @@ NOT_BY_DRIVE: dict[tuple[str, str], str] = {
         "(orientation \"reversed\"): the incline then acts the other way, a direction-dependent friction of the "
         "contact does not (tilting by a known angle does not separate them: both models absorb the known tilt)"),
 }
-#: drive cycles of a proposed experiment
-CYCLES = 4
-#: a proposal for a force found along the stroke: drive cycles and amplitude shares tried (the
-#: body must travel: each cycle advances it by one step, and the small amplitudes hardly move it)
-TRAVEL_CYCLES = (4, 8, 16)
-TRAVEL_SHARES = (0.75, 1.0)
 
 
 @dataclass(frozen=True)
@@ -119,8 +112,8 @@ class Proposal:
                 "scored": [dict(d.to_dict(), delta_bic=s) for d, s in self.scored]}
 
 
-def drives(rec: Recording, cycles: int = CYCLES, orientations: Sequence[str] = ("normal",),
-           shares: Sequence[float] = AMPLITUDE_SHARES) -> list[Drive]:
+def drives(rec: Recording, cycles: int = PROPOSAL_CYCLES, orientations: Sequence[str] = ("normal",),
+           shares: Sequence[float] = PROPOSAL_AMPLITUDE_SHARES) -> list[Drive]:
     """The sawtooth drives within the rig's limits (module docstring), in each of
     `orientations` (the rig as it stands, and turned end for end where a model has a force
     fixed to the bench)."""
@@ -128,9 +121,9 @@ def drives(rec: Recording, cycles: int = CYCLES, orientations: Sequence[str] = (
     if not saw:
         return []
     a_max = max(e.amplitude_V for e in saw)
-    f_lo = min(e.frequency_Hz for e in saw) / FREQUENCY_SPAN
-    f_hi = max(e.frequency_Hz for e in saw) * FREQUENCY_SPAN
-    freqs = sorted({f for f in FREQUENCIES if f_lo <= f <= f_hi} | {e.frequency_Hz for e in saw})
+    f_lo = min(e.frequency_Hz for e in saw) / PROPOSAL_FREQUENCY_SPAN
+    f_hi = max(e.frequency_Hz for e in saw) * PROPOSAL_FREQUENCY_SPAN
+    freqs = sorted({f for f in PROPOSAL_FREQUENCIES if f_lo <= f <= f_hi} | {e.frequency_Hz for e in saw})
     edge = min(e.edge_s for e in saw)
     rest = max(e.rest_s for e in saw)
     out = []
@@ -258,11 +251,11 @@ def propose(rec: Recording, sigma: float, names: tuple[str, str], a: tuple[Model
     if not grid:
         return None
     # the raw difference of every drive first (predictions only: one batch call); what the
-    # parameters absorb only lowers it, so the Jacobians are taken for the SHORTLIST drives
+    # parameters absorb only lowers it, so the Jacobians are taken for the PROPOSAL_SHORTLIST drives
     # that differ most (the rest keep their raw difference, an upper bound, in `scored`)
     raw = raw_differences(virtual_recording(rec, grid), sigma, a, b, dt)
     order = sorted(range(len(grid)), key=lambda i: -(raw[i] if math.isfinite(raw[i]) else -math.inf))
-    short = order[:SHORTLIST]
+    short = order[:PROPOSAL_SHORTLIST]
     scores = dict(zip(short, separations(virtual_recording(rec, [grid[i] for i in short]), sigma, a, b, dt)))
     scored = sorted(((grid[i], scores[i] if i in scores else raw[i]) for i in range(len(grid))),
                     key=lambda x: -(x[1] if math.isfinite(x[1]) else -math.inf))

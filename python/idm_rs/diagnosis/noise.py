@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..recording import Recording
+from .thresholds import DISAGREE_SIGMAS
 
 
 @dataclass(frozen=True)
@@ -60,10 +61,6 @@ def estimate_noise(rec: Recording) -> NoiseEstimate:
     d4 = np.concatenate([np.diff(e.x, 4) for e in rec.experiments])
     hf_sigma = float(1.4826 * np.median(np.abs(d4 - np.median(d4))) / math.sqrt(70.0))
     return NoiseEstimate(hf_sigma, math.nan, hf_sigma, 0, 0.05, source="fourth differences")
-
-
-#: the rest and residual estimates disagree when they differ by more than this many combined 1-sigma
-DISAGREE_SIGMAS = 3.0
 
 
 def residual_sigma(residuals: Sequence[NDArray[np.float64]]) -> tuple[float, float]:

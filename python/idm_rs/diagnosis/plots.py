@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import TYPE_CHECKING, Optional, Union
 
 import numpy as np
 
@@ -328,8 +328,9 @@ def plot_rms_story(d: Diagnosis, directory: Path) -> Path:
     return _save(fig, directory / "rms_story.png")
 
 
-def plot_diagnosis(d: Diagnosis, directory: Path) -> list[Path]:
-    """Write every figure of the diagnosis into `directory` (created); returns their paths."""
+def plot_diagnosis(d: Diagnosis, directory: Union[str, Path]) -> list[Path]:
+    """Write every figure of the diagnosis `d` into `directory` (created); returns their paths.
+    An interrupted diagnosis gets the figures of what it finished (none before its calibration)."""
     import matplotlib
 
     matplotlib.use("Agg")

@@ -6,11 +6,11 @@ candidate ranking with its evidence, and the refitted model in one line. Units e
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Optional, Sequence
+from typing import TYPE_CHECKING, Callable, Optional, Sequence
 
 from ..params import PARAM_INFO
-from .catalogue import CALIBRATION_RANGE, CATALOGUE, by_id
-from .thresholds import BIC_THRESHOLD
+from .catalogue import CATALOGUE, by_id
+from .thresholds import AT_BOUND_SHARE, BIC_THRESHOLD, CALIBRATION_RANGE
 
 if TYPE_CHECKING:
     from typing_extensions import TypeGuard  # typing.TypeGuard from Python 3.10
@@ -82,11 +82,6 @@ def candidate_params(c: Candidate) -> list[tuple[str, float, Optional[float]]]:
         s = c.reported_std.get(name)
         out.append((name, float(v), None if s is None else float(s)))
     return out
-
-
-#: a fitted value within this share of its range from a bound counts as at the bound (a bounded
-#: least-squares fit stops just inside; the change column's two decimals cannot tell it apart)
-AT_BOUND_SHARE = 1e-3
 
 
 def at_bound(value: float, lower: float, upper: float) -> bool:
@@ -201,6 +196,43 @@ def _evidence(delta_bic: float) -> str:
     return "weak"
 
 
+def _one_effect_summary(d: Diagnosis, best: Candidate, alts: list, ratio: Callable[[float], float]) -> list[str]:
+    """The plain words of a verdict naming one effect (`best`)."""
+    lines: list[str] = []
+    params = format_params(best)
+    lines.append(f"  Found: {best.description}"
+                 + (f" ({params})" if params not in ("–", "(structure only)") else "")
+                 + " — the nominal model lacks it. With it added and the nominal values re-fitted, the model "
+                 f"matches the recordings to {ratio(best.rms_after):.2f} × their noise, against "
+                 f"{ratio(d.rms_calibrated):.2f} × with the nominal values re-fitted alone.")
+    sure = f"  How sure: {_evidence(best.delta_bic)} evidence against \"nothing missing\""
+    if _finite(best.heldout_rms):
+        sure += (f"; the refitted model also predicts an experiment it was not fitted to "
+                 f"({ratio(best.heldout_rms):.2f} × noise)")
+    if alts:
+        sure += (f". But {', '.join(a.effect for a in alts)} explain{'s' if len(alts) == 1 else ''} these "
+                 "recordings about as well: the data cannot tell them apart")
+    weak = [p for p in getattr(best, "identifiability", []) if not p.determined]
+    if weak:
+        sure += (". These experiments do not determine " + ", ".join(
+            f"{p.name} (95 % interval {p.low:.3g} to {p.high:.3g}"
+            + (f", traded off against {p.partner}" if p.partner else "") + ")" for p in weak)
+            + ": the values printed are one point of that range")
+    lines.append(sure + ".")
+    todo = "  What to do: add this effect to your model with the fitted values (the refit model below)"
+    prop = getattr(d, "proposal", None)
+    if prop is not None:
+        todo += "; " + prop.words() + (", and diagnose again with it added" if prop.separates else "")
+    elif alts:
+        todo += ("; to decide between it and the alternative, record experiments that excite them differently "
+                 "(the other drive direction, another amplitude or frequency)")
+    pp = getattr(d, "parameter_proposal", None)
+    if pp is not None:
+        todo += "; " + pp.words()
+    lines.append(todo + ".")
+    return lines
+
+
 def plain_summary(d: Diagnosis) -> list[str]:
     """What was found, how sure, what to do — for a reader who does not speak statistics; the
     numbers behind each sentence follow in the report."""
@@ -228,37 +260,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
                      f"the pair predicts an experiment it was not fitted to at {ratio(sec.heldout_rms):.2f} × noise.")
         lines.append("  What to do: add both effects to your model with the fitted values (the refit model below).")
     elif best is not None:
-        params = format_params(best)
-        lines.append(f"  Found: {best.description}"
-                     + (f" ({params})" if params not in ("–", "(structure only)") else "")
-                     + " — the nominal model lacks it. With it added and the nominal values re-fitted, the model "
-                     f"matches the recordings to {ratio(best.rms_after):.2f} × their noise, against "
-                     f"{ratio(d.rms_calibrated):.2f} × with the nominal values re-fitted alone.")
-        sure = f"  How sure: {_evidence(best.delta_bic)} evidence against \"nothing missing\""
-        if _finite(best.heldout_rms):
-            sure += (f"; the refitted model also predicts an experiment it was not fitted to "
-                     f"({ratio(best.heldout_rms):.2f} × noise)")
-        if alts:
-            sure += (f". But {', '.join(a.effect for a in alts)} explain{'s' if len(alts) == 1 else ''} these "
-                     "recordings about as well: the data cannot tell them apart")
-        weak = [p for p in getattr(best, "identifiability", []) if not p.determined]
-        if weak:
-            sure += (". These experiments do not determine " + ", ".join(
-                f"{p.name} (95 % interval {p.low:.3g} to {p.high:.3g}"
-                + (f", traded off against {p.partner}" if p.partner else "") + ")" for p in weak)
-                + ": the values printed are one point of that range")
-        lines.append(sure + ".")
-        todo = "  What to do: add this effect to your model with the fitted values (the refit model below)"
-        prop = getattr(d, "proposal", None)
-        if prop is not None:
-            todo += "; " + prop.words() + (", and diagnose again with it added" if prop.separates else "")
-        elif alts:
-            todo += ("; to decide between it and the alternative, record experiments that excite them differently "
-                     "(the other drive direction, another amplitude or frequency)")
-        pp = getattr(d, "parameter_proposal", None)
-        if pp is not None:
-            todo += "; " + pp.words()
-        lines.append(todo + ".")
+        lines += _one_effect_summary(d, best, alts, ratio)
     elif d.verdict == "none":
         lines.append(f"  Found: nothing missing. The nominal model with re-fitted values matches the recordings to "
                      f"their noise ({ratio(d.rms_calibrated):.2f} × noise){biggest}.")
@@ -308,6 +310,10 @@ def plain_summary(d: Diagnosis) -> list[str]:
 
 
 def text_report(d: Diagnosis) -> str:
+    """The diagnosis `d` as text: the verdict in plain words, the RMS story against the noise
+    floor, the calibrated parameters, where the residual lives, the ranking with its evidence,
+    discovery and a second effect when they ran, what the data do not determine, the experiment
+    that would separate look-alikes, and the refitted model in one line (units throughout)."""
     sigma = d.noise.sigma
     rec = d.recording
     lines: list[str] = []

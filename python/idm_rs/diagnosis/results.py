@@ -1,14 +1,13 @@
 """What a diagnosis returns (:class:`Diagnosis`, with a :class:`Candidate` per catalogue effect
-tried). The algorithm (:mod:`.diagnose`) builds these; ``Diagnosis.report()`` and ``.plot()``
-call the report (:mod:`.report`) and the figures (:mod:`.plots`), which read these classes for
-their types only, so the imports run one way."""
+tried). The algorithm (:mod:`.diagnose`) builds these; the report (:func:`.report.text_report`)
+and the figures (:func:`.plots.plot_diagnosis`) are functions of a :class:`Diagnosis` that read
+these classes for their types only: this module imports neither, so the imports run one way."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import TYPE_CHECKING, Any, Optional, Union
+from typing import TYPE_CHECKING, Any, Optional
 
 import numpy as np
 from numpy.typing import NDArray
@@ -282,13 +281,3 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
             "determining_experiment": (self.parameter_proposal.to_dict() if self.parameter_proposal is not None
                                        else None),
         }
-
-    def report(self) -> str:
-        from .report import text_report
-
-        return text_report(self)
-
-    def plot(self, directory: Union[str, Path]) -> list[Path]:
-        from .plots import plot_diagnosis
-
-        return plot_diagnosis(self, Path(directory))

@@ -18,10 +18,7 @@ from numpy.typing import NDArray
 from .case_model import ModelSpec
 from .catalogue import Effect
 from .fitting import FitResult, FreeParam, Objective
-
-#: |cos| of the angle between two effects' projected columns above which the data cannot tell
-#: them apart to first order
-DEGENERATE_COS = 0.95
+from .thresholds import DEGENERATE_COS
 
 
 @dataclass(frozen=True)

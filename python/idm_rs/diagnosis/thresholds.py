@@ -1,16 +1,31 @@
-"""The thresholds the diagnosis's verdict uses (read by the algorithm, its results, the report and
-the figures; this module imports nothing of the package)."""
+"""Every number the diagnosis is tuned by, in one place: what it controls, its unit, and the
+measurement or argument that set it. Read by the stages, the results, the report and the
+figures; this module imports nothing of the package.
 
-#: BIC improvement (in chi^2 units) an effect needs to count as found: "very strong" evidence
-#: on the Kass-Raftery scale
+Sections follow the diagnosis's order: the verdict's rules; the noise and where the residual
+lives; the fits; the calibration of the nominal parameters; the catalogue candidates; the
+second effect; discovery; what the data determine and the experiment proposed next. Counts are
+plain numbers (fits, evaluations, cycles); chi^2 is in units of the noise variance.
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+# --- the verdict ------------------------------------------------------------------------------
+
+#: BIC improvement [chi^2 units] an effect needs to count as found: "very strong" evidence on
+#: the Kass-Raftery scale
 BIC_THRESHOLD = 10.0
-#: an effect must beat the runner-up by this much BIC to be named alone
+#: BIC [chi^2 units] by which an effect must beat the runner-up to be named alone
 SEPARATION = 10.0
 #: residual RMS / noise RMS below which what is left counts as noise
 NOISE_RATIO_OK = 1.1
 #: lag-1 autocorrelation z-score above which a residual counts as systematic (about N(0, 1) for
-#: white noise: one-sided 3e-5 beyond 4; every healthy dev device's calibrated residual was
-#: within 1.4, effect cases mostly beyond 4.4)
+#: white noise: one-sided 3e-5 beyond 4; every healthy development device's calibrated residual
+#: was within 1.4, devices with an effect mostly beyond 4.4)
 WHITENESS_Z = 4.0
 #: candidates refitted over everything after the one-cycle fits of all of them
 REFIT_TOP = 3
@@ -19,3 +34,226 @@ REFIT_TOP = 3
 #: Self & Liang 1987), whose tail the chi-squared with as many degrees of freedom as the effect
 #: has parameters bounds from above: the test used is that conservative bound
 LR_ALPHA = 1e-3
+
+# --- the noise, and where the residual lives --------------------------------------------------
+
+#: the rest and residual noise estimates disagree when they differ by more than this many
+#: combined standard deviations
+DISAGREE_SIGMAS = 3.0
+#: window length of the time localisation [s]: a tenth of a 100 Hz drive cycle, two fast edges
+WINDOW_S = 1e-3
+#: z-score above which a window's or a phase's residual energy counts as systematic
+SYSTEMATIC_Z = 4.0
+
+# --- fits ---------------------------------------------------------------------------------------
+
+#: RK4 step of every fit [s]: within ~1e-11 m of dt = 5e-8 s on the development recordings (their
+#: noise is ~1e-9 m); divides the 5 and 10 us sample steps and the 0.5 ms edges; a point that
+#: diverges is retried at dt/2
+FIT_DT = 2e-7
+#: a derivative of the readings [m per fit unit] beyond this many times the experiment's range of
+#: motion (+1 um) has blown up: one fit unit is a few percent of a parameter, which cannot move
+#: the reading by more than a few times its whole range
+BLOWN_UP = 1e3
+#: a fit stops when an accepted step gains less than this many chi^2 units times max(1, chi^2/n)
+#: (scipy's `ftol`, relative to the cost, set to FTOL_CHI2 / n). Every decision the diagnosis
+#: takes is 100 times coarser (AGREE_CHI2 = 25, the BIC threshold); at scipy's default (1e-8
+#: relative, 1e-4 chi^2 units here) a fit started at its optimum took all its 16 evaluations
+#: gaining 1e-3 chi^2 each: a third of the candidate-fit time of the slowest development case
+FTOL_CHI2 = 0.1
+#: step [fit units] of the central difference of the parameter setters' composition (no
+#: simulation: exact for the linear setters, 1e-13 relative for the log-scaled ones)
+CHAIN_STEP = 1e-6
+#: drive cycles fitted at each stage of a progressive fit (None: all). Stick-slip makes the
+#: misfit a rugged function of the parameters over many cycles (a slip event more or less
+#: shifts everything after it), but a smooth one over the first cycle; each stage starts in
+#: the basin the shorter one found
+FIT_HORIZONS: tuple[Optional[int], ...] = (1, 2, None)
+#: two local fits reached the same optimum when their chi^2 differ by less than this, in units
+#: of the best fit's residual variance (the noise variance, or more where the residual is far
+#: from noise: a model that misses an effect cannot tell optima apart more finely than its own
+#: misfit, the quasi-likelihood scale of least squares)
+AGREE_CHI2 = 25.0
+#: a ranked start is worth a local fit when its chi^2 is within this factor of the best start's:
+#: a start 100x worse does not reach the best basin in a few exact Gauss-Newton steps, and its
+#: local fit costs as much as the best one's
+PROMISING = 4.0
+#: a local fit "leaves noise" when its chi^2 is within NOISE_CHI2_Z standard deviations of the
+#: chi^2 of pure noise (n + z sqrt(2n)) and its residual's lag-1 whiteness z-score is within
+#: NOISE_WHITENESS_Z: no other start can then end better by more than the noise's own
+#: fluctuation, so `multistart(stop_at_noise=True)` fits no more starts. The whiteness test
+#: guards against a noise level estimated a few per cent high, under which a basin that misses
+#: a small effect passes the chi^2 test: the effect's smooth residual still shows in the
+#: autocorrelation (900 chi^2 units over n = 20,000 samples give z ~ 6)
+NOISE_CHI2_Z = 3.0
+NOISE_WHITENESS_Z = 2.0
+
+#: a fitted value within this share of its range from a bound counts as at the bound (a bounded
+#: least-squares fit stops just inside; the report's change column's two decimals cannot tell
+#: it apart)
+AT_BOUND_SHARE = 1e-3
+
+# --- the calibration of the nominal parameters -----------------------------------------------
+
+#: the nominal parameters calibrated before any physics is blamed: the ones a lab knows least
+#: well (friction levels and damping, the piezo constant, the masses)
+CALIBRATED: tuple[str, ...] = ("mu_k", "d33", "sigma1", "sigma2", "fric_alpha", "m1", "m2")
+#: bounds of a calibrated parameter, relative to its nominal value, and its fit scale (one fit
+#: unit: 5 % of the nominal value)
+CALIBRATION_RANGE = (0.6, 1.5)
+CALIBRATION_SCALE = 0.05
+#: drive cycles of every experiment the population search compares (cheap, and the misfit is
+#: smooth over one cycle: FIT_HORIZONS)
+SEARCH_CYCLES = 1
+#: the population search: members per free parameter, generations
+SEARCH_POPULATION_PER_PARAM = 6
+SEARCH_GENERATIONS = 25
+#: distinct good members the search hands on as starts
+SEARCH_POLISHES = 2
+#: Latin-hypercube starts over the plausible ranges, ranked beside the search's members
+LHS_STARTS = 8
+#: local fits from the best distinct promising ranked starts (the search's best member, the
+#: nominal values and the best 1-D scan start get one each besides)
+CALIBRATION_LOCAL_FITS = 1
+#: points of each calibrated parameter's 1-D scan over its plausible range (the others at their
+#: nominal values), over SCAN_CYCLES drive cycles
+SCAN_POINTS = 21
+SCAN_CYCLES = 2
+
+# --- the catalogue candidates -----------------------------------------------------------------
+
+#: |cos| of the angle between two effects' projected columns above which the data cannot tell
+#: them apart to first order
+DEGENERATE_COS = 0.95
+#: leading candidates whose nominal parameters seed a refit of the null model
+NULL_REFITS = 1
+#: least-squares evaluations of the final polish of the leading candidate (and of rivals within
+#: SEPARATION of it, at most POLISH_CLOSE candidates in all)
+POLISH_NFEV = 12
+POLISH_CLOSE = 3
+#: multiples of an effect parameter's fit scale its multistart tries (both signs where signed)
+CANDIDATE_MAGNITUDES = (1.0, 3.0, 10.0, 30.0)
+#: the wider search: every candidate's population search (members per free parameter,
+#: generations) over the first cycle, and the candidates that then get local fits
+WIDE_POPULATION = 5
+WIDE_GENERATIONS = 10
+WIDE_FITS = 2
+#: a candidate whose screening score (the chi^2 a linearised step would gain) is below this is
+#: not fitted in the first round: it cannot approach BIC_THRESHOLD + its parameters' penalty
+#: (the wider search, run when the residual is systematic, fits every candidate regardless)
+MIN_SCORE = 5.0
+#: a candidate's local fits: the horizons (drive cycles; None: everything) fitted in turn, and
+#: least-squares evaluations at each. Everything at once: a recording holds only 2-5 drive
+#: cycles, so two cycles save little, and their optimum can lie elsewhere (measured on a
+#: spring-to-ground device of the confusion benchmark: from the nominal values with a spring of
+#: 3e4 N/m, 8+8 evaluations over two cycles then everything ended at chi^2 6.3e6 with mu_k at its
+#: bound; 12 over everything reach the truth). 16 evaluations: on another confusion device the
+#: fit that reaches the truth (chi^2 5,324) stands at 131,830 after 8, behind a local minimum's
+#: 17,600 (a short fit for all and a long one for the best misses it)
+CANDIDATE_HORIZONS: tuple[Optional[int], ...] = (None,)
+CANDIDATE_NFEV: tuple[int, ...] = (16,)
+#: local fits per candidate's multistart from its best distinct ranked starts (the best start at
+#: the nominal values as given gets one more)
+CANDIDATE_FITS = 1
+
+# --- the second effect ------------------------------------------------------------------------
+
+#: candidates fitted (multistart) in the search for a second effect, best screened first
+SECOND_TOP = 2
+#: supported first-round candidates (best ΔBIC first) whose pairs are fitted jointly when the
+#: search from the leader names no second effect, and the least-squares evaluations of each
+#: joint fit (measured on a two-effect device, creep and incline mis-set together: from the
+#: nominal values with each effect at its own fit alone, 24 evaluations reach noise; 12 stop at
+#: 2.06 x noise)
+JOINT_TOP = 3
+JOINT_NFEV = 30
+
+# --- discovery: the inferred force ------------------------------------------------------------
+
+#: knots of the inferred force per drive cycle: resolves the slow phase's shape and the fast
+#: edge to its own length (0.5 ms at 100 Hz)
+KNOTS_PER_CYCLE = 20
+#: accepted Levenberg-Marquardt steps of the force inference, at most (the force enters
+#: linearly; what is left is the stick-slip's own nonlinearity), and trial steps in all
+INFER_ITERATIONS = 8
+INFER_MAX_TRIALS = 16
+#: the first damping (relative to the diagonal of J'J), and the relative chi^2 gain below which
+#: the inference has converged (beyond the `dof` units that fitting noise gains): judged on the
+#: undamped linear step, so a damped step's small gain is never taken for convergence
+INFER_LM_START = 0.01
+INFER_CONVERGED_GAIN = 0.01
+#: smoothing weights tried by generalised cross-validation, relative to tr(J'J)/tr(D'D)
+SMOOTHING_GRID = np.logspace(-8, 2, 41)
+#: the integrator of the force inference: Dormand-Prince, landing on every sample time. RK4 at
+#: the fit step lets the derivatives grow without bound in fast slips (the friction state's
+#: stability limit); the adaptive step keeps both the run and its derivatives stable. Its knot
+#: derivatives agree with RK4's at dt = 1e-8 s (where RK4's are stable) to 3 % on the test
+#: recordings, in 0.06 s per 8 knots of a 42 ms record (Rodas4's did not, through the kinks)
+INFER_METHOD = dict(method="dopri5", rtol=1e-8, atol=1e-8)
+#: the force the inference starts from [N], everywhere: not exactly zero, so a body at rest is
+#: not exactly on the friction law's kinks (v1 = 0, Fh = 0), where a derivative is one-sided and
+#: the side the value picks may be the wrong one for the perturbation (docs/SENSITIVITIES.md);
+#: a micronewton moves the body by ~1e-16 m
+START_FORCE = 1e-6
+#: step [N] of the forward differences that replace a knot's derivative which blew up
+FD_FORCE_STEP = 1e-4
+#: step [fit units] of the forward differences that replace the calibrated parameters'
+#: derivatives which blew up (the fits' own step, fitting.Objective.jacobian)
+FD_PARAM_STEP = 1e-3
+#: relative size of a pivot below which a column counts as dependent on the others (the
+#: library's columns and the knots' bases; normal equations are solved at machine precision)
+RANK_TOLERANCE = 1e-12
+
+# --- discovery: the library regression and the refit ------------------------------------------
+
+#: most library terms a discovered force may have
+MAX_TERMS = 4
+#: wavelengths [m] of the periodic library terms tried (their fit refines the one chosen)
+WAVELENGTHS = np.geomspace(2e-6, 200e-6, 25)
+#: a periodic term must lower the cross-validated error by this factor below the best
+#: non-periodic form: the wavelength scan is itself a choice the data must pay for
+PERIODIC_GAIN = 0.9
+#: a term more must lower the cross-validated error by this factor and by TERM_SHARE of the
+#: force's own effect
+TERM_GAIN = 0.9
+TERM_SHARE = 0.02
+#: a found term whose refitted coefficient is within this many standard deviations of zero is
+#: dropped unless the model without it is worse by BIC_THRESHOLD
+PRUNE_Z = 5.0
+#: a library term whose effect keeps less than this share of its size once the calibrated
+#: parameters' directions are projected out is their alias (left out of the regression)
+ALIAS_SHARE = 0.05
+#: a form must predict the held-out experiments' force effect to within this share of it
+#: (cross-validated error relative to the force's own effect): at least half explained
+FORM_CV_MAX = 0.5
+#: rounds of pruning (each drops every weak term at once and refits)
+PRUNE_ROUNDS = 3
+#: least-squares evaluations of the refit with the found terms
+DISCOVERY_REFIT_NFEV = 25
+
+# --- what the data determine, and the experiment proposed next ---------------------------------
+
+#: a parameter counts as determined when its 95 % interval's half-width is at most this share of
+#: its value (the datasheet's target: every reported value within 25 % of the truth, or its
+#: interval covering it)
+DETERMINED_WITHIN = 0.25
+#: two parameters whose estimates correlate beyond this are reported as a combination
+STRONG_CORRELATION = 0.9
+#: multiples of the largest recorded amplitude tried (a lab's amplifier reached the largest;
+#: the smallest leave the body in presliding, where friction's shape shows)
+PROPOSAL_AMPLITUDE_SHARES = (0.1, 0.25, 0.5, 0.75, 1.0)
+#: frequencies tried [Hz]: these within [lowest / PROPOSAL_FREQUENCY_SPAN, highest x
+#: PROPOSAL_FREQUENCY_SPAN] recorded, and the recorded ones themselves
+PROPOSAL_FREQUENCIES = (10.0, 25.0, 50.0, 100.0, 200.0, 400.0, 800.0)
+PROPOSAL_FREQUENCY_SPAN = 4.0
+#: a predicted ΔBIC [chi^2 units] below this separates nothing (the verdict's own threshold)
+SEPARATES = BIC_THRESHOLD
+#: drives whose absorbed separation is computed (those with the largest raw difference): the
+#: Jacobians are most of the cost (177 s for 70 drives of a look-alike pair on a busy machine)
+PROPOSAL_SHORTLIST = 10
+#: drive cycles of a proposed experiment
+PROPOSAL_CYCLES = 4
+#: a proposal for a force found along the stroke: drive cycles and amplitude shares tried (the
+#: body must travel: each cycle advances it by one step, and the small amplitudes hardly move it)
+TRAVEL_CYCLES = (4, 8, 16)
+TRAVEL_SHARES = (0.75, 1.0)

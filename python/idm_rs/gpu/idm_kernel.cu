@@ -2,7 +2,7 @@
  * sweep backend (compiled by NVRTC through CuPy) and, unchanged, of the CPU build the test suite
  * compiles with the system C compiler to check it against the Rust engine.
  *
- * It mirrors rust/src/model.rs for the models the kernel admits (rust/src/kernel.rs: the LPS or
+ * It mirrors rust/src/model/mod.rs for the models the kernel admits (rust/src/gpu/kernel.rs: the LPS or
  * the DPS, Leuven friction, Bouc-Wen piezo hysteresis on or off, a constant load on the main
  * body, no effects). It is specialised at compile time, as DiffEqGPU generates one kernel per
  * ODE: the backend puts in front of it the engine's layout header (the constants' offsets by
@@ -32,7 +32,7 @@
 #endif
 
 /* IDM_N_SCALARS and the offset of each scalar by name come from the engine
- * (rust/src/kernel.rs: kernel_header); IDM_N, IDM_HYST from the backend */
+ * (rust/src/gpu/kernel.rs: kernel_header); IDM_N, IDM_HYST from the backend */
 #ifndef IDM_N_SCALARS
 #error "compile with the engine's header in front: idm_rs.engine.kernel_header()"
 #endif
@@ -140,7 +140,7 @@ IDM_HD idm_fric idm_fric_of(const double *c) {
 #define IDM_RARE(c, m, k) IDM_CS(c[k])
 #endif
 
-/* Stribeck curve S(v) [N] (friction.rs: Leuven::stribeck) */
+/* Stribeck curve S(v) [N] (physics/friction.rs: Leuven::stribeck) */
 IDM_HD double idm_stribeck(const double *c, const double *m, const idm_fric *fr, double v) {
     double fc = IDM_CS(c[IDM_C_FC]);
     double s;
@@ -160,7 +160,7 @@ IDM_HD double idm_stribeck(const double *c, const double *m, const idm_fric *fr,
 }
 
 /* dy/dt of the state [q (n), v (n), g, Fh, h] at voltage volt rising at dvolt [V/s]; returns
- * the friction force Ff [N] (model.rs: Model::rhs_impl with the constant load, no effects).
+ * the friction force Ff [N] (model/mod.rs: Model::rhs_impl with the constant load, no effects).
  * c: the scalars, m: the matrix columns, both in registers. */
 IDM_HD double idm_rhs(const double *c, const idm_fric *fr, const double *m, double volt, double dvolt, const double *y,
                       double *dy) {
@@ -181,7 +181,7 @@ IDM_HD double idm_rhs(const double *c, const idm_fric *fr, const double *m, doub
     double ff = (fh + IDM_CS(c[IDM_C_SIGMA2]) * v1) + IDM_CS(c[IDM_C_SIGMA1]) * gdot;
     dy[ig] = gdot;
     dy[ifh] = fhdot;
-    /* the load acts on the main body (model.rs: f_constant), the piezo pushes both ends */
+    /* the load acts on the main body (model/mod.rs: f_constant), the piezo pushes both ends */
     double f_main = (fp + IDM_CS(c[IDM_C_F_CONST])) - ff, f_weight = 0.0 - fp;
     IDM_UNROLL
     for (int i = 0; i < IDM_N; i++) dy[i] = y[n + i];
@@ -195,7 +195,7 @@ IDM_HD double idm_rhs(const double *c, const idm_fric *fr, const double *m, doub
     return ff;
 }
 
-/* The piecewise-linear input, evaluated from its few numbers (waveforms.py / waveform.rs:
+/* The piecewise-linear input, evaluated from its few numbers (waveforms.py / physics/waveform.rs:
  * the same arithmetic, so the breakpoints are the engine's to the bit): breakpoint k [s, V]. */
 typedef struct {
     double delay, amp, peak, span;
@@ -315,7 +315,7 @@ IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, do
                           double *out, long long points) {
     const int n = IDM_N;
     /* four vectors: the state, the stages' running sum (k1 + 2 k2 + 2 k3, added in the order of
-     * rk4.rs), the latest stage and the stage input */
+     * integrate/rk4.rs), the latest stage and the stage input */
     double y[IDM_DIM], acc[IDM_DIM], k[IDM_DIM], tmp[IDM_DIM];
     IDM_UNROLL
     for (int i = 0; i < IDM_DIM; i++) y[i] = 0.0;
@@ -389,11 +389,11 @@ IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, do
     out[5 * points] = div_at;
 }
 
-/* Dormand-Prince 5(4) with first-same-as-last stages (dopri5.rs), landing on every breakpoint
- * and on t_end (drive.rs), error norm in the model's natural units (model.rs: state_scales:
+/* Dormand-Prince 5(4) with first-same-as-last stages (integrate/dopri5.rs), landing on every breakpoint
+ * and on t_end (drive.rs), error norm in the model's natural units (model/mod.rs: state_scales:
  * positions and h by the free stroke d33 V_max, velocities by stroke x the LPS frequency, Fh by
  * Fs; g left out). Outputs as idm_rk4_point, then 6 accepted steps, 7 smallest step [s], 8 = 1
- * where the run stopped because its step collapsed (crawl.rs: every IDM_CRAWL_CHECK_STEPS
+ * where the run stopped because its step collapsed (integrate/crawl.rs: every IDM_CRAWL_CHECK_STEPS
  * accepted steps, the steps it would need at the pace of the last ones are projected; beyond
  * IDM_MAX_ADAPTIVE_STEPS it stops, status 3 at that time), else 0. */
 IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc, double t_end, double rtol,

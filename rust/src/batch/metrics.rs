@@ -1,7 +1,7 @@
 //! Sweep metrics of a point, accumulated inside the step loop by an observer of the driver (no
 //! trajectory is stored), and the point's recorded sensor readings when a fit asks for them.
 
-use crate::drive::Observer;
+use crate::integrate::task::Observer;
 use crate::model::Model;
 
 use super::steady::{CycleStats, Steady, Train};

@@ -18,11 +18,11 @@ pub use points::{PointTables, WaveFamily};
 pub use runner::BatchRunner;
 pub use steady::{Steady, Train, STALL_STEP_FRACTION};
 
-use crate::drive::Method;
-use crate::effects::Effects;
-use crate::mechanics::Structure;
-use crate::params::Params;
-use crate::waveform::PiecewiseLinear;
+use crate::integrate::method::Method;
+use crate::physics::effects::Effects;
+use crate::physics::mechanics::Structure;
+use crate::physics::params::Params;
+use crate::physics::waveform::PiecewiseLinear;
 
 /// What is common to every point of a batch.
 #[derive(Clone, Debug)]

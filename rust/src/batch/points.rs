@@ -3,9 +3,9 @@
 //! input as one waveform family with its fields per point. A row that does not make a valid
 //! point gives the reason instead (the point is then flagged `Invalid`, the others run).
 
-use crate::effects::{Effects, EFFECT_NAMES};
-use crate::params::{Params, PARAM_NAMES};
-use crate::waveform::PiecewiseLinear;
+use crate::physics::effects::{Effects, EFFECT_NAMES};
+use crate::physics::params::{Params, PARAM_NAMES};
+use crate::physics::waveform::PiecewiseLinear;
 
 use super::{PointSpec, Train};
 

@@ -5,15 +5,18 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use rayon::prelude::*;
 
-use crate::stepper::Held;
-use crate::drive::{check_task, run_tasks, LaneEnd, Method, SimError, Task};
+use crate::integrate::stepper::Held;
+use crate::drive::run_tasks;
+use crate::integrate::method::Method;
+use crate::integrate::plan::check_task;
+use crate::integrate::task::{LaneEnd, SimError, Task};
 use crate::model::Model;
 use crate::sensitivity::{derivatives, parse_seeds, Schedule};
 
 use super::metrics::{MetricsObserver, PointMetrics};
 use super::{BatchConfig, PointOutput, PointSpec, Status};
 
-/// Points advanced together per core (see `stepper.rs` and `lanes_rk4.rs`): eight f64 lanes fill
+/// Points advanced together per core (see `integrate/stepper.rs` and `lanes/rk4.rs`): eight f64 lanes fill
 /// two AVX2 registers per quantity; the choice is measured in `benches/lanes_cost.rs`.
 pub const LANES: usize = 8;
 
@@ -63,7 +66,7 @@ fn prepare<'a>(cfg: &BatchConfig, index: usize, spec: &'a PointSpec) -> Result<R
 struct Failure {
     /// [s]
     t: f64,
-    /// the method's own account (an adaptive step that collapsed: `crawl.rs`), if it gave one
+    /// the method's own account (an adaptive step that collapsed: `integrate/crawl.rs`), if it gave one
     why: Option<String>,
 }
 
@@ -139,7 +142,7 @@ fn retry(cfg: &BatchConfig, ready: &Ready, first: Failure, cancel: &AtomicBool) 
             dt_tried = dt;
             record_every *= 2;
             method = Method::Rk4 { dt };
-            let steps = match crate::drive::plan_steps(
+            let steps = match crate::integrate::plan::plan_steps(
                 &ready.model,
                 &ready.spec.wave,
                 ready.spec.t_start,

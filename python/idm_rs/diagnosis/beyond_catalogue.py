@@ -1,0 +1,182 @@
+"""The diagnosis beyond the catalogue around :mod:`.discovery`: where discovery starts, a found
+term's gain taken against a refitted null, and whether a first effect is needed beside the
+found term (or was spurious)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Optional
+
+import numpy as np
+
+from .case_model import ModelSpec
+from .discovery import Discovery
+from .fitting import FitResult, FreeParam, apply, fit
+from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
+from .thresholds import (
+    BIC_THRESHOLD,
+    NOISE_RATIO_OK,
+)
+
+
+def found_against_null(pb: Problem, cal: CalibratedNull, found: Discovery) -> None:
+    """A found term's gain, taken against the nominal model refitted from where the term's
+    refit left the calibrated subset (as every catalogue candidate's is, refit_nulls): the
+    refit starts from the nominal values too, and a better basin of the nominal parameters it
+    reaches is the null's credit, not the term's. When the term no longer pays by BIC_THRESHOLD
+    there, it is not discovered (the reason says so, with both figures)."""
+    r = found.refit
+    if r is None:
+        return
+    start = [f.at(r.values[f.name]) for f in cal.free if f.name in r.values]
+    if len(start) != len(cal.free):
+        return
+    n0 = fit(pb.obj, cal.fit.spec, start, max_nfev=6, progress=pb.tick)
+    k = len(found.values)
+    gain = min(cal.fit.chi2, n0.chi2) - r.chi2 - k * pb.ln_n
+    found.delta_bic = min(found.delta_bic, gain)
+    if gain < BIC_THRESHOLD:
+        found.discovered = False
+        found.reason = (f"{found.reason}; but the nominal model refitted from where the term's refit left the "
+                        f"calibrated parameters reaches RMS {n0.rms / pb.sigma:.2f} x noise (the term "
+                        f"{r.rms / pb.sigma:.2f}): ΔBIC {gain:.0f} < {BIC_THRESHOLD:g}, the gain was a better "
+                        f"calibration, not the term")
+
+
+def term_alone(pb: Problem, cal: CalibratedNull, found: Discovery) -> tuple[FitResult, list[FreeParam]]:
+    """The form of `found` (found and refitted from the model with a first effect) refitted
+    from the calibrated null without that effect, started at the found values: the term alone's
+    refit and its library parameters."""
+    from .discovery.refit import _refit
+
+    assert found.form is not None and found.refit is not None
+    v = found.refit.values
+    form = found.form
+    alone_form = replace(form, coefficients={t.param: v.get(t.param, form.coefficients[t.param]) for t in form.terms},
+                         wavelength=v.get("lib_wavelength", form.wavelength))
+    start = [f.at(v.get(f.name, f.x0)) for f in cal.free]
+    return _refit(pb.obj, cal.fit.spec, start, alone_form, pb.tick)
+
+
+def without_lead(pb: Problem, cal: CalibratedNull, lead: Refit, found: Discovery
+                  ) -> tuple[float, FitResult, list[FreeParam]]:
+    """ΔBIC of the discovered term with the first effect (`found`, discovered from the model
+    with it) over the term alone, refitted from the calibrated null: the first effect must pay
+    its own way beside the found term (it may have mimicked part of it). Returns (ΔBIC, the
+    term alone's refit, its library parameters)."""
+    assert found.refit is not None
+    r0, lib = term_alone(pb, cal, found)
+    n_lib = len(lib)
+    with_lead = found.refit.chi2 + (len(lead.free) + n_lib) * pb.ln_n
+    alone = r0.chi2 + (len(cal.free) + n_lib) * pb.ln_n
+    return alone - with_lead, r0, lib
+
+
+def alone_explains(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal: float, lead: Refit,
+                    found: Discovery) -> Optional[Discovery]:
+    """A form found from the model with a first effect that did not stand there, refitted
+    alone from the calibrated null: the first effect may be spurious (it mimicked part of the
+    missing force and, kept, spoils the held-out prediction). The form with the lowest RMS that
+    gained by BIC is tried; it is returned as discovered when alone it leaves noise, predicts
+    the held-out experiment to noise and better than the null, and improves BIC, else None."""
+    tried = [t for t in [found, *found.tried] if t.refit is not None and t.form is not None and t.form.terms
+             and t.delta_bic >= BIC_THRESHOLD]
+    if not tried:
+        return None
+    best = min(tried, key=lambda t: t.rms_after)
+    assert best.form is not None  # tried keeps found forms only
+    r0, lib = term_alone(pb, cal, best)
+    delta_bic = cal.fit.chi2 - r0.chi2 - len(lib) * pb.ln_n
+    ho = heldout.rms(r0.spec, [f.at(r0.values[f.name]) for f in list(cal.free) + lib])
+    sigma = pb.sigma
+    terms = ", ".join(t.symbol for t in best.form.terms)
+    if not (delta_bic >= BIC_THRESHOLD and r0.rms <= NOISE_RATIO_OK * sigma and ho <= NOISE_RATIO_OK * sigma
+            and ho < ho_cal):
+        found.reason += (f"; without {lead.candidate.effect}, the form {terms} alone leaves RMS "
+                         f"{r0.rms / sigma:.2f} x noise, held out {ho / sigma:.2f} x noise (ΔBIC {delta_bic:.0f})")
+        # kept among the forms tried (the experiment that would decide it is looked for there)
+        found.tried.append(replace(best, refit=r0, rms_after=r0.rms, delta_bic=delta_bic, heldout_rms_after=ho,
+                                   free=[f.at(r0.values[f.name]) for f in list(cal.free) + lib], tried=[]))
+        return None
+    from .discovery.refit import _equation, describe
+
+    out = replace(best, discovered=True, refit=r0, rms_after=r0.rms, delta_bic=delta_bic,
+                  rms_before=cal.fit.rms, heldout_rms_before=ho_cal, heldout_rms_after=ho, tried=[])
+    vals = {f.name: r0.values[f.name] for f in lib}
+    out.values = {n: (x, r0.std.get(n)) for n, x in vals.items()}
+    out.equation = _equation(best.form, vals)
+    if best.body in best.forces:
+        out.description = describe(best.form, vals, best.forces[best.body])
+    where = "main body" if best.body == "main" else "weight"
+    out.reason = (f"a force on the {where} of the form {terms}, found from the model with {lead.candidate.effect} "
+                  f"(where it did not stand: {best.reason}), refitted without it: it improves BIC by "
+                  f"{delta_bic:.0f} over the calibrated model (RMS {cal.fit.rms / sigma:.2f} → {r0.rms / sigma:.2f} "
+                  f"x noise) and predicts the held-out experiment ({ho_cal * 1e9:.2f} → {ho * 1e9:.2f} nm); "
+                  f"{lead.candidate.effect} had mimicked part of it")
+    return out
+
+
+def discovery_start(verdict: str, lead: Optional[Refit], cal: CalibratedNull, nominal: Nominal, ho_cal: float
+                     ) -> tuple[ModelSpec, list[FreeParam], float, Optional[Refit]]:
+    """Where discovery starts: (the model, its free calibrated parameters centred there, the
+    held-out RMS [m] a found term must beat, the first effect it is found beside or None).
+    After "not_converged", the nominal values as given (the calibration's basins each
+    compensate for the missing force their own way), judged against the calibrated null's
+    held-out RMS; else from the model with the first effect when one stands; else from the
+    calibrated null."""
+    if verdict == "not_converged":
+        return nominal.spec, list(cal.free), ho_cal, None
+    if lead is not None:
+        return apply(lead.base, lead.free, np.zeros(len(lead.free))), list(lead.free), lead.candidate.heldout_rms, lead
+    return cal.fit.spec, list(cal.at), ho_cal, None
+
+
+def settle_discovery(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal: float, found: Discovery,
+                     d_lead: Optional[Refit], from_nominal: bool, verdict: str, reason: str, rms_after: float
+                     ) -> tuple[Discovery, str, str, float]:
+    """What discovery's result `found` makes of the verdict (`verdict`, `reason`, `rms_after` as
+    the catalogue left them; `d_lead` the first effect discovery started beside, or None;
+    `from_nominal` when it started from the nominal values as given): the found term taken
+    against a refitted null, its figures against the best calibrated null after a calibration
+    that did not converge, the first effect kept only when it pays its own way beside the term,
+    and a form that did not stand beside a first effect tried alone. Returns (the discovery,
+    verdict, reason, RMS after [m])."""
+    if found.discovered and d_lead is None:
+        found_against_null(pb, cal, found)
+    if found.discovered and from_nominal:
+        # its figures against the best calibrated null (discovery's own are against the
+        # nominal values as given, far off when a force is missing)
+        sigma = pb.sigma
+        found.rms_before, found.heldout_rms_before = cal.fit.rms, ho_cal
+        where = "main body" if found.body == "main" else "weight"
+        terms = ", ".join(t.symbol for t in found.form.terms) if found.form is not None else ""
+        found.reason = (f"the calibration did not converge ({cal.search.summary()}); discovery from the "
+                        f"nominal values as given: a force on the {where} of the form {terms} "
+                        f"({found.description}) improves BIC by {found.delta_bic:.0f} over the best calibrated "
+                        f"null (RMS {cal.fit.rms / sigma:.2f} → {found.rms_after / sigma:.2f} x noise) and "
+                        f"predicts the held-out experiment ({ho_cal * 1e9:.2f} → "
+                        f"{found.heldout_rms_after * 1e9:.2f} nm)")
+    if found.discovered:
+        verdict, reason, rms_after = "discovered", found.reason, found.rms_after
+        if d_lead is not None:
+            without, r0, lib = without_lead(pb, cal, d_lead, found)
+            if without >= BIC_THRESHOLD:
+                verdict = f"{d_lead.candidate.effect}+discovered"
+                reason = (f"{d_lead.candidate.effect} stands but leaves a systematic residual; beyond it, "
+                          f"{reason}; {d_lead.candidate.effect} pays its own way beside the found term "
+                          f"(ΔBIC {without:.0f} against the term alone)")
+            else:
+                # the term alone is the answer: its own refit from the calibrated null
+                found.refit, found.rms_after = r0, r0.rms
+                found.values = {f.name: (r0.values[f.name], r0.std.get(f.name)) for f in lib}
+                found.delta_bic = cal.fit.chi2 - r0.chi2 - len(lib) * pb.ln_n
+                rms_after = r0.rms
+                reason = (f"{reason} (found from the model with {d_lead.candidate.effect}, which is not needed "
+                          f"beside it: ΔBIC {without:.0f} < {BIC_THRESHOLD:g} against the term alone, "
+                          f"refitted from the calibrated model: RMS {r0.rms / pb.sigma:.2f} x noise)")
+        return found, verdict, reason, rms_after
+    # d_lead is the first effect when set (discovery_start)
+    alone = alone_explains(pb, cal, heldout, ho_cal, d_lead, found) if d_lead is not None else None
+    if alone is not None:
+        return alone, "discovered", alone.reason, alone.rms_after
+    return found, verdict, reason + f"; discovery: {found.reason}", rms_after

@@ -1,0 +1,96 @@
+"""The progress bar of a diagnosis (a share of the bar per stage, an ETA from the whole run's rate)
+and the clock that times the stages."""
+
+from __future__ import annotations
+
+import time
+from typing import Callable, Optional
+
+
+class Clock:
+    """Seconds per stage; a stage run twice (held-out) sums. Tells the progress bar, if any,
+    that the stage is done."""
+
+    def __init__(self, progress: Optional["Progress"] = None) -> None:
+        self.timings: dict[str, float] = {}
+        self._last = time.perf_counter()
+        self._progress = progress
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.timings[name] = self.timings.get(name, 0.0) + now - self._last
+        self._last = now
+        if self._progress is not None:
+            self._progress.stage_done(name)
+
+
+#: the diagnosis's stages: (name, share of a typical run's time [%], typical simulations), from
+#: the dev-set timings (benches/RESULTS.md); the progress bar advances by stage with an ETA
+STAGES: tuple[tuple[str, float, float], ...] = (
+    ("calibration", 40.0, 1500.0),
+    ("screening", 6.0, 30.0),
+    ("candidate fits", 34.0, 300.0),
+    ("null refits", 6.0, 30.0),
+    ("polish", 6.0, 30.0),
+    ("wider search", 4.0, 300.0),
+    ("held-out", 4.0, 10.0),
+    # the stages that run only on some cases (a first effect leaving a systematic residual, an
+    # unexplained residual, an alternative or an undetermined parameter): no share of the bar
+    ("second effect", 0.0, 300.0),
+    ("discovery", 0.0, 100.0),
+    ("next experiment", 0.0, 50.0),
+    ("next experiment (parameter)", 0.0, 50.0),
+)
+
+
+class Progress:
+    """A percent bar over the stages: each stage owns its share, simulations advance it within the
+    stage (approaching the share's end, as a stage's length is not known in advance). The ETA is
+    the average rate of the whole run so far (tqdm's smoothing 0), not the last few updates':
+    a stage that runs long no longer sends it from minutes to an hour and back. Beside it: the
+    stage and the simulated runs, counted as the report counts them (``runs()``, the
+    simulator's own count, one per experiment simulated)."""
+
+    def __init__(self, name: str, runs: Optional[Callable[[], int]] = None) -> None:
+        from tqdm.auto import tqdm
+
+        self.bar = tqdm(total=100.0, desc=f"diagnosing {name}", unit="%", smoothing=0.0,
+                        bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
+        self.stage, self.start, self.in_stage, self.evals = 0, 0.0, 0.0, 0
+        self.runs = runs
+        self._show()
+
+    def _show(self) -> None:
+        name = STAGES[self.stage][0] if self.stage < len(STAGES) else "done"
+        count = self.runs() if self.runs is not None else self.evals
+        self.bar.set_postfix_str(f"{name}, {count} simulated runs", refresh=False)
+
+    def update(self, n: int = 1) -> None:
+        """``n`` more simulations."""
+        self.evals += int(n)
+        if self.stage < len(STAGES):
+            _, share, typical = STAGES[self.stage]
+            self.in_stage += n
+            target = self.start + share * (1.0 - 0.5 ** (self.in_stage / typical))
+            self.bar.update(max(0.0, target - self.bar.n))
+        self._show()
+
+    def stage_done(self, name: str) -> None:
+        while self.stage < len(STAGES):
+            stage, share, _ = STAGES[self.stage]
+            self.stage += 1
+            self.start += share
+            if stage == name:
+                break
+        self.in_stage = 0.0
+        self.bar.update(max(0.0, self.start - self.bar.n))
+        self._show()
+
+    def close(self, done: bool = True) -> None:
+        if done:
+            self.bar.update(max(0.0, 100.0 - self.bar.n))
+        self.bar.close()
+
+
+def progress_bar(show: bool, name: str, runs: Optional[Callable[[], int]] = None) -> Optional[Progress]:
+    return Progress(name, runs) if show else None

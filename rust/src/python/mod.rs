@@ -1,0 +1,760 @@
+//! Thin PyO3 layer: numpy views in (zero copy where contiguous), the pure-Rust core called with
+//! the GIL released, numpy arrays out (moved, not copied), errors mapped to Python exceptions.
+//! No numerics here: a model's structure is parsed by `Structure::from_name`/`RigDrive::from_name`,
+//! a single run (stoppable, with its derivatives) is `simulate::simulate_with_derivatives`, the
+//! batch's thread, pool and cancellation live in `batch::runner`, its metric columns are
+//! declared in `batch::metrics::METRIC_COLUMNS`. What stays here is what needs the GIL: the
+//! Ctrl-C watch of a single run, conversions.
+
+use std::borrow::Cow;
+use std::collections::HashMap;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use crate::batch::{BatchConfig, BatchRunner, PointMetrics, PointTables, WaveFamily, METRIC_COLUMNS};
+use crate::integrate::method::Method;
+use crate::integrate::plan::check_task;
+use crate::integrate::task::{SimError, Task};
+use crate::physics::effects::{Effects, EFFECT_NAMES};
+use crate::physics::external_force::{Body, ExternalForce};
+use crate::physics::mechanics::Structure;
+use crate::model::{Model, N_ACCOUNTING};
+use crate::physics::params::{Params, PARAM_NAMES};
+use crate::physics::rig::RigDrive;
+use crate::sensitivity::parse_seeds;
+use crate::simulate::simulate_with_derivatives;
+use crate::physics::waveform::PiecewiseLinear;
+
+create_exception!(
+    _core,
+    DivergenceError,
+    PyRuntimeError,
+    "The integration left its physical bounds (a step too large, usually)."
+);
+
+fn value_error(msg: impl Into<String>) -> PyErr {
+    PyValueError::new_err(msg.into())
+}
+
+fn sim_error(py: Python<'_>, e: SimError) -> PyErr {
+    match e {
+        SimError::Input(m) => PyValueError::new_err(m),
+        SimError::Diverged { t, message } => {
+            let err = DivergenceError::new_err(message);
+            // the time [s] as an attribute, so callers need not parse the message
+            let _ = err.value(py).setattr("t", t);
+            err
+        }
+    }
+}
+
+/// Run `f` with the GIL released; a panic becomes a RuntimeError instead of tearing down Python.
+fn detached<T: Send, F: FnOnce() -> T + Send>(py: Python<'_>, f: F) -> PyResult<T> {
+    py.detach(|| catch_unwind(AssertUnwindSafe(f))).map_err(|p| {
+        let what = p
+            .downcast_ref::<String>()
+            .cloned()
+            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+            .unwrap_or_else(|| "unknown panic".into());
+        PyRuntimeError::new_err(format!(
+            "internal error in idm-rs core (please report): {what}"
+        ))
+    })
+}
+
+/// A contiguous view of a 1-D array, or a copy when it is strided.
+fn slice1<'a>(a: &'a PyReadonlyArray1<'_, f64>) -> Cow<'a, [f64]> {
+    match a.as_slice() {
+        Ok(s) => Cow::Borrowed(s),
+        Err(_) => Cow::Owned(a.as_array().iter().copied().collect()),
+    }
+}
+
+/// A row-major view of a 2-D array, or a copy when it is not C-contiguous.
+fn slice2<'a>(a: &'a PyReadonlyArray2<'_, f64>) -> Cow<'a, [f64]> {
+    match a.as_slice() {
+        Ok(s) => Cow::Borrowed(s),
+        Err(_) => Cow::Owned(a.as_array().iter().copied().collect()),
+    }
+}
+
+fn parse_params(params: &HashMap<String, f64>) -> PyResult<Params> {
+    let pairs: Vec<(&str, f64)> = params.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+    Params::from_pairs(&pairs).map_err(value_error)
+}
+
+fn parse_effects(effects: &HashMap<String, f64>) -> PyResult<Effects> {
+    let pairs: Vec<(&str, f64)> = effects.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+    Effects::from_pairs(&pairs).map_err(value_error)
+}
+
+/// Declares [`RunConfig`] from one list of fields — name, type, default, doc — written once:
+/// the struct, its defaults, and the keyword parsing of its Python constructor.
+macro_rules! run_config {
+    ($( $(#[doc = $doc:expr])* $name:ident : $ty:ty = $default:expr ),* $(,)?) => {
+        /// How to run: the model's structure and the integration method, shared by `simulate` and
+        /// the batch. Built once in Python with keywords; checked on construction.
+        #[pyclass(module = "idm_rs._core", frozen, get_all)]
+        #[derive(Clone, Debug)]
+        struct RunConfig {
+            $( $(#[doc = $doc])* $name: $ty, )*
+        }
+
+        impl Default for RunConfig {
+            fn default() -> Self {
+                RunConfig { $( $name: $default, )* }
+            }
+        }
+
+        impl RunConfig {
+            /// Set the fields named in `kwargs`; None keeps a field's default, an unknown keyword
+            /// is refused by name.
+            fn set_from(&mut self, kwargs: &Bound<'_, PyDict>) -> PyResult<()> {
+                for (key, value) in kwargs.iter() {
+                    let key: String = key.extract()?;
+                    if value.is_none() {
+                        continue;
+                    }
+                    match key.as_str() {
+                        $( stringify!($name) => {
+                            self.$name = value.extract().map_err(|e| {
+                                PyTypeError::new_err(format!("parameter '{}': {e}", stringify!($name)))
+                            })?
+                        } )*
+                        other => {
+                            return Err(PyTypeError::new_err(format!(
+                                "RunConfig() got an unexpected keyword argument '{other}'"
+                            )))
+                        }
+                    }
+                }
+                Ok(())
+            }
+        }
+    };
+}
+
+run_config! {
+    /// "lps", "dps" or "rig"
+    model: String = "dps".to_string(),
+    /// FEM elements of the DPS bar
+    n_elements: usize = 4,
+    /// whether the piezo hysteresis state h runs
+    piezo_hysteresis: bool = true,
+    /// "rk4", "dopri5", "rodas4" or "auto"
+    method: String = "rk4".to_string(),
+    /// RK4 step [s]
+    dt: f64 = 1e-8,
+    /// adaptive tolerances (atol in units of each state's scale)
+    rtol: f64 = 1e-7,
+    atol: f64 = 1e-7,
+    /// adaptive first trial step [s] (not given: `dt`)
+    first_step: f64 = f64::NAN,
+    /// RK4 retries at dt/2, dt/4, ... for a diverging batch point
+    retries: u32 = 2,
+    /// batch worker threads (below 1: 1)
+    threads: usize = 1,
+    /// batch: record the sensor reading every this many RK4 steps (0: none)
+    record_every: usize = 0,
+    /// batch: return each point's final state
+    final_states: bool = false,
+    /// batch: start-up cycles of a sawtooth train left out of the steady-state metrics
+    skip_cycles: usize = 1,
+    /// model "rig": "position" (spring to a moving end), "force" (the input is the force) or
+    /// "closed_loop" (a position servo)
+    rig_drive: String = "position".to_string(),
+    /// model "rig", position drive: spring [N/m] and damper [N s/m] to the moving end
+    rig_stiffness: f64 = 0.0,
+    rig_damping: f64 = 0.0,
+    /// model "rig", closed-loop drive: position gain [1/s], velocity gain [V s/m], actuator
+    /// constant [N/V] and the controller's saturation [V] (0: none)
+    rig_kp: f64 = 0.0,
+    rig_kv: f64 = 0.0,
+    rig_gain: f64 = 0.0,
+    rig_limit: f64 = 0.0,
+}
+
+impl RunConfig {
+    fn structure(&self) -> PyResult<Structure> {
+        Structure::from_name(&self.model, self.n_elements, || {
+            RigDrive::from_name(&self.rig_drive, self.rig_stiffness, self.rig_damping, self.rig_kp, self.rig_kv,
+                                self.rig_gain, self.rig_limit)
+        })
+        .map_err(value_error)
+    }
+
+    fn method(&self) -> PyResult<Method> {
+        Method::from_name(&self.method, self.dt, self.rtol, self.atol, self.first_step).map_err(value_error)
+    }
+
+    fn model(&self, p: Params, e: Effects, accounting: bool) -> PyResult<Model> {
+        Model::new(p, e, self.structure()?, self.piezo_hysteresis, accounting).map_err(value_error)
+    }
+}
+
+#[pymethods]
+impl RunConfig {
+    #[new]
+    #[pyo3(signature = (**kwargs))]
+    fn new(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let mut c = RunConfig::default();
+        if let Some(k) = kwargs {
+            c.set_from(k)?;
+        }
+        if c.first_step.is_nan() {
+            c.first_step = c.dt;
+        }
+        c.threads = c.threads.max(1);
+        c.structure()?;
+        c.method()?;
+        Ok(c)
+    }
+
+    fn __repr__(&self) -> String {
+        format!("{self:?}")
+    }
+}
+
+/// Table 1 overridden by `params`, with the derived normal force filled in.
+#[pyfunction]
+fn resolve_params(params: HashMap<String, f64>) -> PyResult<HashMap<String, f64>> {
+    let p = parse_params(&params)?;
+    Ok(PARAM_NAMES
+        .iter()
+        .map(|n| (n.to_string(), p.get(n).unwrap()))
+        .collect())
+}
+
+/// The batch's metric columns: (name, unit, long name), in result order.
+#[pyfunction]
+fn metric_columns() -> Vec<(&'static str, &'static str, &'static str)> {
+    METRIC_COLUMNS.iter().map(|(n, u, l, _)| (*n, *u, *l)).collect()
+}
+
+#[pyfunction]
+fn param_names() -> Vec<&'static str> {
+    PARAM_NAMES.to_vec()
+}
+
+#[pyfunction]
+fn effect_names() -> Vec<&'static str> {
+    EFFECT_NAMES.to_vec()
+}
+
+/// The instruction set the lane groups of plain models run on ("scalar", "avx2", "avx512").
+#[pyfunction]
+fn simd_level() -> &'static str {
+    crate::lanes::simd_level()
+}
+
+/// Choose the lane groups' instruction set: "scalar", "avx2" (the default) or "avx512" (the
+/// best the processor has at or below it). Results are bitwise the same; only speed differs.
+#[pyfunction]
+fn set_simd_level(level: &str) -> PyResult<()> {
+    if !["scalar", "avx2", "avx512"].contains(&level) {
+        return Err(PyValueError::new_err(format!(
+            "simd level must be 'scalar', 'avx2' or 'avx512', got '{level}'"
+        )));
+    }
+    crate::lanes::set_simd_level(level);
+    Ok(())
+}
+
+/// Per-point waveform fields of a batch of `kind` ("triangle", "sawtooth", "sampled").
+#[pyfunction]
+fn wave_fields(kind: &str) -> PyResult<Vec<&'static str>> {
+    let fam = WaveFamily::new(kind, Some((vec![0.0], vec![0.0]))).map_err(value_error)?;
+    Ok(fam.fields().to_vec())
+}
+
+/// The GPU kernel's constants of every point: `params` (P, len(param_names())) in
+/// `param_names()` order, NaN normal_force = derived; returns (P, kernel_constant_count()).
+/// Refuses (naming the row) a point the kernel cannot run.
+#[pyfunction]
+fn kernel_constants<'py>(
+    py: Python<'py>,
+    config: &RunConfig,
+    params: PyReadonlyArray2<'_, f64>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let rows = params.shape()[0];
+    let table = slice2(&params);
+    let np = PARAM_NAMES.len();
+    let mut out = Vec::with_capacity(rows * crate::gpu::kernel::N_CONSTANTS);
+    for r in 0..rows {
+        let pairs: Vec<(&str, f64)> = PARAM_NAMES
+            .iter()
+            .copied()
+            .zip(table[r * np..(r + 1) * np].iter().copied())
+            .filter(|(name, v)| !(*name == "normal_force" && v.is_nan()))
+            .collect();
+        let p = Params::from_pairs(&pairs).map_err(|e| value_error(format!("point {r}: {e}")))?;
+        let m = config.model(p, Effects::default(), false)?;
+        out.extend(crate::gpu::kernel::kernel_constants(&m).map_err(|e| value_error(format!("point {r}: {e}")))?);
+    }
+    Ok(out.into_pyarray(py).reshape([rows, crate::gpu::kernel::N_CONSTANTS])?.into_any())
+}
+
+/// Number of constants per point of the GPU kernel (its layout is `rust/src/gpu/kernel.rs`).
+#[pyfunction]
+fn kernel_constant_count() -> (usize, usize, usize) {
+    (crate::gpu::kernel::N_CONSTANTS, crate::gpu::kernel::N_SCALARS, crate::gpu::kernel::MAX_DOF)
+}
+
+/// What the GPU kernel implements (`rust/src/gpu/kernel.rs`): the Table 1 parameters, effects,
+/// waveform families (with their fields), structures and metrics it admits, and its largest
+/// node count; the kernel backends refuse everything else by name.
+#[pyfunction]
+fn kernel_accepts(py: Python<'_>) -> PyResult<Bound<'_, pyo3::types::PyDict>> {
+    let d = pyo3::types::PyDict::new(py);
+    d.set_item("params", crate::gpu::kernel::PARAMS.to_vec())?;
+    d.set_item("effects", crate::gpu::kernel::EFFECTS.to_vec())?;
+    let waves = pyo3::types::PyDict::new(py);
+    for (kind, fields) in crate::gpu::kernel::WAVES {
+        waves.set_item(kind, fields.to_vec())?;
+    }
+    d.set_item("waves", waves)?;
+    d.set_item("structures", crate::gpu::kernel::STRUCTURES.to_vec())?;
+    d.set_item("metrics", crate::gpu::kernel::METRICS.to_vec())?;
+    d.set_item("max_dof", crate::gpu::kernel::MAX_DOF)?;
+    Ok(d)
+}
+
+/// The C `#define`s of the kernel's constants' layout (`rust/src/gpu/kernel.rs`), to put in front
+/// of the kernel source when it is compiled.
+#[pyfunction]
+fn kernel_header() -> String {
+    crate::gpu::kernel::kernel_header()
+}
+
+/// Highest structural natural frequency [rad/s] of the model.
+#[pyfunction]
+fn highest_frequency(params: HashMap<String, f64>, config: &RunConfig) -> PyResult<f64> {
+    let m = config.model(parse_params(&params)?, Effects::default(), false)?;
+    Ok(m.mech.highest_frequency())
+}
+
+/// Name and unit of every state component of the model (see `Layout::components`).
+#[pyfunction]
+#[pyo3(signature = (params, effects, config, energy=false))]
+fn state_components(
+    params: HashMap<String, f64>,
+    effects: HashMap<String, f64>,
+    config: &RunConfig,
+    energy: bool,
+) -> PyResult<Vec<(String, &'static str)>> {
+    let m = config.model(parse_params(&params)?, parse_effects(&effects)?, energy)?;
+    Ok(m.layout.components())
+}
+
+/// A sampled external force as Python passes it: (times [s], forces [N], body name).
+type ExternalForceArg<'a> = (PyReadonlyArray1<'a, f64>, PyReadonlyArray1<'a, f64>, String);
+
+/// `m` with the sampled external force, if one is given.
+fn with_external(m: Model, force: Option<ExternalForceArg<'_>>) -> PyResult<Model> {
+    let Some((t, f, body)) = force else { return Ok(m) };
+    let body = Body::from_name(&body).map_err(value_error)?;
+    let force = ExternalForce::new(body, slice1(&t).into_owned(), slice1(&f).into_owned()).map_err(value_error)?;
+    m.with_external_force(force).map_err(value_error)
+}
+
+/// Raise ValueError if a run with these settings would be refused (span, step, model, state).
+#[pyfunction]
+#[pyo3(signature = (params, effects, wave_t, wave_v, t_start, t_end, config, initial_state=None, external_force=None))]
+#[allow(clippy::too_many_arguments)]
+fn check_run(
+    params: HashMap<String, f64>,
+    effects: HashMap<String, f64>,
+    wave_t: PyReadonlyArray1<'_, f64>,
+    wave_v: PyReadonlyArray1<'_, f64>,
+    t_start: f64,
+    t_end: f64,
+    config: &RunConfig,
+    initial_state: Option<PyReadonlyArray1<'_, f64>>,
+    external_force: Option<ExternalForceArg<'_>>,
+) -> PyResult<()> {
+    let m = with_external(config.model(parse_params(&params)?, parse_effects(&effects)?, false)?, external_force)?;
+    let wave = PiecewiseLinear::new(slice1(&wave_t).into_owned(), slice1(&wave_v).into_owned())
+        .map_err(value_error)?;
+    let y0 = initial_state.as_ref().map(slice1);
+    let rest = m.rest_state();
+    let task = Task {
+        model: &m,
+        wave: &wave,
+        t_start,
+        t_end,
+        y0: y0.as_deref().unwrap_or(&rest),
+    };
+    check_task(&task, &config.method()?).map_err(|e| value_error(e.to_string()))
+}
+
+/// Simulate one run; returns a dict of numpy arrays (see `idm_rs.simulate`). With
+/// `sensitivities` (names), also `sensitivities` (saved times x names): d reading / d name,
+/// and `final_state_sensitivities` (state components x names).
+#[pyfunction]
+#[pyo3(signature = (params, effects, wave_t, wave_v, t_start, t_end, config, save_every, energy, initial_state=None, sensitivities=None, external_force=None))]
+#[allow(clippy::too_many_arguments)]
+fn simulate<'py>(
+    py: Python<'py>,
+    params: HashMap<String, f64>,
+    effects: HashMap<String, f64>,
+    wave_t: PyReadonlyArray1<'_, f64>,
+    wave_v: PyReadonlyArray1<'_, f64>,
+    t_start: f64,
+    t_end: f64,
+    config: &RunConfig,
+    save_every: usize,
+    energy: bool,
+    initial_state: Option<PyReadonlyArray1<'_, f64>>,
+    sensitivities: Option<Vec<String>>,
+    external_force: Option<ExternalForceArg<'_>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let m = with_external(config.model(parse_params(&params)?, parse_effects(&effects)?, energy)?, external_force)?;
+    let names = sensitivities.unwrap_or_default();
+    let normal_force_derived = !params.contains_key("normal_force");
+    let seeds = parse_seeds(&m, &names, normal_force_derived).map_err(value_error)?;
+    let method = config.method()?;
+    let wave = PiecewiseLinear::new(slice1(&wave_t).into_owned(), slice1(&wave_v).into_owned())
+        .map_err(value_error)?;
+    let y0: Vec<f64> = match &initial_state {
+        Some(a) => slice1(a).into_owned(),
+        None => m.rest_state(),
+    };
+    // the run goes on a worker thread; this one looks for Ctrl-C (Python's signal handlers run
+    // only here) and asks the run to stop, keeping the trajectory saved so far
+    let cancel = AtomicBool::new(false);
+    let (traj, complete, derived) = std::thread::scope(|scope| -> PyResult<_> {
+        let worker = scope.spawn(|| {
+            catch_unwind(AssertUnwindSafe(|| {
+                simulate_with_derivatives(&m, &wave, t_start, t_end, &y0, &method, save_every, &seeds,
+                                          normal_force_derived, &cancel)
+            }))
+        });
+        while !py.detach(|| {
+            let deadline = Instant::now() + Duration::from_millis(50);
+            while !worker.is_finished() && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            worker.is_finished()
+        }) {
+            if py.check_signals().is_err() {
+                cancel.store(true, Ordering::Relaxed);
+            }
+        }
+        worker
+            .join()
+            .ok()
+            .and_then(|r| r.ok())
+            .ok_or_else(|| PyRuntimeError::new_err("internal error in idm-rs core (please report)"))
+    })?
+    .map_err(|e| sim_error(py, e))?;
+
+    let nt = traj.t.len();
+    let dof = traj.dof;
+    let d = PyDict::new(py);
+    let arr2 = |v: Vec<f64>, cols: usize| -> PyResult<Bound<'py, PyAny>> {
+        Ok(v.into_pyarray(py).reshape([nt, cols])?.into_any())
+    };
+    d.set_item("t", traj.t.into_pyarray(py))?;
+    d.set_item("nodes", arr2(traj.nodes, dof)?)?;
+    d.set_item("velocities", arr2(traj.velocities, dof)?)?;
+    d.set_item("g", traj.g.into_pyarray(py))?;
+    d.set_item("fh", traj.fh.into_pyarray(py))?;
+    d.set_item("h", traj.h.into_pyarray(py))?;
+    d.set_item("friction", traj.friction.into_pyarray(py))?;
+    d.set_item("piezo_force", traj.piezo_force.into_pyarray(py))?;
+    d.set_item("voltage", traj.voltage.into_pyarray(py))?;
+    d.set_item("reading", traj.reading.into_pyarray(py))?;
+    d.set_item("final_state", traj.final_state.into_pyarray(py))?;
+    d.set_item("state_components", m.layout.components())?;
+    d.set_item("complete", complete)?;
+    if let Some(s) = derived {
+        let n = s.names;
+        d.set_item("sensitivity_names", names)?;
+        d.set_item("sensitivities", arr2(s.readings, n)?)?;
+        let dim = s.final_state.len() / n.max(1);
+        d.set_item("final_state_sensitivities", s.final_state.into_pyarray(py).reshape([dim, n])?)?;
+    }
+    if energy {
+        d.set_item("accounting", arr2(traj.accounting, N_ACCOUNTING)?)?;
+        d.set_item("kinetic", traj.kinetic.into_pyarray(py))?;
+        d.set_item("strain", traj.strain.into_pyarray(py))?;
+        d.set_item("momentum", traj.momentum.into_pyarray(py))?;
+    }
+    Ok(d)
+}
+
+/// A batch running on a background thread (see `batch::runner`).
+#[pyclass(module = "idm_rs._core")]
+struct BatchRun {
+    runner: BatchRunner,
+    final_states: bool,
+    /// names whose derivatives each point returns
+    sensitivities: Vec<String>,
+}
+
+#[pymethods]
+impl BatchRun {
+    /// Points finished so far.
+    fn progress(&self) -> usize {
+        self.runner.progress()
+    }
+
+    #[getter]
+    fn total(&self) -> usize {
+        self.runner.total()
+    }
+
+    /// Ask the workers to stop; points already finished are kept.
+    fn cancel(&self) {
+        self.runner.cancel();
+    }
+
+    /// Wait up to `timeout` seconds (GIL released); True when the batch has finished.
+    fn wait(&self, py: Python<'_>, timeout: f64) -> bool {
+        py.detach(|| self.runner.wait(timeout))
+    }
+
+    /// Join and return the metrics as a dict of arrays (NaN / status 0 for points not run),
+    /// with `traces` (a list of arrays) when readings were recorded and `final_states` (a list
+    /// of arrays, empty where a point did not finish) when asked for.
+    fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let outputs = py
+            .detach(|| self.runner.join())
+            .map_err(|e| if e.contains("already taken") { PyRuntimeError::new_err(e) } else { value_error(e) })?;
+        let d = PyDict::new(py);
+        if outputs.iter().any(|o| !o.trace.is_empty()) {
+            let traces = PyList::empty(py);
+            for o in &outputs {
+                traces.append(PyArray1::from_slice(py, &o.trace))?;
+            }
+            d.set_item("traces", traces)?;
+        }
+        if self.final_states {
+            // one array per point (its layout's size; empty where the point did not finish)
+            let states = PyList::empty(py);
+            for o in &outputs {
+                states.append(PyArray1::from_slice(py, &o.final_state))?;
+            }
+            d.set_item("final_states", states)?;
+        }
+        if !self.sensitivities.is_empty() {
+            // one (names x samples) array per point; empty where the point did not finish
+            let n = self.sensitivities.len();
+            let sens = PyList::empty(py);
+            for o in &outputs {
+                let samples = o.sensitivities.len() / n;
+                sens.append(PyArray1::from_slice(py, &o.sensitivities).reshape([n, samples])?)?;
+            }
+            d.set_item("sensitivities", sens)?;
+            d.set_item("sensitivity_names", self.sensitivities.clone())?;
+        }
+        let reasons = PyList::empty(py);
+        for o in &outputs {
+            reasons.append(&o.reason)?;
+        }
+        d.set_item("reasons", reasons)?;
+        let metrics: Vec<PointMetrics> = outputs.into_iter().map(|o| o.metrics).collect();
+        let col = |f: fn(&PointMetrics) -> f64| metrics.iter().map(f).collect::<Vec<f64>>();
+        for (name, _, _, value) in METRIC_COLUMNS {
+            d.set_item(name, col(value).into_pyarray(py))?;
+        }
+        d.set_item("diverged_at", col(|m| m.diverged_at).into_pyarray(py))?;
+        d.set_item("dt_used", col(|m| m.dt_used).into_pyarray(py))?;
+        let steps: Vec<u64> = metrics.iter().map(|m| m.steps).collect();
+        d.set_item("steps", steps.into_pyarray(py))?;
+        let status: Vec<u8> = metrics.iter().map(|m| m.status as u8).collect();
+        d.set_item("status", status.into_pyarray(py))?;
+        Ok(d)
+    }
+}
+
+/// Start a batch. One row per point: `params` (P, 24) in `param_names()` order (NaN
+/// normal_force = derived), `effects` (P, 9) in `effect_names()` order, `wave_fields` (P, k) in
+/// `wave_fields(wave_kind)` order; optional per-point `t_ends`, `t_starts` [s] and
+/// `initial_states` (P, state size).
+#[pyfunction]
+#[pyo3(signature = (config, t_end, params, effects, wave_kind, wave_fields, sampled=None, t_ends=None, t_starts=None, initial_states=None, sensitivities=None))]
+#[allow(clippy::too_many_arguments)]
+fn start_batch(
+    py: Python<'_>,
+    config: &RunConfig,
+    t_end: f64,
+    params: PyReadonlyArray2<'_, f64>,
+    effects: PyReadonlyArray2<'_, f64>,
+    wave_kind: &str,
+    wave_fields: PyReadonlyArray2<'_, f64>,
+    sampled: Option<(PyReadonlyArray1<'_, f64>, PyReadonlyArray1<'_, f64>)>,
+    t_ends: Option<PyReadonlyArray1<'_, f64>>,
+    t_starts: Option<PyReadonlyArray1<'_, f64>>,
+    initial_states: Option<PyReadonlyArray2<'_, f64>>,
+    sensitivities: Option<Vec<String>>,
+) -> PyResult<BatchRun> {
+    let samples = sampled
+        .as_ref()
+        .map(|(t, v)| (slice1(t).into_owned(), slice1(v).into_owned()));
+    let family = WaveFamily::new(wave_kind, samples).map_err(value_error)?;
+    let cfg = BatchConfig {
+        structure: config.structure()?,
+        piezo_hysteresis: config.piezo_hysteresis,
+        t_end,
+        method: config.method()?,
+        retries: config.retries,
+        record_every: config.record_every,
+        final_states: config.final_states,
+        skip_cycles: config.skip_cycles,
+        sensitivities: sensitivities.unwrap_or_default(),
+    };
+    let (p, e, w) = (slice2(&params), slice2(&effects), slice2(&wave_fields));
+    let (te, ts) = (t_ends.as_ref().map(slice1), t_starts.as_ref().map(slice1));
+    let st = initial_states.as_ref().map(|a| (slice2(a), a.shape()[1]));
+    let tables = PointTables {
+        params: &p,
+        effects: &e,
+        waves: &w,
+        family: &family,
+        t_ends: te.as_deref(),
+        t_starts: ts.as_deref(),
+        states: st.as_ref().map(|(s, d)| (&s[..], *d)),
+    };
+    let points = detached(py, || tables.points())?.map_err(value_error)?;
+    let cfg_names = cfg.sensitivities.clone();
+    let runner = BatchRunner::start(cfg, points, config.threads).map_err(value_error)?;
+    Ok(BatchRun {
+        runner,
+        final_states: config.final_states,
+        sensitivities: cfg_names,
+    })
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<BatchRun>()?;
+    m.add_class::<RunConfig>()?;
+    m.add_function(wrap_pyfunction!(start_batch, m)?)?;
+    m.add_function(wrap_pyfunction!(wave_fields, m)?)?;
+    m.add_function(wrap_pyfunction!(simd_level, m)?)?;
+    m.add_function(wrap_pyfunction!(set_simd_level, m)?)?;
+    m.add_function(wrap_pyfunction!(check_run, m)?)?;
+    m.add("DivergenceError", m.py().get_type::<DivergenceError>())?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(state_components, m)?)?;
+    m.add_function(wrap_pyfunction!(resolve_params, m)?)?;
+    m.add_function(wrap_pyfunction!(param_names, m)?)?;
+    m.add_function(wrap_pyfunction!(metric_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(effect_names, m)?)?;
+    m.add_function(wrap_pyfunction!(highest_frequency, m)?)?;
+    m.add_function(wrap_pyfunction!(kernel_constants, m)?)?;
+    m.add_function(wrap_pyfunction!(kernel_constant_count, m)?)?;
+    m.add_function(wrap_pyfunction!(kernel_header, m)?)?;
+    m.add_function(wrap_pyfunction!(kernel_accepts, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    declarations::register(m)?;
+    Ok(())
+}
+
+// ==== declarations: Table 1, the effect catalogue, the structures, gravity ====================
+// Read-only descriptions of the model for the Python side (units, bounds, catalogue text); kept
+// in one block apart from the engine's entry points above, registered by
+// `declarations::register` in the module's init.
+
+mod declarations {
+    use pyo3::prelude::*;
+    use pyo3::types::PyDict;
+
+    use crate::physics::declare::ParamDecl;
+    use crate::physics::effects::EFFECTS;
+    use crate::integrate::method::METHODS;
+    use crate::physics::mechanics::STRUCTURES;
+    use crate::physics::params::{GRAVITY, TABLE1};
+
+    /// One declared quantity as a dict: name, symbol, unit, meaning, domain (lower, upper,
+    /// lower_closed, rule) and value (None where Table 1 derives it).
+    fn param_dict<'py>(py: Python<'py>, d: &ParamDecl) -> PyResult<Bound<'py, PyDict>> {
+        let out = PyDict::new(py);
+        out.set_item("name", d.name)?;
+        out.set_item("symbol", d.symbol)?;
+        out.set_item("unit", d.unit)?;
+        out.set_item("meaning", d.meaning)?;
+        out.set_item("lower", d.domain.lower())?;
+        out.set_item("upper", d.domain.upper())?;
+        out.set_item("lower_closed", d.domain.lower_closed())?;
+        out.set_item("rule", d.domain.rule())?;
+        let value = (!d.value.is_nan()).then_some(d.value); // NaN: derived
+        out.set_item("value", value)?;
+        Ok(out)
+    }
+
+    /// Table 1, in the order of `param_names()`.
+    #[pyfunction]
+    fn param_declarations(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
+        TABLE1.iter().map(|d| param_dict(py, d)).collect()
+    }
+
+    /// The effect catalogue: id, kind ("term", "structure", "parameter"), physics, term, params.
+    #[pyfunction]
+    fn effect_declarations(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
+        EFFECTS
+            .iter()
+            .map(|e| {
+                let out = PyDict::new(py);
+                out.set_item("id", e.id)?;
+                out.set_item("kind", e.kind.name())?;
+                out.set_item("physics", e.physics)?;
+                out.set_item("term", e.term)?;
+                let params: PyResult<Vec<_>> = e.params.iter().map(|d| param_dict(py, d)).collect();
+                out.set_item("params", params?)?;
+                Ok(out)
+            })
+            .collect()
+    }
+
+    /// The structures (`model` names): name, label, meaning, elements (takes `n_elements`), idm.
+    #[pyfunction]
+    fn structure_declarations(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
+        STRUCTURES
+            .iter()
+            .map(|s| {
+                let out = PyDict::new(py);
+                out.set_item("name", s.name)?;
+                out.set_item("label", s.label)?;
+                out.set_item("meaning", s.meaning)?;
+                out.set_item("elements", s.elements)?;
+                out.set_item("idm", s.idm)?;
+                Ok(out)
+            })
+            .collect()
+    }
+
+    /// The integration methods: name, adaptive (chooses its own steps), meaning.
+    #[pyfunction]
+    fn method_declarations(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
+        METHODS
+            .iter()
+            .map(|d| {
+                let out = PyDict::new(py);
+                out.set_item("name", d.name)?;
+                out.set_item("adaptive", d.adaptive)?;
+                out.set_item("meaning", d.meaning)?;
+                Ok(out)
+            })
+            .collect()
+    }
+
+    pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+        m.add_function(wrap_pyfunction!(method_declarations, m)?)?;
+        m.add_function(wrap_pyfunction!(structure_declarations, m)?)?;
+        m.add_function(wrap_pyfunction!(param_declarations, m)?)?;
+        m.add_function(wrap_pyfunction!(effect_declarations, m)?)?;
+        // standard gravity [m/s^2] of the default normal force
+        m.add("GRAVITY", GRAVITY)?;
+        Ok(())
+    }
+}
+// ==== end of declarations ====================================================================
