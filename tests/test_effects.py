@@ -266,3 +266,21 @@ def test_bench_fixed_forces_are_declared_effect_parameters_and_turn_with_the_rig
     assert oriented(values, False) == values
     for n in BENCH_FIXED:
         idm_rs.Effects(**{n: -0.01})  # the turned value is accepted
+
+
+#: catalogue effects that put no force on a body (the reading's lag and drift): the energy
+#: budget has nothing of theirs to close
+NO_FORCE = {"sensor_lowpass", "thermal_drift"}
+
+
+def test_the_effect_lists_of_the_tests_cover_every_catalogue_effect():
+    """A new effect fails here until the energy-balance test (FORCE_EFFECTS) and the drawn
+    effects of the property tests (conftest.EFFECT_RANGES; creep is drawn as its pair) know it:
+    these lists are kept by hand, so a gap is made loud."""
+    from conftest import EFFECT_RANGES
+    from idm_rs.declarations import EFFECTS
+    from idm_rs.diagnosis.catalogue import LIBRARY_IDS
+
+    term = [e for e in EFFECTS if e.kind == "term" and e.id not in LIBRARY_IDS]
+    assert {e.id for e in term} - NO_FORCE == set(FORCE_EFFECTS)
+    assert {p.name for e in term for p in e.params} == set(EFFECT_RANGES) | {"kappa", "tau_creep"}

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Literal, Optional, Sequence
 
 import numpy as np
 
+from . import methods
 from .cli_figures import plot_result, plot_sweep
 from .declarations import IDM_MODELS, structure_label
 from .effects import Effects
@@ -576,7 +577,8 @@ def sweep_summary(ds: "xarray.Dataset", metric: str) -> str:
     n = int(a["points"])
     wall = float(a["wall_time_s"])
     model = structure_label(a["model"], a["n_elements"])
-    step = f"dt = {a['dt_s']:g} s" if a["method"] == "rk4" else f"rtol = {a['rtol']:g}, atol = {a['atol']:g}"
+    step = (f"rtol = {a['rtol']:g}, atol = {a['atol']:g}" if methods.is_adaptive(a["method"])
+            else f"dt = {a['dt_s']:g} s")
     counts = np.bincount(ds["status"].values.ravel().astype(np.int64), minlength=len(STATUS_NAMES))
     statuses = ", ".join(f"{name} {int(c)}" for name, c in zip(STATUS_NAMES, counts) if c or name in ("ok", "diverged"))
     rule = a.get("t_end_rule", "as given")
@@ -608,7 +610,7 @@ def sweep_summary(ds: "xarray.Dataset", metric: str) -> str:
 def cmd_simulate(a: argparse.Namespace) -> int:
     params = params_from_overrides(a.param)
     waveform = waveform_from_args(a)
-    adaptive = a.method != "rk4"
+    adaptive = methods.is_adaptive(a.method)
     if a.first_step is not None and not adaptive:
         raise CliError("--first-step is for the adaptive methods; RK4 takes --dt")
     dt = a.dt if a.dt is not None else 1e-8
@@ -690,13 +692,13 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     if a.metric in (*STEADY_METRICS, "step_per_cycle") and not isinstance(waveform, Sawtooth):
         raise CliError(f"--metric {a.metric} is defined for sawtooth trains only (--waveform sawtooth); "
                        f"this sweep drives a {type(waveform).__name__.lower()}")
-    if a.first_step is not None and a.method == "rk4":
+    if a.first_step is not None and not methods.is_adaptive(a.method):
         raise CliError("--first-step is for the adaptive methods; RK4 takes --dt")
     dt = a.dt if a.dt is not None else 1e-8
     t_end = a.t_end  # None: each point to its own waveform's end
     if t_end is not None:
         _warn_past_samples(waveform, t_end)
-        if a.method == "rk4":
+        if not methods.is_adaptive(a.method):
             t_end = _snap(t_end, dt)
     client = None
     if a.scheduler:

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 from .declarations import structure_label
+from .methods import is_adaptive
 from .simulation import SimulationResult
 from .waveforms import Sawtooth
 
@@ -176,7 +177,7 @@ def sweep_title(ds: "xarray.Dataset", metric: str) -> str:
 
     a = ds.attrs
     model = structure_label(str(a.get("model")), int(a.get("n_elements", 1)))
-    step = f"dt = {a.get('dt_s'):g} s" if a.get("method") == "rk4" else f"rtol = {a.get('rtol'):g}"
+    step = f"rtol = {a.get('rtol'):g}" if is_adaptive(str(a.get("method"))) else f"dt = {a.get('dt_s'):g} s"
     on = [k[len("effect_"):] + f" = {v:g}" for k, v in a.items() if k.startswith("effect_")]
     details = (f"{model}, {a.get('method')} ({step}), t_end = {a.get('t_end_s'):g} s, "
                f"{_waveform_title(str(a.get('waveform')), [str(d) for d in ds[metric].dims])}"

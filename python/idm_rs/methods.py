@@ -34,6 +34,15 @@ from . import engine
 METHODS: tuple[str, ...] = tuple(str(d["name"]) for d in engine.method_declarations())
 #: the methods that choose their own step
 ADAPTIVE: tuple[str, ...] = tuple(str(d["name"]) for d in engine.method_declarations() if d["adaptive"])
+
+
+def is_adaptive(method: str) -> bool:
+    """Whether `method` chooses its own steps (rtol, atol) rather than taking a fixed `dt`: what
+    every "does this run take dt?" question asks, so a new fixed-step method needs no edit
+    where runs are prepared."""
+    return method in ADAPTIVE
+
+
 #: the type of a method name: spelled out for the type checker, held equal to METHODS by
 #: tests/test_declarations.py
 MethodName = Literal["rk4", "dopri5", "rodas4", "auto"]

@@ -117,8 +117,8 @@ class SimulationResult:
     def __repr__(self) -> str:
         """A one-line summary (the arrays are attributes: ``result.t``, ``result.nodes``, ...)."""
         model = structure_label(self.model, self.n_elements)
-        how = (f"rk4, dt = {self.dt:g} s" if self.method == "rk4"
-               else f"{self.method}, rtol = {self.rtol:g}, atol = {self.atol:g}")
+        how = (f"{self.method}, rtol = {self.rtol:g}, atol = {self.atol:g}" if methods.is_adaptive(self.method)
+               else f"{self.method}, dt = {self.dt:g} s")
         span = f"t = {self.t[0]:g}..{self.t[-1]:g} s" if self.t.size else "no saved times"
         on = self.effects.active()
         effects = f", effects {on}" if on else ""
@@ -181,7 +181,8 @@ class SimulationResult:
             raise ValueError("steady_state() re-runs the train from rest; this run started at "
                              f"t = {self.t[0]:g} s from a given state")
         how: dict[str, Any] = (
-            {"dt": self.dt} if self.method == "rk4" else {"rtol": self.rtol, "atol": self.atol, "first_step": self.dt})
+            {"rtol": self.rtol, "atol": self.atol, "first_step": self.dt} if methods.is_adaptive(self.method)
+            else {"dt": self.dt})
         # ignores: this run's own waveform, model and method, typed wider than steady_state()'s; it
         # refuses a waveform that is not a Sawtooth train with a ValueError
         return steady_state(self.params, self.waveform, model=self.model, n_elements=self.n_elements,  # type: ignore[arg-type]
@@ -323,9 +324,9 @@ def simulate(
         if isinstance(value, bool) or int(value) != value or value < 1:
             raise ValueError(f"parameter '{name}' must be a positive integer, got {value!r}")
     method, rtol, atol = methods.resolve(method, rtol, atol)
-    if method == "rk4" and dt is None:
+    adaptive = methods.is_adaptive(method)
+    if not adaptive and dt is None:
         dt = 1e-8
-    adaptive = method in methods.ADAPTIVE
     step = float(first_step if adaptive and first_step is not None else (dt if dt is not None else 1e-8))
     from .batch import Structure, sensitivity_names
 
@@ -337,7 +338,7 @@ def simulate(
     names = sensitivity_names(sensitivities)
     bt, bv = waveform.breakpoints()
     y0 = None if initial_state is None else np.ascontiguousarray(initial_state, dtype=float).ravel()
-    if method == "rk4" and (t_end - t_start) / step > LONG_RUN_STEPS:
+    if not adaptive and (t_end - t_start) / step > LONG_RUN_STEPS:
         n = (t_end - t_start) / step
         warnings.warn(f"{n:.2g} RK4 steps (t_end = {t_end:g} s at dt = {step:g} s) take minutes or more; Ctrl-C "
                       "stops the run and keeps the trajectory so far (or use method='auto')", RuntimeWarning,

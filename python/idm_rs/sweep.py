@@ -138,7 +138,7 @@ class _Plan:
         t_ends = None
         if self.own_t_end:
             t_ends = _durations(self.waveform, {c: wm[:, j] for j, c in enumerate(wnames)})
-            if self.method == "rk4":
+            if not methods.is_adaptive(self.method):
                 t_ends = snap_to_steps(t_ends, self.dt)
         return Tables(pm, em, self.waveform.batch_kind, wm, sampled, t_ends)
 
@@ -393,7 +393,7 @@ def sweep(
         own = False
         if isinstance(t_end, bool) or not (float(t_end) > 0 and math.isfinite(float(t_end))):
             raise ValueError(f"parameter 't_end' must be a positive time [s], got {t_end!r}")
-        slack = 0.5 * float(dt) if method == "rk4" else 1e-12 * longest
+        slack = 1e-12 * longest if methods.is_adaptive(method) else 0.5 * float(dt)
         if isinstance(waveform, Sawtooth) and float(t_end) < longest - slack:
             at = " of the point " + ", ".join(f"{k} = {v:g}" for k, v in where.items()) if where else ""
             raise ValueError(f"t_end = {float(t_end):g} s ends before the sawtooth train{at} "
@@ -781,7 +781,7 @@ def _run_kernel(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_s
     from .gpu import Spec, launch_cuda, pack, run_cpu, wave_columns
     from .gpu.backend import Finished, Launched
 
-    adaptive = plan.method != "rk4"
+    adaptive = methods.is_adaptive(plan.method)
     config = plan.structure.config(method="rk4", dt=plan.dt)  # the constants do not depend on the method
     spec = Spec(2 if plan.model == "lps" else plan.n_elements + 1, plan.piezo_hysteresis)
     kind = plan.waveform.batch_kind
@@ -818,7 +818,7 @@ def _finish_kernel_block(plan: _Plan, out: dict[str, NDArray[Any]], handle: Any,
     """Wait for a block, write its outputs straight into the sweep's columns, rerun its failed
     points on the CPU engine."""
     res = handle.result()
-    adaptive = plan.method != "rk4"
+    adaptive = methods.is_adaptive(plan.method)
     sl = slice(start, stop)
     for k in ("final_position", "peak_velocity", "peak_friction", "slip_fraction", "status", "diverged_at"):
         out[k][sl] = res[k]

@@ -262,7 +262,7 @@ impl Model<Dual64> {
 
 #[cfg(test)]
 mod tests {
-    use crate::physics::effects::Effects;
+    use crate::physics::effects::{Effects, EFFECT_PARAMS};
     use crate::physics::external_force::{Body, ExternalForce};
     use crate::physics::mechanics::Structure;
     use crate::model::Model;
@@ -331,17 +331,24 @@ mod tests {
     #[test]
     fn analytic_jacobian_equals_the_one_derived_from_the_right_hand_side() {
         let p = Params::paper();
-        let all = Effects {
-            tau_amp: 2e-5,
-            kappa: 0.05,
-            tau_creep: 3e-3,
-            tau_sensor: 4e-5,
-            k_ground: 2e3,
-            c_weight: 0.3,
-            eps: 0.07,
-            theta_rad: 0.1,
-            ..Effects::default()
-        };
+        // every catalogue effect on at once, from the declarations: a new effect parameter stops
+        // this test until it has a value here (so its partials are compared)
+        let mut all = Effects::default();
+        for d in EFFECT_PARAMS.iter().filter(|d| !d.name.starts_with("lib")) {
+            let value = match d.name {
+                "tau_amp" => 2e-5,
+                "kappa" => 0.05,
+                "tau_creep" => 3e-3,
+                "tau_sensor" => 4e-5,
+                "k_ground" => 2e3,
+                "c_weight" => 0.3,
+                "eps" => 0.07,
+                "theta_rad" => 0.1,
+                "drift_rate" => 1e-6,
+                other => panic!("give effect parameter '{other}' a value in this test"),
+            };
+            all.set(d.name, value).unwrap();
+        }
         // every library term on at once, on the main body and on the weight
         let library = Effects {
             lib_x1: 3e3, lib_v1: 0.2, lib_dx: -1e3, lib_dv: 0.1, lib_sgn: 0.05, lib_abs: 0.3, lib_vv: 20.0,

@@ -103,6 +103,31 @@ impl EffectKind {
     }
 }
 
+/// What an effect acts on. A mechanism runs the effects whose parts it has (a friction rig:
+/// the main body and the reading; no piezo element, no weight), refusing the others by name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// the main body (a force on it, or its friction)
+    Main,
+    /// the weight (a force on it)
+    Weight,
+    /// the piezo element or its voltage
+    Piezo,
+    /// the sensor's reading only
+    Reading,
+}
+
+impl Part {
+    pub fn name(self) -> &'static str {
+        match self {
+            Part::Main => "main body",
+            Part::Weight => "weight",
+            Part::Piezo => "piezo element",
+            Part::Reading => "reading",
+        }
+    }
+}
+
 /// One effect of the catalogue (docs/RECORDINGS.md).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EffectDecl {
@@ -113,6 +138,8 @@ pub struct EffectDecl {
     pub physics: &'static str,
     /// the term it adds to the nominal equations, as text
     pub term: &'static str,
+    /// the parts of the device it acts on
+    pub acts_on: &'static [Part],
     pub params: &'static [ParamDecl],
 }
 

@@ -5,7 +5,7 @@
 //! switch on parts of the paper's own model; they are declared here too so the catalogue has
 //! one source, but need no field.)
 
-use crate::physics::declare::{check_domains, Domain, EffectDecl, EffectKind, ParamDecl};
+use crate::physics::declare::{check_domains, Domain, EffectDecl, EffectKind, ParamDecl, Part};
 use crate::physics::params::{table1, GRAVITY};
 use crate::numbers::real::Real;
 use crate::numbers::scalar::Scalar;
@@ -20,6 +20,7 @@ macro_rules! effects {
             $( $oid:ident ($okind:ident) {
                 physics: $ophysics:literal,
                 term: $oterm:literal,
+                acts_on: [$($opart:ident),+],
                 params: [$($oparam:expr),* $(,)?] $(,)?
             } )*
         }
@@ -27,6 +28,7 @@ macro_rules! effects {
             $( $tid:ident {
                 physics: $tphysics:literal,
                 term: $tterm:literal,
+                acts_on: [$($tpart:ident),+],
                 $( state: { name: $sname:literal, unit: $sunit:literal, tau: $stau:ident, follows: $sfollows:ident, scale: $sscale:ident }, )?
                 params: { $( $field:ident: $symbol:literal, $unit:literal, $domain:expr, $meaning:literal; )* } $(,)?
             } )*
@@ -60,6 +62,7 @@ macro_rules! effects {
                 kind: EffectKind::$okind,
                 physics: $ophysics,
                 term: $oterm,
+                acts_on: &[$(Part::$opart),+],
                 params: &[$($oparam),*],
             },)*
             $(EffectDecl {
@@ -67,6 +70,7 @@ macro_rules! effects {
                 kind: EffectKind::Term,
                 physics: $tphysics,
                 term: $tterm,
+                acts_on: &[$(Part::$tpart),+],
                 params: &[$(effects!(@param $field, $symbol, $unit, $domain, $meaning)),*],
             },)*
         ];
@@ -139,17 +143,20 @@ effects! {
         pe_mass (Structure) {
             physics: "the PE has mass: the device is the DPS (4 elements, consistent mass, Rayleigh damping), not the LPS",
             term: "PE as a 4-element bar with mass and Rayleigh damping (DPS)",
+            acts_on: [Piezo],
             params: [],
         }
         piezo_hysteresis (Parameter) {
             physics: "the PE force has Bouc-Wen hysteresis h (amplitude hyst_alpha; hyst_beta, hyst_gamma as nominal)",
             term: "Fp = kp (d33 V - h), h' = hyst_alpha d33 V' - hyst_beta |V'| h - hyst_gamma V' |h|",
+            acts_on: [Piezo],
             // with h switched on; at hyst_alpha = 0 h stays 0
             params: [ParamDecl { value: 0.0, ..table1("hyst_alpha") }],
         }
         stribeck (Parameter) {
             physics: "static friction exceeds kinetic friction (mu_s > mu_k: a Stribeck peak)",
             term: "s(v) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta), Fs = mu_s Fn > Fc",
+            acts_on: [Main],
             // fitted as the excess, so mu_s >= mu_k holds whatever mu_k the fit is at
             params: [ParamDecl {
                 name: "mu_s_excess",
@@ -165,6 +172,7 @@ effects! {
         incline {
             physics: "the guide is tilted: gravity along it on the device, normal force times cos(theta)",
             term: "m1 x1'' += -(m1 + m2 + mPE) g sin(theta_rad), Fn *= cos(theta_rad)",
+            acts_on: [Main],
             params: {
                 theta_rad: "theta", "rad",
                     Domain::Open { lower: -std::f64::consts::FRAC_PI_2, upper: std::f64::consts::FRAC_PI_2, text: "(-pi/2, pi/2)" },
@@ -174,6 +182,7 @@ effects! {
         spring_to_ground {
             physics: "a spring from the main body to the ground, force -k_ground x1",
             term: "m1 x1'' += -k_ground x1",
+            acts_on: [Main],
             params: {
                 k_ground: "k_ground", "N/m", Domain::NonNegative, "stiffness of a spring from the main body to ground";
             },
@@ -181,6 +190,7 @@ effects! {
         amplifier_lowpass {
             physics: "the PE voltage lags the command through a first-order amplifier (tau_amp)",
             term: "Vpe' = (Vcmd - Vpe) / tau_amp",
+            acts_on: [Piezo],
             state: { name: "v_pe", unit: "V", tau: tau_amp, follows: Command, scale: Voltage },
             params: {
                 tau_amp: "tau_amp", "s", Domain::NonNegative, "amplifier lag of the PE voltage behind the command; 0 = off";
@@ -189,6 +199,7 @@ effects! {
         piezo_creep {
             physics: "the PE creeps: an extra free extension relaxing to kappa d33 V with time constant tau_creep",
             term: "xc' = (kappa d33 V - xc) / tau_creep, Fp = kp (d33 V + xc)",
+            acts_on: [Piezo],
             state: { name: "x_creep", unit: "m", tau: tau_creep, follows: CreepTarget, scale: Stroke },
             params: {
                 kappa: "kappa", "1", Domain::Finite, "creep amplitude, relative to the free extension d33 V";
@@ -198,6 +209,7 @@ effects! {
         weight_friction {
             physics: "viscous drag on the weight, force -c_weight v2",
             term: "m2 x2'' += -c_weight x2'",
+            acts_on: [Weight],
             params: {
                 c_weight: "c_weight", "N s/m", Domain::NonNegative, "viscous drag coefficient on the weight";
             },
@@ -205,6 +217,7 @@ effects! {
         friction_asymmetry {
             physics: "friction levels depend on the sliding direction: Fc, Fs times (1 + eps sgn v1)",
             term: "Fc, Fs *= (1 + eps sgn x1')",
+            acts_on: [Main],
             params: {
                 eps: "eps", "1", Domain::Open { lower: -1.0, upper: 1.0, text: "(-1, 1)" },
                     "friction asymmetry: Fc, Fs times (1 + eps sgn v1)";
@@ -213,6 +226,7 @@ effects! {
         sensor_lowpass {
             physics: "the sensor reads x1 through a first-order low-pass (tau_sensor)",
             term: "x' = (x1 - x) / tau_sensor (the reading)",
+            acts_on: [Reading],
             state: { name: "x_sensor", unit: "m", tau: tau_sensor, follows: Position, scale: Stroke },
             params: {
                 tau_sensor: "tau_sensor", "s", Domain::NonNegative, "sensor lag: the reading follows x1 through a first-order low-pass; 0 = off";
@@ -221,6 +235,7 @@ effects! {
         library_force {
             physics: "a force on the main body made of library terms (what `discover` found; off at all zeros)",
             term: "m1 x1'' += lib_x1 x1 + lib_v1 v1 + lib_dx (x1 - x2) + lib_dv (v1 - v2) + lib_sgn tanh(v1/v_s) + lib_abs |v1| + lib_vv v1|v1| + lib_volt V + lib_dvolt V' + lib_t t + lib_x1sq x1^2 + lib_x1cube x1^3 + lib_sin sin(2 pi x1/lib_wavelength) + lib_cos cos(..) + Ff (lib_ff + lib_ff_sin sin(..) + lib_ff_cos cos(..))",
+            acts_on: [Main],
             params: {
                 lib_x1: "a_x1", "N/m", Domain::Finite, "library force: coefficient of x1";
                 lib_v1: "a_v1", "N s/m", Domain::Finite, "library force: coefficient of v1";
@@ -245,6 +260,7 @@ effects! {
         library_force_weight {
             physics: "a force on the weight made of library terms (what `discover` found on the weight; off at all zeros)",
             term: "m2 x2'' += libw_x2 x2 + libw_v2 v2 + libw_dx (x2 - x1) + libw_dv (v2 - v1) + libw_sgn tanh(v2/v_s) + libw_vv v2|v2| + libw_volt V + libw_dvolt V'",
+            acts_on: [Weight],
             params: {
                 libw_x2: "c_x2", "N/m", Domain::Finite, "library force on the weight: coefficient of x2";
                 libw_v2: "c_v2", "N s/m", Domain::Finite, "library force on the weight: coefficient of v2";
@@ -259,6 +275,7 @@ effects! {
         thermal_drift {
             physics: "the reading drifts linearly in time (drift_rate)",
             term: "x = x1 + drift_rate t (the reading)",
+            acts_on: [Reading],
             params: {
                 drift_rate: "drift_rate", "m/s", Domain::Finite, "linear drift of the reading";
             },

@@ -8,7 +8,8 @@
 
 use nalgebra::DMatrix;
 
-use crate::physics::effects::Effects;
+use crate::physics::declare::{EffectKind, Part};
+use crate::physics::effects::{Effects, EFFECTS};
 use crate::physics::params::Params;
 use crate::numbers::real::Real;
 use crate::numbers::scalar::Scalar;
@@ -115,20 +116,25 @@ impl RigDrive {
         }
     }
 
-    /// Refuse effects and switches that need the piezo element or the weight.
+    /// The parts of a device a rig has: one body on the friction element, read by a sensor.
+    pub const PARTS: &'static [Part] = &[Part::Main, Part::Reading];
+
+    /// Refuse the piezo switch, and every effect that is on and acts on a part the rig does not
+    /// have ([`RigDrive::PARTS`], from each effect's declaration): the message names the first.
     fn refuse_piezo_effects(e: &Effects, piezo_hysteresis: bool) -> Result<(), String> {
         if piezo_hysteresis {
             return Err("the rig has no piezo element: use piezo_hysteresis=False".into());
         }
-        for (name, v) in [
-            ("tau_amp", e.tau_amp),
-            ("kappa", e.kappa),
-            ("tau_creep", e.tau_creep),
-            ("c_weight", e.c_weight),
-        ] {
-            if v != 0.0 {
+        for decl in EFFECTS.iter().filter(|d| d.kind == EffectKind::Term) {
+            let Some(part) = decl.acts_on.iter().find(|p| !Self::PARTS.contains(p)) else {
+                continue;
+            };
+            if let Some(on) = decl.params.iter().find(|q| e.get(q.name).is_some_and(|v| v != 0.0)) {
                 return Err(format!(
-                    "effect parameter '{name}' acts on the piezo element or the weight, which the rig does not have; set it to 0"
+                    "effect parameter '{}' ({}) acts on the {}, which the rig does not have; set it to 0",
+                    on.name,
+                    decl.id,
+                    part.name()
                 ));
             }
         }
@@ -309,5 +315,22 @@ mod tests {
         assert!(err.contains("'c_weight'"), "{err}");
         let err = Model::new(rig_params(), Effects::default(), drive, true, false).unwrap_err();
         assert!(err.contains("piezo_hysteresis"), "{err}");
+        // every effect parameter, alone: refused exactly when its effect acts on a part the rig
+        // lacks (a force on the weight from the library too), run otherwise
+        for decl in EFFECTS.iter().filter(|d| d.kind == EffectKind::Term) {
+            let lacks = decl.acts_on.iter().any(|p| !RigDrive::PARTS.contains(p));
+            for q in decl.params {
+                let mut e = Effects::default();
+                e.set(q.name, 1e-3).unwrap();
+                if q.name == "kappa" {
+                    e.tau_creep = 1e-3; // kappa alone is refused for its own reason
+                }
+                match Model::new(rig_params(), e, drive, false, false) {
+                    Err(err) if lacks => assert!(err.contains(&format!("'{}'", q.name)), "{err}"),
+                    Ok(_) if !lacks => {}
+                    other => panic!("{}: {:?}", q.name, other.map(|_| ())),
+                }
+            }
+        }
     }
 }
