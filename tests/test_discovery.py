@@ -204,6 +204,38 @@ def test_the_regression_names_the_term_the_force_is_made_of():
     assert all(t in MAIN_TERMS for t in form.terms)
 
 
+def test_a_term_with_a_look_alike_in_the_library_is_reported_with_it():
+    """A force c V on a device whose PE extension x2 - x1 follows d33 V (as a stiff PE's does on
+    slow drives): V and x1 - x2 move the readings alike, so the form names one of them and
+    reports the other as the look-alike these experiments cannot tell apart."""
+    rng = np.random.default_rng(11)
+    experiments = []
+    d33 = 1.24e-7
+    for j in range(4):
+        n, k = 400, 40
+        t = np.linspace(0, 0.04, n)
+        knots = np.linspace(0, 0.04, k)
+        volt = 80 * np.abs(np.sin(2 * np.pi * t / 0.01 + 0.3 * j))
+        x1 = np.cumsum(rng.normal(0.0, 1e-9, n))
+        x2 = x1 + d33 * volt * (1 + 1e-3 * rng.normal(size=n))
+        v1 = np.gradient(x1, t)
+        tr = Trajectory(t, x1, v1, x2, np.gradient(x2, t), 3.0 * np.tanh(v1 / 1e-3), volt, np.gradient(volt, t), 1e-3)
+        B = np.stack([np.interp(t, knots, np.eye(k)[i]) for i in range(k)], axis=1)
+        values = np.linalg.lstsq(B, 5e-4 * volt, rcond=None)[0]
+        experiments.append((knots, values, rng.normal(size=(n, k)), tr))
+    f = InferredForce("main", [e[0] for e in experiments], [e[1] for e in experiments], 0.0, 1e4, 1e3, 10.0,
+                      [np.zeros(400)] * 4, [e[2] for e in experiments], [e[3] for e in experiments])
+    form = find_terms(f, max_terms=2)
+    chosen = {t.symbol for t in form.terms}
+    assert chosen in ({"V"}, {"x1 - x2"})
+    pairs = {(a, b) for a, b, _ in form.look_alikes}
+    assert ("V", "x1 - x2") in pairs or ("x1 - x2", "V") in pairs
+    assert all(c >= 0.95 for _, _, c in form.look_alikes)
+    from idm_rs.diagnosis.discovery.refit import look_alike_note
+
+    assert "cannot be told apart from" in look_alike_note(form)
+
+
 @pytest.mark.slow
 def test_the_whole_diagnosis_discovers_off_catalogue_physics(tmp_path):
     """The issue's bar, through `diagnose` (calibration, every catalogue effect, then discovery)

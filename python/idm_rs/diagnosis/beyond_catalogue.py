@@ -11,6 +11,7 @@ import numpy as np
 
 from .case_model import ModelSpec
 from .discovery import Discovery
+from .discovery.refit import look_alike_note
 from .fitting import FitResult, FreeParam, apply, fit
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .thresholds import (
@@ -155,7 +156,7 @@ def settle_discovery(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal:
                         f"({found.description}) improves BIC by {found.delta_bic:.0f} over the best calibrated "
                         f"null (RMS {cal.fit.rms / sigma:.2f} → {found.rms_after / sigma:.2f} x noise) and "
                         f"predicts the held-out experiment ({ho_cal * 1e9:.2f} → "
-                        f"{found.heldout_rms_after * 1e9:.2f} nm)")
+                        f"{found.heldout_rms_after * 1e9:.2f} nm)" + look_alike_note(found.form))
     if found.discovered:
         verdict, reason, rms_after = "discovered", found.reason, found.rms_after
         if d_lead is not None:

@@ -68,6 +68,7 @@ class Discovery:
             "heldout_experiment": self.heldout_experiment, "description": self.description,
             "equation": self.equation, "seconds": self.seconds, "failures": self.failures,
             "notes": self.form.notes if self.form else [],
+            "look_alikes": [list(a) for a in self.form.look_alikes] if self.form else [],
             "inferred_force": {b: {"chi2_before": f.chi2_before, "chi2_after": f.chi2_after, "dof": f.dof,
                                    "smoothing": f.smoothing} for b, f in self.forces.items()},
         }
@@ -319,6 +320,19 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
     return out
 
 
+def look_alike_note(form: Optional[FoundForm]) -> str:
+    """'; on these experiments x1 - x2 cannot be told apart from V (...)' for the form's terms
+    that have a look-alike in the library (:attr:`FoundForm.look_alikes`), else ''."""
+    if form is None:
+        return ""
+    kept = {t.symbol for t in form.terms}
+    alike = [a for a in form.look_alikes if a[0] in kept]
+    if not alike:
+        return ""
+    return "; on these experiments " + "; ".join(
+        f"{a} cannot be told apart from {b} (|cos| = {c:.3f} of their effects on the readings)" for a, b, c in alike)
+
+
 def _best_standing(standing: list[Discovery]) -> Discovery:
     """Of the forms that stand, the one with the largest BIC gain; its reason names the others."""
     best = max(standing, key=lambda x: x.delta_bic)
@@ -419,6 +433,7 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
                         f"{rms_null / sigma:.2f} → {trial.rms_after / sigma:.2f} x noise) and predicts "
                         f"the held-out experiment better "
                         f"({heldout_rms_null * 1e9:.2f} → {trial.heldout_rms_after * 1e9:.2f} nm)")
+        trial.reason += look_alike_note(form)
     elif trial.delta_bic < BIC_THRESHOLD:
         trial.reason = f"ΔBIC {trial.delta_bic:.0f} < {BIC_THRESHOLD:g}"
     elif not improves:

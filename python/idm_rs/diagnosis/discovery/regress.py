@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from ..thresholds import (
     ALIAS_SHARE,
+    DEGENERATE_COS,
     FORM_CV_MAX,
     MAX_TERMS,
     PERIODIC_GAIN,
@@ -39,6 +40,11 @@ class FoundForm:
     #: where it was found: "inferred force" (its effect on the readings), "inferred force,
     #: calibration projected out", or "residual (direct)"
     source: str = "inferred force"
+    #: (a chosen term, a library term left out, |cos| of their effects on the readings) for each
+    #: pair at or above DEGENERATE_COS: look-alikes these experiments cannot tell apart, so the
+    #: term chosen names one of two physics (a force c V and the PE's extension x2 - x1, which
+    #: follows d33 V)
+    look_alikes: list[tuple[str, str, float]] = field(default_factory=list)
 
     @property
     def variables(self) -> list[str]:
@@ -185,7 +191,26 @@ def find_terms(force: InferredForce, max_terms: int = MAX_TERMS, project: bool =
     wl = best_wl if any(t.periodic for t in chosen) else 0.0
     source = ("residual (direct)" if force.target is not None
               else "inferred force, calibration projected out" if project else "inferred force")
-    return FoundForm(force.body, chosen, coefs, wl, float(errs[k]), [float(e) for e in errs], tried, notes, source)
+    alike = _look_alikes(np.concatenate(X), best_terms, supports[k] if k > 0 else np.zeros(0, dtype=np.int64))
+    return FoundForm(force.body, chosen, coefs, wl, float(errs[k]), [float(e) for e in errs], tried, notes, source,
+                     alike)
+
+
+def _look_alikes(X: NDArray[np.float64], terms: Sequence[Term], support: NDArray[np.int64]
+                 ) -> list[tuple[str, str, float]]:
+    """(chosen symbol, other symbol, |cos|) for every chosen term (columns `support` of `X`, the
+    library terms' effects on the readings) and every term left out whose effect is parallel to
+    it within DEGENERATE_COS: to first order the data cannot tell the two apart."""
+    norms = np.linalg.norm(X, axis=0)
+    out = []
+    for i in support:
+        for j in range(len(terms)):
+            if j in support or norms[i] == 0.0 or norms[j] == 0.0:
+                continue
+            cos = abs(float(X[:, i] @ X[:, j])) / (norms[i] * norms[j])
+            if cos >= DEGENERATE_COS:
+                out.append((terms[int(i)].symbol, terms[j].symbol, cos))
+    return sorted(out, key=lambda a: -a[2])
 
 
 def with_quadrature(form: FoundForm) -> FoundForm:
