@@ -231,6 +231,14 @@ def test_a_term_with_a_look_alike_in_the_library_is_reported_with_it():
     pairs = {(a, b) for a, b, _ in form.look_alikes}
     assert ("V", "x1 - x2") in pairs or ("x1 - x2", "V") in pairs
     assert all(c >= 0.95 for _, _, c in form.look_alikes)
+    # the look-alike in the chosen term's place, its coefficient from the same regression: the
+    # force 5e-4 V is -(5e-4 / d33) (x1 - x2) where x2 - x1 = d33 V (the start of its refit)
+    (a, b), = [p for p in pairs if p in form.swaps]
+    other = form.swapped(a, b)
+    assert {t.symbol for t in other.terms} == {b} and other.look_alikes == []
+    coef = {"V": 5e-4, "x1 - x2": -5e-4 / d33}
+    term = other.terms[0]
+    assert abs(other.coefficients[term.param] / coef[b] - 1) < 0.02
     from idm_rs.diagnosis.discovery.refit import look_alike_note
 
     assert "cannot be told apart from" in look_alike_note(form)
@@ -315,3 +323,36 @@ def test_a_periodic_term_is_refitted_with_its_phase_free():
     assert with_quadrature(q) is q
     plain = FoundForm("main", [vv], {"lib_vv": -1e3}, 0.0, 0.1, [1.0, 0.1])
     assert with_quadrature(plain) is plain
+
+
+@pytest.mark.parametrize("alt_gain, kept, named", [(0.0, "x1 - x2", "V"), (40.0, "V", None), (-40.0, "x1 - x2", None)])
+def test_a_look_alike_is_refitted_in_the_found_terms_place_and_the_data_choose(monkeypatch, alt_gain, kept, named):
+    """The look-alike test is first order; the refit is not. The look-alike refitted in place of
+    the found term replaces it when it gains BIC_THRESHOLD more, is dropped when it loses by as
+    much, and otherwise stays named as the one the next experiment must tell apart (a force c V
+    and x1 - x2, ΔBIC +0 on the off-catalogue voltage-force device)."""
+    from idm_rs.diagnosis.discovery import FoundForm
+    from idm_rs.diagnosis.discovery import refit as rf
+
+    dx = next(t for t in MAIN_TERMS if t.param == "lib_dx")
+    volt = next(t for t in MAIN_TERMS if t.param == "lib_volt")
+    form = FoundForm("main", [dx], {"lib_dx": 4.6e3}, 0.0, 0.1, [1.0, 0.1],
+                     look_alikes=[("x1 - x2", "V", 0.9999)], swaps={("x1 - x2", "V"): (volt, 5.8e-4)})
+    best = rf.Discovery(True, "found", "main", form, {}, delta_bic=12_302.0, rms_after=1.5e-9)
+
+    def judged(cx, body, f, force, forces):
+        assert [t.symbol for t in f.terms] == ["V"] and f.coefficients == {"lib_volt": 5.8e-4}
+        return rf.Discovery(True, "alt", body, f, forces, delta_bic=12_302.0 + alt_gain, rms_after=1.5e-9)
+
+    monkeypatch.setattr(rf, "_judged", judged)
+    cx = type("Cx", (), {"sigma": 1.5e-9})()
+    out = rf._separated(cx, best, {"main": None})
+    assert [t.symbol for t in out.form.terms] == [kept]
+    assert (out.look_alike.form.terms[0].symbol if out.look_alike is not None else None) == named
+    note = rf.look_alike_note(out.form) + out.separation
+    if named:
+        assert "cannot be told apart from V" in note and "the data do not choose" in note
+    elif kept == "V":
+        assert "gains ΔBIC 40 more" in note and out.tried[0] is best
+    else:
+        assert "loses by ΔBIC 40" in note and "cannot be told apart" not in note

@@ -59,6 +59,30 @@ def term_alone(pb: Problem, cal: CalibratedNull, found: Discovery) -> tuple[FitR
     return _refit(pb.obj, cal.fit.spec, start, alone_form, pb.tick)
 
 
+def _look_alike_alone(pb: Problem, cal: CalibratedNull, found: Discovery) -> str:
+    """The look-alike that fitted as well as `found` beside the first effect (its
+    :attr:`~.discovery.Discovery.look_alike`), refitted alone from the calibrated null as the
+    found term just was, so the two are compared (and the next experiment sought) on the same
+    model: kept when still within BIC_THRESHOLD, else dropped with the figure. Returns the
+    sentence for the reason ('' when there is none)."""
+    alt = found.look_alike
+    if alt is None or alt.form is None or alt.refit is None:
+        return ""
+    ra, lib = term_alone(pb, cal, alt)
+    alt.refit, alt.rms_after = ra, ra.rms
+    alt.free = [f.at(ra.values[f.name]) for f in list(cal.free) + lib]
+    alt.values = {f.name: (ra.values[f.name], ra.std.get(f.name)) for f in lib}
+    alt.delta_bic = cal.fit.chi2 - ra.chi2 - len(lib) * pb.ln_n
+    gain = alt.delta_bic - found.delta_bic
+    terms = ", ".join(t.symbol for t in alt.form.terms)
+    if abs(gain) < BIC_THRESHOLD:
+        return f"; its look-alike {terms}, refitted alone too: ΔBIC {gain:+.0f}, the data do not choose"
+    found.look_alike = None
+    return (f"; its look-alike {terms}, refitted alone too, {'gains' if gain > 0 else 'loses'} ΔBIC {abs(gain):.0f}"
+            + (" (the found form stays named: the look-alike came second where both had the first effect)"
+               if gain > 0 else ""))
+
+
 def without_lead(pb: Problem, cal: CalibratedNull, lead: Refit, found: Discovery
                   ) -> tuple[float, FitResult, list[FreeParam]]:
     """ΔBIC of the discovered term with the first effect (`found`, discovered from the model
@@ -156,7 +180,8 @@ def settle_discovery(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal:
                         f"({found.description}) improves BIC by {found.delta_bic:.0f} over the best calibrated "
                         f"null (RMS {cal.fit.rms / sigma:.2f} → {found.rms_after / sigma:.2f} x noise) and "
                         f"predicts the held-out experiment ({ho_cal * 1e9:.2f} → "
-                        f"{found.heldout_rms_after * 1e9:.2f} nm)" + look_alike_note(found.form))
+                        f"{found.heldout_rms_after * 1e9:.2f} nm)" + look_alike_note(found.form)
+                        + found.separation)
     if found.discovered:
         verdict, reason, rms_after = "discovered", found.reason, found.rms_after
         if d_lead is not None:
@@ -169,12 +194,14 @@ def settle_discovery(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal:
             else:
                 # the term alone is the answer: its own refit from the calibrated null
                 found.refit, found.rms_after = r0, r0.rms
+                found.free = [f.at(r0.values[f.name]) for f in list(cal.free) + lib]
                 found.values = {f.name: (r0.values[f.name], r0.std.get(f.name)) for f in lib}
                 found.delta_bic = cal.fit.chi2 - r0.chi2 - len(lib) * pb.ln_n
                 rms_after = r0.rms
                 reason = (f"{reason} (found from the model with {d_lead.candidate.effect}, which is not needed "
                           f"beside it: ΔBIC {without:.0f} < {BIC_THRESHOLD:g} against the term alone, "
                           f"refitted from the calibrated model: RMS {r0.rms / pb.sigma:.2f} x noise)")
+                reason += _look_alike_alone(pb, cal, found)
         return found, verdict, reason, rms_after
     # d_lead is the first effect when set (discovery_start)
     alone = alone_explains(pb, cal, heldout, ho_cal, d_lead, found) if d_lead is not None else None

@@ -43,7 +43,7 @@ from .next_experiment import ParameterProposal, Proposal
 from .noise import NoiseEstimate, cross_check, estimate_noise
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .progress import Clock, Progress, progress_bar
-from .proposals import determining_experiment, separating_experiment, travel_experiment
+from .proposals import determining_experiment, look_alike_experiment, separating_experiment, travel_experiment
 from .results import Alternative, Candidate, Diagnosis, SecondSearch
 from .rules import better_of, by_rank, candidate_explains, is_finite, null_leaves_noise
 from .screening import Screened, near_degenerate
@@ -288,6 +288,9 @@ def _next_experiment_stage(s: _State) -> None:
         s.reason += "; cannot be told apart from " + ", ".join(f"{a.effect} ({a.why})" for a in s.alternatives)
         s.proposal = separating_experiment(s.pb, s.refits, s.verdict, s.alternatives[0].effect)
         s.clock.lap("next experiment")
+    elif s.found is not None and s.found.discovered and s.found.look_alike is not None:
+        s.proposal = look_alike_experiment(s.pb, s.found)
+        s.clock.lap("next experiment (look-alike)")
     s.parameter_proposal = determining_experiment(s.pb, s.refits, s.verdict)
     if (s.parameter_proposal is None and s.verdict in ("unexplained", "not_converged") and s.found is not None
             and not s.found.discovered):

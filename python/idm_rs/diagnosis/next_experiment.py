@@ -48,6 +48,13 @@ NOT_BY_DRIVE: dict[tuple[str, str], str] = {
         "|m g sin(theta)| / fric_alpha, ~1e-13 m here); record with the rig turned end for end on the bench "
         "(orientation \"reversed\"): the incline then acts the other way, a direction-dependent friction of the "
         "contact does not (tilting by a known angle does not separate them: both models absorb the known tilt)"),
+    # discovery's look-alike terms (a form's symbols)
+    ("x1 - x2", "V"): (
+        "the PE's extension x2 - x1 is d33 V less its compression by the force it carries (F / k_pe: ~0.1 um "
+        "under a 3 N friction force against ~10 um of stroke), so a force c V and a spring (c / d33) (x1 - x2) "
+        "between the bodies differ by ~1 % of themselves, below the noise on every sawtooth of the rig's limits; "
+        "a reading of the PE's own extension (a strain gauge or a second position sensor on the weight) "
+        "beside the body's tells them apart"),
 }
 
 

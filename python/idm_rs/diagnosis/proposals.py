@@ -33,6 +33,19 @@ def separating_experiment(pb: Problem, refits: list[Refit], winner: str, other: 
     return propose(pb.rec, pb.sigma, (winner, other), models[0], models[1])
 
 
+def look_alike_experiment(pb: Problem, found: Discovery) -> Optional[Proposal]:
+    """For a discovered form whose look-alike, refitted in its place, fits as well
+    (:attr:`Discovery.look_alike`: a force c V and the PE's extension x1 - x2 on slow drives),
+    the drive that best separates the two refitted models (:mod:`.next_experiment`)."""
+    alt = found.look_alike
+    if not found.discovered or alt is None or found.refit is None or alt.refit is None:
+        return None
+    if found.form is None or alt.form is None:
+        return None
+    names = (" + ".join(t.symbol for t in found.form.terms), " + ".join(t.symbol for t in alt.form.terms))
+    return propose(pb.rec, pb.sigma, names, (found.refit.spec, found.free), (alt.refit.spec, alt.free))
+
+
 def travel_experiment(pb: Problem, found: Discovery) -> Optional[ParameterProposal]:
     """For a discovery that did not stand because a form that leaves noise on every recording
     failed the held-out prediction, the drive after which the held-out check's training

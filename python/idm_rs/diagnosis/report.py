@@ -282,8 +282,12 @@ def plain_summary(d: Diagnosis) -> list[str]:
                      f"({ratio(f.heldout_rms_before):.2f} → {ratio(f.heldout_rms_after):.2f} × noise). The form is "
                      "the simplest library combination that reproduces the force across experiments; a different "
                      "mechanism with the same signature on these experiments cannot be excluded.")
-        lines.append("  What to do: add the term (the refit model below) and look for its physical cause (the "
-                     "variable it depends on says where); confirm with experiments that excite it differently.")
+        todo = ("  What to do: add the term (the refit model below) and look for its physical cause (the "
+                "variable it depends on says where); confirm with experiments that excite it differently")
+        prop = getattr(d, "proposal", None)
+        if prop is not None:
+            todo += "; " + prop.words() + (", and diagnose again with it added" if prop.separates else "")
+        lines.append(todo + ".")
     elif d.verdict == "unexplained":
         lines.append(f"  Found: the recordings disagree with the model in a way no catalogue effect explains: "
                      f"{ratio(d.rms_after):.2f} × the noise remains"

@@ -53,6 +53,11 @@ class Discovery:
     tried: list["Discovery"] = field(default_factory=list)
     #: the refit's free parameters (the calibrated subset and the library's), centred on its optimum
     free: list[FreeParam] = field(default_factory=list, repr=False)
+    #: what refitting each look-alike in the found term's place showed (:func:`_separated`)
+    separation: str = ""
+    #: a look-alike refitted in the found term's place that fits as well (within BIC_THRESHOLD):
+    #: the two the next experiment must tell apart
+    look_alike: Optional["Discovery"] = field(default=None, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -69,6 +74,7 @@ class Discovery:
             "equation": self.equation, "seconds": self.seconds, "failures": self.failures,
             "notes": self.form.notes if self.form else [],
             "look_alikes": [list(a) for a in self.form.look_alikes] if self.form else [],
+            "separation": self.separation,
             "inferred_force": {b: {"chi2_before": f.chi2_before, "chi2_after": f.chi2_after, "dof": f.dof,
                                    "smoothing": f.smoothing} for b, f in self.forces.items()},
         }
@@ -307,7 +313,8 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
         if done:
             break
     if standing:
-        best = _best_standing(standing)
+        best = _separated(cx, _best_standing(standing), forces)
+        best.reason += look_alike_note(best.form) + best.separation
         best.seconds = time.perf_counter() - t0
         return best
     if failures:
@@ -331,6 +338,42 @@ def look_alike_note(form: Optional[FoundForm]) -> str:
         return ""
     return "; on these experiments " + "; ".join(
         f"{a} cannot be told apart from {b} (|cos| = {c:.3f} of their effects on the readings)" for a, b, c in alike)
+
+
+def _separated(cx: _Context, best: Discovery, forces: dict[str, InferredForce]) -> Discovery:
+    """The standing form `best` against each of its look-alikes refitted in its place: the
+    look-alike test is first order at the calibrated model, the refit is not (a force c V and
+    the PE's extension x1 - x2 part where the PE's compression by the weight's inertia is not
+    d33 V). A look-alike that stands and gains BIC_THRESHOLD more takes its place; one that
+    loses by BIC_THRESHOLD is dropped from the form's look-alikes; otherwise both stay named,
+    with the figures, for the next experiment to separate."""
+    form = best.form
+    if form is None:
+        return best
+    kept = {t.symbol for t in form.terms}
+    for chosen, other, _ in list(form.look_alikes):
+        if chosen not in kept or (chosen, other) not in form.swaps:
+            continue
+        force = forces[best.body]
+        alt = _judged(cx, best.body, form.swapped(chosen, other), force, forces)
+        gain = alt.delta_bic - best.delta_bic if alt.discovered else -math.inf
+        if gain >= BIC_THRESHOLD:
+            alt.separation = (f"; {other} in place of its look-alike {chosen} (first order, these experiments "
+                              f"cannot tell them apart) gains ΔBIC {gain:.0f} more when both are refitted "
+                              f"(RMS {best.rms_after / cx.sigma:.3f} → {alt.rms_after / cx.sigma:.3f} x noise)")
+            alt.tried = [best] + best.tried
+            return alt
+        if gain <= -BIC_THRESHOLD:
+            form.look_alikes = [a for a in form.look_alikes if a[:2] != (chosen, other)]
+            what = f"loses by ΔBIC {-gain:.0f}" if alt.discovered else f"does not stand ({alt.reason})"
+            best.separation += f"; its look-alike {other}, refitted in place of {chosen}, {what}"
+        else:
+            best.separation += (f"; refitted in place of {chosen}, {other} reaches RMS {alt.rms_after / cx.sigma:.3f} "
+                                f"x noise, ΔBIC {gain:+.0f}: within {BIC_THRESHOLD:g}, the data do not choose")
+            if alt.discovered and best.look_alike is None:
+                best.look_alike = alt
+        best.tried.append(alt)
+    return best
 
 
 def _best_standing(standing: list[Discovery]) -> Discovery:
@@ -433,7 +476,6 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
                         f"{rms_null / sigma:.2f} → {trial.rms_after / sigma:.2f} x noise) and predicts "
                         f"the held-out experiment better "
                         f"({heldout_rms_null * 1e9:.2f} → {trial.heldout_rms_after * 1e9:.2f} nm)")
-        trial.reason += look_alike_note(form)
     elif trial.delta_bic < BIC_THRESHOLD:
         trial.reason = f"ΔBIC {trial.delta_bic:.0f} < {BIC_THRESHOLD:g}"
     elif not improves:

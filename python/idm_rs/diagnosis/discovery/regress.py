@@ -45,6 +45,17 @@ class FoundForm:
     #: term chosen names one of two physics (a force c V and the PE's extension x2 - x1, which
     #: follows d33 V)
     look_alikes: list[tuple[str, str, float]] = field(default_factory=list)
+    #: for each look-alike pair (chosen symbol, other symbol): the other term and its coefficient
+    #: when it replaces the chosen one in the regression (the start of that form's refit)
+    swaps: dict[tuple[str, str], tuple[Term, float]] = field(default_factory=dict)
+
+    def swapped(self, chosen: str, other: str) -> "FoundForm":
+        """This form with term `chosen` replaced by its look-alike `other` (:attr:`swaps`),
+        the other coefficients as they are."""
+        term, value = self.swaps[(chosen, other)]
+        terms = [term if t.symbol == chosen else t for t in self.terms]
+        coefficients = {t.param: (value if t is term else self.coefficients[t.param]) for t in terms}
+        return replace(self, terms=terms, coefficients=coefficients, look_alikes=[], swaps={})
 
     @property
     def variables(self) -> list[str]:
@@ -191,9 +202,17 @@ def find_terms(force: InferredForce, max_terms: int = MAX_TERMS, project: bool =
     wl = best_wl if any(t.periodic for t in chosen) else 0.0
     source = ("residual (direct)" if force.target is not None
               else "inferred force, calibration projected out" if project else "inferred force")
-    alike = _look_alikes(np.concatenate(X), best_terms, supports[k] if k > 0 else np.zeros(0, dtype=np.int64))
+    support = supports[k] if k > 0 else np.zeros(0, dtype=np.int64)
+    Xa, ya = np.concatenate(X), np.concatenate(y)
+    alike = _look_alikes(Xa, best_terms, support)
+    swaps = {}
+    index = {t.symbol: i for i, t in enumerate(best_terms)}
+    for a, b, _ in alike:
+        other = np.array([index[b] if i == index[a] else i for i in support])
+        c = lstsq(Xa[:, other], ya, "a look-alike's coefficients")[0]
+        swaps[(a, b)] = (best_terms[index[b]], float(c[list(other).index(index[b])]))
     return FoundForm(force.body, chosen, coefs, wl, float(errs[k]), [float(e) for e in errs], tried, notes, source,
-                     alike)
+                     alike, swaps)
 
 
 def _look_alikes(X: NDArray[np.float64], terms: Sequence[Term], support: NDArray[np.int64]
