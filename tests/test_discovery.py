@@ -356,3 +356,44 @@ def test_a_look_alike_is_refitted_in_the_found_terms_place_and_the_data_choose(m
         assert "gains ΔBIC 40 more" in note and out.tried[0] is best
     else:
         assert "loses by ΔBIC 40" in note and "cannot be told apart" not in note
+
+
+def test_backward_elimination_keeps_the_units_that_pay_their_way(monkeypatch):
+    """A form carrying a friction periodic in position, a force periodic in position at the same
+    wavelength and a cubic term, where only the friction's pair is needed: each unit (a periodic
+    term with its quadrature partner, any other term alone) is refitted away in turn, and the
+    cheapest removal is taken while the form without it is within BIC_THRESHOLD of the form with it."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis.discovery import FoundForm
+    from idm_rs.diagnosis.discovery import refit as rf
+
+    by = {t.param: t for t in MAIN_TERMS}
+    names = ["lib_x1cube", "lib_sin", "lib_cos", "lib_ff_sin", "lib_ff_cos"]
+    form = FoundForm("main", [by[n] for n in names], {n: 1.0 for n in names}, 20e-6, 0.1, [1.0, 0.1])
+    assert rf._units(form) == [frozenset({"lib_x1cube"}), frozenset({"lib_sin", "lib_cos"}),
+                               frozenset({"lib_ff_sin", "lib_ff_cos"})]
+    refits = []
+
+    def result(f):
+        have = {t.param for t in f.terms}
+        # the friction's pair is the physics (chi2 +1e4 without it); the others lower chi2 by 3 each
+        chi2 = 1000.0 + (0.0 if {"lib_ff_sin", "lib_ff_cos"} <= have else 1e4) - 3.0 * len(have - {"lib_ff_sin",
+                                                                                              "lib_ff_cos"})
+        values = {**{t.param: 1.0 for t in f.terms}, "lib_wavelength": 20e-6, "mu_k": 0.5}
+        return SimpleNamespace(chi2=chi2, values=values), [t.param for t in f.terms] + ["lib_wavelength"]
+
+    def refit(objective, spec, free, f, progress):
+        refits.append({t.param for t in f.terms})
+        return result(f)
+
+    monkeypatch.setattr(rf, "_refit", refit)
+    objective = SimpleNamespace(n=20_000)
+    r, lib = result(form)
+    out, r2, lib2 = rf.eliminated(objective, None, [], form, r, lib, None)
+    assert {t.param for t in out.terms} == {"lib_ff_sin", "lib_ff_cos"} and out.wavelength == 20e-6
+    assert r2.chi2 == 1000.0 and lib2 == ["lib_ff_sin", "lib_ff_cos", "lib_wavelength"]
+    assert len(refits) == 3 + 2  # three units tried, then the two left
+    # a single unit is left as it is (nothing refitted)
+    refits.clear()
+    assert rf.eliminated(objective, None, [], out, r2, lib2, None)[0] is out and not refits

@@ -11,7 +11,7 @@ import numpy as np
 
 from .case_model import ModelSpec
 from .discovery import Discovery
-from .discovery.refit import look_alike_note
+from .discovery.refit import eliminated, look_alike_note
 from .fitting import FitResult, FreeParam, apply, fit
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .thresholds import (
@@ -111,6 +111,10 @@ def alone_explains(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal: f
     best = min(tried, key=lambda t: t.rms_after)
     assert best.form is not None  # tried keeps found forms only
     r0, lib = term_alone(pb, cal, best)
+    # alone, a unit of the form may no longer pay its way (it mopped up what the first effect did)
+    form, r0, lib = eliminated(pb.obj, cal.fit.spec, cal.free, best.form, r0, lib, pb.tick)
+    best = replace(best, form=form)
+    assert best.form is not None
     delta_bic = cal.fit.chi2 - r0.chi2 - len(lib) * pb.ln_n
     ho = heldout.rms(r0.spec, [f.at(r0.values[f.name]) for f in list(cal.free) + lib])
     sigma = pb.sigma
