@@ -166,7 +166,7 @@ def test_a_form_spoilt_by_a_spurious_first_effect_is_refitted_alone(monkeypatch)
         return SimpleNamespace(name=name, at=lambda v: SimpleNamespace(name=name, value=v))
 
     free = [param("mu_k")]
-    cal = SimpleNamespace(fit=SimpleNamespace(chi2=3.0 * n, rms=1.73 * sigma), free=free)
+    cal = SimpleNamespace(fit=SimpleNamespace(chi2=3.0 * n, rms=1.73 * sigma, spec="spec"), free=free)
     lead = SimpleNamespace(candidate=SimpleNamespace(effect="friction_asymmetry"))
     lib = [param("lib_ff_sin"), param("lib_wavelength")]
 

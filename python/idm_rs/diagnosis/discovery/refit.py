@@ -232,8 +232,8 @@ def eliminated(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[
     (sin, cos and Ff sin, Ff cos at one wavelength) are strong together and one of the two
     is redundant: a form carrying both, and a cubic term beside them, left 1.00 x noise on the
     recordings and 1.15 x on the held-out experiment (an off-catalogue periodic friction)."""
-    ln_n = math.log(objective.n)
     while len(units := _units(form)) > 1:
+        ln_n = math.log(objective.n)
         bic = r.chi2 + len(lib) * ln_n
         best: Optional[tuple[float, FoundForm, FitResult, list[FreeParam]]] = None
         for unit in units:
