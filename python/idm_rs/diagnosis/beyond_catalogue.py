@@ -15,6 +15,7 @@ from .discovery.refit import eliminated, look_alike_note
 from .fitting import FitResult, FreeParam, apply, fit
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .thresholds import (
+    ALONE_FORMS,
     BIC_THRESHOLD,
     NOISE_RATIO_OK,
 )
@@ -101,18 +102,34 @@ def alone_explains(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal: f
                     found: Discovery) -> Optional[Discovery]:
     """A form found from the model with a first effect that did not stand there, refitted
     alone from the calibrated null: the first effect may be spurious (it mimicked part of the
-    missing force and, kept, spoils the held-out prediction). The form with the lowest RMS that
-    gained by BIC is tried; it is returned as discovered when alone it leaves noise, predicts
-    the held-out experiment to noise and better than the null, and improves BIC, else None."""
-    tried = [t for t in [found, *found.tried] if t.refit is not None and t.form is not None and t.form.terms
-             and t.delta_bic >= BIC_THRESHOLD]
-    if not tried:
-        return None
-    best = min(tried, key=lambda t: t.rms_after)
+    missing force and, kept, spoils the held-out prediction). The forms that gained by BIC are
+    tried in the order of their RMS (at most ALONE_FORMS, each refitted and eliminated to the
+    units that pay); the first returned as discovered when alone it leaves noise, predicts the
+    held-out experiment to noise and better than the null, and improves BIC, else None (beside
+    the spurious effect the form nearest noise need not be the true one: on a ±2.2 % friction
+    periodic over 11.8 um, sin, Ff sin, cos at 1.04 x noise and the true Ff sin, Ff cos at 1.05 x)."""
+    tried = sorted((t for t in [found, *found.tried] if t.refit is not None and t.form is not None and t.form.terms
+                    and t.delta_bic >= BIC_THRESHOLD), key=lambda t: t.rms_after)
+    done: set[frozenset[str]] = set()
+    for candidate in tried[:ALONE_FORMS]:
+        out = _alone(pb, cal, heldout, ho_cal, lead, found, candidate, done)
+        if out is not None:
+            return out
+    return None
+
+
+def _alone(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal: float, lead: Refit, found: Discovery,
+           best: Discovery, done: set[frozenset[str]]) -> Optional[Discovery]:
+    """:func:`alone_explains` for one form `best` (skipped when its eliminated form was judged
+    already, `done`)."""
     assert best.form is not None  # tried keeps found forms only
     r0, lib = term_alone(pb, cal, best)
     # alone, a unit of the form may no longer pay its way (it mopped up what the first effect did)
     form, r0, lib = eliminated(pb.obj, cal.fit.spec, cal.free, best.form, r0, lib, pb.tick)
+    key = frozenset(t.param for t in form.terms)
+    if key in done:
+        return None
+    done.add(key)
     best = replace(best, form=form)
     assert best.form is not None
     delta_bic = cal.fit.chi2 - r0.chi2 - len(lib) * pb.ln_n
