@@ -397,3 +397,31 @@ def test_backward_elimination_keeps_the_units_that_pay_their_way(monkeypatch):
     # a single unit is left as it is (nothing refitted)
     refits.clear()
     assert rf.eliminated(objective, None, [], out, r2, lib2, None)[0] is out and not refits
+
+
+def test_the_next_experiment_is_sought_for_a_look_alike_the_data_do_not_choose(monkeypatch):
+    """A discovered form with a look-alike that fits as well: the drive search of the catalogue's
+    look-alikes runs on the two refitted models, named by their terms; nothing without one."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis import proposals
+    from idm_rs.diagnosis.discovery import Discovery, FoundForm
+
+    dx = next(t for t in MAIN_TERMS if t.param == "lib_dx")
+    volt = next(t for t in MAIN_TERMS if t.param == "lib_volt")
+
+    def found(term, spec):
+        d = Discovery(True, "", "main", FoundForm("main", [term], {term.param: 1.0}, 0.0, 0.1, [1.0, 0.1]), {})
+        d.refit, d.free = SimpleNamespace(spec=spec), [spec + " free"]
+        return d
+
+    calls = []
+    monkeypatch.setattr(proposals, "propose", lambda rec, sigma, names, a, b: calls.append((names, a, b)) or "p")
+    pb = SimpleNamespace(rec="rec", sigma=1e-9)
+    d = found(dx, "with x1 - x2")
+    assert proposals.look_alike_experiment(pb, d) is None and not calls
+    d.look_alike = found(volt, "with V")
+    assert proposals.look_alike_experiment(pb, d) == "p"
+    assert calls == [(("x1 - x2", "V"), ("with x1 - x2", ["with x1 - x2 free"]), ("with V", ["with V free"]))]
+    d.discovered = False
+    assert proposals.look_alike_experiment(pb, d) is None
