@@ -60,6 +60,15 @@ def term_alone(pb: Problem, cal: CalibratedNull, found: Discovery) -> tuple[FitR
     return _refit(pb.obj, cal.fit.spec, start, alone_form, pb.tick)
 
 
+def _take_alone(pb: Problem, cal: CalibratedNull, d: Discovery, r: FitResult, lib: list[FreeParam]) -> None:
+    """`d`'s figures from its form's refit `r` alone from the calibrated null (library
+    parameters `lib`): the refit, its RMS, free parameters, library values and ΔBIC."""
+    d.refit, d.rms_after = r, r.rms
+    d.free = [f.at(r.values[f.name]) for f in list(cal.free) + lib]
+    d.values = {f.name: (r.values[f.name], r.std.get(f.name)) for f in lib}
+    d.delta_bic = cal.fit.chi2 - r.chi2 - len(lib) * pb.ln_n
+
+
 def _look_alike_alone(pb: Problem, cal: CalibratedNull, found: Discovery) -> str:
     """The look-alike that fitted as well as `found` beside the first effect (its
     :attr:`~.discovery.Discovery.look_alike`), refitted alone from the calibrated null as the
@@ -69,11 +78,7 @@ def _look_alike_alone(pb: Problem, cal: CalibratedNull, found: Discovery) -> str
     alt = found.look_alike
     if alt is None or alt.form is None or alt.refit is None:
         return ""
-    ra, lib = term_alone(pb, cal, alt)
-    alt.refit, alt.rms_after = ra, ra.rms
-    alt.free = [f.at(ra.values[f.name]) for f in list(cal.free) + lib]
-    alt.values = {f.name: (ra.values[f.name], ra.std.get(f.name)) for f in lib}
-    alt.delta_bic = cal.fit.chi2 - ra.chi2 - len(lib) * pb.ln_n
+    _take_alone(pb, cal, alt, *term_alone(pb, cal, alt))
     gain = alt.delta_bic - found.delta_bic
     terms = ", ".join(t.symbol for t in alt.form.terms)
     if abs(gain) < BIC_THRESHOLD:
@@ -214,10 +219,7 @@ def settle_discovery(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal:
                           f"(ΔBIC {without:.0f} against the term alone)")
             else:
                 # the term alone is the answer: its own refit from the calibrated null
-                found.refit, found.rms_after = r0, r0.rms
-                found.free = [f.at(r0.values[f.name]) for f in list(cal.free) + lib]
-                found.values = {f.name: (r0.values[f.name], r0.std.get(f.name)) for f in lib}
-                found.delta_bic = cal.fit.chi2 - r0.chi2 - len(lib) * pb.ln_n
+                _take_alone(pb, cal, found, r0, lib)
                 rms_after = r0.rms
                 reason = (f"{reason} (found from the model with {d_lead.candidate.effect}, which is not needed "
                           f"beside it: ΔBIC {without:.0f} < {BIC_THRESHOLD:g} against the term alone, "
