@@ -284,6 +284,35 @@ def test_a_non_finite_or_rank_deficient_system_is_named_not_a_verdict():
     assert rank == 1 and np.allclose(np.column_stack([np.arange(5.0)] * 2) @ x, np.arange(5.0))
 
 
+def test_the_held_out_prediction_is_compared_segment_by_segment(cases, monkeypatch):
+    """The held-out experiment is compared as every other figure is: one offset per drive-cycle
+    segment. A shift between cycles (a slip event more or less, which no per-segment figure
+    counts) costs nothing; a mismatch within the cycles costs what it is; a diverged prediction
+    is no figure (NaN). With one offset per experiment the true model itself failed the rule."""
+    from types import SimpleNamespace
+
+    import idm_rs.diagnosis.problem as problem
+
+    rec = load_case(cases["none"])
+    noise = estimate_noise(rec)
+    sim = CaseSimulator(rec)
+    ho = HeldOut(Problem(rec, noise, sim, Objective(rec, sim, noise.sigma), None))
+    j, sigma = ho.index, noise.sigma
+    n = ho.test.samples[j]
+    bounds = ho.test.starts[j] + [n]
+    assert len(bounds) >= 3  # two cycles or more, so two segments or more
+    x = rec.experiments[j].x[:n]
+    between = np.concatenate([np.full(b - a, 40.0 * sigma * k) for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:]))])
+    within = 3.0 * sigma * np.sin(np.linspace(0.0, 40.0 * math.pi, n))
+    monkeypatch.setattr(problem, "fit", lambda *a, **k: SimpleNamespace(spec=None))
+    for pred, lo, hi in [(x + between, 0.0, 1e-6), (x + between + within, 1.8, 2.2)]:
+        monkeypatch.setattr(sim, "predict", lambda specs, experiments=None, p=pred: [[p if i == j else np.zeros(0) for i in range(len(rec.experiments))]])
+        assert lo <= ho.rms(None, []) / sigma <= hi
+    assert np.std(between) > 10 * sigma  # what one offset per experiment would have said of the shift
+    monkeypatch.setattr(sim, "predict", lambda specs, experiments=None: [[np.full(n, np.nan)] * len(rec.experiments)])
+    assert math.isnan(ho.rms(None, []))
+
+
 def test_the_direct_regression_reads_the_residual_net_of_its_noise():
     """The direct view's target is the residual itself (white noise in it): its cross-validated
     error counts only what the form leaves of the systematic part, so a form that reproduces

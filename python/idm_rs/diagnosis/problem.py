@@ -111,20 +111,28 @@ class Refit:
 
 class HeldOut:
     """Prediction of one experiment by a model refitted on the others (the largest experiment of
-    a direction that has at least two)."""
+    a direction that has at least two), compared as every other figure is: one position offset
+    per drive-cycle segment (multiple shooting by translation)."""
 
     def __init__(self, pb: Problem) -> None:
         self.pb = pb
         self.index = heldout_index(pb.rec)
         train = [i for i in range(len(pb.rec.experiments)) if i != self.index]
         self.obj = Objective(pb.rec, pb.sim, pb.sigma, train)
+        #: the held-out experiment alone, segmented as the training experiments are
+        self.test = Objective(pb.rec, pb.sim, pb.sigma, [self.index])
 
     def rms(self, spec: ModelSpec, free: Sequence[FreeParam]) -> float:
-        """RMS [m] of the held-out experiment's residual (its own offset removed)."""
+        """RMS [m] of the held-out experiment's residual, each segment's offset removed (NaN
+        where the prediction diverged). With one offset over the whole experiment instead, the
+        true model itself failed the 1.1 x noise rule (1.12 x against 1.01 x per segment on an
+        off-catalogue periodic friction, refitted to 1.00 x on the others: the shift a slip
+        event more or less leaves on every later cycle, which the training figures forgive)."""
         # refit on the training experiments from the full-data solution, then predict
         start = [f.at(f.value(0.0)) for f in free]
         r = fit(self.obj, spec, start, max_nfev=4, progress=self.pb.tick)
-        pred = self.pb.sim.predict([r.spec])[0]
-        d = self.pb.rec.experiments[self.index].x - pred[self.index]
-        d = d - d.mean()
-        return float(math.sqrt(np.mean(d * d)))
+        pred = self.pb.sim.predict([r.spec], experiments=[self.index])[0]
+        if not np.all(np.isfinite(pred[self.index])):
+            return math.nan
+        res, _ = self.test.profiled(pred)
+        return float(math.sqrt(np.mean(res[0] * res[0])))
