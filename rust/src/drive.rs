@@ -303,9 +303,9 @@ enum LaneRun {
 /// as one operation for `pulp` to compile once per instruction set: its `with_simd` runs inside
 /// a function with that set's features enabled, and everything it calls is inlined into it
 /// (closures are not: the call through `FnOnce` stays out of line, compiled for the baseline).
-/// Only the two SoA drivers are in it: the lane-interleaved scalar code of the hand-overs and of
-/// the fallback (`run_fixed`) gains nothing from vector instructions, so it is compiled once,
-/// not once per instruction set (build time; the bits are the same either way).
+/// Only the two SoA drivers are in it; the hand-overs to the implicit method have their own
+/// dispatch (`HandOvers`), and the lane-by-lane fallback (`run_fixed`) is compiled once, for the
+/// baseline (build time; the bits are the same either way).
 struct PlainGroups<'t, 'a, O, E, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> {
     tasks: &'t [Task<'a>],
     method: &'t Method,
@@ -344,6 +344,62 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool
     }
 }
 
+/// The runs `method="auto"` handed over to the implicit method (`handoffs`, from the vector
+/// drivers), `L` at a time as lane-interleaved scalar code, each one's end into `ends`; one
+/// operation for `pulp` so that it can be compiled for an instruction set (its calls inlined).
+struct HandOvers<'t, 'a, O, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> {
+    tasks: &'t [Task<'a>],
+    handoffs: &'t [Handoff],
+    method: &'t Method,
+    observer: &'t mut O,
+    cancel: &'t AtomicBool,
+    ends: &'t mut [Option<(LaneEnd, Vec<f64>)>],
+}
+
+impl<O: Observer, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> pulp::WithSimd
+    for HandOvers<'_, '_, O, N, D, EXTRAS, L>
+{
+    type Output = Option<()>;
+
+    #[inline(always)]
+    fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<()> {
+        for group in self.handoffs.chunks(L) {
+            let chunk: Vec<Task> = group.iter().map(|h| Task { t_start: h.t, y0: &h.y, ..self.tasks[h.task] }).collect();
+            let resume: Vec<Resume> = group.iter().map(|h| h.resume).collect();
+            let index: Vec<usize> = group.iter().map(|h| h.task).collect();
+            let mut done = Vec::with_capacity(group.len());
+            run_group::<[f64; D], _, _, D, L>(
+                &chunk,
+                0,
+                self.method,
+                &Held::default(),
+                [0.0; D],
+                ModelRhs::<f64, N, EXTRAS, L>::for_tasks,
+                &mut Renumbered { inner: &mut *self.observer, index: &index },
+                self.cancel,
+                &mut done,
+                Some(&resume),
+            )?;
+            for (h, end) in group.iter().zip(done) {
+                self.ends[h.task] = Some(end);
+            }
+        }
+        Some(())
+    }
+}
+
+/// Run the hand-overs compiled for AVX2 (+FMA) where the lanes run on AVX2, else for the
+/// baseline: two copies of the implicit method's code per shape, not one per instruction set
+/// (build time). The bits are the same either way (no fused multiply-add is contracted).
+#[inline(always)]
+fn hand_over_dispatch<Op: pulp::WithSimd>(op: Op) -> Op::Output {
+    match simd_arch() {
+        #[cfg(target_arch = "x86_64")]
+        pulp::Arch::V3(v3) => pulp::Simd::vectorize(v3, op),
+        _ => op.with_simd(pulp::Scalar::new()),
+    }
+}
+
 /// Run `tasks` of one fixed-size state layout (`N` nodes, `D` components, `EXTRAS`: lag states)
 /// into `out`: on the vector lanes where they run there (`PlainGroups`, under `pulp`'s dispatch),
 /// the runs that turned stiff then with the implicit method, `L` at a time; else `L` at a time
@@ -366,27 +422,14 @@ fn run_fixed<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTR
     };
     match run {
         LaneRun::Ran { mut ends, handoffs } => {
-            // lanes that turned stiff go on with the implicit method, L at a time
-            for group in handoffs.chunks(L) {
-                let chunk: Vec<Task> = group.iter().map(|h| Task { t_start: h.t, y0: &h.y, ..tasks[h.task] }).collect();
-                let resume: Vec<Resume> = group.iter().map(|h| h.resume).collect();
-                let index: Vec<usize> = group.iter().map(|h| h.task).collect();
-                let mut done = Vec::with_capacity(group.len());
-                run_group::<[f64; D], _, _, D, L>(
-                    &chunk,
-                    0,
-                    method,
-                    &Held::default(),
-                    [0.0; D],
-                    ModelRhs::<f64, N, EXTRAS, L>::for_tasks,
-                    &mut Renumbered { inner: &mut *observer, index: &index },
-                    cancel,
-                    &mut done,
-                    Some(&resume),
-                )?;
-                for (h, end) in group.iter().zip(done) {
-                    ends[h.task] = Some(end);
-                }
+            // lanes that turned stiff go on with the implicit method, L at a time: for the plain
+            // shapes (no lag states: the sweeps'), compiled for AVX2 (+FMA) as well as for the
+            // baseline (RESULTS §22); with lag states (the diagnosis's) once, for the baseline
+            let op = HandOvers::<O, N, D, EXTRAS, L> { tasks, handoffs: &handoffs, method, observer: &mut *observer, cancel, ends: &mut ends };
+            if !EXTRAS {
+                hand_over_dispatch(op)?;
+            } else {
+                pulp::WithSimd::with_simd(op, pulp::Scalar::new())?;
             }
             out.extend(ends.into_iter().map(|o| o.expect("every task ends")));
         }
