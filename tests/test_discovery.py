@@ -302,11 +302,14 @@ def test_the_held_out_prediction_is_compared_segment_by_segment(cases, monkeypat
     bounds = ho.test.starts[j] + [n]
     assert len(bounds) >= 3  # two cycles or more, so two segments or more
     x = rec.experiments[j].x[:n]
-    between = np.concatenate([np.full(b - a, 40.0 * sigma * k) for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:]))])
+    segments = zip(bounds[:-1], bounds[1:])
+    between = np.concatenate([np.full(b - a, 40.0 * sigma * k) for k, (a, b) in enumerate(segments)])
     within = 3.0 * sigma * np.sin(np.linspace(0.0, 40.0 * math.pi, n))
     monkeypatch.setattr(problem, "fit", lambda *a, **k: SimpleNamespace(spec=None))
     for pred, lo, hi in [(x + between, 0.0, 1e-6), (x + between + within, 1.8, 2.2)]:
-        monkeypatch.setattr(sim, "predict", lambda specs, experiments=None, p=pred: [[p if i == j else np.zeros(0) for i in range(len(rec.experiments))]])
+        def one(specs, experiments=None, p=pred):
+            return [[p if i == j else np.zeros(0) for i in range(len(rec.experiments))]]
+        monkeypatch.setattr(sim, "predict", one)
         assert lo <= ho.rms(None, []) / sigma <= hi
     assert np.std(between) > 10 * sigma  # what one offset per experiment would have said of the shift
     monkeypatch.setattr(sim, "predict", lambda specs, experiments=None: [[np.full(n, np.nan)] * len(rec.experiments)])
