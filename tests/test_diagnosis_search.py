@@ -104,6 +104,22 @@ def test_the_fit_jacobian_is_the_engines_exact_one(long_rec):
         start += n
 
 
+def test_a_fit_that_starts_on_a_bound_still_moves(long_rec):
+    """A start with a parameter on its bound (a calibration leaves several there) takes full
+    steps: scipy's solver sized its first trust region from the hair it moves such a start
+    inside, and the fit stopped where it began (a two-effect device's spring fit: 2 of 16
+    evaluations, chi^2 unchanged). The bound parameter here is sigma1 at its true value."""
+    obj = Objective(long_rec, CaseSimulator(long_rec), NOISE).with_cycles(2)
+    s1 = NOMINAL.sigma1
+    on_bound = FreeParam("sigma1", s1, 0.5 * s1, s1, 0.05 * s1, set_param("sigma1"))
+    assert on_bound.u_bounds()[1] == 0.0
+    start = obj.chi2(apply(SPEC, [_m2(0.97)], np.zeros(1)))
+    r = fit(obj, SPEC, [_m2(0.97), on_bound], max_nfev=8)
+    assert r.chi2 < 0.01 * start
+    assert r.values["m2"] == pytest.approx(NOMINAL.m2, rel=3e-3)
+    assert r.values["sigma1"] <= s1
+
+
 def test_multistart_reaches_the_optimum_where_one_local_fit_stops_short(long_rec):
     # the single-shooting misfit (one offset per experiment) has another basin: from m2 15 % low
     # one local fit stops there ...

@@ -61,6 +61,9 @@ BLOWN_UP = 1e3
 #: relative, 1e-4 chi^2 units here) a fit started at its optimum took all its 16 evaluations
 #: gaining 1e-3 chi^2 each: a third of the candidate-fit time of the slowest development case
 FTOL_CHI2 = 0.1
+#: a fit's start lies at least this far inside its bounds [fit units] (see fitting.inside_bounds):
+#: far beyond scipy's 1e-10 "on the bound", and a change of the parameter of ~1e-8 of itself
+START_INSIDE = 1e-6
 #: step [fit units] of the central difference of the parameter setters' composition (no
 #: simulation: exact for the linear setters, 1e-13 relative for the log-scaled ones)
 CHAIN_STEP = 1e-6
