@@ -22,7 +22,7 @@ use crate::integrate::switching::Switching;
 use crate::integrate::task::{adaptive_options, LaneEnd, Observer, Resume, Task, CANCEL_CHECK_ATTEMPTS};
 use crate::lanes::dopri5::{run_dopri5_lanes, Handoff};
 use crate::lanes::rk4::run_rk4_lanes;
-use crate::lanes::{simd_arch, LaneExp, LibmExp, PlainLanes};
+use crate::lanes::{simd_arch, LaneExp, LanesRhs, LibmExp, PlainLanes};
 use crate::model::with_state_size;
 use crate::numbers::scalar::Scalar;
 use crate::physics::waveform::Cursor;
@@ -347,8 +347,9 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool
 /// The runs `method="auto"` handed over to the implicit method (`handoffs`, from the vector
 /// drivers), `L` at a time as lane-interleaved scalar code, each one's end into `ends`; one
 /// operation for `pulp` so that it can be compiled for an instruction set (its calls inlined).
-struct HandOvers<'t, 'a, O, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> {
+struct HandOvers<'t, 'a, O, E, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> {
     tasks: &'t [Task<'a>],
+    _exp: PhantomData<E>,
     handoffs: &'t [Handoff],
     method: &'t Method,
     observer: &'t mut O,
@@ -356,8 +357,8 @@ struct HandOvers<'t, 'a, O, const N: usize, const D: usize, const EXTRAS: bool, 
     ends: &'t mut [Option<(LaneEnd, Vec<f64>)>],
 }
 
-impl<O: Observer, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> pulp::WithSimd
-    for HandOvers<'_, '_, O, N, D, EXTRAS, L>
+impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> pulp::WithSimd
+    for HandOvers<'_, '_, O, E, N, D, EXTRAS, L>
 {
     type Output = Option<()>;
 
@@ -374,7 +375,7 @@ impl<O: Observer, const N: usize, const D: usize, const EXTRAS: bool, const L: u
                 self.method,
                 &Held::default(),
                 [0.0; D],
-                ModelRhs::<f64, N, EXTRAS, L>::for_tasks,
+                |c, slack| LanesRhs::<E, N, D, L, EXTRAS>::new(ModelRhs::<f64, N, EXTRAS, L>::for_tasks(c, slack)),
                 &mut Renumbered { inner: &mut *self.observer, index: &index },
                 self.cancel,
                 &mut done,
@@ -397,6 +398,44 @@ fn hand_over_dispatch<Op: pulp::WithSimd>(op: Op) -> Op::Output {
         #[cfg(target_arch = "x86_64")]
         pulp::Arch::V3(v3) => pulp::Simd::vectorize(v3, op),
         _ => op.with_simd(pulp::Scalar::new()),
+    }
+}
+
+/// `tasks` `L` at a time as lane-interleaved code (`run_group`), where the vector drivers do not
+/// run them (another shape, a group less than half full, or Rodas4); the stages of plain models
+/// as vectors where at least half the lanes are busy ([`LanesRhs`]). One operation for `pulp`,
+/// as [`HandOvers`].
+struct ByGroups<'t, 'a, O, E, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> {
+    tasks: &'t [Task<'a>],
+    method: &'t Method,
+    observer: &'t mut O,
+    cancel: &'t AtomicBool,
+    out: &'t mut Vec<(LaneEnd, Vec<f64>)>,
+    _exp: PhantomData<E>,
+}
+
+impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> pulp::WithSimd
+    for ByGroups<'_, '_, O, E, N, D, EXTRAS, L>
+{
+    type Output = Option<()>;
+
+    #[inline(always)]
+    fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<()> {
+        for (c, chunk) in self.tasks.chunks(L).enumerate() {
+            run_group::<[f64; D], O, _, D, L>(
+                chunk,
+                c * L,
+                self.method,
+                &Held::default(),
+                [0.0; D],
+                |c, slack| LanesRhs::<E, N, D, L, EXTRAS>::new(ModelRhs::<f64, N, EXTRAS, L>::for_tasks(c, slack)),
+                &mut *self.observer,
+                self.cancel,
+                &mut *self.out,
+                None,
+            )?;
+        }
+        Some(())
     }
 }
 
@@ -425,7 +464,7 @@ fn run_fixed<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTR
             // lanes that turned stiff go on with the implicit method, L at a time: for the plain
             // shapes (no lag states: the sweeps'), compiled for AVX2 (+FMA) as well as for the
             // baseline (RESULTS §22); with lag states (the diagnosis's) once, for the baseline
-            let op = HandOvers::<O, N, D, EXTRAS, L> { tasks, handoffs: &handoffs, method, observer: &mut *observer, cancel, ends: &mut ends };
+            let op = HandOvers::<O, E, N, D, EXTRAS, L> { tasks, _exp: PhantomData, handoffs: &handoffs, method, observer: &mut *observer, cancel, ends: &mut ends };
             if !EXTRAS {
                 hand_over_dispatch(op)?;
             } else {
@@ -434,19 +473,12 @@ fn run_fixed<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTR
             out.extend(ends.into_iter().map(|o| o.expect("every task ends")));
         }
         LaneRun::Fallback => {
-            for (c, chunk) in tasks.chunks(L).enumerate() {
-                run_group::<[f64; D], O, _, D, L>(
-                    chunk,
-                    c * L,
-                    method,
-                    &Held::default(),
-                    [0.0; D],
-                    ModelRhs::<f64, N, EXTRAS, L>::for_tasks,
-                    observer,
-                    cancel,
-                    out,
-                    None,
-                )?;
+            let op = ByGroups::<O, E, N, D, EXTRAS, L> { tasks, method, observer, cancel, out, _exp: PhantomData };
+            // Rodas4 over plain models: its stages as vectors, compiled for AVX2 as the hand-overs
+            if !EXTRAS && matches!(method, Method::Rodas4 { .. }) {
+                hand_over_dispatch(op)?;
+            } else {
+                pulp::WithSimd::with_simd(op, pulp::Scalar::new())?;
             }
         }
     }

@@ -20,10 +20,14 @@ use super::{BatchConfig, PointOutput, PointSpec, Status};
 /// two AVX2 registers per quantity; the choice is measured in `benches/lanes_cost.rs`.
 pub const LANES: usize = 8;
 
-/// Points per rayon task: one lane group. A task is milliseconds of work or more, so
-/// scheduling costs nothing, and small tasks balance the threads when a batch has few points
-/// (a fit's Jacobian) or points of very different cost.
-pub const CHUNK: usize = LANES;
+/// Points per rayon task: the queue one lane group refills its lanes from. Eight lane-fulls:
+/// a lane whose point ends takes the next point of the queue rather than idling until the
+/// slowest of its group ends, and the points that `method="auto"` hands to the implicit method
+/// gather into fuller groups (their stages run as vectors only where half the lanes are busy).
+/// A task is tens of milliseconds or more, so scheduling costs nothing; a batch with few points
+/// (a fit's Jacobian) is split finer (`chunk_size`). Results do not depend on it (every point
+/// runs alone, bitwise, on lanes or not).
+pub const CHUNK: usize = 8 * LANES;
 
 /// A point that passed its checks: model, initial state and planned RK4 steps (0 if adaptive).
 struct Ready<'a> {
@@ -222,11 +226,11 @@ fn add_sensitivities(cfg: &BatchConfig, ready: &Ready, mut out: PointOutput, can
     }
 }
 
-/// End of the lane group starting at `start`: up to LANES points sharing one state layout.
+/// End of the lane group starting at `start`: up to CHUNK points sharing one state layout.
 fn lane_group_end(valid: &[Ready], start: usize) -> usize {
     let dim = valid[start].model.layout.dim;
     let mut end = start + 1;
-    while end < valid.len() && end - start < LANES && valid[end].model.layout.dim == dim {
+    while end < valid.len() && end - start < CHUNK && valid[end].model.layout.dim == dim {
         end += 1;
     }
     end

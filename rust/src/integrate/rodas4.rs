@@ -66,16 +66,21 @@ const CC: [&[f64]; 6] = [
 pub(crate) const IMPLICIT_CRAWL_HINT: &str = "even the implicit method's step collapsed (a discontinuity in the \
     model, or parameters far outside the physical range): check the parameters, or loosen 'rtol'/'atol'";
 
-/// Stages, Jacobians, factorisations and step sizes of `L` lanes.
+/// Stages, Jacobians, factorisations and step sizes of `L` lanes. The stages, the matrix and
+/// its factors are stored component by component (`lu[r * d + c][i]`: entry (r, c) of lane i),
+/// so that the factorisation, the solves and the stage sums run over the lanes as vector
+/// arithmetic; the states the right-hand side sees (`f`, `y_stage`) lane by lane, as
+/// [`Rhs::eval_lanes`] takes them.
 pub struct Rodas4<S: State, const L: usize = 1, const D: usize = 0> {
     opts: [AdaptiveOptions; L],
-    u: [[S; 6]; L],
+    /// the six stage increments: `u[s * d + c][i]`
+    u: Vec<[S::Elem; L]>,
     f: [S; L],
     y_stage: [S; L],
     dfdt: [S; L],
     jac: [Vec<S::Elem>; L],
-    lu: [Vec<S::Elem>; L],
-    pivot: [Vec<usize>; L],
+    lu: Vec<[S::Elem; L]>,
+    pivot: Vec<[usize; L]>,
     h: [f64; L],
     in_norm: [f64; L],
     pub stats: [AdaptiveStats; L],
@@ -85,14 +90,15 @@ impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
     /// Buffers shaped like `zero` (all zeros), one set of options per lane.
     pub fn new(opts: [AdaptiveOptions; L], zero: S) -> Self {
         let d = zero.as_ref().len();
+        let z = S::Elem::from(0.0);
         Rodas4 {
-            u: std::array::from_fn(|_| std::array::from_fn(|_| zero.clone())),
+            u: vec![[z; L]; 6 * d],
             f: std::array::from_fn(|_| zero.clone()),
             y_stage: std::array::from_fn(|_| zero.clone()),
             dfdt: std::array::from_fn(|_| zero.clone()),
-            jac: std::array::from_fn(|_| vec![S::Elem::from(0.0); d * d]),
-            lu: std::array::from_fn(|_| vec![S::Elem::from(0.0); d * d]),
-            pivot: std::array::from_fn(|_| vec![0; d]),
+            jac: std::array::from_fn(|_| vec![z; d * d]),
+            lu: vec![[z; L]; d * d],
+            pivot: vec![[0; L]; d],
             h: std::array::from_fn(|i| opts[i].h_init.min(opts[i].h_max)),
             in_norm: std::array::from_fn(|i| {
                 opts[i].scale.iter().filter(|s| s.is_finite()).count().max(1) as f64
@@ -131,6 +137,7 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
         end: &[f64; L],
         active: &[bool; L],
     ) -> [Attempt; L] {
+        let d = if D > 0 { D } else { ys[0].as_ref().len() };
         let mut step = [0.0; L];
         let mut last = [false; L];
         let mut ok = *active;
@@ -147,56 +154,20 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
             step[i] = if last[i] { end[i] - t[i] } else { h };
             f.jacobian(i, 0.0, ys[i].as_ref(), &mut self.jac[i], self.dfdt[i].as_mut());
             // E = I / (gamma h) - J
-            let d = if D > 0 { D } else { ys[i].as_ref().len() };
             let inv = 1.0 / (GAMMA * step[i]);
-            for (e, j) in self.lu[i].iter_mut().zip(&self.jac[i]) {
-                *e = -*j;
+            for (e, j) in self.lu.iter_mut().zip(&self.jac[i]) {
+                e[i] = -*j;
             }
             for r in 0..d {
-                self.lu[i][r * d + r] += inv;
+                self.lu[r * d + r][i] += inv;
             }
-            ok[i] = lu_factor::<_, D>(&mut self.lu[i], &mut self.pivot[i], d);
         }
-        for s in 0..6 {
-            for i in 0..L {
-                if !ok[i] {
-                    continue;
-                }
-                let (h, y) = (step[i], ys[i].as_ref());
-                if s == 0 {
-                    f.eval(i, 0.0, y, self.f[i].as_mut());
-                } else {
-                    let ys_ = self.y_stage[i].as_mut();
-                    for c in 0..y.len() {
-                        let mut acc = y[c];
-                        for (j, a) in A[s].iter().enumerate() {
-                            acc += self.u[i][j].as_ref()[c] * *a;
-                        }
-                        ys_[c] = acc;
-                    }
-                    f.eval(i, C[s] * h, self.y_stage[i].as_ref(), self.f[i].as_mut());
-                }
-                // right-hand side of stage s: f + sum_j c_sj / h u_j + h d_s df/dt
-                let (u, rhs) = {
-                    let (done, rest) = self.u[i].split_at_mut(s);
-                    (done, rest[0].as_mut())
-                };
-                let (fs, ft) = (self.f[i].as_ref(), self.dfdt[i].as_ref());
-                let inv_h = 1.0 / h;
-                let mut cc = [0.0; 5];
-                for (k, c) in CC[s].iter().enumerate() {
-                    cc[k] = c * inv_h;
-                }
-                let hd = h * DT_WEIGHT[s];
-                for c in 0..rhs.len() {
-                    let mut acc = fs[c] + ft[c] * hd;
-                    for (j, ccj) in cc[..s].iter().enumerate() {
-                        acc += u[j].as_ref()[c] * *ccj;
-                    }
-                    rhs[c] = acc;
-                }
-                lu_solve::<_, D>(&self.lu[i], &self.pivot[i], rhs);
-            }
+        let factored = lu_factor::<_, D, L>(&mut self.lu, &mut self.pivot, d, &ok);
+        for i in 0..L {
+            ok[i] &= factored[i];
+        }
+        if ok.iter().any(|o| *o) {
+            self.stages(f, ys, &step, &ok, d);
         }
         std::array::from_fn(|i| {
             if !active[i] {
@@ -242,6 +213,59 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
 }
 
 impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
+    /// The six stages of the lanes with `ok` (their matrix factored in `lu`), into `u`: each
+    /// stage's state, the right-hand side of every lane at it in one call (so that it may run
+    /// as vector arithmetic: `lanes/mod.rs`), the stage's linear system and its solve over the
+    /// lanes.
+    #[inline(always)]
+    // lane loops index several per-lane arrays by the same lane on purpose
+    #[allow(clippy::needless_range_loop)]
+    fn stages<F: Rhs<S::Elem>>(&mut self, f: &mut F, ys: &[S; L], step: &[f64; L], ok: &[bool; L], d: usize) {
+        let d = if D > 0 { D } else { d };
+        for s in 0..6 {
+            if s == 0 {
+                f.eval_lanes(&[0.0; L], ys, &mut self.f, ok);
+            } else {
+                let mut tau = [0.0; L];
+                for i in 0..L {
+                    if !ok[i] {
+                        continue;
+                    }
+                    tau[i] = C[s] * step[i];
+                    let (y, y_stage) = (ys[i].as_ref(), self.y_stage[i].as_mut());
+                    for c in 0..d {
+                        let mut acc = y[c];
+                        for (j, a) in A[s].iter().enumerate() {
+                            acc += self.u[j * d + c][i] * *a;
+                        }
+                        y_stage[c] = acc;
+                    }
+                }
+                f.eval_lanes(&tau, &self.y_stage, &mut self.f, ok);
+            }
+            // right-hand side of stage s: f + sum_j c_sj / h u_j + h d_s df/dt
+            let mut cc = [[0.0; L]; 5];
+            let mut hd = [0.0; L];
+            for i in 0..L {
+                let inv_h = 1.0 / step[i];
+                for (k, c) in CC[s].iter().enumerate() {
+                    cc[k][i] = c * inv_h;
+                }
+                hd[i] = step[i] * DT_WEIGHT[s];
+            }
+            for c in 0..d {
+                for i in 0..L {
+                    let mut acc = self.f[i].as_ref()[c] + self.dfdt[i].as_ref()[c] * hd[i];
+                    for j in 0..s {
+                        acc += self.u[j * d + c][i] * cc[j][i];
+                    }
+                    self.u[s * d + c][i] = acc;
+                }
+            }
+            lu_solve::<_, D, L>(&self.lu, &self.pivot, &mut self.u[s * d..(s + 1) * d]);
+        }
+    }
+
     /// Continue lane `i` from another method's run: its next step `h` [s] and the number of
     /// steps that run accepted (held steps are counted from the run's start).
     /// Accepted steps of lane `i` so far.
@@ -264,14 +288,15 @@ impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
     #[inline(always)]
     fn finish(&mut self, i: usize, y: &[S::Elem]) -> f64 {
         let o = &self.opts[i];
-        let (u, out) = (&self.u[i], self.y_stage[i].as_mut());
+        let (u, out) = (&self.u, self.y_stage[i].as_mut());
+        let d = y.len();
         let mut err2 = 0.0;
-        for c in 0..y.len() {
+        for c in 0..d {
             let mut acc = y[c];
             for (j, a) in A[5].iter().enumerate() {
-                acc += u[j].as_ref()[c] * *a;
+                acc += u[j * d + c][i] * *a;
             }
-            let e = u[5].as_ref()[c];
+            let e = u[5 * d + c][i];
             out[c] = acc + e;
             if o.scale[c].is_finite() {
                 let tol = o.atol * o.scale[c] + o.rtol * y[c].value().abs().max(out[c].value().abs());
@@ -282,74 +307,115 @@ impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
     }
 }
 
-/// In-place LU factorisation with partial pivoting of the `d` x `d` row-major matrix `a` (the
-/// diagonal of U stored as its reciprocal)
-/// (nalgebra's LU owns and allocates its matrix; this runs once per step on a lane's own
-/// buffer). `D` > 0 fixes the size at compile time (the loops unroll). False when the matrix
-/// is singular or not finite.
+/// In-place LU factorisation with partial pivoting of each lane's `d` x `d` row-major matrix,
+/// stored component by component (`a[r * d + c][i]`: entry (r, c) of lane i; the diagonal of U
+/// stored as its reciprocal), each lane with its own pivots (`pivot[k][i]`), so that the
+/// elimination runs over the lanes as vector arithmetic; a lane's result is bitwise that of the
+/// factorisation alone. (nalgebra's LU owns and allocates one matrix; this runs once per step
+/// on the lanes' buffers.) `D` > 0 fixes the size at compile time (the loops unroll). Per lane:
+/// false where `on` is false or the matrix is singular or not finite (the other lanes' factors
+/// are computed all the same and not used).
 #[inline(always)]
-fn lu_factor<T: Scalar, const D: usize>(a: &mut [T], pivot: &mut [usize], d: usize) -> bool {
+// lane loops index several per-lane arrays by the same lane on purpose (the vectorised layout)
+#[allow(clippy::needless_range_loop)]
+fn lu_factor<T: Scalar, const D: usize, const L: usize>(
+    a: &mut [[T; L]],
+    pivot: &mut [[usize; L]],
+    d: usize,
+    on: &[bool; L],
+) -> [bool; L] {
     let d = if D > 0 { D } else { d };
     let (a, pivot) = (&mut a[..d * d], &mut pivot[..d]);
+    let mut ok = *on;
     for k in 0..d {
-        let mut p = k;
-        let mut best = a[k * d + k].value().abs();
+        // each lane's pivot: the first row r >= k with the largest |a_rk|
+        let mut p = [k; L];
+        let mut best: [f64; L] = std::array::from_fn(|i| a[k * d + k][i].value().abs());
         for r in k + 1..d {
-            let x = a[r * d + k].value().abs();
-            if x > best {
-                best = x;
-                p = r;
+            for i in 0..L {
+                let x = a[r * d + k][i].value().abs();
+                if x > best[i] {
+                    best[i] = x;
+                    p[i] = r;
+                }
             }
         }
-        if !(best > 0.0 && best.is_finite()) {
-            return false;
+        for i in 0..L {
+            ok[i] &= best[i] > 0.0 && best[i].is_finite();
         }
         pivot[k] = p;
-        if p != k {
-            for c in 0..d {
-                a.swap(k * d + c, p * d + c);
+        for i in 0..L {
+            if p[i] != k {
+                for c in 0..d {
+                    let x = a[k * d + c][i];
+                    a[k * d + c][i] = a[p[i] * d + c][i];
+                    a[p[i] * d + c][i] = x;
+                }
             }
         }
-        let inv = T::one() / a[k * d + k];
         // the solves multiply by the pivot's reciprocal: a division is a long serial latency
+        let inv: [T; L] = std::array::from_fn(|i| T::one() / a[k * d + k][i]);
         a[k * d + k] = inv;
         for r in k + 1..d {
-            let m = a[r * d + k] * inv;
+            let m: [T; L] = std::array::from_fn(|i| a[r * d + k][i] * inv[i]);
             a[r * d + k] = m;
-            if !m.is_exactly(0.0) {
-                for c in k + 1..d {
-                    let akc = a[k * d + c];
-                    a[r * d + c] -= m * akc;
+            // a zero multiplier leaves its row as it is (bitwise, as the elimination alone skips it)
+            let zero: [bool; L] = std::array::from_fn(|i| m[i].is_exactly(0.0));
+            if zero.iter().all(|z| *z) {
+                continue;
+            }
+            for c in k + 1..d {
+                let akc = a[k * d + c];
+                let row = &mut a[r * d + c];
+                for i in 0..L {
+                    let x = row[i] - m[i] * akc[i];
+                    if !zero[i] {
+                        row[i] = x;
+                    }
                 }
             }
         }
     }
-    true
+    ok
 }
 
-/// Solve A x = b in place with the factors of [`lu_factor`].
+/// Solve A x = b in place for every lane with the factors of [`lu_factor`] (`b[c][i]`:
+/// component c of lane i).
 #[inline(always)]
 // the row swaps by pivot index, in the factorisation's order, like the loops below
 #[allow(clippy::needless_range_loop)]
-fn lu_solve<T: Scalar, const D: usize>(lu: &[T], pivot: &[usize], b: &mut [T]) {
+fn lu_solve<T: Scalar, const D: usize, const L: usize>(lu: &[[T; L]], pivot: &[[usize; L]], b: &mut [[T; L]]) {
     let d = if D > 0 { D } else { b.len() };
     let (lu, pivot, b) = (&lu[..d * d], &pivot[..d], &mut b[..d]);
     for k in 0..d {
-        b.swap(k, pivot[k]);
+        for i in 0..L {
+            let p = pivot[k][i];
+            if p != k {
+                let x = b[k][i];
+                b[k][i] = b[p][i];
+                b[p][i] = x;
+            }
+        }
     }
     for r in 1..d {
         let mut s = b[r];
         for c in 0..r {
-            s -= lu[r * d + c] * b[c];
+            for i in 0..L {
+                s[i] -= lu[r * d + c][i] * b[c][i];
+            }
         }
         b[r] = s;
     }
     for r in (0..d).rev() {
         let mut s = b[r];
         for c in r + 1..d {
-            s -= lu[r * d + c] * b[c];
+            for i in 0..L {
+                s[i] -= lu[r * d + c][i] * b[c][i];
+            }
         }
-        b[r] = s * lu[r * d + r];
+        for i in 0..L {
+            b[r][i] = s[i] * lu[r * d + r][i];
+        }
     }
 }
 
@@ -395,18 +461,18 @@ mod tests {
 
     #[test]
     fn lu_solves_a_pivoting_system() {
-        let mut a = vec![0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
-        let mut p = vec![0; 3];
-        assert!(lu_factor::<f64, 0>(&mut a, &mut p, 3));
-        let mut b = vec![5.0, 3.0, 6.0];
-        lu_solve::<f64, 3>(&a, &p, &mut b);
         let m = [0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
+        let mut a: Vec<[f64; 1]> = m.iter().map(|x| [*x]).collect();
+        let mut p = vec![[0]; 3];
+        assert!(lu_factor::<f64, 0, 1>(&mut a, &mut p, 3, &[true])[0]);
+        let mut b = vec![[5.0], [3.0], [6.0]];
+        lu_solve::<f64, 3, 1>(&a, &p, &mut b);
         for r in 0..3 {
-            let s: f64 = (0..3).map(|c| m[r * 3 + c] * b[c]).sum();
+            let s: f64 = (0..3).map(|c| m[r * 3 + c] * b[c][0]).sum();
             assert!((s - [5.0, 3.0, 6.0][r]).abs() < 1e-14);
         }
-        let mut z = vec![1.0, 2.0, 2.0, 4.0];
-        assert!(!lu_factor::<f64, 2>(&mut z, &mut p[..2], 2));
+        let mut z = vec![[1.0], [2.0], [2.0], [4.0]];
+        assert!(!lu_factor::<f64, 2, 1>(&mut z, &mut p[..2], 2, &[true])[0]);
     }
 
     #[test]
