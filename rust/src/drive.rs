@@ -17,7 +17,7 @@ use crate::integrate::method::Method;
 use crate::integrate::model_rhs::{LaneInputs, ModelRhs};
 use crate::integrate::rk4::Rk4;
 use crate::integrate::rodas4::Rodas4;
-use crate::integrate::stepper::{Attempt, Held, State, Stepper};
+use crate::integrate::stepper::{AdaptiveOptions, Attempt, Held, State, Stepper};
 use crate::integrate::switching::Switching;
 use crate::integrate::task::{adaptive_options, LaneEnd, Observer, Resume, Task, CANCEL_CHECK_ATTEMPTS};
 use crate::lanes::dopri5::{run_dopri5_lanes, Handoff};
@@ -224,41 +224,69 @@ where
     R: LaneInputs<S::Elem, L>,
 {
     let task = |i: usize| &chunk[i.min(chunk.len() - 1)];
+    let opts = |rtol, atol, first_step| std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
+    match *method {
+        Method::Rk4 { dt } => {
+            let st: Rk4<S, L> = Rk4::new(dt, zero.clone());
+            drive_group(chunk, first, dt, st, zero, rhs_for, observer, cancel, out, resume)
+        }
+        Method::Dopri5 { rtol, atol, first_step } => {
+            let st: Dopri5<S, L> = Dopri5::new(opts(rtol, atol, first_step), zero.clone());
+            drive_group(chunk, first, 0.0, st, zero, rhs_for, observer, cancel, out, resume)
+        }
+        Method::Rodas4 { rtol, atol, first_step } => {
+            let st: Rodas4<S, L, D> = Rodas4::new(opts(rtol, atol, first_step), zero.clone());
+            drive_group(chunk, first, 0.0, st, zero, rhs_for, observer, cancel, out, resume)
+        }
+        Method::Auto { rtol, atol, first_step } => {
+            let st = switching::<S, D, L>(opts(rtol, atol, first_step), zero.clone(), resume);
+            drive_group(chunk, first, 0.0, st, zero, rhs_for, observer, cancel, out, resume)
+        }
+    }
+}
+
+/// `method="auto"`'s stepper for a group; runs handed over from the vector lanes (`resume`)
+/// start with their Rodas4 trial pending.
+#[inline(always)]
+fn switching<S: State, const D: usize, const L: usize>(opts: [AdaptiveOptions; L], zero: S, resume: Option<&[Resume]>) -> Switching<S, L, D> {
+    let mut st: Switching<S, L, D> = Switching::new(opts, zero);
+    if let Some(r) = resume {
+        for (i, r) in r.iter().enumerate() {
+            st.start_trial(i, r.h, r.steps);
+        }
+    }
+    st
+}
+
+/// Drive one group of up to `L` tasks with stepper `st` (see [`run_group`]).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn drive_group<'a, S, St, O, R, const L: usize>(
+    chunk: &[Task<'a, S::Elem>],
+    first: usize,
+    dt: f64,
+    mut st: St,
+    zero: S,
+    rhs_for: impl FnOnce(&[Task<'a, S::Elem>], f64) -> R,
+    observer: &mut O,
+    cancel: &AtomicBool,
+    out: &mut Vec<(LaneEnd, Vec<S::Elem>)>,
+    resume: Option<&[Resume]>,
+) -> Option<()>
+where
+    S: State,
+    St: Stepper<S, L>,
+    O: Observer<S::Elem>,
+    R: LaneInputs<S::Elem, L>,
+{
+    let task = |i: usize| &chunk[i.min(chunk.len() - 1)];
     let mut ys: [S; L] = std::array::from_fn(|i| {
         let mut y = zero.clone();
         y.as_mut().copy_from_slice(task(i).y0);
         y
     });
-    let ends = match *method {
-        Method::Rk4 { dt } => {
-            let mut st: Rk4<S, L> = Rk4::new(dt, zero);
-            let mut rhs = rhs_for(chunk, st.admissible_slack());
-            drive_lanes(chunk, first, dt, &mut st, &mut rhs, &mut ys, observer, cancel, resume)?
-        }
-        Method::Dopri5 { rtol, atol, first_step } => {
-            let opts = std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
-            let mut st: Dopri5<S, L> = Dopri5::new(opts, zero);
-            let mut rhs = rhs_for(chunk, st.admissible_slack());
-            drive_lanes(chunk, first, 0.0, &mut st, &mut rhs, &mut ys, observer, cancel, resume)?
-        }
-        Method::Rodas4 { rtol, atol, first_step } => {
-            let opts = std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
-            let mut st: Rodas4<S, L, D> = Rodas4::new(opts, zero);
-            let mut rhs = rhs_for(chunk, st.admissible_slack());
-            drive_lanes(chunk, first, 0.0, &mut st, &mut rhs, &mut ys, observer, cancel, resume)?
-        }
-        Method::Auto { rtol, atol, first_step } => {
-            let opts = std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
-            let mut st: Switching<S, L, D> = Switching::new(opts, zero);
-            if let Some(r) = resume {
-                for (i, r) in r.iter().enumerate() {
-                    st.start_trial(i, r.h, r.steps);
-                }
-            }
-            let mut rhs = rhs_for(chunk, st.admissible_slack());
-            drive_lanes(chunk, first, 0.0, &mut st, &mut rhs, &mut ys, observer, cancel, resume)?
-        }
-    };
+    let mut rhs = rhs_for(chunk, st.admissible_slack());
+    let ends = drive_lanes(chunk, first, dt, &mut st, &mut rhs, &mut ys, observer, cancel, resume)?;
     for (e, y) in ends.into_iter().zip(ys.iter()) {
         out.push((e, y.as_ref().to_vec()));
     }
@@ -369,18 +397,19 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool
             let resume: Vec<Resume> = group.iter().map(|h| h.resume).collect();
             let index: Vec<usize> = group.iter().map(|h| h.task).collect();
             let mut done = Vec::with_capacity(group.len());
-            run_group::<[f64; D], _, _, D, L>(
-                &chunk,
-                0,
-                self.method,
-                &Held::default(),
-                [0.0; D],
-                |c, slack| LanesRhs::<E, N, D, L, EXTRAS>::new(ModelRhs::<f64, N, EXTRAS, L>::for_tasks(c, slack)),
-                &mut Renumbered { inner: &mut *self.observer, index: &index },
-                self.cancel,
-                &mut done,
-                Some(&resume),
-            )?;
+            let Method::Auto { rtol, atol, first_step } = *self.method else { unreachable!("only auto hands runs over") };
+            let opts = std::array::from_fn(|i| adaptive_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step, &Held::default()));
+            let st = switching::<[f64; D], D, L>(opts, [0.0; D], Some(&resume));
+            let observer = &mut Renumbered { inner: &mut *self.observer, index: &index };
+            if EXTRAS {
+                // lag states run lane by lane
+                let rhs = ModelRhs::<f64, N, EXTRAS, L>::for_tasks;
+                drive_group(&chunk, 0, 0.0, st, [0.0; D], rhs, observer, self.cancel, &mut done, Some(&resume))?;
+            } else {
+                // the stages of both methods as vectors where half the lanes are busy
+                let rhs = LanesRhs::<E, N, D, L, EXTRAS>::for_tasks;
+                drive_group(&chunk, 0, 0.0, st, [0.0; D], rhs, observer, self.cancel, &mut done, Some(&resume))?;
+            }
             for (h, end) in group.iter().zip(done) {
                 self.ends[h.task] = Some(end);
             }
@@ -401,11 +430,10 @@ fn hand_over_dispatch<Op: pulp::WithSimd>(op: Op) -> Op::Output {
     }
 }
 
-/// `tasks` `L` at a time as lane-interleaved code (`run_group`), where the vector drivers do not
-/// run them (another shape, a group less than half full, or Rodas4); the stages of plain models
-/// as vectors where at least half the lanes are busy ([`LanesRhs`]). One operation for `pulp`,
-/// as [`HandOvers`].
-struct ByGroups<'t, 'a, O, E, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> {
+/// Rodas4 over plain models (`tasks`), `L` at a time, the stages as vectors where at least half
+/// the lanes are busy ([`LanesRhs`]): one operation for `pulp`, compiled for AVX2 as
+/// [`HandOvers`].
+struct Rodas4Groups<'t, 'a, O, E, const N: usize, const D: usize, const L: usize> {
     tasks: &'t [Task<'a>],
     method: &'t Method,
     observer: &'t mut O,
@@ -414,26 +442,19 @@ struct ByGroups<'t, 'a, O, E, const N: usize, const D: usize, const EXTRAS: bool
     _exp: PhantomData<E>,
 }
 
-impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool, const L: usize> pulp::WithSimd
-    for ByGroups<'_, '_, O, E, N, D, EXTRAS, L>
+impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pulp::WithSimd
+    for Rodas4Groups<'_, '_, O, E, N, D, L>
 {
     type Output = Option<()>;
 
     #[inline(always)]
     fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<()> {
+        let Method::Rodas4 { rtol, atol, first_step } = *self.method else { unreachable!("Rodas4 groups") };
         for (c, chunk) in self.tasks.chunks(L).enumerate() {
-            run_group::<[f64; D], O, _, D, L>(
-                chunk,
-                c * L,
-                self.method,
-                &Held::default(),
-                [0.0; D],
-                |c, slack| LanesRhs::<E, N, D, L, EXTRAS>::new(ModelRhs::<f64, N, EXTRAS, L>::for_tasks(c, slack)),
-                &mut *self.observer,
-                self.cancel,
-                &mut *self.out,
-                None,
-            )?;
+            let opts = std::array::from_fn(|i| adaptive_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step, &Held::default()));
+            let st: Rodas4<[f64; D], L, D> = Rodas4::new(opts, [0.0; D]);
+            let rhs = LanesRhs::<E, N, D, L>::for_tasks;
+            drive_group(chunk, c * L, 0.0, st, [0.0; D], rhs, &mut *self.observer, self.cancel, &mut *self.out, None)?;
         }
         Some(())
     }
@@ -473,12 +494,24 @@ fn run_fixed<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTR
             out.extend(ends.into_iter().map(|o| o.expect("every task ends")));
         }
         LaneRun::Fallback => {
-            let op = ByGroups::<O, E, N, D, EXTRAS, L> { tasks, method, observer, cancel, out, _exp: PhantomData };
-            // Rodas4 over plain models: its stages as vectors, compiled for AVX2 as the hand-overs
             if !EXTRAS && matches!(method, Method::Rodas4 { .. }) {
-                hand_over_dispatch(op)?;
+                // its stages as vectors, compiled for AVX2 as the hand-overs
+                hand_over_dispatch(Rodas4Groups::<O, E, N, D, L> { tasks, method, observer, cancel, out, _exp: PhantomData })?;
             } else {
-                pulp::WithSimd::with_simd(op, pulp::Scalar::new())?;
+                for (c, chunk) in tasks.chunks(L).enumerate() {
+                    run_group::<[f64; D], O, _, D, L>(
+                        chunk,
+                        c * L,
+                        method,
+                        &Held::default(),
+                        [0.0; D],
+                        ModelRhs::<f64, N, EXTRAS, L>::for_tasks,
+                        observer,
+                        cancel,
+                        out,
+                        None,
+                    )?;
+                }
             }
         }
     }

@@ -476,6 +476,34 @@ mod tests {
     }
 
     #[test]
+    fn lanes_pivot_each_on_their_own_and_equal_the_factorisation_alone() {
+        // lane 0 needs row swaps, lane 1 none, lane 2 is singular: each lane as if alone
+        let mats = [
+            [0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0],
+            [4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.1, 0.3, 2.0],
+            [1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 1.0, 1.0],
+        ];
+        let mut a: Vec<[f64; 3]> = (0..9).map(|e| std::array::from_fn(|i| mats[i][e])).collect();
+        let mut p = vec![[0; 3]; 3];
+        let ok = lu_factor::<f64, 3, 3>(&mut a, &mut p, 3, &[true; 3]);
+        assert_eq!(ok, [true, true, false]);
+        assert_ne!(p[0][0], 0);
+        assert_eq!([p[0][1], p[1][1], p[2][1]], [0, 1, 2], "the diagonally dominant lane keeps its rows");
+        let mut b = vec![[5.0, 1.0, 0.0], [3.0, 2.0, 0.0], [6.0, 3.0, 0.0]];
+        lu_solve::<f64, 3, 3>(&a, &p, &mut b);
+        for i in 0..2 {
+            let mut alone: Vec<[f64; 1]> = mats[i].iter().map(|x| [*x]).collect();
+            let mut pa = vec![[0]; 3];
+            assert!(lu_factor::<f64, 3, 1>(&mut alone, &mut pa, 3, &[true])[0]);
+            let mut x = vec![[[5.0, 1.0][i]], [[3.0, 2.0][i]], [[6.0, 3.0][i]]];
+            lu_solve::<f64, 3, 1>(&alone, &pa, &mut x);
+            for c in 0..3 {
+                assert_eq!(b[c][i].to_bits(), x[c][0].to_bits(), "lane {i} component {c}");
+            }
+        }
+    }
+
+    #[test]
     fn non_autonomous_problem_meets_its_tolerance() {
         // y' = -y + t^3 (time enters through df/dt); exact y = t^3 - 3t^2 + 6t - 6 + 7 e^-t
         let t0 = std::cell::Cell::new(0.0);

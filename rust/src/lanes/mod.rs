@@ -129,6 +129,11 @@ impl<'a, E: LaneExp, const N: usize, const D: usize, const L: usize, const EXTRA
         LanesRhs { inner, lanes, _exp: std::marker::PhantomData }
     }
 
+    /// [`LanesRhs::new`] over [`ModelRhs::for_tasks`].
+    pub fn for_tasks(tasks: &[Task<'a>], slack: f64) -> Self {
+        Self::new(ModelRhs::for_tasks(tasks, slack))
+    }
+
     /// Whether the lanes are computed as vectors (else one by one).
     pub fn is_vector(&self) -> bool {
         self.lanes.is_some()
