@@ -281,13 +281,16 @@ fn run_chunk(
     out
 }
 
-/// Points per rayon task for a batch of `n` points on `threads` threads: a lane group
-/// ([`CHUNK`]), or fewer when the batch has fewer than a group per thread, so that every thread
-/// gets some (a fit's prediction of one model on three experiments is three points: one task
-/// of three would leave the other threads idle). Grouping changes no result (every point runs
-/// alone, bitwise, on lanes or not).
+/// Points per rayon task for a batch of `n` points on `threads` threads: about an eighth of a
+/// thread's share, so that the threads end together when points differ in cost (a sweep's
+/// corners take 10x its middle), between a lane group ([`LANES`]) and [`CHUNK`] points; fewer
+/// when the batch has fewer than a group per thread, so that every thread gets some (a fit's
+/// prediction of one model on three experiments is three points: one task of three would leave
+/// the other threads idle). Grouping changes no result (every point runs alone, bitwise, on
+/// lanes or not).
 fn chunk_size(n: usize, threads: usize) -> usize {
-    CHUNK.min(n.div_ceil(threads.max(1))).max(1)
+    let threads = threads.max(1);
+    (n / (8 * threads)).clamp(LANES, CHUNK).min(n.div_ceil(threads)).max(1)
 }
 
 /// Run every point on the current rayon pool. Unfinished points (after `cancel`) come back as
@@ -311,11 +314,13 @@ mod tests {
     use super::*;
 
     #[test]
-    fn small_batches_are_spread_over_the_threads_and_large_ones_go_a_lane_group_at_a_time() {
+    fn batches_are_split_about_eight_tasks_per_thread_between_a_lane_group_and_a_chunk() {
         assert_eq!(chunk_size(3, 2), 2); // [2, 1]: both threads busy
         assert_eq!(chunk_size(9, 2), 5); // [5, 4] rather than [8, 1]
-        assert_eq!(chunk_size(1_000, 2), CHUNK);
-        assert_eq!(chunk_size(5, 1), CHUNK.min(5));
+        assert_eq!(chunk_size(256, 2), 16); // eight tasks per thread
+        assert_eq!(chunk_size(1_000_000, 2), CHUNK);
+        assert_eq!(chunk_size(100, 16), LANES); // at least a lane group
+        assert_eq!(chunk_size(5, 1), 5);
         assert_eq!(chunk_size(0, 2), 1); // par_chunks needs a positive size
     }
 }
