@@ -319,7 +319,8 @@ mod tests {
         assert_eq!(chunk_size(9, 2), 5); // [5, 4] rather than [8, 1]
         assert_eq!(chunk_size(256, 2), 16); // eight tasks per thread
         assert_eq!(chunk_size(1_000_000, 2), CHUNK);
-        assert_eq!(chunk_size(100, 16), LANES); // at least a lane group
+        assert_eq!(chunk_size(200, 16), LANES); // at least a lane group
+        assert_eq!(chunk_size(100, 16), 7); // but every thread gets some
         assert_eq!(chunk_size(5, 1), 5);
         assert_eq!(chunk_size(0, 2), 1); // par_chunks needs a positive size
     }
