@@ -36,12 +36,14 @@ def main(argv=None) -> int:
     for rep in range(a.repeats):
         res = {}
         for name, path in engines.items():
-            out = Path(a.out) / f"engine_ab_{name}.nc"
+            out = Path(a.out) / f"engine_ab_{name}_{rep}.nc"
+            out.unlink(missing_ok=True)
             subprocess.run([sys.executable, "-m", "idm_rs", "sweep", "--model", a.model, "--method", a.method,
                             "--t-end", "10e-3", "--grid", f"mass_ratio=0.25:2:{n}", "--grid", f"voltage=40:120:{n}",
                             "--out", str(out), "--no-progress"],
                            env={"PYTHONPATH": path, "PATH": "/usr/bin:/bin"}, check=True, capture_output=True)
-            res[name] = ds = xr.open_dataset(out).load()
+            with xr.open_dataset(out) as f:
+                res[name] = ds = f.load()
             print(f"{rep}: {name}: {ds.attrs['wall_time_s']:.2f} s, {n * n / ds.attrs['wall_time_s']:.0f} points/s, "
                   f"steps mean {float(ds['steps'].mean()):.0f}", flush=True)
         b, c = res["before"], res["after"]
