@@ -223,8 +223,7 @@ where
     O: Observer<S::Elem>,
     R: LaneInputs<S::Elem, L>,
 {
-    let task = |i: usize| &chunk[i.min(chunk.len() - 1)];
-    let opts = |rtol, atol, first_step| std::array::from_fn(|i| adaptive_options(task(i), rtol, atol, first_step, held));
+    let opts = |rtol, atol, first_step| group_options(chunk, rtol, atol, first_step, held);
     match *method {
         Method::Rk4 { dt } => {
             let st: Rk4<S, L> = Rk4::new(dt, zero.clone());
@@ -243,6 +242,12 @@ where
             drive_group(chunk, first, 0.0, st, zero, rhs_for, observer, cancel, out, resume)
         }
     }
+}
+
+/// Each lane's adaptive options for a group of tasks (idle lanes take the last task's).
+#[inline(always)]
+fn group_options<T: Scalar, const L: usize>(chunk: &[Task<T>], rtol: f64, atol: f64, first_step: f64, held: &Held) -> [AdaptiveOptions; L] {
+    std::array::from_fn(|i| adaptive_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step, held))
 }
 
 /// `method="auto"`'s stepper for a group; runs handed over from the vector lanes (`resume`)
@@ -392,13 +397,16 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool
 
     #[inline(always)]
     fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<()> {
+        if self.handoffs.is_empty() {
+            return Some(()); // any method: only auto hands runs over
+        }
+        let Method::Auto { rtol, atol, first_step } = *self.method else { unreachable!("only auto hands runs over") };
         for group in self.handoffs.chunks(L) {
             let chunk: Vec<Task> = group.iter().map(|h| Task { t_start: h.t, y0: &h.y, ..self.tasks[h.task] }).collect();
             let resume: Vec<Resume> = group.iter().map(|h| h.resume).collect();
             let index: Vec<usize> = group.iter().map(|h| h.task).collect();
             let mut done = Vec::with_capacity(group.len());
-            let Method::Auto { rtol, atol, first_step } = *self.method else { unreachable!("only auto hands runs over") };
-            let opts = std::array::from_fn(|i| adaptive_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step, &Held::default()));
+            let opts = group_options(&chunk, rtol, atol, first_step, &Held::default());
             let st = switching::<[f64; D], D, L>(opts, [0.0; D], Some(&resume));
             let observer = &mut Renumbered { inner: &mut *self.observer, index: &index };
             if EXTRAS {
@@ -451,8 +459,7 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pu
     fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<()> {
         let Method::Rodas4 { rtol, atol, first_step } = *self.method else { unreachable!("Rodas4 groups") };
         for (c, chunk) in self.tasks.chunks(L).enumerate() {
-            let opts = std::array::from_fn(|i| adaptive_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step, &Held::default()));
-            let st: Rodas4<[f64; D], L, D> = Rodas4::new(opts, [0.0; D]);
+            let st: Rodas4<[f64; D], L, D> = Rodas4::new(group_options(chunk, rtol, atol, first_step, &Held::default()), [0.0; D]);
             let rhs = LanesRhs::<E, N, D, L>::for_tasks;
             drive_group(chunk, c * L, 0.0, st, [0.0; D], rhs, &mut *self.observer, self.cancel, &mut *self.out, None)?;
         }

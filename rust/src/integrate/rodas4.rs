@@ -221,7 +221,6 @@ impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
     // lane loops index several per-lane arrays by the same lane on purpose
     #[allow(clippy::needless_range_loop)]
     fn stages<F: Rhs<S::Elem>>(&mut self, f: &mut F, ys: &[S; L], step: &[f64; L], ok: &[bool; L], d: usize) {
-        let d = if D > 0 { D } else { d };
         for s in 0..6 {
             if s == 0 {
                 f.eval_lanes(&[0.0; L], ys, &mut self.f, ok);
