@@ -198,8 +198,10 @@ def _nominal_of(effects: list[str], p: Any, true0: Any, given: dict[str, float])
     return nominal
 
 
-def effect_case(directory: Path, c: dict[str, Any], rng: np.random.Generator) -> dict[str, Any]:
-    """Write one effect case with its size tuned; returns what was set."""
+def effect_case(directory: Path, c: dict[str, Any], rng: np.random.Generator,
+                sensor: Any = None) -> dict[str, Any]:
+    """Write one effect case with its size tuned; returns what was set. `sensor`: a function of
+    the drawn white-noise RMS giving the reading's ``SensorNoise`` (None: white noise)."""
     import idm_rs
     from idm_rs.synthetic import make_case
 
@@ -216,7 +218,7 @@ def effect_case(directory: Path, c: dict[str, Any], rng: np.random.Generator) ->
     make_case(directory, nominal_params=nominal.replace(normal_force=true.normal_force), true_params=true,
               model=nominal_model, n_elements=4, piezo_hysteresis=False, true_model=model,
               true_piezo_hysteresis=effect == "piezo_hysteresis", effects=eff, experiments=EXPERIMENTS,
-              noise_rms=noise, seed=seed, dt=2e-8)
+              noise_rms=noise, seed=seed, dt=2e-8, noise=sensor(noise) if sensor is not None else None)
     return {"misset": misset, "magnitude": {name: magnitude} if name else {}, "size_after_refit": size,
             "noise_rms": noise}
 

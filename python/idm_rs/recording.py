@@ -203,6 +203,9 @@ class Recording:
     sample_rate_Hz: float
     resolution_m: float
     meta: dict = field(repr=False, default_factory=dict)  #: meta.json as read
+    #: how the sensor reads, as the diagnosis learned it (its noise colour, nuisance columns and
+    #: channel delay: ``diagnosis.measurement.Measurement``); None (as loaded): white noise
+    measurement: Any = field(repr=False, default=None)
 
     @classmethod
     def load(cls, path: PathLike) -> "Recording":

@@ -25,6 +25,7 @@ from .declarations import structure
 from .effects import Effects, oriented
 from .params import Params
 from .recording import FORMAT_ID, HEADER, META, ORIENTATIONS
+from .sensor_noise import SensorNoise
 from .simulation import Model, simulate
 from .waveforms import Sampled, Sawtooth, voltage_at
 
@@ -71,6 +72,7 @@ def make_case(
     edge_s: float = 0.0005,
     sample_rate_Hz: float = 1e5,
     write_noise_rms: bool = False,
+    noise: Optional[SensorNoise] = None,
 ) -> Path:
     """Simulate the true device and write a case directory; returns ``Path(directory)``.
 
@@ -86,6 +88,10 @@ def make_case(
     for a drive recorded sample by sample, ``{"sampled": idm_rs.Sampled(t, V)}`` (its times on
     the sample grid, from 0; optionally ``file``), written as ``waveform: "sampled"``.
     ``write_noise_rms`` puts the noise RMS in meta.json (``sensor.noise_rms_m``).
+    ``noise`` (an :class:`idm_rs.sensor_noise.SensorNoise`) replaces the white noise of
+    ``noise_rms`` with what a lab's reading carries: coloured noise, hum, spikes, a drifting zero,
+    a late displacement channel (the device is driven that much later than the voltage column
+    says; its motion after the file's end is not recorded).
     Each file's ``x`` is the simulated ``reading`` (sampled at ``sample_rate_Hz``, integrated at
     step ``dt``) + an offset (``offsets[i]``, or uniform in ±2 µm) + white Gaussian noise of RMS
     ``noise_rms`` [m], rounded to multiples of ``resolution`` [m] (``None`` or 0: no rounding).
@@ -101,8 +107,11 @@ def make_case(
     exps = [dict(e) for e in (DEFAULT_EXPERIMENTS if experiments is None else experiments)]
     if not exps:
         raise ValueError("experiments must not be empty")
+    if noise is not None and not isinstance(noise, SensorNoise):
+        raise TypeError(f"noise must be idm_rs.sensor_noise.SensorNoise, got {type(noise).__name__}")
     if not (noise_rms >= 0 and math.isfinite(noise_rms)):
         raise ValueError(f"noise_rms must be finite and non-negative, got {noise_rms}")
+    sensor = noise if noise is not None else SensorNoise(rms=noise_rms)
     resolution = float(resolution or 0.0)
     if resolution < 0 or not math.isfinite(resolution):
         raise ValueError(f"resolution must be finite and non-negative, got {resolution}")
@@ -140,7 +149,7 @@ def make_case(
         placed = {} if orientation == "normal" else {"orientation": orientation}
         if "sampled" in e:
             meta_exps.append(dict(_sampled_experiment(out, i, e, true_params, true_model, true_n_elements,
-                                                      true_piezo_hysteresis, acting, offs[i], noise_rms, resolution,
+                                                      true_piezo_hysteresis, acting, offs[i], sensor, resolution,
                                                       rng, dt, save_every, sample_rate_Hz), **placed))
             continue
         rest = float(e.get("rest_s", rest_s))
@@ -153,6 +162,8 @@ def make_case(
             direction=e["direction"],
             delay=rest,
         )
+        # a late displacement channel: the motion it reads began delay_s after the voltage
+        felt = wave if sensor.delay_s == 0 else dataclasses.replace(wave, delay=rest + sensor.delay_s)
         n = int(round(wave.duration * sample_rate_Hz)) + 1
         t = np.arange(n) / sample_rate_Hz
         if abs(t[-1] - wave.duration) > 1e-9 / sample_rate_Hz:
@@ -162,7 +173,7 @@ def make_case(
             )
         sim = simulate(
             true_params,
-            wave,
+            felt,
             t_end=t[-1],
             dt=dt,
             model=true_model,
@@ -173,9 +184,7 @@ def make_case(
         )
         if sim.t.shape != t.shape or np.max(np.abs(sim.t - t)) > 1e-3 / sample_rate_Hz:
             raise RuntimeError(f"experiments[{i}]: simulation saved {sim.t.size} times, expected {n}")
-        x = sim.reading + offs[i]
-        if noise_rms > 0:
-            x = x + rng.normal(0.0, noise_rms, size=n)
+        x = sim.reading + offs[i] + _noise(sensor, t, rng, 1.0 / sample_rate_Hz)
         if resolution > 0:
             x = np.round(x / resolution) * resolution
         v = voltage_at(wave, t)
@@ -215,13 +224,22 @@ def make_case(
         "sensor": {"sample_rate_Hz": float(sample_rate_Hz), "resolution_m": resolution},
     }
     if write_noise_rms:
-        meta["sensor"]["noise_rms_m"] = float(noise_rms)
+        meta["sensor"]["noise_rms_m"] = float(sensor.rms)
     (out / META).write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
     return out
 
 
+def _noise(sensor: SensorNoise, t: np.ndarray, rng: np.random.Generator, step: float) -> np.ndarray:
+    """One file's noise and artefacts. White noise alone draws exactly as it always has (the
+    recordings of a given seed stay the same)."""
+    plain = not (sensor.ar or sensor.pink or sensor.hum or sensor.outliers or sensor.drift_m[1] > 0)
+    if plain:
+        return rng.normal(0.0, sensor.rms, size=t.size) if sensor.rms > 0 else np.zeros(t.size)
+    return sensor.random(t.size, step, rng) + sensor.artefacts(t, rng)
+
+
 def _sampled_experiment(out: Path, i: int, e: Mapping[str, Any], params: Params, model: Model, n_elements: int,
-                        hysteresis: bool, effects: Optional[Effects], offset: float, noise_rms: float,
+                        hysteresis: bool, effects: Optional[Effects], offset: float, sensor: SensorNoise,
                         resolution: float, rng: np.random.Generator, dt: float, save_every: int,
                         sample_rate_Hz: float) -> dict[str, Any]:
     """One experiment driven by a recorded voltage (a Sampled), written as ``waveform: "sampled"``."""
@@ -230,11 +248,11 @@ def _sampled_experiment(out: Path, i: int, e: Mapping[str, Any], params: Params,
         raise TypeError(f"experiments[{i}]['sampled'] must be an idm_rs.Sampled")
     n = int(round(wave.duration * sample_rate_Hz)) + 1
     t = np.arange(n) / sample_rate_Hz
-    sim = simulate(params, wave, t_end=t[-1], dt=dt, model=model, n_elements=n_elements,
+    felt = wave if sensor.delay_s == 0 else Sampled(np.r_[0.0, wave.t + sensor.delay_s], np.r_[wave.voltage[0],
+                                                                                                 wave.voltage])
+    sim = simulate(params, felt, t_end=t[-1], dt=dt, model=model, n_elements=n_elements,
                    save_every=save_every, piezo_hysteresis=hysteresis, effects=effects)
-    x = sim.reading + offset
-    if noise_rms > 0:
-        x = x + rng.normal(0.0, noise_rms, size=n)
+    x = sim.reading + offset + _noise(sensor, t, rng, 1.0 / sample_rate_Hz)
     if resolution > 0:
         x = np.round(x / resolution) * resolution
     v = np.interp(t, wave.t, wave.voltage)

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from ..recording import Recording
 from .case_model import CaseSimulator, ModelSpec
+from .measurement import Measurement, Profile
 from .segments import segment_starts
 from .thresholds import BLOWN_UP, CHAIN_STEP, FIT_HORIZONS, FTOL_CHI2, START_INSIDE
 
@@ -167,6 +168,15 @@ class Objective:
         #: nuisance offsets fitted with every model (one per segment, or per experiment)
         self.n_offsets = sum(len(s) for s in self.starts.values())
         self._bad = 1e3  # residual (noise units) given to samples of a diverged run
+        #: the sensor's measurement model (noise colour, nuisance columns, channel delay) the
+        #: diagnosis learned and left on the recording; None: white noise, offsets only
+        m = getattr(recording, "measurement", None)
+        self.measurement: Optional[Measurement] = None if m is None or m.trivial else m
+        self._profiles: dict[int, Profile] = {}
+        if self.measurement is not None:
+            for j in self.experiments:
+                t = recording.experiments[j].t[: self.samples[j]]
+                self._profiles[j] = Profile(self.measurement, t, self.starts[j])
 
     def with_cycles(self, cycles: Optional[int]) -> "Objective":
         return Objective(self.recording, self.sim, self.sigma, self.experiments, cycles, self.segmented)
@@ -181,11 +191,20 @@ class Objective:
     def profiled(self, preds: Sequence[NDArray[np.float64]]) -> tuple[list[NDArray[np.float64]], list[float]]:
         """Residuals [m] with the best offset removed, and those offsets [m]."""
         res, offs = [], []
+        m = self.measurement
         for j in self.experiments:
-            d = self.recording.experiments[j].x[: self.samples[j]] - preds[j]
+            p = preds[j] if m is None else m.shifted(np.asarray(preds[j])[: self.samples[j]],
+                                                     self.recording.sample_step)
+            d = self.recording.experiments[j].x[: self.samples[j]] - p
             if not np.all(np.isfinite(d)):
                 res.append(np.full(d.size, self._bad * self.sigma))
                 offs.extend([math.nan] * len(self.starts[j]))
+                continue
+            if m is not None:
+                # generalised least squares: whitened, the nuisances profiled out in that metric
+                w, coef = self._profiles[j].residual(d)
+                res.append(w)
+                offs.extend(float(c) for c in coef[: len(self.starts[j])])
                 continue
             r = np.empty_like(d)
             bounds = self.starts[j] + [d.size]
@@ -209,8 +228,12 @@ class Objective:
         (columns x samples): the residual is data minus prediction minus each segment's mean,
         so a column is minus the prediction's derivative less its segment mean, in noise units."""
         blocks = []
+        m = self.measurement
         for j in self.experiments:
             s = np.asarray(dpred[j])[:, : self.samples[j]]
+            if m is not None:
+                blocks.append(self._profiles[j].columns(m.shifted(s, self.recording.sample_step)))
+                continue
             c = np.empty_like(s)
             bounds = self.starts[j] + [s.shape[1]]
             for a, b in zip(bounds[:-1], bounds[1:]):

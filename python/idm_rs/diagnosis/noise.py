@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..recording import Recording
+from .noise_model import NoiseModel
 from .thresholds import DISAGREE_SIGMAS
 
 
@@ -27,6 +28,8 @@ class NoiseEstimate:
     #: which estimate `sigma` is: "given", "rest", "fourth differences", "rest and residual
     #: (pooled)" or "residual (rest disagrees)"
     source: str = "rest"
+    #: the noise model: colour, lines, spikes, resolution, drift, delay (None before it is learned)
+    model: Optional[NoiseModel] = None
 
 
 def estimate_noise(rec: Recording) -> NoiseEstimate:

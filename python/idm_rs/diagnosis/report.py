@@ -343,6 +343,15 @@ def text_report(d: Diagnosis) -> str:
                         for dr, s in prop.scored[:4])
         lines.append(f"  NEXT EXPERIMENT: {prop.words()}. Expected ΔBIC of the best drives tried: {top}")
 
+    # --- what the reading carries besides the motion
+    model = getattr(d.noise, "model", None)
+    if model is not None:
+        lines += ["", f"Noise model: {model.describe()}"]
+        lines += [f"  note: {n}" for n in model.notes]
+        if model.coloured or model.lines or model.drift_m or model.delay_applied:
+            lines.append("  every residual, chi^2 and RMS below is in the whitened metric (generalised least "
+                         "squares), with the lines, drift and delay above profiled out as measurement properties")
+
     # --- the RMS story
     best = d.verdict_candidate
     lines += ["", "Residual RMS (a position offset fitted per drive-cycle segment: multiple shooting by translation)"]

@@ -45,6 +45,52 @@ WINDOW_S = 1e-3
 #: z-score above which a window's or a phase's residual energy counts as systematic
 SYSTEMATIC_Z = 4.0
 
+# --- the measurement: the noise's colour, spikes, hum, a drifting zero, a late channel --------
+
+#: significance of every test that adds something to the measurement model (a colour, a line,
+#: a zero slope, a delay): the false-detection rate per recording of each, against the one-sided
+#: chi^2 of its degrees of freedom. A measurement property wrongly taken on costs a little power;
+#: one wrongly left out turns into a false alarm, but the tests run on every white recording too,
+#: and there they must stay silent (the white path is then bit for bit the old one)
+MEASUREMENT_ALPHA = 1e-4
+#: highest autoregressive order of the noise model (chosen by AIC below it): enough for a
+#: low-passed or 1/f noise over the 100 kHz sample band the rest segments resolve
+AR_MAX_ORDER = 8
+#: a sample deviating from the median of its six neighbours by more than this many robust
+#: standard deviations of that deviation, its neighbours not, is a spike: rejected (replaced by
+#: that median). Beyond 8 sigma a Gaussian sample falls once in 1e15; the isolation keeps a
+#: misfit ringing (3 samples a period at 100 kHz) from being taken for one
+OUTLIER_Z = 8.0
+#: the rest samples of a file the colour is fitted to (the first ones; its removal matrix is
+#: square in them), and the fixed-point iterations of the autocovariances' correction
+COLOUR_SEGMENT_MAX = 2000
+COLOUR_ITERATIONS = 4
+#: significance at which a line is refused because its amplitude differs between files more than
+#: their standard errors allow: the mains feed every file alike, where low-frequency noise gives
+#: each file its own amplitude. An ordinary level: it guards the line against noise
+LINE_SPREAD_ALPHA = 1e-2
+#: significance at which a zero drift is refused because the rest before the drive (the device
+#: still) does not drift as the file does: that test guards against taking a missing effect's
+#: trend for the sensor's, so it is run at an ordinary level, not at MEASUREMENT_ALPHA
+DRIFT_REST_ALPHA = 1e-3
+#: ... or whose neighbours deviate by less than this share of its own deviation (a spike beside a
+#: slip, where the residual moves fast: a misfit ringing's neighbours deviate as much as it does)
+OUTLIER_ISOLATION = 0.35
+#: the mains: fundamental frequencies [Hz] tested for a hum line, and the harmonics tested with
+#: a significant fundamental
+MAINS_HZ = (50.0, 60.0)
+MAINS_HARMONICS = (2, 3)
+#: the channel delays scanned [s] (both signs), and the scan's step
+DELAY_RANGE_S = 40e-6
+DELAY_STEP_S = 1e-6
+#: rounds of the delay and the null's parameters estimated in turn, and the share of chi^2 a round
+#: must leave (at most) for another: a delay that does not explain the residual stops after one
+DELAY_ROUNDS = 4
+DELAY_PROGRESS = 0.9
+#: least-squares evaluations of the null's refit in the measurement's metric (it starts at the
+#: calibrated optimum, which the white metric already found: a few Gauss-Newton steps)
+REMEASURE_NFEV = 8
+
 # --- fits ---------------------------------------------------------------------------------------
 
 #: RK4 step of every fit [s]: within ~1e-11 m of dt = 5e-8 s on the development recordings (their

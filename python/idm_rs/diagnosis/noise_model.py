@@ -1,0 +1,459 @@
+"""The noise model, estimated from the recording and stated: its colour (an AR(p) fitted to the
+rest before the drive, p by AIC), spikes (rejected, counted), mains hum (lines at 50/60 Hz and
+harmonics, per-file amplitude and phase), the reading's resolution, a sensor zero drifting within
+a file, and a delay of the displacement channel. :func:`learn` takes the calibrated model's
+prediction (the device's motion, as well as the nominal model can tell it) and returns what the
+objective must apply (:class:`.measurement.Measurement`) with the recording cleaned of its spikes,
+and the report's account (:class:`NoiseModel`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..recording import Recording
+from .measurement import Measurement, Profile, Whitener
+from .segments import segment_starts
+from .thresholds import (
+    AR_MAX_ORDER,
+    COLOUR_ITERATIONS,
+    COLOUR_SEGMENT_MAX,
+    DELAY_RANGE_S,
+    DRIFT_REST_ALPHA,
+    LINE_SPREAD_ALPHA,
+    DELAY_STEP_S,
+    MAINS_HARMONICS,
+    MAINS_HZ,
+    MEASUREMENT_ALPHA,
+    OUTLIER_ISOLATION,
+    OUTLIER_Z,
+)
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """What the diagnosis found the sensor's reading to carry besides the device's motion."""
+
+    sigma: float  #: marginal RMS of the noise [m] (as `NoiseEstimate.sigma`)
+    order: int  #: autoregressive order of its colour (0: white)
+    lag1: float  #: its lag-1 autocorrelation
+    rho: tuple[float, ...]  #: its autocorrelation at lags 0..order
+    lines: tuple[tuple[float, float], ...] = ()  #: (frequency [Hz], mean amplitude [m]) profiled out
+    resolution: float = 0.0  #: the reading's resolution [m] (meta.json)
+    outliers: int = 0  #: samples rejected as spikes (replaced by their neighbours' median)
+    delay_s: float = math.nan  #: the displacement channel's delay estimated behind the voltage [s]
+    delay_applied: bool = False  #: the delay is taken as a measurement property in every fit
+    drift_m: tuple[float, ...] = ()  #: each file's zero drift over its length [m] (when applied)
+    notes: tuple[str, ...] = ()  #: what could not be told apart, or was estimated and not applied
+
+    @property
+    def coloured(self) -> bool:
+        return self.order > 0
+
+    def to_dict(self) -> dict:
+        return {"summary": self.describe(), "sigma_m": self.sigma, "ar_order": self.order, "lag1": self.lag1,
+                "acf": list(self.rho), "lines": [{"frequency_Hz": f, "amplitude_m": a} for f, a in self.lines],
+                "resolution_m": self.resolution, "outliers": self.outliers,
+                "delay_s": self.delay_s if math.isfinite(self.delay_s) else None, "delay_applied": self.delay_applied,
+                "drift_m": list(self.drift_m), "notes": list(self.notes)}
+
+    def describe(self) -> str:
+        """One line: "coloured noise (AR(2)), lag-1 0.89, 2.1 nm; a 50 Hz line of 3.0 nm in the
+        reading; resolution 4 nm; 5 spikes rejected; ..." """
+        parts = [(f"coloured noise (AR({self.order})), lag-1 {self.lag1:.2f}, " if self.coloured
+                  else "white noise, ") + f"{self.sigma * 1e9:.2f} nm"]
+        for f, a in self.lines:
+            parts.append(f"a {f:g} Hz line of {a * 1e9:.1f} nm in the reading")
+        if self.resolution > 0:
+            parts.append(f"resolution {self.resolution * 1e9:.3g} nm")
+        if self.outliers:
+            parts.append(f"{self.outliers} spike{'s' if self.outliers != 1 else ''} rejected")
+        if self.delay_applied:
+            parts.append(f"the reading {self.delay_s * 1e6:.1f} us late")
+        if self.drift_m:
+            parts.append("a zero drifting " + ", ".join(f"{d * 1e9:+.1f}" for d in self.drift_m) + " nm per file")
+        return "; ".join(parts)
+
+
+# --- spikes ---------------------------------------------------------------------------------------
+
+
+def spikes(r: NDArray[np.float64], resolution: float = 0.0) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Isolated spikes of a residual: (indices, deviation from the median of the six
+    neighbours [m]). See OUTLIER_Z. The deviation's robust scale is held at least at the
+    rounding error of the reading's `resolution` [m] (a reading coarser than its noise sits
+    on one level for long stretches: a scale of zero, and every step of one level a "spike")."""
+    from scipy.ndimage import median_filter
+
+    if r.size < 16:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    foot = np.array([1, 1, 1, 0, 1, 1, 1], dtype=bool)
+    m = r - median_filter(r, footprint=foot, mode="nearest")
+    scale = max(1.4826 * float(np.median(np.abs(m - np.median(m)))), resolution / math.sqrt(12.0))
+    if not scale > 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    a = np.abs(m)
+    big = a > OUTLIER_Z * scale
+    # isolated: each neighbour's deviation small, or small beside this one's (a spike beside a
+    # slip, where the residual itself moves fast, still stands out of it)
+    nb = np.maximum(np.r_[0.0, a[:-1]], np.r_[a[1:], 0.0])
+    calm = nb < np.maximum(0.5 * OUTLIER_Z * scale, OUTLIER_ISOLATION * a)
+    idx = np.flatnonzero(big & calm)
+    return idx, m[idx]
+
+
+def reject_spikes(rec: Recording, preds: Sequence[NDArray[np.float64]]) -> tuple[Recording, int]:
+    """The recording with every isolated spike of the calibrated residual replaced by its
+    neighbours' median (the reading there is unknown; the neighbours say what it would be), and
+    the count."""
+    exps, count = [], 0
+    for e, p in zip(rec.experiments, preds):
+        d = e.x - np.asarray(p)[: e.x.size]
+        if not np.all(np.isfinite(d)):
+            exps.append(e)
+            continue
+        idx, dev = spikes(d, rec.resolution_m)
+        if idx.size:
+            x = e.x.copy()
+            x[idx] -= dev
+            e = replace(e, x=x)
+            count += int(idx.size)
+        exps.append(e)
+    return (replace(rec, experiments=exps) if count else rec), count
+
+
+# --- the colour -----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Colour:
+    """An AR fit to the rest: marginal RMS [m], autocorrelation 0..p, samples, and the evidence."""
+
+    sigma: float
+    rho: NDArray[np.float64]
+    n: int
+    lr: float  #: 2 ln likelihood ratio of the AR(p) against white noise
+
+
+def fit_colour(segments: Sequence[NDArray[np.float64]], max_order: int = AR_MAX_ORDER) -> Optional[Colour]:
+    """The noise's AR model from still segments, each with its own unknown offset and slope
+    removed (a zero that drifts, or a hum, is a slope over a 2 ms rest): pooled
+    autocovariances, corrected to what the model expects them to be after that removal (the
+    exact expectation, tr(M Sigma M S_k), M the removal and Sigma the model's covariance: a
+    strongly correlated noise loses a large share of its variance to a short segment's line),
+    the order by AIC, white unless the colour is significant (MEASUREMENT_ALPHA)."""
+    from scipy.linalg import toeplitz
+    from scipy.stats import chi2 as chi2_dist
+    from statsmodels.tsa.arima_process import arma_acf
+    from statsmodels.tsa.stattools import levinson_durbin
+
+    segs = [np.asarray(s[:COLOUR_SEGMENT_MAX], dtype=float) for s in segments if s.size > 2 * max_order + 8]
+    if not segs:
+        return None
+    n = sum(s.size for s in segs)
+    p_max = max(1, min(max_order, min(s.size for s in segs) // 8))
+    makers = []
+    raw = np.zeros(p_max + 1)
+    for s in segs:
+        B = np.stack([np.ones(s.size), np.linspace(-1.0, 1.0, s.size)], axis=1)
+        Q, _ = np.linalg.qr(B)
+        M = np.eye(s.size) - Q @ Q.T
+        makers.append(M)
+        y = M @ s
+        for k in range(p_max + 1):
+            raw[k] += float(np.dot(y[k:], y[: y.size - k]))
+    raw /= n
+    gamma = raw.copy()
+    order, lr = 0, 0.0
+    longest = max(s.size for s in segs)
+    for _ in range(COLOUR_ITERATIONS):
+        if gamma[0] <= 0:
+            return None
+        ld = levinson_durbin(gamma / gamma[0], nlags=p_max, isacov=True)
+        sig_k = np.r_[1.0, np.asarray(ld.sigma)[1:]]
+        aic = n * np.log(np.maximum(sig_k, 1e-300)) + 2.0 * np.arange(p_max + 1)
+        order = int(np.argmin(aic))
+        lr = float(n * math.log(1.0 / max(sig_k[order], 1e-300)))
+        if order == 0 or lr <= chi2_dist.isf(MEASUREMENT_ALPHA, order):
+            order = 0
+        phi = np.asarray(ld.phi)[1: order + 1, order] if order else np.zeros(0)
+        acov = gamma[0] * arma_acf(np.r_[1.0, -phi], [1.0], lags=longest)
+        expected = np.zeros(p_max + 1)
+        for M in makers:
+            A = M @ toeplitz(acov[: M.shape[0]]) @ M
+            expected += [np.trace(A, offset=k) for k in range(p_max + 1)]
+        # the estimator's bias under the current model, taken off the raw autocovariances
+        gamma = raw - (expected / n - acov[: p_max + 1])
+    rho = gamma[: order + 1] / gamma[0]
+    return Colour(math.sqrt(gamma[0]), rho, n, lr)
+
+
+def rest_segments(rec: Recording, lines: Optional[Sequence[NDArray[np.float64]]] = None
+                  ) -> list[NDArray[np.float64]]:
+    """Each file's rest before the drive (the device still), less the hum fitted there."""
+    out = []
+    for j, e in enumerate(rec.experiments):
+        mask = e.rest_mask
+        x = e.x[mask]
+        if lines is not None:
+            x = x - lines[j][mask]
+        out.append(x)
+    return out
+
+
+# --- nuisances tested on the calibrated residual ----------------------------------------------------
+
+
+@dataclass
+class Residuals:
+    """The calibrated model's data-minus-prediction per file, with each file's segment starts and
+    the calibrated parameters' Jacobian in a measurement's metric (`jac_of`: whitened, nuisances
+    profiled, noise units; None where there is none): a nuisance is credited only with what a
+    refit of those parameters could not take up (a calibration bends its parameters to mimic
+    part of a hum or a drift, differently in each file)."""
+
+    rec: Recording
+    preds: list[NDArray[np.float64]]
+    starts: list[list[int]]
+    jac_of: Callable[[Measurement], Optional[NDArray[np.float64]]]
+
+    @classmethod
+    def of(cls, rec: Recording, preds: Sequence[NDArray[np.float64]],
+           jac_of: Optional[Callable[[Measurement], Optional[NDArray[np.float64]]]] = None) -> "Residuals":
+        starts = [segment_starts(e, rec.sample_rate_Hz, e.n_samples) for e in rec.experiments]
+        return cls(rec, [np.asarray(p)[: e.n_samples] for p, e in zip(preds, rec.experiments)], starts,
+                   jac_of if jac_of is not None else (lambda m: None))
+
+    def chi2(self, m: Measurement, sigma: float) -> float:
+        total = 0.0
+        for e, p, st in zip(self.rec.experiments, self.preds, self.starts):
+            d = e.x - m.shifted(p, self.rec.sample_step)
+            if not np.all(np.isfinite(d)):
+                return math.inf
+            w, _ = Profile(m, e.t, st).residual(d)
+            total += float(w @ w)
+        return total / sigma**2
+
+    def joint(self, m: Measurement, cols: Sequence[NDArray[np.float64]], sigma: float) -> "Joint":
+        """The least squares of extra columns `cols[j]` (samples x k of file j, the same k for
+        every file) beyond `m`'s nuisances and the calibrated parameters, in `m`'s metric."""
+        ws, blocks = [], []
+        for e, p, st, X in zip(self.rec.experiments, self.preds, self.starts, cols):
+            prof = Profile(m, e.t, st)
+            w, _ = prof.residual(e.x - m.shifted(p, self.rec.sample_step))
+            ws.append(w / sigma)
+            blocks.append(prof.columns(X.T).T / sigma)
+        w = np.concatenate(ws)
+        k = blocks[0].shape[1]
+        X = np.zeros((w.size, k * len(blocks)))
+        row = 0
+        for f, B in enumerate(blocks):
+            X[row: row + B.shape[0], f * k: (f + 1) * k] = B
+            row += B.shape[0]
+        J = self.jac_of(m)
+        if J is not None and J.shape[0] == w.size and np.all(np.isfinite(J)):
+            Q, _ = np.linalg.qr(J)
+            X = X - Q @ (Q.T @ X)
+            w = w - Q @ (Q.T @ w)
+        A, b = X.T @ X, X.T @ w
+        cov = np.linalg.pinv(A)
+        coef = cov @ b
+        return Joint(A, b, coef, cov, k)
+
+
+@dataclass
+class Joint:
+    """A joint least squares of per-file extra columns: Gram A, inner products b (noise units),
+    coefficients [m per column unit] and their covariance, k columns per file."""
+
+    A: NDArray[np.float64]
+    b: NDArray[np.float64]
+    coef: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    k: int
+
+    @property
+    def gain(self) -> float:
+        """chi^2 the columns take off the residual."""
+        return float(self.b @ self.coef)
+
+    def of_file(self, f: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(coefficients, standard errors) of file f."""
+        s = slice(f * self.k, (f + 1) * self.k)
+        return self.coef[s], np.sqrt(np.maximum(np.diag(self.cov)[s], 0.0))
+
+
+def _sinusoids(rec: Recording, f: float) -> list[NDArray[np.float64]]:
+    return [np.stack([np.sin(2 * math.pi * f * e.t), np.cos(2 * math.pi * f * e.t)], axis=1) for e in rec.experiments]
+
+
+def find_lines(res: Residuals, m: Measurement, sigma: float) -> tuple[tuple[float, float], ...]:
+    """Mains hum: the fundamental (50 or 60 Hz) whose per-file sine and cosine lower chi^2
+    significantly (2 per file degrees of freedom) with amplitudes alike in every file (the mains
+    feed each file alike, at its own phase; a missing effect's residual projects unevenly on a
+    sinusoid, most where the drive is strongest), then its harmonics that add significantly."""
+    from scipy.stats import chi2 as chi2_dist
+
+    nf = len(res.rec.experiments)
+    best: Optional[tuple[float, float, float]] = None
+    for f0 in MAINS_HZ:
+        jt = res.joint(m, _sinusoids(res.rec, f0), sigma)
+        if jt.gain <= chi2_dist.isf(MEASUREMENT_ALPHA, 2 * nf):
+            continue
+        amps, se = np.zeros(nf), np.zeros(nf)
+        for f in range(nf):
+            c, e = jt.of_file(f)
+            amps[f], se[f] = math.hypot(*c), max(float(np.mean(e)), 1e-300)
+        spread = float(np.sum(((amps - np.average(amps, weights=se**-2)) / se) ** 2))
+        if nf > 1 and spread > chi2_dist.isf(LINE_SPREAD_ALPHA, nf - 1):
+            continue
+        if best is None or jt.gain > best[1]:
+            best = (f0, jt.gain, float(np.average(amps, weights=se**-2)))
+    if best is None:
+        return ()
+    lines = [(best[0], best[2])]
+    for k in MAINS_HARMONICS:
+        with_lines = replace(m, lines_Hz=tuple(f for f, _ in lines))
+        jt = res.joint(with_lines, _sinusoids(res.rec, k * best[0]), sigma)
+        if jt.gain > chi2_dist.isf(MEASUREMENT_ALPHA, 2 * nf):
+            lines.append((k * best[0], float(np.mean([math.hypot(*jt.of_file(f)[0]) for f in range(nf)]))))
+    return tuple(lines)
+
+
+def line_values(rec: Recording, res: Residuals, m: Measurement, sigma: float) -> list[NDArray[np.float64]]:
+    """Each file's fitted hum [m] at every sample (for the rest's colour without it)."""
+    if not m.lines_Hz:
+        return [np.zeros(e.n_samples) for e in rec.experiments]
+    cols = [Measurement(lines_Hz=m.lines_Hz).columns(e.t) for e in rec.experiments]
+    jt = res.joint(replace(m, lines_Hz=()), cols, sigma)
+    return [X @ jt.of_file(f)[0] for f, X in enumerate(cols)]
+
+
+def find_drift(res: Residuals, m: Measurement, sigma: float) -> tuple[bool, tuple[float, ...], bool]:
+    """A sensor zero drifting within each file: (per-file slopes significant beyond one slope
+    common to every file, each file's drift over its length [m], a common slope significant). A
+    common slope alone is the catalogue's thermal drift (a device property, left to it)."""
+    from scipy.stats import chi2 as chi2_dist
+
+    exps = res.rec.experiments
+    nf = len(exps)
+    jt = res.joint(m, [(e.t - e.t.mean())[:, None] for e in exps], sigma)
+    ones = np.ones(nf)
+    common = float(ones @ jt.b) ** 2 / max(float(ones @ jt.A @ ones), 1e-300)
+    common_sig = common > chi2_dist.isf(MEASUREMENT_ALPHA, 1)
+    if nf < 2 or jt.gain - common <= chi2_dist.isf(MEASUREMENT_ALPHA, nf - 1):
+        return False, (), common_sig
+    # a zero drifts before the drive as it does after: each file's slope over its rest (the
+    # device still) must agree with its slope over the whole file. A missing effect puts a
+    # trend into the residual of the moving part only
+    z2 = 0.0
+    for f, e in enumerate(exps):
+        c, se_file = jt.of_file(f)
+        slope, se = rest_slope(e.t[e.rest_mask], e.x[e.rest_mask], m.whiten, sigma)
+        if math.isfinite(slope):
+            z2 += (slope - float(c[0])) ** 2 / (se * se + float(se_file[0]) ** 2)
+    if z2 > chi2_dist.isf(DRIFT_REST_ALPHA, nf):
+        return False, (), common_sig
+    drift = tuple(float(jt.of_file(f)[0][0]) * float(e.t[-1] - e.t[0]) for f, e in enumerate(exps))
+    return True, drift, common_sig
+
+
+def rest_slope(t: NDArray[np.float64], x: NDArray[np.float64], whiten: Whitener, sigma: float
+               ) -> tuple[float, float]:
+    """Slope [m/s] of a still segment (generalised least squares in the noise's colour) and its
+    standard error; NaN where the segment is too short."""
+    if t.size < 8:
+        return math.nan, math.inf
+    B = np.stack([np.ones(t.size), t - t.mean()], axis=1)
+    Bw, xw = whiten(B.T).T, whiten(x - x.mean())
+    cov = np.linalg.inv(Bw.T @ Bw) * sigma**2
+    return float(np.linalg.lstsq(Bw, xw, rcond=None)[0][1]), math.sqrt(float(cov[1, 1]))
+
+
+def find_delay(res: Residuals, m: Measurement, sigma: float) -> tuple[float, float, float]:
+    """The displacement channel's delay behind the voltage [s] by a scan of the prediction's
+    shift (no simulation: the reading is the same motion, read late), refined by a parabola
+    through the best three; the chi^2 it gains over none, and the chi^2 it leaves."""
+    taus = np.arange(-DELAY_RANGE_S, DELAY_RANGE_S + 0.5 * DELAY_STEP_S, DELAY_STEP_S)
+    c = np.array([res.chi2(m.with_delay(float(t)), sigma) for t in taus])
+    c0 = res.chi2(m.with_delay(0.0), sigma)
+    k = int(np.argmin(c))
+    tau = float(taus[k])
+    if 0 < k < taus.size - 1:
+        den = c[k - 1] - 2.0 * c[k] + c[k + 1]
+        if den > 0:
+            tau += 0.5 * DELAY_STEP_S * (c[k - 1] - c[k + 1]) / den
+    best = min(res.chi2(m.with_delay(tau), sigma), float(c[k]))
+    return tau, c0 - best, best
+
+
+def delay_significant(gain: float) -> bool:
+    from scipy.stats import chi2 as chi2_dist
+
+    return gain > chi2_dist.isf(MEASUREMENT_ALPHA, 1)
+
+
+# --- everything, in order ----------------------------------------------------------------------------
+
+
+@dataclass
+class Learned:
+    """What :func:`learn` found: the recording cleaned of spikes, the measurement the objective
+    applies (delay and drift only where the null with them leaves noise: decided by the caller),
+    and the report's account."""
+
+    rec: Recording
+    measurement: Measurement
+    model: NoiseModel
+    drift: bool  #: per-file zero slopes are significant (to be applied if the null then leaves noise)
+    delay_s: float
+    delay_gain: float  #: chi^2 the delay gains over none
+
+
+def learn(rec: Recording, preds: Sequence[NDArray[np.float64]], sigma: float,
+          jac_of: Optional[Callable[[Recording, Measurement], Optional[NDArray[np.float64]]]] = None) -> Learned:
+    """The noise model from the recording and the calibrated model's prediction `preds` (per
+    experiment), with the white-noise level `sigma` [m] estimated so far: spikes rejected, the
+    hum found, the colour fitted to the rest without the hum, the hum re-tested in that colour,
+    a drifting zero and a channel delay tested."""
+    rec, n_out = reject_spikes(rec, preds)
+    cleaned = rec
+    res = Residuals.of(rec, preds, (lambda m: jac_of(cleaned, m)) if jac_of is not None else None)
+    colour = fit_colour(rest_segments(rec))
+    white = Measurement()
+
+    def measurement_of(c: Optional[Colour]) -> tuple[Measurement, float]:
+        if c is None or c.rho.size < 2:
+            return white, (c.sigma if c is not None else sigma)
+        return Measurement(whiten=Whitener.from_acf(c.rho, c.rho.size - 1)), c.sigma
+
+    m, s = measurement_of(colour)
+    s = s if colour is not None else sigma
+    lines = find_lines(res, m, s)
+    if lines:
+        m = replace(m, lines_Hz=tuple(f for f, _ in lines))
+        colour = fit_colour(rest_segments(rec, line_values(rec, res, m, s)))
+        m2, s = measurement_of(colour)
+        m = replace(m2, lines_Hz=m.lines_Hz)
+        s = s if colour is not None else sigma
+        lines = find_lines(res, replace(m, lines_Hz=()), s) or lines
+        m = replace(m, lines_Hz=tuple(f for f, _ in lines))
+    drift, drift_m, common = find_drift(res, m, s)
+    with_drift = replace(m, drift=drift)
+    tau, gain, _ = find_delay(res, with_drift, s)
+    notes = []
+    if common and not drift:
+        notes.append("the reading drifts alike in every file: a sensor zero drifting so cannot be told "
+                     "from the catalogue's thermal drift")
+    rho = colour.rho if colour is not None and colour.rho.size > 1 else np.ones(1)
+    model = NoiseModel(
+        sigma=s if colour is not None and colour.rho.size > 1 else sigma, order=int(rho.size - 1),
+        lag1=float(rho[1]) if rho.size > 1 else 0.0, rho=tuple(float(v) for v in rho), lines=lines,
+        resolution=float(rec.resolution_m), outliers=n_out, delay_s=tau, drift_m=drift_m if drift else (),
+        notes=tuple(notes))
+    return Learned(rec, m, model, drift, tau, gain)
+
