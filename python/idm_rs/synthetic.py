@@ -91,7 +91,7 @@ def make_case(
     ``noise`` (an :class:`idm_rs.sensor_noise.SensorNoise`) replaces the white noise of
     ``noise_rms`` with what a lab's reading carries: coloured noise, hum, spikes, a drifting zero,
     a late displacement channel (the device is driven that much later than the voltage column
-    says; its motion after the file's end is not recorded).
+    says, the delay rounded to ``dt``; its motion after the file's end is not recorded).
     Each file's ``x`` is the simulated ``reading`` (sampled at ``sample_rate_Hz``, integrated at
     step ``dt``) + an offset (``offsets[i]``, or uniform in ±2 µm) + white Gaussian noise of RMS
     ``noise_rms`` [m], rounded to multiples of ``resolution`` [m] (``None`` or 0: no rounding).
@@ -163,7 +163,7 @@ def make_case(
             delay=rest,
         )
         # a late displacement channel: the motion it reads began delay_s after the voltage
-        felt = wave if sensor.delay_s == 0 else dataclasses.replace(wave, delay=rest + sensor.delay_s)
+        felt = wave if sensor.delay_s == 0 else dataclasses.replace(wave, delay=rest + _on_grid(sensor.delay_s, dt))
         n = int(round(wave.duration * sample_rate_Hz)) + 1
         t = np.arange(n) / sample_rate_Hz
         if abs(t[-1] - wave.duration) > 1e-9 / sample_rate_Hz:
@@ -229,6 +229,12 @@ def make_case(
     return out
 
 
+def _on_grid(delay_s: float, dt: float) -> float:
+    """A channel delay [s] rounded to the integration step (the drive's breakpoints must fall on
+    step boundaries)."""
+    return round(delay_s / dt) * dt
+
+
 def _noise(sensor: SensorNoise, t: np.ndarray, rng: np.random.Generator, step: float) -> np.ndarray:
     """One file's noise and artefacts. White noise alone draws exactly as it always has (the
     recordings of a given seed stay the same)."""
@@ -248,8 +254,8 @@ def _sampled_experiment(out: Path, i: int, e: Mapping[str, Any], params: Params,
         raise TypeError(f"experiments[{i}]['sampled'] must be an idm_rs.Sampled")
     n = int(round(wave.duration * sample_rate_Hz)) + 1
     t = np.arange(n) / sample_rate_Hz
-    felt = wave if sensor.delay_s == 0 else Sampled(np.r_[0.0, wave.t + sensor.delay_s], np.r_[wave.voltage[0],
-                                                                                                 wave.voltage])
+    late = _on_grid(sensor.delay_s, dt)
+    felt = wave if late == 0 else Sampled(np.r_[0.0, wave.t + late], np.r_[wave.voltage[0], wave.voltage])
     sim = simulate(params, felt, t_end=t[-1], dt=dt, model=model, n_elements=n_elements,
                    save_every=save_every, piezo_hysteresis=hysteresis, effects=effects)
     x = sim.reading + offset + _noise(sensor, t, rng, 1.0 / sample_rate_Hz)

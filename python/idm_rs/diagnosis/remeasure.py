@@ -35,18 +35,22 @@ def remeasured(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseE
         return pb, cal, replace(noise, model=model), found
     noise = _noise_of(noise, found)
     m_base = found.measurement
-    m_full = replace(m_base, drift=found.drift)
     notes = list(model.notes)
-    pb2, cal2 = _refit(pb, cal, nominal, noise, found.rec, m_full)
-    if m_full != m_base and not null_leaves_noise(pb2, cal2):
-        notes.append("a zero drift within each file estimated and not taken as a measurement property: the "
-                     "calibrated model with it still leaves a systematic residual")
-        pb2, cal2 = _refit(pb, cal, nominal, noise, found.rec, m_base)
-        model = replace(model, drift_m=())
-    elif found.drift:
-        notes.append("a zero drifting within each file is profiled out of every fit: the catalogue's thermal "
-                     "drift (one rate for every file) cannot be told from it")
+    refit: Optional[tuple[Problem, CalibratedNull]] = None
+    if found.drift:
+        pb2, cal2 = _refit(pb, cal, nominal, noise, found.rec, replace(m_base, drift=True))
+        if null_leaves_noise(pb2, cal2):
+            refit = pb2, cal2
+            notes.append("a zero drifting within each file is profiled out of every fit: the catalogue's thermal "
+                         "drift (one rate for every file) cannot be told from it")
+        else:
+            notes.append("a zero drift within each file estimated and not taken as a measurement property: the "
+                         "calibrated model with it still leaves a systematic residual")
+            model = replace(model, drift_m=())
     model = replace(model, notes=tuple(notes))
+    if refit is None and m_base.trivial and not model.outliers:
+        return pb, cal, replace(noise, model=model), found  # nothing taken on: the white path as it was
+    pb2, cal2 = refit if refit is not None else _refit(pb, cal, nominal, noise, found.rec, m_base)
     found.measurement = pb2.rec.measurement or m_base
     return pb2, cal2, replace(noise, model=model), found
 
@@ -115,29 +119,23 @@ def _noise_of(noise: NoiseEstimate, found: Learned) -> NoiseEstimate:
 
 def _refit(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, rec: Recording,
            m: Measurement) -> tuple[Problem, CalibratedNull]:
-    """The null refitted from its optimum in the metric of `m` over `rec` (the calibration's
-    other optima re-scored there; `cal`'s search record updated in place)."""
+    """The null refitted from its optimum in the metric of `m` over `rec`, the calibration's other
+    optima re-scored there (new records: `cal` is left as it was)."""
     rec = replace(rec, measurement=None if m.trivial else m)
     pb2 = Problem(rec, noise, pb.sim, Objective(rec, pb.sim, noise.sigma), pb.tick)
     r = fit(pb2.obj, nominal.spec, cal.at, max_nfev=REMEASURE_NFEV, progress=pb.tick)
-    # the calibration's other optima, scored in the new metric (one batch run)
-    polishes = list(cal.search.polishes)
-    if polishes:
-        preds = pb2.obj.predict([p.spec for p in polishes])
-        for p, pr in zip(polishes, preds):
+    others = [p for p in cal.search.polishes if p is not cal.fit]
+    rescored = []
+    if others:  # one batch run
+        for p, pr in zip(others, pb2.obj.predict([p.spec for p in others])):
             res, offs = pb2.obj.profiled(pr)
-            p.residuals, p.offsets = res, offs
-            p.chi2 = float(sum(float((x * x).sum()) for x in res)) / noise.sigma**2
-            p.jac = None
-    one = pb2.obj.with_cycles(1)
-    cal.one_cycle.chi2 = one.chi2(cal.one_cycle.spec)
-    cal.search.search_best = cal.one_cycle.chi2
-    best = r if not polishes or r.chi2 <= polishes[0].chi2 else polishes[0]
-    polishes = sorted([best] + [p for p in polishes if p is not best and p is not cal.fit], key=lambda p: p.chi2)
-    cal.search.polishes = polishes
+            rescored.append(replace(p, residuals=res, offsets=offs, jac=None,
+                                    chi2=float(sum(float((x * x).sum()) for x in res)) / noise.sigma**2))
+    polishes = sorted([r] + rescored, key=lambda p: p.chi2)
+    best = polishes[0]
+    one = replace(cal.one_cycle, chi2=pb2.obj.with_cycles(1).chi2(cal.one_cycle.spec))
+    search = replace(cal.search, polishes=polishes, search_best=one.chi2, fit=best)
     at = [f.at(best.values[f.name]) for f in cal.free]
     bic = best.chi2 + (len(cal.free) + pb2.n_offsets) * pb2.ln_n
-    cal2 = CalibratedNull(cal.free, cal.one_cycle, cal.one_cycle_at, best, at, bic, whiteness_z(best.residuals),
-                          cal.search, cal.scan_at)
-    return pb2, cal2
-
+    return pb2, CalibratedNull(cal.free, one, cal.one_cycle_at, best, at, bic, whiteness_z(best.residuals), search,
+                               cal.scan_at)
