@@ -44,7 +44,7 @@ from .noise import NoiseEstimate, cross_check, estimate_noise
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .noise_model import Learned
 from .progress import Clock, Progress, progress_bar
-from .remeasure import delay_instead, remeasured
+from .remeasure import artefacts_instead, remeasured
 from .proposals import determining_experiment, look_alike_experiment, separating_experiment, travel_experiment
 from .results import Alternative, Candidate, Diagnosis, SecondSearch
 from .rules import better_of, by_rank, candidate_explains, is_finite, null_leaves_noise
@@ -228,29 +228,31 @@ def _verdict_stage(s: _State) -> None:
     s.locations, windows = locate(s.rec, s.cal.fit.residuals, s.pb.sigma)
     s.spans = merge_windows(windows, s.pb.sigma)
     s.verdict, s.reason, s.rms_after = decide_verdict(s.ranking, s.cal, s.noise, s.ho_cal, s.searched_wide)
-    if s.verdict != "none" and s.learned is not None:
-        _delay_check(s)
+    if s.verdict != "none" and s.learned is not None and s.learned.artefacts:
+        _artefact_check(s)
 
 
-def _delay_check(s: _State) -> None:
-    """A verdict that blames physics, weighed against a late displacement channel: where the
-    calibrated null read with the estimated delay leaves noise as well as the verdict's model,
-    the delay is a measurement property and nothing is missing."""
+def _artefact_check(s: _State) -> None:
+    """A verdict that blames physics, weighed against what the reading was found to carry (hum
+    lines, a zero drifting in each file, a late channel): where the calibrated null with them
+    leaves noise as well as the verdict's model, they are measurement properties and nothing is
+    missing."""
     assert s.pb is not None and s.cal is not None and s.nominal is not None and s.learned is not None
     named = [c for c in s.ranking if c.effect in s.verdict.split("+")] if s.verdict not in (
         "unexplained", "not_converged") else []
     lead_chi2 = min((c.chi2 for c in named), default=math.inf)
-    out = delay_instead(s.pb, s.cal, s.nominal, s.noise, s.learned, lead_chi2)
+    out = artefacts_instead(s.pb, s.cal, s.nominal, s.noise, s.learned, lead_chi2)
     if out is None:
         return
     s.pb, s.cal, s.noise = out
     s.rec = s.pb.rec
     was = s.verdict
     s.verdict, s.rms_after = "none", s.cal.fit.rms
-    s.reason = (f"the reading is {s.learned.delay_s * 1e6:.1f} us late (a channel delay, a measurement property): "
-                f"the calibrated model read that late leaves noise (RMS {s.cal.fit.rms / s.pb.sigma:.2f} x noise, "
-                f"whiteness z = {s.cal.whiteness_z:.1f})"
-                + (f" as well as {was} did" if named else f", where without it the verdict was {was}"))
+    what = s.noise.model.describe() if s.noise.model is not None else "measurement properties"
+    s.reason = (f"the reading carries measurement properties, not physics ({what}): the calibrated model with "
+                f"them leaves noise (RMS {s.cal.fit.rms / s.pb.sigma:.2f} x noise, whiteness z = "
+                f"{s.cal.whiteness_z:.1f})"
+                + (f" as well as {was} did" if named else f", where without them the verdict was {was}"))
     s.locations, windows = locate(s.rec, s.cal.fit.residuals, s.pb.sigma)
     s.spans = merge_windows(windows, s.pb.sigma)
 

@@ -22,6 +22,7 @@ from .thresholds import (
     AR_MAX_ORDER,
     COLOUR_ITERATIONS,
     COLOUR_SEGMENT_MAX,
+    DELAY_MIN_S,
     DELAY_RANGE_S,
     DRIFT_REST_ALPHA,
     LINE_SPREAD_ALPHA,
@@ -47,6 +48,9 @@ class NoiseModel:
     outliers: int = 0  #: samples rejected as spikes (replaced by their neighbours' median)
     delay_s: float = math.nan  #: the displacement channel's delay estimated behind the voltage [s]
     delay_applied: bool = False  #: the delay is taken as a measurement property in every fit
+    #: the lines, the drift and the delay are profiled out of every fit (they explained what the
+    #: verdict would otherwise have blamed on physics); else found and reported only
+    artefacts_applied: bool = False
     drift_m: tuple[float, ...] = ()  #: each file's zero drift over its length [m] (when applied)
     notes: tuple[str, ...] = ()  #: what could not be told apart, or was estimated and not applied
 
@@ -59,6 +63,7 @@ class NoiseModel:
                 "acf": list(self.rho), "lines": [{"frequency_Hz": f, "amplitude_m": a} for f, a in self.lines],
                 "resolution_m": self.resolution, "outliers": self.outliers,
                 "delay_s": self.delay_s if math.isfinite(self.delay_s) else None, "delay_applied": self.delay_applied,
+                "artefacts_applied": self.artefacts_applied,
                 "drift_m": list(self.drift_m), "notes": list(self.notes)}
 
     def describe(self) -> str:
@@ -67,14 +72,17 @@ class NoiseModel:
         parts = [(f"coloured noise (AR({self.order})), lag-1 {self.lag1:.2f}, " if self.coloured
                   else "white noise, ") + f"{self.sigma * 1e9:.2f} nm"]
         for f, a in self.lines:
-            parts.append(f"a {f:g} Hz line of {a * 1e9:.1f} nm in the reading")
+            parts.append(f"a {f:g} Hz line of {a * 1e9:.1f} nm in the reading" if self.artefacts_applied
+                         else f"a {f:g} Hz component of {a * 1e9:.1f} nm (not taken as hum)")
         if self.resolution > 0:
             parts.append(f"resolution {self.resolution * 1e9:.3g} nm")
         if self.outliers:
             parts.append(f"{self.outliers} spike{'s' if self.outliers != 1 else ''} rejected")
         if self.delay_applied:
             parts.append(f"the reading {self.delay_s * 1e6:.1f} us late")
-        if self.drift_m:
+        elif math.isfinite(self.delay_s) and abs(self.delay_s) >= DELAY_MIN_S:
+            parts.append(f"a delay of {self.delay_s * 1e6:.1f} us estimated (not taken)")
+        if self.drift_m and self.artefacts_applied:
             parts.append("a zero drifting " + ", ".join(f"{d * 1e9:+.1f}" for d in self.drift_m) + " nm per file")
         return "; ".join(parts)
 
@@ -391,10 +399,11 @@ def find_delay(res: Residuals, m: Measurement, sigma: float) -> tuple[float, flo
     return tau, c0 - best, best
 
 
-def delay_significant(gain: float) -> bool:
+def delay_significant(gain: float, delay_s: float) -> bool:
+    """A delay that lowers chi^2 significantly and is long enough to be one (DELAY_MIN_S)."""
     from scipy.stats import chi2 as chi2_dist
 
-    return gain > chi2_dist.isf(MEASUREMENT_ALPHA, 1)
+    return gain > chi2_dist.isf(MEASUREMENT_ALPHA, 1) and abs(delay_s) >= DELAY_MIN_S
 
 
 # --- everything, in order ----------------------------------------------------------------------------
@@ -402,16 +411,23 @@ def delay_significant(gain: float) -> bool:
 
 @dataclass
 class Learned:
-    """What :func:`learn` found: the recording cleaned of spikes, the measurement the objective
-    applies (delay and drift only where the null with them leaves noise: decided by the caller),
-    and the report's account."""
+    """What :func:`learn` found: the recording cleaned of spikes, the measurement every fit
+    applies from the start (the noise's colour), the artefacts that may explain what the verdict
+    would blame on physics (lines, a drifting zero, a delay: weighed against the verdict by the
+    caller), and the report's account."""
 
     rec: Recording
     measurement: Measurement
     model: NoiseModel
-    drift: bool  #: per-file zero slopes are significant (to be applied if the null then leaves noise)
+    lines_Hz: tuple[float, ...]  #: hum lines found
+    drift: bool  #: per-file zero slopes are significant
     delay_s: float
     delay_gain: float  #: chi^2 the delay gains over none
+
+    @property
+    def artefacts(self) -> bool:
+        """Anything beyond the colour that could stand in for missing physics."""
+        return bool(self.lines_Hz) or self.drift or delay_significant(self.delay_gain, self.delay_s)
 
 
 def learn(rec: Recording, preds: Sequence[NDArray[np.float64]], sigma: float,
@@ -435,16 +451,18 @@ def learn(rec: Recording, preds: Sequence[NDArray[np.float64]], sigma: float,
     s = s if colour is not None else sigma
     lines = find_lines(res, m, s)
     if lines:
-        m = replace(m, lines_Hz=tuple(f for f, _ in lines))
-        colour = fit_colour(rest_segments(rec, line_values(rec, res, m, s)))
-        m2, s = measurement_of(colour)
-        m = replace(m2, lines_Hz=m.lines_Hz)
+        # the colour again, of the rest without the hum, and the hum tested in it
+        colour = fit_colour(rest_segments(rec, line_values(rec, res, replace(m, lines_Hz=tuple(
+            f for f, _ in lines)), s)))
+        m, s = measurement_of(colour)
         s = s if colour is not None else sigma
-        lines = find_lines(res, replace(m, lines_Hz=()), s) or lines
-        m = replace(m, lines_Hz=tuple(f for f, _ in lines))
-    drift, drift_m, common = find_drift(res, m, s)
-    with_drift = replace(m, drift=drift)
-    tau, gain, _ = find_delay(res, with_drift, s)
+        lines = find_lines(res, m, s) or lines
+    with_lines = replace(m, lines_Hz=tuple(f for f, _ in lines))
+    # the delay before the drift: a late reading leaves a trend of its own in each file (the slow
+    # phase read late), which the drift test would take for a drifting zero
+    tau, gain, _ = find_delay(res, with_lines, s)
+    drift, drift_m, common = find_drift(res, with_lines.with_delay(tau) if delay_significant(gain, tau) else with_lines,
+                                        s)
     notes = []
     if common and not drift:
         notes.append("the reading drifts alike in every file: a sensor zero drifting so cannot be told "
@@ -455,5 +473,5 @@ def learn(rec: Recording, preds: Sequence[NDArray[np.float64]], sigma: float,
         lag1=float(rho[1]) if rho.size > 1 else 0.0, rho=tuple(float(v) for v in rho), lines=lines,
         resolution=float(rec.resolution_m), outliers=n_out, delay_s=tau, drift_m=drift_m if drift else (),
         notes=tuple(notes))
-    return Learned(rec, m, model, drift, tau, gain)
+    return Learned(rec, m, model, with_lines.lines_Hz, drift, tau, gain)
 

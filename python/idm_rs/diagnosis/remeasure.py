@@ -1,9 +1,11 @@
-"""The calibrated null taken into the measurement's metric: the noise model learned from the
-recording and the calibrated prediction (:func:`.noise_model.learn`), the null refitted from its
-optimum by generalised least squares, its other optima re-scored there. A zero drift is a
-measurement property only where the null with it leaves noise (a missing effect can put a trend
-into a residual too, and then it is the effect's to explain); a channel delay is weighed against
-the verdict (:func:`delay_instead`): a first-order lag looks like a delay to first order."""
+"""The measurement taken into the fits. After the calibration: the noise model learned from the
+recording and the calibrated prediction (:func:`.noise_model.learn`); the recording cleaned of
+its spikes and every fit made in the noise colour's whitened metric (the null refitted there from
+its optimum, its other optima re-scored). At the verdict: hum lines, a zero drifting in each file
+and a late channel are measurement properties where the calibrated null with them leaves noise
+as well as the verdict's model does (:func:`artefacts_instead`) — a missing effect can put a
+sinusoid's share, a trend or a lag into a residual too, so they are weighed against the physics
+rather than taken before it."""
 
 from __future__ import annotations
 
@@ -14,11 +16,11 @@ from typing import Callable, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from .fitting import Objective, fit
-from .noise import NoiseEstimate, whiteness_z
 from ..recording import Recording
+from .fitting import Objective, fit
 from .measurement import Measurement
-from .noise_model import Learned, Residuals, delay_significant, find_delay, learn
+from .noise import NoiseEstimate, whiteness_z
+from .noise_model import Learned, Residuals, delay_significant, find_delay, find_drift, learn
 from .problem import CalibratedNull, Nominal, Problem
 from .rules import null_leaves_noise
 from .thresholds import DELAY_PROGRESS, DELAY_ROUNDS, REMEASURE_NFEV, SEPARATION
@@ -26,77 +28,82 @@ from .thresholds import DELAY_PROGRESS, DELAY_ROUNDS, REMEASURE_NFEV, SEPARATION
 
 def remeasured(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate
                ) -> tuple[Problem, CalibratedNull, NoiseEstimate, Learned]:
-    """(problem, calibrated null, noise, what was learned) in the measurement's metric; the
-    inputs unchanged (bit for bit) where the recording is white, clean, without hum or drift."""
+    """(problem, calibrated null, noise, what was learned) in the noise colour's metric, the
+    spikes rejected; the inputs unchanged (bit for bit) where the recording is white and clean."""
     preds = pb.sim.predict([cal.fit.spec])[0]
     found = learn(pb.rec, preds, noise.sigma, _jacobians(pb, cal, nominal, noise))
-    model = found.model
-    if found.measurement.trivial and not model.outliers and not found.drift:
-        return pb, cal, replace(noise, model=model), found
-    noise = _noise_of(noise, found)
-    m_base = found.measurement
-    notes = list(model.notes)
-    refit: Optional[tuple[Problem, CalibratedNull]] = None
-    if found.drift:
-        pb2, cal2 = _refit(pb, cal, nominal, noise, found.rec, replace(m_base, drift=True))
-        if null_leaves_noise(pb2, cal2):
-            refit = pb2, cal2
-            notes.append("a zero drifting within each file is profiled out of every fit: the catalogue's thermal "
-                         "drift (one rate for every file) cannot be told from it")
-        else:
-            notes.append("a zero drift within each file estimated and not taken as a measurement property: the "
-                         "calibrated model with it still leaves a systematic residual")
-            model = replace(model, drift_m=())
-    model = replace(model, notes=tuple(notes))
-    if refit is None and m_base.trivial and not model.outliers:
-        return pb, cal, replace(noise, model=model), found  # nothing taken on: the white path as it was
-    pb2, cal2 = refit if refit is not None else _refit(pb, cal, nominal, noise, found.rec, m_base)
-    found.measurement = pb2.rec.measurement or m_base
-    return pb2, cal2, replace(noise, model=model), found
+    noise = replace(_noise_of(noise, found), model=found.model)
+    if found.measurement.trivial and not found.model.outliers:
+        return pb, cal, noise, found  # the white path as it was
+    pb2, cal2 = _refit(pb, cal, nominal, noise, found.rec, found.measurement)
+    return pb2, cal2, noise, found
 
 
-def delay_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, found: Learned,
-                  lead_chi2: float) -> tuple[Problem, CalibratedNull, NoiseEstimate] | None:
-    """Where the channel delay is significant and the calibrated null read that late leaves noise
-    within SEPARATION of the chi^2 of the verdict's model (`lead_chi2`; inf for a verdict without
-    one), the delay explains what the verdict blamed on physics: (problem, null, noise) with it;
-    else None (the estimate stays in the noise model as a note)."""
-    if not delay_significant(found.delay_gain):
+def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, found: Learned,
+                      lead_chi2: float) -> Optional[tuple[Problem, CalibratedNull, NoiseEstimate]]:
+    """Where hum lines, a drifting zero or a channel delay were found and the calibrated null with
+    them (the delay and the null estimated in turn) leaves noise within SEPARATION of the chi^2 of
+    the verdict's model (`lead_chi2`; inf for a verdict without one), they explain what the
+    verdict blamed on physics: (problem, null, noise) with them; else None (the noise model keeps
+    them as found, not taken)."""
+    if not found.artefacts:
         return None
-    base = found.measurement or Measurement()
-    tau, pb2, cal2 = found.delay_s, pb, cal
-    # the delay and the null's parameters estimated in turn: a calibration that ran without the
-    # delay bent its parameters to mimic part of it, and the delay scanned on that prediction
-    # comes out short of the truth (a 10 us delay: 6.8, 9.1, 9.7, 9.9 us in four rounds)
-    for _ in range(DELAY_ROUNDS):
-        before = cal2.fit.chi2
-        pb2, cal2 = _refit(pb, cal2, nominal, noise, pb.rec, base.with_delay(tau))
-        if null_leaves_noise(pb2, cal2) or cal2.fit.chi2 > DELAY_PROGRESS * before:
-            break
-        res = Residuals.of(pb.rec, pb.sim.predict([cal2.fit.spec])[0])
-        tau = find_delay(res, base, noise.sigma)[0]
+    base = replace(found.measurement, lines_Hz=found.lines_Hz, drift=found.drift)
+    delay = delay_significant(found.delay_gain, found.delay_s)
+    if delay:
+        tau, pb2, cal2, base = _with_delay(pb, cal, nominal, noise, base, found.delay_s)
+    else:
+        tau = 0.0
+        pb2, cal2 = _refit(pb, cal, nominal, noise, pb.rec, base)
     if not (null_leaves_noise(pb2, cal2) and cal2.fit.chi2 <= lead_chi2 + SEPARATION):
         return None
-    found.delay_s = tau
     model = noise.model
-    note = ("a channel delay and a first-order lag (sensor_lowpass, amplifier_lowpass) differ only in the "
-            "ringing's amplitude: the delay explains the residual as well")
     if model is not None:
-        # a delay puts a trend common to every file into the residual: not a drift then
-        kept = tuple(n for n in model.notes if "drifts alike" not in n)
-        model = replace(model, delay_s=tau, delay_applied=True, notes=kept + (note,))
+        notes = [n for n in model.notes if "drifts alike" not in n]
+        if base.drift and not model.drift_m:
+            notes.append("a zero drifting within each file, hidden while the null mimicked the delay, is "
+                         "profiled out of every fit with it")
+        if delay:
+            notes.append("a channel delay and a first-order lag (sensor_lowpass, amplifier_lowpass) differ only "
+                         "in the ringing's amplitude: the delay explains the residual as well")
+        if base.drift:
+            notes.append("a zero drifting within each file is profiled out of every fit: the catalogue's "
+                         "thermal drift (one rate for every file) cannot be told from it")
+        model = replace(model, delay_s=tau if delay else model.delay_s, delay_applied=delay,
+                        artefacts_applied=True, notes=tuple(notes))
     return pb2, cal2, replace(noise, model=model)
+
+
+def _with_delay(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, base: Measurement,
+                tau: float) -> tuple[float, Problem, CalibratedNull, Measurement]:
+    """The delay and the null's parameters estimated in turn from `tau` [s]: a calibration that
+    ran without the delay bent its parameters to mimic part of it, and the delay scanned on that
+    prediction comes out short of the truth (a 10 us delay: 6.8, 9.1, 9.7, 9.9 us in four
+    rounds); a zero drifting in each file, hidden while the null mimicked the delay, is tested
+    again each round. Returns (delay, problem, null, the measurement without the delay)."""
+    pb2, cal2, m = pb, cal, base
+    for _ in range(DELAY_ROUNDS):
+        before = cal2.fit.chi2
+        pb2, cal2 = _refit(pb, cal2, nominal, noise, pb.rec, m.with_delay(tau))
+        if null_leaves_noise(pb2, cal2) or cal2.fit.chi2 > DELAY_PROGRESS * before:
+            break
+        jac = _jacobians(pb2, cal2, nominal, noise)
+        res = Residuals.of(pb.rec, pb.sim.predict([cal2.fit.spec])[0], lambda mm: jac(pb.rec, mm))
+        tau = find_delay(res, replace(m, drift=False), noise.sigma)[0]
+        m = replace(m, drift=m.drift or find_drift(res, replace(m, drift=False).with_delay(tau), noise.sigma)[0])
+    return tau, pb2, cal2, m
 
 
 def _jacobians(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate
                ) -> Callable[[Recording, Measurement], Optional[NDArray[np.float64]]]:
     """The calibrated parameters' Jacobian at the null's optimum in a measurement's metric (the
-    fit's own in the white one; one sensitivity run per other metric, remembered). It does not
-    depend on the data, only on the model and the metric."""
+    fit's own in the metric it was fitted in; one sensitivity run per other metric, remembered).
+    It does not depend on the data, only on the model and the metric."""
     memo: dict[Measurement, Optional[NDArray[np.float64]]] = {}
+    fitted_in = pb.rec.measurement or Measurement()
 
     def jac(rec: Recording, m: Measurement) -> Optional[NDArray[np.float64]]:
-        if m.trivial and cal.fit.jac is not None:
+        if m == fitted_in and cal.fit.jac is not None:
             return cal.fit.jac
         if m not in memo:
             obj = Objective(replace(rec, measurement=m), pb.sim, noise.sigma)

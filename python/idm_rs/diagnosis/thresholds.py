@@ -83,6 +83,10 @@ MAINS_HARMONICS = (2, 3)
 #: the channel delays scanned [s] (both signs), and the scan's step
 DELAY_RANGE_S = 40e-6
 DELAY_STEP_S = 1e-6
+#: the shortest delay taken for one [s]: a tenth of the 10 us sample step. A missing effect shifts
+#: the best alignment of the calibrated prediction by a fraction of a microsecond (a spring to
+#: ground: -0.5 us, significant) without any channel being late
+DELAY_MIN_S = 1e-6
 #: rounds of the delay and the null's parameters estimated in turn, and the share of chi^2 a round
 #: must leave (at most) for another: a delay that does not explain the residual stops after one
 DELAY_ROUNDS = 4
