@@ -41,11 +41,11 @@ from .fitting import Objective
 from .locate import Location, locate, merge_windows
 from .next_experiment import ParameterProposal, Proposal
 from .noise import NoiseEstimate, cross_check, estimate_noise
-from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .noise_model import Learned
+from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .progress import Clock, Progress, progress_bar
-from .remeasure import artefacts_instead, remeasured
 from .proposals import determining_experiment, look_alike_experiment, separating_experiment, travel_experiment
+from .remeasure import artefacts_instead, remeasured
 from .results import Alternative, Candidate, Diagnosis, SecondSearch
 from .rules import better_of, by_rank, candidate_explains, is_finite, null_leaves_noise
 from .screening import Screened, near_degenerate

@@ -88,10 +88,15 @@ def _with_delay(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: Noise
         if null_leaves_noise(pb2, cal2) or cal2.fit.chi2 > DELAY_PROGRESS * before:
             break
         jac = _jacobians(pb2, cal2, nominal, noise)
-        res = Residuals.of(pb.rec, pb.sim.predict([cal2.fit.spec])[0], lambda mm: jac(pb.rec, mm))
+        res = Residuals.of(pb.rec, pb.sim.predict([cal2.fit.spec])[0], _bound(jac, pb.rec))
         tau = find_delay(res, replace(m, drift=False), noise.sigma)[0]
         m = replace(m, drift=m.drift or find_drift(res, replace(m, drift=False).with_delay(tau), noise.sigma)[0])
     return tau, pb2, cal2, m
+
+
+def _bound(jac: Callable[[Recording, Measurement], Optional[NDArray[np.float64]]], rec: Recording
+           ) -> Callable[[Measurement], Optional[NDArray[np.float64]]]:
+    return lambda m: jac(rec, m)
 
 
 def _jacobians(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate

@@ -313,6 +313,19 @@ def plain_summary(d: Diagnosis) -> list[str]:
     return lines
 
 
+def _noise_model_lines(d: Diagnosis) -> list[str]:
+    """What the reading carries besides the motion, and the metric the figures below are in."""
+    model = getattr(d.noise, "model", None)
+    if model is None:
+        return []
+    out = ["", f"Noise model: {model.describe()}"] + [f"  note: {n}" for n in model.notes]
+    if model.coloured or model.artefacts_applied:
+        out.append("  every residual, chi^2 and RMS below is in the whitened metric (generalised least squares)"
+                   + (", the lines, drift and delay above profiled out as measurement properties"
+                      if model.artefacts_applied else ""))
+    return out
+
+
 def text_report(d: Diagnosis) -> str:
     """The diagnosis `d` as text: the verdict in plain words, the RMS story against the noise
     floor, the calibrated parameters, where the residual lives, the ranking with its evidence,
@@ -343,18 +356,9 @@ def text_report(d: Diagnosis) -> str:
                         for dr, s in prop.scored[:4])
         lines.append(f"  NEXT EXPERIMENT: {prop.words()}. Expected ΔBIC of the best drives tried: {top}")
 
-    # --- what the reading carries besides the motion
-    model = getattr(d.noise, "model", None)
-    if model is not None:
-        lines += ["", f"Noise model: {model.describe()}"]
-        lines += [f"  note: {n}" for n in model.notes]
-        if model.coloured or model.lines or model.drift_m or model.delay_applied:
-            lines.append("  every residual, chi^2 and RMS below is in the whitened metric (generalised least "
-                         "squares), with the lines, drift and delay above profiled out as measurement properties")
-
-    # --- the RMS story
+    # --- what the reading carries besides the motion, then the RMS story
     best = d.verdict_candidate
-    lines += ["", "Residual RMS (a position offset fitted per drive-cycle segment: multiple shooting by translation)"]
+    lines += _noise_model_lines(d) + ["", "Residual RMS (a position offset fitted per drive-cycle segment: multiple shooting by translation)"]
     rows = [
         [f"noise floor ({getattr(d.noise, 'source', 'rest')})", _nm(sigma), "1.00 ×",
          f"rest {_nm(d.noise.rest_sigma)}, fitted residual's 2nd differences "
