@@ -3,6 +3,7 @@ through the Rust batch engine, read out at the sensor's sample times."""
 
 from __future__ import annotations
 
+import copy
 import os
 from dataclasses import dataclass
 from typing import Mapping, Optional, Sequence
@@ -55,6 +56,18 @@ class CaseSimulator:
         #: act with the other sign there (their rows and reading derivatives are negated)
         self._reversed = [e.is_reversed for e in recording.experiments]
         self.evaluations = 0  # simulated experiment runs, for reports
+
+    def late(self, delay_s: float) -> "CaseSimulator":
+        """The same simulator with every sawtooth drive felt `delay_s` [s] later than its voltage
+        column says (rounded to the fit step): a displacement channel read that late, simulated
+        exactly (a shifted prediction interpolated between samples blurs the ringing, which a
+        low-pass lag then fits better than the truth). Sampled drives are not shifted."""
+        out = copy.copy(self)
+        k = engine.wave_fields(Sawtooth.batch_kind).index("delay")
+        shift = round(delay_s / self.dt) * self.dt
+        out._wave_rows = [None if r is None else [v + shift if i == k else v for i, v in enumerate(r)]
+                          for r in self._wave_rows]
+        return out
 
     def horizon(self, j: int, cycles: Optional[int]) -> tuple[float, int]:
         """(duration [s], samples) of experiment j cut after `cycles` drive cycles (None: all)."""

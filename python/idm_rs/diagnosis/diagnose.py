@@ -241,7 +241,10 @@ def _artefact_check(s: _State) -> None:
     named = [c for c in s.ranking if c.effect in s.verdict.split("+")] if s.verdict not in (
         "unexplained", "not_converged") else []
     lead_chi2 = min((c.chi2 for c in named), default=math.inf)
-    out = artefacts_instead(s.pb, s.cal, s.nominal, s.noise, s.learned, lead_chi2)
+    fitted = [c for c in s.ranking if not c.screened_only and c.calibrated]
+    leads = named or fitted
+    out = artefacts_instead(s.pb, s.cal, s.nominal, s.noise, s.learned, lead_chi2,
+                            dict(leads[0].calibrated) if leads else None)
     if out is None:
         return
     s.pb, s.cal, s.noise = out

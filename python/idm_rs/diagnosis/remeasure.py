@@ -17,13 +17,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..recording import Recording
-from .fitting import Objective, fit
+from .fitting import Objective, apply, fit
 from .measurement import Measurement
 from .noise import NoiseEstimate, whiteness_z
 from .noise_model import Learned, Residuals, delay_significant, find_delay, find_drift, learn
 from .problem import CalibratedNull, Nominal, Problem
 from .rules import null_leaves_noise
-from .thresholds import DELAY_PROGRESS, DELAY_ROUNDS, REMEASURE_NFEV, SEPARATION
+from .thresholds import DELAY_PROGRESS, DELAY_ROUNDS, DELAY_TOL_S, REMEASURE_NFEV, SEPARATION
 
 
 def remeasured(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate
@@ -40,21 +40,25 @@ def remeasured(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseE
 
 
 def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, found: Learned,
-                      lead_chi2: float) -> Optional[tuple[Problem, CalibratedNull, NoiseEstimate]]:
+                      lead_chi2: float, lead: Optional[dict[str, float]] = None
+                      ) -> Optional[tuple[Problem, CalibratedNull, NoiseEstimate]]:
     """Where hum lines, a drifting zero or a channel delay were found and the calibrated null with
     them (the delay and the null estimated in turn) leaves noise within SEPARATION of the chi^2 of
     the verdict's model (`lead_chi2`; inf for a verdict without one), they explain what the
     verdict blamed on physics: (problem, null, noise) with them; else None (the noise model keeps
-    them as found, not taken)."""
+    them as found, not taken). `lead`: the leading candidate's nominal values, a second start
+    (a lag candidate's fit bent them as the delay needs; the calibration bent them the other
+    way), taken where it starts lower."""
     if not found.artefacts:
         return None
     base = replace(found.measurement, lines_Hz=found.lines_Hz, drift=found.drift)
     delay = delay_significant(found.delay_gain, found.delay_s)
+    start = _better_start(pb, cal, nominal, noise, base.with_delay(found.delay_s if delay else 0.0), lead)
     if delay:
-        tau, pb2, cal2, base = _with_delay(pb, cal, nominal, noise, base, found.delay_s)
+        tau, pb2, cal2, base = _with_delay(pb, start, nominal, noise, base, found.delay_s)
     else:
         tau = 0.0
-        pb2, cal2 = _refit(pb, cal, nominal, noise, pb.rec, base)
+        pb2, cal2 = _refit(pb, start, nominal, noise, pb.rec, base)
     if not (null_leaves_noise(pb2, cal2) and cal2.fit.chi2 <= lead_chi2 + SEPARATION):
         return None
     model = noise.model
@@ -74,24 +78,55 @@ def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise:
     return pb2, cal2, replace(noise, model=model)
 
 
+def _better_start(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, m: Measurement,
+                  lead: Optional[dict[str, float]]) -> CalibratedNull:
+    """`cal`, or `cal` centred on the nominal values `lead` where those fit better in the metric
+    of `m` (two runs)."""
+    if not lead or any(f.name not in lead for f in cal.free):
+        return cal
+    at = [f.at(lead[f.name]) for f in cal.free]
+    obj = Objective(replace(pb.rec, measurement=None if m.trivial else m), pb.sim, noise.sigma)
+    a, b = obj.predict([apply(nominal.spec, cal.at, np.zeros(len(at))), apply(nominal.spec, at, np.zeros(len(at)))])
+    chi_a, chi_b = (float(v @ v) for v in (obj.vector(a), obj.vector(b)))
+    return replace(cal, at=at) if chi_b < chi_a else cal
+
+
 def _with_delay(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, base: Measurement,
                 tau: float) -> tuple[float, Problem, CalibratedNull, Measurement]:
-    """The delay and the null's parameters estimated in turn from `tau` [s]: a calibration that
-    ran without the delay bent its parameters to mimic part of it, and the delay scanned on that
-    prediction comes out short of the truth (a 10 us delay: 6.8, 9.1, 9.7, 9.9 us in four
-    rounds); a zero drifting in each file, hidden while the null mimicked the delay, is tested
-    again each round. Returns (delay, problem, null, the measurement without the delay)."""
+    """The delay and the null's parameters estimated in turn from `tau` [s] until the delay
+    settles (DELAY_TOL_S): a calibration that ran without the delay bent its parameters to mimic
+    part of it, and the delay scanned on that prediction comes out short of the truth (a 10 us
+    delay: 6.8, 9.1, 9.7, 9.9 us round by round). A zero drifting in each file, hidden while the
+    null mimicked the delay, is tested each round, and again at the settled delay (a drift taken
+    on the way that the settled null no longer shows is dropped). Returns (delay, problem, null,
+    the measurement without the delay)."""
     pb2, cal2, m = pb, cal, base
-    for _ in range(DELAY_ROUNDS):
+    for k in range(DELAY_ROUNDS):
         before = cal2.fit.chi2
         pb2, cal2 = _refit(pb, cal2, nominal, noise, pb.rec, m.with_delay(tau))
-        if null_leaves_noise(pb2, cal2) or cal2.fit.chi2 > DELAY_PROGRESS * before:
+        if k and cal2.fit.chi2 > DELAY_PROGRESS * before and null_leaves_noise(pb2, cal2) is False:
+            break  # the delay does not explain the residual: no use going on
+        res = _residuals(pb, cal2, nominal, noise)
+        new = find_delay(res, replace(m, drift=False), noise.sigma)[0]
+        m = replace(m, drift=m.drift or find_drift(res, replace(m, drift=False).with_delay(new), noise.sigma)[0])
+        settled = abs(new - tau) < DELAY_TOL_S
+        tau = new
+        if settled:
             break
-        jac = _jacobians(pb2, cal2, nominal, noise)
-        res = Residuals.of(pb.rec, pb.sim.predict([cal2.fit.spec])[0], _bound(jac, pb.rec))
-        tau = find_delay(res, replace(m, drift=False), noise.sigma)[0]
-        m = replace(m, drift=m.drift or find_drift(res, replace(m, drift=False).with_delay(tau), noise.sigma)[0])
+    if m.drift and not base.drift:
+        res = _residuals(pb, cal2, nominal, noise)
+        if not find_drift(res, replace(m, drift=False).with_delay(tau), noise.sigma)[0]:
+            m = replace(m, drift=False)
+    pb2, cal2 = _refit(pb, cal2, nominal, noise, pb.rec, m.with_delay(tau))
     return tau, pb2, cal2, m
+
+
+def _residuals(pb: Problem, cal2: CalibratedNull, nominal: Nominal, noise: NoiseEstimate) -> Residuals:
+    """The residuals of the null `cal2` over `pb`'s recording, with its Jacobians."""
+    # the prediction undelayed, the delay (as the scans take it) interpolated: the Jacobians in the
+    # same terms, on pb's simulator
+    jac = _jacobians(replace(pb, rec=replace(pb.rec, measurement=None)), cal2, nominal, noise)
+    return Residuals.of(pb.rec, pb.sim.predict([cal2.fit.spec])[0], _bound(jac, pb.rec))
 
 
 def _bound(jac: Callable[[Recording, Measurement], Optional[NDArray[np.float64]]], rec: Recording
@@ -132,9 +167,12 @@ def _noise_of(noise: NoiseEstimate, found: Learned) -> NoiseEstimate:
 def _refit(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, rec: Recording,
            m: Measurement) -> tuple[Problem, CalibratedNull]:
     """The null refitted from its optimum in the metric of `m` over `rec`, the calibration's other
-    optima re-scored there (new records: `cal` is left as it was)."""
+    optima re-scored there (new records: `cal` is left as it was). A delay is simulated (the
+    drive felt that late: :meth:`.case_model.CaseSimulator.late`), not interpolated."""
+    sim = pb.sim.late(m.delay_s) if m.delay_s else pb.sim
+    m = m.with_delay(0.0)
     rec = replace(rec, measurement=None if m.trivial else m)
-    pb2 = Problem(rec, noise, pb.sim, Objective(rec, pb.sim, noise.sigma), pb.tick)
+    pb2 = Problem(rec, noise, sim, Objective(rec, sim, noise.sigma), pb.tick)
     r = fit(pb2.obj, nominal.spec, cal.at, max_nfev=REMEASURE_NFEV, progress=pb.tick)
     others = [p for p in cal.search.polishes if p is not cal.fit]
     rescored = []

@@ -313,6 +313,9 @@ def plain_summary(d: Diagnosis) -> list[str]:
     return lines
 
 
+RMS_TITLE = "Residual RMS (a position offset fitted per drive-cycle segment: multiple shooting by translation)"
+
+
 def _noise_model_lines(d: Diagnosis) -> list[str]:
     """What the reading carries besides the motion, and the metric the figures below are in."""
     model = getattr(d.noise, "model", None)
@@ -358,7 +361,7 @@ def text_report(d: Diagnosis) -> str:
 
     # --- what the reading carries besides the motion, then the RMS story
     best = d.verdict_candidate
-    lines += _noise_model_lines(d) + ["", "Residual RMS (a position offset fitted per drive-cycle segment: multiple shooting by translation)"]
+    lines += _noise_model_lines(d) + ["", RMS_TITLE]
     rows = [
         [f"noise floor ({getattr(d.noise, 'source', 'rest')})", _nm(sigma), "1.00 ×",
          f"rest {_nm(d.noise.rest_sigma)}, fitted residual's 2nd differences "

@@ -87,9 +87,12 @@ DELAY_STEP_S = 1e-6
 #: the best alignment of the calibrated prediction by a fraction of a microsecond (a spring to
 #: ground: -0.5 us, significant) without any channel being late
 DELAY_MIN_S = 1e-6
-#: rounds of the delay and the null's parameters estimated in turn, and the share of chi^2 a round
-#: must leave (at most) for another: a delay that does not explain the residual stops after one
-DELAY_ROUNDS = 4
+#: rounds of the delay and the null's parameters estimated in turn (at most), the change of the
+#: delay [s] at which it counts as settled, and the share of chi^2 a round must leave (at most) for
+#: another while the null does not leave noise: a delay that does not explain the residual stops
+#: after two. The lag a delay is weighed against is fitted to convergence; so is the delay
+DELAY_ROUNDS = 8
+DELAY_TOL_S = 0.05e-6
 DELAY_PROGRESS = 0.9
 #: least-squares evaluations of the null's refit in the measurement's metric (it starts at the
 #: calibrated optimum, which the white metric already found: a few Gauss-Newton steps)
