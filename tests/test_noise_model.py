@@ -115,6 +115,26 @@ def test_make_case_reads_the_motion_late_by_the_channel_delay(tmp_path: Path) ->
     np.testing.assert_array_equal(b.experiments[0].voltage, a.experiments[0].voltage)
 
 
+def test_a_late_simulator_is_the_recording_of_a_late_channel(tmp_path: Path) -> None:
+    # the delay weighed against a verdict is simulated (the drive felt late), not interpolated:
+    # it reproduces a recording written with that delay to the integration error
+    from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
+    from idm_rs.recording import load_case
+
+    p = idm_rs.Params()
+    a = load_case(make_case(tmp_path / "a", nominal_params=p, experiments=EXPERIMENTS[:2], noise=SensorNoise(rms=0.0),
+                            resolution=0.0, offsets=[0.0, 0.0], dt=1e-8))
+    b = load_case(make_case(tmp_path / "b", nominal_params=p, experiments=EXPERIMENTS[:2],
+                            noise=SensorNoise(rms=0.0, delay_s=3.4e-6), resolution=0.0, offsets=[0.0, 0.0], dt=1e-8))
+    spec = ModelSpec(Structure("lps", 1, False), p.to_dict(resolved=False), {})
+    sim = CaseSimulator(a, dt=1e-7)
+    late = sim.late(3.4e-6).predict([spec])[0]
+    on_time = sim.predict([spec])[0]
+    for j in range(2):
+        assert np.max(np.abs(late[j] - b.experiments[j].x)) < 2e-10
+        assert np.max(np.abs(on_time[j] - b.experiments[j].x)) > 1e-8  # the delay matters
+
+
 def test_white_noise_draws_as_before(tmp_path: Path) -> None:
     from idm_rs.recording import load_case
 
