@@ -228,7 +228,7 @@ def _verdict_stage(s: _State) -> None:
     s.locations, windows = locate(s.rec, s.cal.fit.residuals, s.pb.sigma)
     s.spans = merge_windows(windows, s.pb.sigma)
     s.verdict, s.reason, s.rms_after = decide_verdict(s.ranking, s.cal, s.noise, s.ho_cal, s.searched_wide)
-    if s.verdict != "none" and s.learned is not None and s.learned.artefacts:
+    if s.verdict != "none" and s.learned is not None and s.learned.weighable:
         _artefact_check(s)
 
 
@@ -244,7 +244,7 @@ def _artefact_check(s: _State) -> None:
     fitted = [c for c in s.ranking if not c.screened_only and c.calibrated]
     leads = named or fitted
     out = artefacts_instead(s.pb, s.cal, s.nominal, s.noise, s.learned, lead_chi2,
-                            dict(leads[0].calibrated) if leads else None)
+                            dict(leads[0].calibrated) if leads else None, named[0].spec if named else None)
     if out is None:
         return
     s.pb, s.cal, s.noise = out

@@ -429,6 +429,12 @@ class Learned:
         """Anything beyond the colour that could stand in for missing physics."""
         return bool(self.lines_Hz) or self.drift or delay_significant(self.delay_gain, self.delay_s)
 
+    @property
+    def weighable(self) -> bool:
+        """Something a verdict that blames physics is weighed against: an artefact, or a colour
+        (estimated from a short rest, to be estimated again from the null's residual)."""
+        return self.artefacts or self.measurement.whiten.order > 0
+
 
 def learn(rec: Recording, preds: Sequence[NDArray[np.float64]], sigma: float,
           jac_of: Optional[Callable[[Recording, Measurement], Optional[NDArray[np.float64]]]] = None) -> Learned:

@@ -94,6 +94,10 @@ DELAY_MIN_S = 1e-6
 DELAY_ROUNDS = 8
 DELAY_TOL_S = 0.05e-6
 DELAY_PROGRESS = 0.9
+#: the colour read off the null's residual replaces the rest's where its lag-1 correlation is
+#: within this many standard errors of the rest estimate's (a healthy device's residual is noise:
+#: they agree; one that holds a missing effect reads a far stronger correlation)
+RECOLOUR_SIGMAS = 3.0
 #: least-squares evaluations of the null's refit in the measurement's metric (it starts at the
 #: calibrated optimum, which the white metric already found: a few Gauss-Newton steps)
 REMEASURE_NFEV = 8
