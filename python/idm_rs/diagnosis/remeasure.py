@@ -65,7 +65,7 @@ def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise:
         recoloured = _recoloured(pb, pb2, cal2, noise, lead_spec)
         if recoloured is None:
             return None
-        pb2, cal2, lead_chi2 = recoloured
+        pb2, cal2, lead_chi2, noise = recoloured
     if not (null_leaves_noise(pb2, cal2) and cal2.fit.chi2 <= lead_chi2 + SEPARATION):
         return None
     model = noise.model
@@ -86,13 +86,14 @@ def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise:
 
 
 def _recoloured(pb: Problem, pb2: Problem, cal2: CalibratedNull, noise: NoiseEstimate,
-                lead_spec: Optional[ModelSpec]) -> Optional[tuple[Problem, CalibratedNull, float]]:
+                lead_spec: Optional[ModelSpec]) -> Optional[tuple[Problem, CalibratedNull, float, NoiseEstimate]]:
     """The colour estimated again, from the residual of the null with the artefacts (thousands of
     samples where the rest has a few hundred: a lag-1 0.84 read 0.78 from 600 rest samples leaves
     the whitened residual a lag-1 correlation of 0.07, a whiteness z of 5 over 5,600 samples), and
     the null and the verdict's model (`lead_spec`) scored in it: (problem, null, the verdict's
-    chi^2) there. None where the null does not run. Scored, not refitted: both keep the
-    parameters they were fitted with."""
+    chi^2, the noise with the residual's level) there. None where the null does not run, or where
+    the residual's colour or level disagrees with the rest's (a residual that holds a missing
+    effect). Scored, not refitted: both keep the parameters they were fitted with."""
     m = pb2.rec.measurement
     assert m is not None
     plain = Objective(replace(pb2.rec, measurement=replace(m, whiten=Whitener(((),), (1.0,)))), pb2.sim, noise.sigma)
@@ -103,8 +104,12 @@ def _recoloured(pb: Problem, pb2: Problem, cal2: CalibratedNull, noise: NoiseEst
     colour = fit_colour(res)
     if colour is None or colour.rho.size < 2 or not _agrees(colour.rho, m.whiten, pb.rec):
         return None
+    if abs(colour.sigma / noise.sigma - 1.0) > RECOLOUR_SIGMAS * noise.relative_uncertainty:
+        return None  # a residual that holds more than noise: its level is not the noise's
     m2 = replace(m, whiten=Whitener.from_acf(colour.rho, colour.rho.size - 1))
     rec2 = replace(pb2.rec, measurement=m2)
+    # the level with the colour: a 600-sample rest read a lag-1 0.84 noise of 1.46 nm as 1.31 nm
+    noise = replace(noise, sigma=colour.sigma, source="the calibrated residual (coloured)")
     pb3 = Problem(rec2, noise, pb2.sim, Objective(rec2, pb2.sim, noise.sigma), pb2.tick)
     r3, _ = pb3.obj.profiled(pred)
     chi2 = float(sum(float((x * x).sum()) for x in r3)) / noise.sigma**2
@@ -117,7 +122,7 @@ def _recoloured(pb: Problem, pb2: Problem, cal2: CalibratedNull, noise: NoiseEst
         obj_l = Objective(rec_l, pb.sim, noise.sigma)
         v = obj_l.vector(obj_l.predict([lead_spec])[0])
         lead_chi2 = float(v @ v)
-    return pb3, cal3, lead_chi2
+    return pb3, cal3, lead_chi2, noise
 
 
 def _agrees(rho: NDArray[np.float64], rest: Whitener, rec: Recording) -> bool:
