@@ -233,6 +233,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--limit", type=int)
     ap.add_argument("--shard", default="0/1")
     ap.add_argument("--summary", action="store_true", help="print the table of the finished cases and stop")
+    ap.add_argument("--code", default="", help="the commit the diagnosis runs (kept in every row)")
     a = ap.parse_args(argv)
 
     def finished() -> list[dict[str, Any]]:
@@ -249,7 +250,7 @@ def main(argv: Optional[list[str]] = None) -> int:
         for c in cases:
             if c["id"] % n != k or c["id"] in {r["id"] for r in finished()}:
                 continue
-            row = run_case(c, Path(tmp), a.seed)
+            row = {**run_case(c, Path(tmp), a.seed), "code": a.code}
             with a.jsonl.open("a") as f:
                 f.write(json.dumps(row) + "\n")
             print(f"{c['id']:3d} {row['truth']:>20s} -> {row['verdict']:<20s} {row['seconds']:5.0f} s "
