@@ -104,7 +104,7 @@ def _recoloured(pb: Problem, pb2: Problem, cal2: CalibratedNull, noise: NoiseEst
     colour = fit_colour(res)
     if colour is None or colour.rho.size < 2 or not _agrees(colour.rho, m.whiten, pb.rec):
         return None
-    if abs(colour.sigma / noise.sigma - 1.0) > RECOLOUR_SIGMAS * noise.relative_uncertainty:
+    if abs(colour.sigma / noise.sigma - 1.0) > RECOLOUR_SIGMAS * _rest_uncertainty(pb.rec, m.whiten):
         return None  # a residual that holds more than noise: its level is not the noise's
     m2 = replace(m, whiten=Whitener.from_acf(colour.rho, colour.rho.size - 1))
     rec2 = replace(pb2.rec, measurement=m2)
@@ -123,6 +123,14 @@ def _recoloured(pb: Problem, pb2: Problem, cal2: CalibratedNull, noise: NoiseEst
         v = obj_l.vector(obj_l.predict([lead_spec])[0])
         lead_chi2 = float(v @ v)
     return pb3, cal3, lead_chi2, noise
+
+
+def _rest_uncertainty(rec: Recording, rest: Whitener) -> float:
+    """Relative 1-sigma error of a correlated noise's level read off the rests (their effective
+    sample size n (1 - rho) / (1 + rho))."""
+    n = sum(int(e.rest_mask.sum()) for e in rec.experiments)
+    r = rest.partial[1][0] if rest.order >= 1 else 0.0
+    return 1.0 / math.sqrt(2.0 * max(n * (1.0 - r) / (1.0 + r), 2.0))
 
 
 def _agrees(rho: NDArray[np.float64], rest: Whitener, rec: Recording) -> bool:
