@@ -122,7 +122,10 @@ def _jsonable(kw: dict[str, Any]) -> dict[str, Any]:
 def noise_truth(c: dict[str, Any]) -> dict[str, Any]:
     """What the noise model should report: marginal RMS, lag-1, line amplitude, delay."""
     s = c.get("sensor", {})
-    out: dict[str, Any] = {"sigma": s.get("rms", c.get("noise_rms"))}
+    sigma = s.get("rms", c.get("noise_rms"))
+    res = c.get("resolution", 0.0) or 0.0
+    # a reading coarser than its noise: the rounding error (resolution^2 / 12) is noise too
+    out: dict[str, Any] = {"sigma": math.sqrt(sigma**2 + res**2 / 12.0) if res > sigma else sigma}
     ar = s.get("ar") or []
     out["lag1"] = ar[0] if ar else None
     out["line"] = s["hum"][0][1] if s.get("hum") else None
@@ -191,6 +194,7 @@ def _within(rep: Optional[float], true: Optional[float], tol: float = 0.2) -> Op
 
 def summary(rows: list[dict[str, Any]]) -> str:
     """The bench's table (markdown)."""
+    rows = [{**r, "noise_truth": noise_truth(r)} for r in rows]
     healthy = [r for r in rows if r["kind"] == "healthy"]
     effects = [r for r in rows if r["kind"] == "effect"]
     fa = sum(1 for r in healthy if r["verdict"] != "none")
@@ -251,6 +255,7 @@ def main(argv: Optional[list[str]] = None) -> int:
             if c["id"] % n != k or c["id"] in {r["id"] for r in finished()}:
                 continue
             row = {**run_case(c, Path(tmp), a.seed), "code": a.code}
+            row["noise_truth"] = noise_truth(row)
             with a.jsonl.open("a") as f:
                 f.write(json.dumps(row) + "\n")
             print(f"{c['id']:3d} {row['truth']:>20s} -> {row['verdict']:<20s} {row['seconds']:5.0f} s "
