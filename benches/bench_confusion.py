@@ -237,9 +237,18 @@ def _key_error(d: Any, c: dict[str, Any], info: dict[str, Any]) -> Optional[floa
     return float(v / truth - 1.0)
 
 
-def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
+def diagnosed(directory: Path) -> tuple[Any, float]:
+    """(the Diagnosis of the case in `directory`, its seconds), warnings silenced."""
     import idm_rs
 
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        t0 = time.perf_counter()
+        d = idm_rs.diagnose(directory, progress=False)
+        return d, time.perf_counter() - t0
+
+
+def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
     rng = np.random.default_rng([seed, c["id"]])
     directory = tmp / f"case{c['id']:03d}"
     if c["kind"] == "healthy":
@@ -248,11 +257,7 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
     else:
         info = effect_case(directory, c, rng)
         truth = c["effect"]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        t0 = time.perf_counter()
-        d = idm_rs.diagnose(directory, progress=False)
-        seconds = time.perf_counter() - t0
+    d, seconds = diagnosed(directory)
     return {**c, **info, "truth": truth, "verdict": d.verdict, "right": d.verdict == truth, "seconds": seconds,
             "calibrated_over_noise": d.rms_calibrated / d.noise.sigma, "after_over_noise": d.rms_after / d.noise.sigma,
             "key_error": _key_error(d, c, info), "alternatives": [a.effect for a in d.alternatives],

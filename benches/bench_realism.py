@@ -27,15 +27,13 @@ import json
 import math
 import sys
 import tempfile
-import time
-import warnings
 from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_confusion import _key_error, _margin, effect_case
+from bench_confusion import _key_error, _margin, diagnosed, effect_case
 from bench_false_alarm import EXPERIMENTS
 from idm_rs.diagnosis.thresholds import CALIBRATED
 
@@ -135,7 +133,6 @@ def noise_truth(c: dict[str, Any]) -> dict[str, Any]:
 
 
 def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
-    import idm_rs
     from idm_rs.sensor_noise import SensorNoise
 
     rng = np.random.default_rng([seed, c["id"]])
@@ -156,11 +153,7 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
         info["sensor"] = ({"rms": info["noise_rms"], "ar": [lag]} if c["artefact"] == "ar1"
                           else {"rms": info["noise_rms"], "outliers": spikes})
         truth = c["effect"]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        t0 = time.perf_counter()
-        d = idm_rs.diagnose(directory, progress=False)
-        seconds = time.perf_counter() - t0
+    d, seconds = diagnosed(directory)
     m = d.noise.model
     reported = {"sigma": d.noise.sigma, "lag1": m.lag1 if m is not None else None,
                 "line": m.lines[0][1] if m is not None and m.lines else None,

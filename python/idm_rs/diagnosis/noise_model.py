@@ -9,7 +9,7 @@ and the report's account (:class:`NoiseModel`)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable, Optional, Sequence
 
 import numpy as np
@@ -228,6 +228,7 @@ class Residuals:
     preds: list[NDArray[np.float64]]
     starts: list[list[int]]
     jac_of: Callable[[Measurement], Optional[NDArray[np.float64]]]
+    _profiles: dict[tuple[Measurement, int], Profile] = field(default_factory=dict, repr=False)
 
     @classmethod
     def of(cls, rec: Recording, preds: Sequence[NDArray[np.float64]],
@@ -236,13 +237,22 @@ class Residuals:
         return cls(rec, [np.asarray(p)[: e.n_samples] for p, e in zip(preds, rec.experiments)], starts,
                    jac_of if jac_of is not None else (lambda m: None))
 
+    def profile(self, m: Measurement, f: int) -> Profile:
+        """File f's nuisance projection in `m`'s metric (the delay plays no part in it: a delay
+        scan builds each file's once)."""
+        key = (m.with_delay(0.0), f)
+        if key not in self._profiles:
+            e = self.rec.experiments[f]
+            self._profiles[key] = Profile(key[0], e.t, self.starts[f])
+        return self._profiles[key]
+
     def chi2(self, m: Measurement, sigma: float) -> float:
         total = 0.0
-        for e, p, st in zip(self.rec.experiments, self.preds, self.starts):
+        for f, (e, p) in enumerate(zip(self.rec.experiments, self.preds)):
             d = e.x - m.shifted(p, self.rec.sample_step)
             if not np.all(np.isfinite(d)):
                 return math.inf
-            w, _ = Profile(m, e.t, st).residual(d)
+            w, _ = self.profile(m, f).residual(d)
             total += float(w @ w)
         return total / sigma**2
 
@@ -250,8 +260,8 @@ class Residuals:
         """The least squares of extra columns `cols[j]` (samples x k of file j, the same k for
         every file) beyond `m`'s nuisances and the calibrated parameters, in `m`'s metric."""
         ws, blocks = [], []
-        for e, p, st, X in zip(self.rec.experiments, self.preds, self.starts, cols):
-            prof = Profile(m, e.t, st)
+        for f, (e, p, X) in enumerate(zip(self.rec.experiments, self.preds, cols)):
+            prof = self.profile(m, f)
             w, _ = prof.residual(e.x - m.shifted(p, self.rec.sample_step))
             ws.append(w / sigma)
             blocks.append(prof.columns(X.T).T / sigma)

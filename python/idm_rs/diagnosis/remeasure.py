@@ -104,7 +104,7 @@ def _recoloured(pb: Problem, pb2: Problem, cal2: CalibratedNull, noise: NoiseEst
     colour = fit_colour(res)
     if colour is None or colour.rho.size < 2 or not _agrees(colour.rho, m.whiten, pb.rec):
         return None
-    if abs(colour.sigma / noise.sigma - 1.0) > RECOLOUR_SIGMAS * _rest_uncertainty(pb.rec, m.whiten):
+    if abs(colour.sigma / noise.sigma - 1.0) > RECOLOUR_SIGMAS * _level_uncertainty(pb.rec, _lag1(m.whiten)):
         return None  # a residual that holds more than noise: its level is not the noise's
     m2 = replace(m, whiten=Whitener.from_acf(colour.rho, colour.rho.size - 1))
     rec2 = replace(pb2.rec, measurement=m2)
@@ -125,12 +125,20 @@ def _recoloured(pb: Problem, pb2: Problem, cal2: CalibratedNull, noise: NoiseEst
     return pb3, cal3, lead_chi2, noise
 
 
-def _rest_uncertainty(rec: Recording, rest: Whitener) -> float:
+def _rest_samples(rec: Recording) -> int:
+    return sum(int(e.rest_mask.sum()) for e in rec.experiments)
+
+
+def _level_uncertainty(rec: Recording, lag1: float) -> float:
     """Relative 1-sigma error of a correlated noise's level read off the rests (their effective
     sample size n (1 - rho) / (1 + rho))."""
-    n = sum(int(e.rest_mask.sum()) for e in rec.experiments)
-    r = rest.partial[1][0] if rest.order >= 1 else 0.0
-    return 1.0 / math.sqrt(2.0 * max(n * (1.0 - r) / (1.0 + r), 2.0))
+    n = _rest_samples(rec)
+    return 1.0 / math.sqrt(2.0 * max(n * (1.0 - lag1) / (1.0 + lag1), 2.0))
+
+
+def _lag1(w: Whitener) -> float:
+    """The lag-1 autocorrelation of a whitener's noise (its order-1 predictor's coefficient)."""
+    return w.partial[1][0] if w.order >= 1 else 0.0
 
 
 def _agrees(rho: NDArray[np.float64], rest: Whitener, rec: Recording) -> bool:
@@ -138,9 +146,8 @@ def _agrees(rho: NDArray[np.float64], rest: Whitener, rec: Recording) -> bool:
     rest estimate's standard error): a residual that still holds a missing effect reads a far
     stronger correlation (its smooth part), and a colour fitted to it would whiten the effect
     away."""
-    n = sum(int(e.rest_mask.sum()) for e in rec.experiments)
-    r_rest = rest.partial[1][0] if rest.order >= 1 else 0.0
-    se = math.sqrt(max(1.0 - r_rest * r_rest, 1e-6) / max(n, 1))
+    r_rest = _lag1(rest)
+    se = math.sqrt(max(1.0 - r_rest * r_rest, 1e-6) / max(_rest_samples(rec), 1))
     return abs(float(rho[1]) - r_rest) <= RECOLOUR_SIGMAS * se
 
 
@@ -224,9 +231,7 @@ def _noise_of(noise: NoiseEstimate, found: Learned) -> NoiseEstimate:
     m = found.model
     if not m.coloured or noise.source == "given":
         return noise
-    n = sum(int(e.rest_mask.sum()) for e in found.rec.experiments)
-    n_eff = max(n * (1.0 - m.lag1) / (1.0 + m.lag1), 2.0)
-    return replace(noise, sigma=m.sigma, rest_sigma=m.sigma, relative_uncertainty=1.0 / math.sqrt(2.0 * n_eff),
+    return replace(noise, sigma=m.sigma, rest_sigma=m.sigma, relative_uncertainty=_level_uncertainty(found.rec, m.lag1),
                    source="rest (coloured)")
 
 
