@@ -309,57 +309,89 @@ def _sinusoids(rec: Recording, f: float) -> list[NDArray[np.float64]]:
     return [np.stack([np.sin(2 * math.pi * f * e.t), np.cos(2 * math.pi * f * e.t)], axis=1) for e in rec.experiments]
 
 
+def _slopes(rec: Recording) -> list[NDArray[np.float64]]:
+    return [(e.t - e.t.mean())[:, None] for e in rec.experiments]
+
+
+def _beside_slopes(rec: Recording, cols: Sequence[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
+    """Each file's columns with its own slope beside them (last): a hum and a drifting zero are
+    fitted together, as a record of one or two mains periods cannot tell a line's slow part from
+    a trend — tested alone, each takes a share of the other, differently in each file."""
+    return [np.concatenate([X, s], axis=1) for X, s in zip(cols, _slopes(rec))]
+
+
+def _line_test(res: Residuals, m: Measurement, f: float, sigma: float
+               ) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
+    """(chi^2 the sinusoid at `f` gains beyond a slope per file, each file's amplitude [m] and its
+    standard error) in the metric of `m`."""
+    both = res.joint(m, _beside_slopes(res.rec, _sinusoids(res.rec, f)), sigma)
+    slopes = res.joint(m, _slopes(res.rec), sigma)
+    nf = len(res.rec.experiments)
+    amps, se = np.zeros(nf), np.zeros(nf)
+    for k in range(nf):
+        c, e = both.of_file(k)
+        amps[k], se[k] = math.hypot(float(c[0]), float(c[1])), max(float(np.mean(e[:2])), 1e-300)
+    return both.gain - slopes.gain, amps, se
+
+
 def find_lines(res: Residuals, m: Measurement, sigma: float) -> tuple[tuple[float, float], ...]:
     """Mains hum: the fundamental (50 or 60 Hz) whose per-file sine and cosine lower chi^2
-    significantly (2 per file degrees of freedom) with amplitudes alike in every file (the mains
-    feed each file alike, at its own phase; a missing effect's residual projects unevenly on a
-    sinusoid, most where the drive is strongest), then its harmonics that add significantly."""
-    from scipy.stats import chi2 as chi2_dist
-
-    nf = len(res.rec.experiments)
+    significantly (2 per file degrees of freedom, beyond a slope per file) with amplitudes alike
+    in every file (the mains feed each file alike, at its own phase; a missing effect's residual
+    projects unevenly on a sinusoid, most where the drive is strongest), then its harmonics that
+    add significantly and alike."""
     best: Optional[tuple[float, float, float]] = None
     for f0 in MAINS_HZ:
-        jt = res.joint(m, _sinusoids(res.rec, f0), sigma)
-        if jt.gain <= chi2_dist.isf(MEASUREMENT_ALPHA, 2 * nf):
-            continue
-        amps, se = np.zeros(nf), np.zeros(nf)
-        for f in range(nf):
-            c, e = jt.of_file(f)
-            amps[f], se[f] = math.hypot(*c), max(float(np.mean(e)), 1e-300)
-        spread = float(np.sum(((amps - np.average(amps, weights=se**-2)) / se) ** 2))
-        if nf > 1 and spread > chi2_dist.isf(LINE_SPREAD_ALPHA, nf - 1):
-            continue
-        if best is None or jt.gain > best[1]:
-            best = (f0, jt.gain, float(np.average(amps, weights=se**-2)))
+        found = _line(res, m, f0, sigma)
+        if found is not None and (best is None or found[0] > best[1]):
+            best = (f0, *found)
     if best is None:
         return ()
     lines = [(best[0], best[2])]
     for k in MAINS_HARMONICS:
-        with_lines = replace(m, lines_Hz=tuple(f for f, _ in lines))
-        jt = res.joint(with_lines, _sinusoids(res.rec, k * best[0]), sigma)
-        if jt.gain > chi2_dist.isf(MEASUREMENT_ALPHA, 2 * nf):
-            lines.append((k * best[0], float(np.mean([math.hypot(*jt.of_file(f)[0]) for f in range(nf)]))))
+        # a harmonic can fall on a drive's frequency (100 Hz): alike in every file, or not hum
+        found = _line(res, replace(m, lines_Hz=tuple(f for f, _ in lines)), k * best[0], sigma)
+        if found is not None:
+            lines.append((k * best[0], found[1]))
     return tuple(lines)
 
 
+def _line(res: Residuals, m: Measurement, f: float, sigma: float) -> Optional[tuple[float, float]]:
+    """(chi^2 gained, the amplitude [m]) of a line at `f` that lowers chi^2 significantly with
+    amplitudes alike in every file; None where there is none."""
+    from scipy.stats import chi2 as chi2_dist
+
+    nf = len(res.rec.experiments)
+    gain, amps, se = _line_test(res, m, f, sigma)
+    if gain <= chi2_dist.isf(MEASUREMENT_ALPHA, 2 * nf):
+        return None
+    mean = float(np.average(amps, weights=se**-2))
+    if nf > 1 and float(np.sum(((amps - mean) / se) ** 2)) > chi2_dist.isf(LINE_SPREAD_ALPHA, nf - 1):
+        return None
+    return gain, mean
+
+
 def line_values(rec: Recording, res: Residuals, m: Measurement, sigma: float) -> list[NDArray[np.float64]]:
-    """Each file's fitted hum [m] at every sample (for the rest's colour without it)."""
+    """Each file's fitted hum [m] at every sample (fitted beside a slope per file), for the rest
+    without it (its colour, its slope)."""
     if not m.lines_Hz:
         return [np.zeros(e.n_samples) for e in rec.experiments]
     cols = [Measurement(lines_Hz=m.lines_Hz).columns(e.t) for e in rec.experiments]
-    jt = res.joint(replace(m, lines_Hz=()), cols, sigma)
-    return [X @ jt.of_file(f)[0] for f, X in enumerate(cols)]
+    jt = res.joint(replace(m, lines_Hz=()), _beside_slopes(rec, cols), sigma)
+    return [X @ jt.of_file(f)[0][: X.shape[1]] for f, X in enumerate(cols)]
 
 
 def find_drift(res: Residuals, m: Measurement, sigma: float) -> tuple[bool, tuple[float, ...], bool]:
     """A sensor zero drifting within each file: (per-file slopes significant beyond one slope
     common to every file, each file's drift over its length [m], a common slope significant). A
-    common slope alone is the catalogue's thermal drift (a device property, left to it)."""
+    common slope alone is the catalogue's thermal drift (a device property, left to it). The hum
+    of `m`'s lines (:func:`line_values`) is taken off each rest before its slope is read (a 2 ms
+    rest holds a tenth of a 50 Hz period: a slope of its own)."""
     from scipy.stats import chi2 as chi2_dist
 
     exps = res.rec.experiments
     nf = len(exps)
-    jt = res.joint(m, [(e.t - e.t.mean())[:, None] for e in exps], sigma)
+    jt = res.joint(m, _slopes(res.rec), sigma)
     ones = np.ones(nf)
     common = float(ones @ jt.b) ** 2 / max(float(ones @ jt.A @ ones), 1e-300)
     common_sig = common > chi2_dist.isf(MEASUREMENT_ALPHA, 1)
@@ -368,10 +400,12 @@ def find_drift(res: Residuals, m: Measurement, sigma: float) -> tuple[bool, tupl
     # a zero drifts before the drive as it does after: each file's slope over its rest (the
     # device still) must agree with its slope over the whole file. A missing effect puts a
     # trend into the residual of the moving part only
+    hum = line_values(res.rec, res, replace(m, drift=False), sigma)
     z2 = 0.0
     for f, e in enumerate(exps):
         c, se_file = jt.of_file(f)
-        slope, se = rest_slope(e.t[e.rest_mask], e.x[e.rest_mask], m.whiten, sigma)
+        x = e.x - hum[f]
+        slope, se = rest_slope(e.t[e.rest_mask], x[e.rest_mask], m.whiten, sigma)
         if math.isfinite(slope):
             z2 += (slope - float(c[0])) ** 2 / (se * se + float(se_file[0]) ** 2)
     if z2 > chi2_dist.isf(DRIFT_REST_ALPHA, nf):
