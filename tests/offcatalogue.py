@@ -1,4 +1,5 @@
-"""An independent simulator of the lumped (LPS) IDM, for recordings with physics the engine lacks.
+"""An independent simulator of the IDM (LPS and DPS, with or without piezo hysteresis), for
+recordings with physics the engine lacks.
 
 Nothing here calls the idm_rs engine: the equations below are written out from docs/MODEL.md
 (checked term by term against rust/src/physics/friction.rs, physics/mechanics.rs and model/mod.rs ``rhs_impl``) and
@@ -6,9 +7,9 @@ integrated with ``scipy.integrate.solve_ivp`` (LSODA, analytic Jacobian). Its pu
 write ``idm-recording/1`` cases of devices whose physics is OUTSIDE the engine's effect
 catalogue, so that a "discovery" feature can be tested on answers it could not have been
 tuned to. ``tests/test_offcatalogue_simulator.py`` checks it against the engine with no extra
-mechanism.
+mechanism, on every structure.
 
-The model (no piezo hysteresis, h = 0; state y = [x1, x2, v1, v2, Fh] (+ [xb, vb])):
+The LPS without hysteresis (:class:`_Rhs`; state y = [x1, x2, v1, v2, Fh] (+ [xb, vb])):
 
     kp = Ep Ap / l,  cp = betac kp  (rayleigh_beta; the LPS has no mass-proportional damping)
     Fp = kp d33 V(t)                          pushes the main body (+) and the weight (-)
@@ -19,6 +20,17 @@ The model (no piezo hysteresis, h = 0; state y = [x1, x2, v1, v2, Fh] (+ [xb, vb
     dg/dt = v - |v| sgn(Fh) |Fh / S(v)|^n                          (v = v1, or v1 - vb)
     dFh/dt = a dg/dt - b |dg/dt| Fh - c dg/dt |Fh|
     Ff = Fh + sigma2 v + sigma1 dg/dt                              (acts against the main body)
+
+Every other structure (:class:`_BarRhs`; state y = [Q (n+1 nodes), Q', Fh, h] (+ [xb, vb])):
+the PE as n two-node bar elements, element mass rho_p Ap le / 6 [[2,1],[1,2]] and stiffness
+Ep Ap / le [[1,-1],[-1,1]] (le = l / n), m1 added at node 0 (the main body), m2 at node n (the
+weight), Rayleigh damping alpha_c Mp + beta_c Kp on the PE's matrices only:
+
+    (Mp + diag(m1, 0, ..., 0, m2)) Q'' + (alpha_c Mp + beta_c Kp) Q' + Kp Q
+        = {Fp - Ff + F_load (+ extra forces), 0, ..., 0, -Fp (+ forces on the weight)}
+    Fp = kp (d33 V - h),  dh/dt = ap d33 V' - bp |V'| h - cp V' |h|   (Bouc-Wen; h = 0 without)
+
+The LPS with hysteresis is n = 1 with a massless PE (alpha_c Mp = 0).
 
 The sensor reads x1 (relative to ground). g itself feeds nothing back, so it is not a state.
 
@@ -38,6 +50,8 @@ the engine's effect catalogue (rust/src/physics/effects.rs):
   damper cb to ground, state xb, vb: the friction law sees v1 - vb, and
   mb xb'' = +Ff - kb xb - cb vb (the friction's reaction); the sensor reads x1. The normal
   force is unchanged. Depends on "base" (a hidden state).
+* :class:`QuadraticSpring` (``"quadratic_spring"``): -k2 x1^2 on m1 (library term x1^2).
+  :class:`LinearDrag` (``"linear_drag"``): -c1 v1 on m1 (library term v1).
 * :class:`VoltageForce` (``"voltage_force"``): c V(t) on m1 (library term V). :class:`FrictionGradient`
   (``"friction_gradient"``): friction times 1 + slope x1. :class:`WeightFriction`
   (``"weight_dry_friction"``): -fw tanh(v2/vs) on m2 (library term sgn v2). :class:`Vibration`
@@ -145,6 +159,23 @@ class CubicSpring:
 
 
 @dataclass(frozen=True)
+class QuadraticSpring:
+    """Force -k2 x1^2 [N] on the main body (a spring to ground that only pushes back, growing
+    with the square of the stroke); k2 [N/m^2]."""
+
+    k2: float
+    name: str = "quadratic_spring"
+
+
+@dataclass(frozen=True)
+class LinearDrag:
+    """Viscous drag -c1 v1 [N] on the main body (air, a lubricant film); c1 [N s/m]."""
+
+    c1: float
+    name: str = "linear_drag"
+
+
+@dataclass(frozen=True)
 class QuadraticDrag:
     """Force -c2 v1 |v1| [N] on the main body; c2 [N s^2/m^2]."""
 
@@ -202,9 +233,10 @@ class Vibration:
     name: str = "vibration"
 
 
-Extra = Union[PeriodicFriction, CubicSpring, QuadraticDrag, CompliantBase, VoltageForce, FrictionGradient,
-              WeightFriction, Vibration]
-_KINDS = {"periodic_friction": PeriodicFriction, "cubic_spring": CubicSpring, "quadratic_drag": QuadraticDrag,
+Extra = Union[PeriodicFriction, CubicSpring, QuadraticSpring, LinearDrag, QuadraticDrag, CompliantBase, VoltageForce,
+              FrictionGradient, WeightFriction, Vibration]
+_KINDS = {"periodic_friction": PeriodicFriction, "cubic_spring": CubicSpring, "quadratic_spring": QuadraticSpring,
+          "linear_drag": LinearDrag, "quadratic_drag": QuadraticDrag,
           "compliant_base": CompliantBase, "voltage_force": VoltageForce, "friction_gradient": FrictionGradient,
           "weight_friction_dry": WeightFriction, "vibration": Vibration}
 
@@ -271,6 +303,8 @@ class _Rhs:
         self.periodic: list[PeriodicFriction] = [e for e in extras if isinstance(e, PeriodicFriction)]
         self.k3 = sum(e.k3 for e in extras if isinstance(e, CubicSpring))
         self.c2 = sum(e.c2 for e in extras if isinstance(e, QuadraticDrag))
+        self.k2 = sum(e.k2 for e in extras if isinstance(e, QuadraticSpring))
+        self.c1 = sum(e.c1 for e in extras if isinstance(e, LinearDrag))
         self.cv = sum(e.c for e in extras if isinstance(e, VoltageForce))
         self.grad = sum(e.slope for e in extras if isinstance(e, FrictionGradient))
         self.fw = sum(e.fw for e in extras if isinstance(e, WeightFriction))
@@ -344,6 +378,9 @@ class _Rhs:
         f = -self.k3 * x1 ** 3 - self.c2 * v1 * abs(v1) + self.cv * self.voltage(t)
         for e in self.vibrations:
             f += e.amplitude * math.sin(2 * math.pi * e.frequency * t + e.phase)
+        if self.k2 or self.c1:  # (a separate sum: the other mechanisms' numbers as they were)
+            f += -self.k2 * x1 * x1 - self.c1 * v1
+            return f, -3.0 * self.k3 * x1 * x1 - 2.0 * self.k2 * x1, -2.0 * self.c2 * abs(v1) - self.c1
         return f, -3.0 * self.k3 * x1 * x1, -2.0 * self.c2 * abs(v1)
 
     def _weight_force(self, v2: float) -> tuple[float, float]:
@@ -393,6 +430,106 @@ class _Rhs:
         return self._friction(y[0], y[2] - vb, y[4])[0]
 
 
+class _BarRhs(_Rhs):
+    """Right-hand side and Jacobian of any structure: the PE as ``n`` two-node bar elements
+    (consistent mass, Rayleigh damping alpha Mp + beta Kp on the PE only) between the main body
+    (node 0) and the weight (node n), with Bouc-Wen piezo hysteresis h where ``hysteresis``.
+    The LPS is n = 1 with a massless PE (then alpha Mp = 0: no mass-proportional damping).
+    State y = [Q (n+1 nodes), Q' (n+1), Fh, h (, xb, vb)]; the extra mechanisms as :class:`_Rhs`."""
+
+    def __init__(self, p: Mapping[str, float], extras: Sequence[Extra], n: int, distributed: bool,
+                 hysteresis: bool) -> None:
+        super().__init__(p, extras)
+        if n < 1:
+            raise ValueError(f"n_elements must be >= 1, got {n}")
+        nodes = n + 1
+        le = p["pe_length"] / n
+        rho = p["pe_density"] if distributed else 0.0
+        me = rho * p["pe_area"] * le / 6.0 * np.array([[2.0, 1.0], [1.0, 2.0]])
+        ke = p["pe_youngs"] * p["pe_area"] / le * np.array([[1.0, -1.0], [-1.0, 1.0]])
+        mp, kp = np.zeros((nodes, nodes)), np.zeros((nodes, nodes))
+        for e in range(n):
+            mp[e: e + 2, e: e + 2] += me
+            kp[e: e + 2, e: e + 2] += ke
+        mass = mp.copy()
+        mass[0, 0] += p["m1"]
+        mass[-1, -1] += p["m2"]
+        self.nodes = nodes
+        self.minv = np.linalg.inv(mass)
+        self.K = kp
+        self.C = p["rayleigh_alpha"] * mp + p["rayleigh_beta"] * kp
+        self.hysteresis = hysteresis
+        self.ap_d33 = p["hyst_alpha"] * p["d33"]
+        self.bp, self.cph = p["hyst_beta"], p["hyst_gamma"]
+        self.fh_i, self.h_i = 2 * nodes, 2 * nodes + 1
+        self.dim = 2 * nodes + 2 + (2 if self.base else 0)
+
+    def _hysteresis(self, h: float) -> tuple[float, float]:
+        """dh/dt and its d/dh (zero without hysteresis)."""
+        if not self.hysteresis:
+            return 0.0, 0.0
+        dv = self.slope
+        return (self.ap_d33 * dv - self.bp * abs(dv) * h - self.cph * dv * abs(h),
+                -self.bp * abs(dv) - self.cph * dv * _sgn(h))
+
+    def fun(self, t: float, y: np.ndarray) -> np.ndarray:
+        N = self.nodes
+        q, v = y[:N], y[N: 2 * N]
+        fh, h = y[self.fh_i], y[self.h_i]
+        vb = y[self.h_i + 2] if self.base else 0.0
+        ff, fhd, _, _ = self._friction(q[0], v[0] - vb, fh)
+        fe, _, _ = self._extra_force(q[0], v[0], t)
+        fw, _ = self._weight_force(v[-1])
+        fp = self.kp * (self.d33 * self.voltage(t) - h)
+        f = -(self.C @ v) - self.K @ q
+        f[0] += fp - ff + self.load + fe
+        f[-1] += fw - fp
+        out = np.empty(self.dim)
+        out[:N] = v
+        out[N: 2 * N] = self.minv @ f
+        out[self.fh_i] = fhd
+        out[self.h_i] = self._hysteresis(h)[0]
+        if self.base:
+            b = self.base
+            out[self.h_i + 1] = vb
+            out[self.h_i + 2] = (ff - b.kb * y[self.h_i + 1] - b.cb * vb) / b.mb
+        return out
+
+    def jac(self, t: float, y: np.ndarray) -> np.ndarray:
+        N = self.nodes
+        q, v = y[:N], y[N: 2 * N]
+        fh, h = y[self.fh_i], y[self.h_i]
+        vb = y[self.h_i + 2] if self.base else 0.0
+        _, _, (ffx, ffv, fff), (fhx, fhv, fhf) = self._friction(q[0], v[0] - vb, fh)
+        _, fex, fev = self._extra_force(q[0], v[0], t)
+        _, fwv = self._weight_force(v[-1])
+        m0, mN = self.minv[:, 0], self.minv[:, -1]
+        J = np.zeros((self.dim, self.dim))
+        J[:N, N: 2 * N] = np.eye(N)
+        J[N: 2 * N, :N] = -self.minv @ self.K
+        J[N: 2 * N, 0] += m0 * (fex - ffx)
+        J[N: 2 * N, N: 2 * N] = -self.minv @ self.C
+        J[N: 2 * N, N] += m0 * (fev - ffv)
+        J[N: 2 * N, 2 * N - 1] += mN * fwv
+        J[N: 2 * N, self.fh_i] = -m0 * fff
+        J[N: 2 * N, self.h_i] = self.kp * (mN - m0)
+        J[self.fh_i, 0], J[self.fh_i, N], J[self.fh_i, self.fh_i] = fhx, fhv, fhf
+        J[self.h_i, self.h_i] = self._hysteresis(h)[1]
+        if self.base:
+            b, xb_i, vb_i = self.base, self.h_i + 1, self.h_i + 2
+            J[N: 2 * N, vb_i] = m0 * ffv
+            J[self.fh_i, vb_i] = -fhv
+            J[xb_i, vb_i] = 1.0
+            J[vb_i, 0], J[vb_i, N], J[vb_i, self.fh_i] = ffx / b.mb, ffv / b.mb, fff / b.mb
+            J[vb_i, xb_i], J[vb_i, vb_i] = -b.kb / b.mb, (-ffv - b.cb) / b.mb
+        return J
+
+    def friction_force(self, y: np.ndarray) -> float:
+        N = self.nodes
+        vb = y[self.h_i + 2] if self.base else 0.0
+        return self._friction(y[0], y[N] - vb, y[self.fh_i])[0]
+
+
 def sawtooth_breakpoints(amplitude_V: float, frequency_Hz: float, cycles: int, edge_s: float,
                          direction: str, rest_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Breakpoints (t [s], V [V]) of the sawtooth docs/RECORDINGS.md describes: 0 V for rest_s,
@@ -422,14 +559,55 @@ def simulate_lps(params: Mapping[str, Any], wave_t: Sequence[float], wave_v: Seq
     component [x1, x2, v1, v2, Fh (, xb, vb)], default 1e-13 m, 1e-10 m/s, 1e-9 N.
     Returns dict(t, x1, v1, x2, v2, ff [N], fh [N], xb, vb (zeros without a base), nfev, njev).
     """
-    p = _resolve(params)
-    rhs = _Rhs(p, _as_extras(extra))
+    rhs = _Rhs(_resolve(params), _as_extras(extra))
+    if atol is None:
+        atol = [1e-13, 1e-13, 1e-10, 1e-10, 1e-9] + ([1e-13, 1e-10] if rhs.base else [])
+    out, ts, nfev, njev = _integrate(rhs, wave_t, wave_v, t_end, sample_times, rtol, atol, max_step, method)
+    ff = np.array([rhs.friction_force(row) for row in out])
+    res = {"t": ts, "x1": out[:, 0], "x2": out[:, 1], "v1": out[:, 2], "v2": out[:, 3], "fh": out[:, 4], "ff": ff,
+           "xb": out[:, 5] if rhs.base else np.zeros(ts.size), "vb": out[:, 6] if rhs.base else np.zeros(ts.size),
+           "nfev": np.array(nfev), "njev": np.array(njev)}
+    return res
+
+
+def simulate_device(params: Mapping[str, Any], wave_t: Sequence[float], wave_v: Sequence[float], t_end: float,
+                    sample_times: Sequence[float], model: str = "lps", n_elements: int = 4,
+                    piezo_hysteresis: bool = False, extra: Any = None, rtol: float = 1e-9,
+                    max_step: float = 1e-5, method: str = "LSODA") -> dict[str, np.ndarray]:
+    """Integrate any structure (plus ``extra``) from rest at t = 0 to ``t_end`` [s]: ``model``
+    "lps" (two masses; ``n_elements`` ignored) or "dps" (``n_elements`` bar elements), with or
+    without Bouc-Wen ``piezo_hysteresis``. The LPS without hysteresis is :func:`simulate_lps`
+    (the same numbers); the rest runs :class:`_BarRhs`. Arguments and result as
+    :func:`simulate_lps` (plus h [m]; x2, v2 are the weight's node)."""
+    if model not in ("lps", "dps"):
+        raise ValueError(f"model must be 'lps' or 'dps', got {model!r}")
+    if model == "lps" and not piezo_hysteresis:
+        res = simulate_lps(params, wave_t, wave_v, t_end, sample_times, extra=extra, rtol=rtol, max_step=max_step,
+                           method=method)
+        res["h"] = np.zeros(res["t"].size)
+        return res
+    rhs = _BarRhs(_resolve(params), _as_extras(extra), 1 if model == "lps" else int(n_elements), model == "dps",
+                  piezo_hysteresis)
+    N = rhs.nodes
+    atol = [1e-13] * N + [1e-10] * N + [1e-9, 1e-13] + ([1e-13, 1e-10] if rhs.base else [])
+    out, ts, nfev, njev = _integrate(rhs, wave_t, wave_v, t_end, sample_times, rtol, atol, max_step, method)
+    ff = np.array([rhs.friction_force(row) for row in out])
+    zeros = np.zeros(ts.size)
+    return {"t": ts, "x1": out[:, 0], "x2": out[:, N - 1], "v1": out[:, N], "v2": out[:, 2 * N - 1],
+            "fh": out[:, rhs.fh_i], "h": out[:, rhs.h_i], "ff": ff,
+            "xb": out[:, rhs.h_i + 1] if rhs.base else zeros, "vb": out[:, rhs.h_i + 2] if rhs.base else zeros,
+            "nfev": np.array(nfev), "njev": np.array(njev)}
+
+
+def _integrate(rhs: _Rhs, wave_t: Sequence[float], wave_v: Sequence[float], t_end: float,
+               sample_times: Sequence[float], rtol: float, atol: Sequence[float], max_step: float,
+               method: str) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """(states at the samples, the sample times, function and Jacobian evaluations): ``rhs`` from
+    rest, segment by segment between the input's breakpoints (its kinks never stepped over)."""
     ts = np.asarray(sample_times, dtype=float)
     if ts.ndim != 1 or (ts.size and (ts[0] < 0 or ts[-1] > t_end * (1 + 1e-12) or np.any(np.diff(ts) <= 0))):
         raise ValueError("sample_times must increase strictly and lie within [0, t_end]")
     bt, bv = np.asarray(wave_t, dtype=float), np.asarray(wave_v, dtype=float)
-    if atol is None:
-        atol = [1e-13, 1e-13, 1e-10, 1e-10, 1e-9] + ([1e-13, 1e-10] if rhs.base else [])
     atol_a = np.asarray(atol, dtype=float)
     edges = np.unique(np.concatenate([[0.0], bt[(bt > 0) & (bt < t_end)], [t_end]]))
     y = np.zeros(rhs.dim)
@@ -459,11 +637,7 @@ def simulate_lps(params: Mapping[str, Any], wave_t: Sequence[float], wave_v: Seq
         if sel.size:
             out[sel] = sol.y[:, : sel.size].T
         y = sol.y[:, -1].copy()
-    ff = np.array([rhs.friction_force(row) for row in out])
-    res = {"t": ts, "x1": out[:, 0], "x2": out[:, 1], "v1": out[:, 2], "v2": out[:, 3], "fh": out[:, 4], "ff": ff,
-           "xb": out[:, 5] if rhs.base else np.zeros(ts.size), "vb": out[:, 6] if rhs.base else np.zeros(ts.size),
-           "nfev": np.array(nfev), "njev": np.array(njev)}
-    return res
+    return out, ts, nfev, njev
 
 
 # --------------------------------------------------------------------------------------------
@@ -483,10 +657,12 @@ def write_case(out_dir: Union[str, Path], nominal: Mapping[str, Any], true_param
                experiments: Sequence[Mapping[str, Any]], extra: Any = None, noise_rms: float = 1.5e-9,
                resolution: float = 2.5e-10, sample_rate: float = 1e5, seed: int = 0,
                truth: Optional[Mapping[str, Any]] = None, write_noise_rms: bool = False) -> Path:
-    """Simulate the true device (``true_params`` + ``extra``, LPS, no piezo hysteresis) and write an
-    ``idm-recording/1`` case: meta.json, one CSV per experiment, and truth.json (the answer).
+    """Simulate the true device (``true_params`` + ``extra``, the structure ``nominal`` declares)
+    and write an ``idm-recording/1`` case: meta.json, one CSV per experiment, and truth.json (the
+    answer).
 
-    ``nominal``: meta.json's "nominal" ({"model": "lps", "piezo_hysteresis": False, "params": {...}}).
+    ``nominal``: meta.json's "nominal" ({"model": "lps" or "dps", "n_elements": n (dps),
+    "piezo_hysteresis": bool, "params": {...}}).
     ``experiments``: dicts with direction, amplitude_V, frequency_Hz, cycles and optionally
     rest_s (default 0.002), edge_s (0.0005) and file. As idm_rs.synthetic.make_case: all
     randomness from ``numpy.random.default_rng(seed)`` (first the per-file offsets, uniform in
@@ -494,8 +670,10 @@ def write_case(out_dir: Union[str, Path], nominal: Mapping[str, Any], true_param
     ``resolution`` [m]; CSV "%.10g". ``truth``: extra entries for truth.json.
     """
     nominal = dict(nominal)
-    if nominal.get("model") != "lps" or nominal.get("piezo_hysteresis", False):
-        raise ValueError("this simulator writes LPS cases without piezo hysteresis")
+    model, hysteresis = nominal.get("model"), bool(nominal.get("piezo_hysteresis", False))
+    if model not in ("lps", "dps"):
+        raise ValueError(f"nominal['model'] must be 'lps' or 'dps', got {model!r}")
+    n_elements = int(nominal.get("n_elements", 4)) if model == "dps" else None
     nominal_params = _resolve(nominal["params"])
     truep = _resolve(true_params)
     extras = _as_extras(extra)
@@ -515,7 +693,8 @@ def write_case(out_dir: Union[str, Path], nominal: Mapping[str, Any], true_param
         t = np.arange(n) / sample_rate
         if abs(t[-1] - duration) > 1e-9 / sample_rate:
             raise ValueError(f"experiments[{i}]: the duration {duration:g} s is not a multiple of the sample step")
-        sim = simulate_lps(truep, bt, bv, t[-1], t, extra=extras)
+        sim = simulate_device(truep, bt, bv, t[-1], t, model=model, n_elements=n_elements or 1,
+                              piezo_hysteresis=hysteresis, extra=extras)
         x = sim["x1"] + offsets[i]
         if noise_rms > 0:
             x = x + rng.normal(0.0, noise_rms, size=n)
@@ -528,7 +707,8 @@ def write_case(out_dir: Union[str, Path], nominal: Mapping[str, Any], true_param
         meta_exps.append({"file": name, "waveform": "sawtooth", "amplitude_V": _fmt_number(amp),
                           "frequency_Hz": _fmt_number(freq), "direction": direction, "cycles": cycles,
                           "rest_s": rest, "edge_s": edge})
-    nom = {"model": "lps", "piezo_hysteresis": False, "params": nominal_params}
+    nom: dict[str, Any] = {"model": model, **({"n_elements": n_elements} if n_elements else {}),
+                           "piezo_hysteresis": hysteresis, "params": nominal_params}
     meta: dict[str, Any] = {"format": FORMAT_ID, "nominal": nom, "experiments": meta_exps,
                             "sensor": {"sample_rate_Hz": float(sample_rate), "resolution_m": float(resolution)}}
     if write_noise_rms:
@@ -542,13 +722,14 @@ def write_case(out_dir: Union[str, Path], nominal: Mapping[str, Any], true_param
         "expected_verdict": "unexplained" if extras else "none",
         "extra": _describe(extras),
         "true_nominal_params": truep,
-        "true_structure": {"model": "lps", "n_elements": None, "piezo_hysteresis": False},
+        "true_structure": {"model": model, "n_elements": n_elements, "piezo_hysteresis": hysteresis},
         "misset_in_meta": misset,
         "noise_rms_m": float(noise_rms),
         "quantisation_m": float(resolution),
         "offsets_m": [float(o) for o in offsets],
         "seed": int(seed),
-        "simulator": "tests/offcatalogue.py: independent LPS, scipy solve_ivp LSODA, rtol 1e-9",
+        "simulator": f"tests/offcatalogue.py: independent {model.upper()}{' + hysteresis' if hysteresis else ''}, "
+                     "scipy solve_ivp LSODA, rtol 1e-9",
     }
     key.update(truth or {})
     (out / "truth.json").write_text(json.dumps(key, indent=2) + "\n", encoding="utf-8")
