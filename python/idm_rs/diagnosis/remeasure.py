@@ -61,12 +61,18 @@ def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise:
     else:
         tau = 0.0
         pb2, cal2 = _refit(pb, start, nominal, noise, pb.rec, base)
-    if pb2.rec.measurement is not None and pb2.rec.measurement.whiten.order > 0:
+    explains = null_leaves_noise(pb2, cal2) and cal2.fit.chi2 <= lead_chi2 + SEPARATION
+    if not explains and pb2.rec.measurement is not None and pb2.rec.measurement.whiten.order > 0:
+        # in the rest's colour the null does not explain it; the colour read off the null's
+        # residual may (a short rest misreads a strong colour). Where that colour disagrees with
+        # the rest's, no rescue: 1/f noise reads stronger and louder over a whole file than
+        # over a detrended 2 ms rest, and so does a residual that holds a missing effect
         recoloured = _recoloured(pb, pb2, cal2, noise, lead_spec)
         if recoloured is None:
             return None
         pb2, cal2, lead_chi2, noise = recoloured
-    if not (null_leaves_noise(pb2, cal2) and cal2.fit.chi2 <= lead_chi2 + SEPARATION):
+        explains = null_leaves_noise(pb2, cal2) and cal2.fit.chi2 <= lead_chi2 + SEPARATION
+    if not explains:
         return None
     model = noise.model
     if model is not None:
