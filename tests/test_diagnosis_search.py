@@ -279,6 +279,23 @@ def test_near_degenerate_effects_are_alternatives_not_a_second_verdict():
     assert diag_verdict.alternatives_to(ranking, "none", pairs) == []
 
 
+def test_a_pairs_look_alike_is_named_with_the_effect_it_could_stand_in_for():
+    # issue 51: incline + spring to ground named as friction_asymmetry + spring_to_ground, the
+    # twin (|cos| 0.990) lost; each member's supported twin is an alternative, said for which
+    pairs = [("incline", "friction_asymmetry", 0.990), ("amplifier_lowpass", "sensor_lowpass", 0.985)]
+    ranking = [_cand("friction_asymmetry", 900.0), _cand("spring_to_ground", 700.0), _cand("incline", 850.0),
+               _cand("amplifier_lowpass", 3.0)]
+    alts = diag_verdict.alternatives_to(ranking, "friction_asymmetry+spring_to_ground", pairs)
+    assert [(a.effect, a.replaces) for a in alts] == [("incline", "friction_asymmetry")]
+    assert alts[0].to_dict()["replaces"] == "friction_asymmetry" and "0.990" in alts[0].why
+    # order within the pair does not matter; a twin without support (ΔBIC 3) is not one
+    assert [a.effect for a in diag_verdict.alternatives_to(ranking, "spring_to_ground+friction_asymmetry",
+                                                           pairs)] == ["incline"]
+    assert diag_verdict.alternatives_to(ranking, "sensor_lowpass+spring_to_ground", pairs) == []
+    # a twin already in the pair is no alternative
+    assert diag_verdict.alternatives_to(ranking, "incline+friction_asymmetry", pairs) == []
+
+
 def test_the_noise_floor_is_cross_checked_against_the_residual(long_rec):
     # white noise of known RMS plus a smooth systematic part: the residual's estimate sees the noise only
     rng = np.random.default_rng(0)

@@ -323,7 +323,8 @@ def _next_experiment_stage(s: _State) -> None:
     s.alternatives = alternatives_to(s.ranking, s.verdict, s.degenerate)
     if s.alternatives:
         s.reason += "; cannot be told apart from " + ", ".join(f"{a.effect} ({a.why})" for a in s.alternatives)
-        s.proposal = separating_experiment(s.pb, s.refits, s.verdict, s.alternatives[0].effect)
+        first = s.alternatives[0]
+        s.proposal = separating_experiment(s.pb, s.refits, first.replaces or s.verdict, first.effect)
         s.clock.lap("next experiment")
     elif s.found is not None and s.found.discovered and s.found.look_alike is not None:
         s.proposal = look_alike_experiment(s.pb, s.found)

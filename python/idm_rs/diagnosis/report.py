@@ -258,7 +258,15 @@ def plain_summary(d: Diagnosis) -> list[str]:
         lines.append(f"  How sure: {_evidence(best.delta_bic)} evidence for the second beside the first (ΔBIC "
                      f"{best.delta_bic:.0f}) and for the first beside the second (ΔBIC {sec.over_second_alone:.0f}); "
                      f"the pair predicts an experiment it was not fitted to at {ratio(sec.heldout_rms):.2f} × noise.")
-        lines.append("  What to do: add both effects to your model with the fitted values (the refit model below).")
+        if alts:
+            twins = "; ".join(f"{a.effect} in place of {a.replaces}" if a.replaces else a.effect for a in alts)
+            lines.append(f"  Could also be: {twins} — a signature these experiments cannot tell from the named "
+                         "effect's.")
+        todo = "  What to do: add both effects to your model with the fitted values (the refit model below)"
+        prop = getattr(d, "proposal", None)
+        if alts and prop is not None:
+            todo += "; " + prop.words() + (", and diagnose again with it added" if prop.separates else "")
+        lines.append(todo + ".")
     elif best is not None:
         lines += _one_effect_summary(d, best, alts, ratio)
     elif d.verdict == "none":

@@ -117,9 +117,14 @@ class Alternative:
     effect: str
     delta_bic: float
     why: str
+    #: for a verdict of two effects: the one of them this effect could stand in for ("" otherwise)
+    replaces: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        return {"effect": self.effect, "delta_bic": self.delta_bic, "why": self.why}
+        out: dict[str, Any] = {"effect": self.effect, "delta_bic": self.delta_bic, "why": self.why}
+        if self.replaces:
+            out["replaces"] = self.replaces
+        return out
 
 
 @dataclass

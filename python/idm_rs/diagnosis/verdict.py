@@ -27,7 +27,11 @@ def rank_with_heldout(refits: list[Refit], heldout: HeldOut) -> list[Candidate]:
 def alternatives_to(ranking: list[Candidate], verdict: str, degenerate: list[tuple[str, str, float]]
                   ) -> list[Alternative]:
     """Effects the data cannot tell apart from the verdict's: a supported candidate within
-    SEPARATION in ΔBIC of it, or one whose screening direction is near-parallel to it."""
+    SEPARATION in ΔBIC of it, or one whose screening direction is near-parallel to it. For a
+    verdict of two effects, each effect's near-parallel twin, named with the one it could stand
+    in for (:attr:`Alternative.replaces`)."""
+    if "+" in verdict:
+        return _pair_alternatives(ranking, verdict, degenerate)
     lead = next((c for c in ranking if c.effect == verdict), None)
     if lead is None:
         return []
@@ -46,6 +50,25 @@ def alternatives_to(ranking: list[Candidate], verdict: str, degenerate: list[tup
         if match is not None and is_eligible(match):
             out[other] = Alternative(other, match.delta_bic,
                                      f"its signature is parallel to the leader's (|cos| = {cos:.3f})")
+    return list(out.values())
+
+
+def _pair_alternatives(ranking: list[Candidate], verdict: str, degenerate: list[tuple[str, str, float]]
+                       ) -> list[Alternative]:
+    """The near-parallel twins of a pair's effects (an incline beside a spring to ground named as
+    friction asymmetry + spring: the data cannot choose the incline's twin over it). A twin must
+    be supported by the data on its own (ΔBIC ≥ BIC_THRESHOLD, fitted or screened): alone, with
+    the other effect missing, it need not leave noise."""
+    named = verdict.split("+")
+    out: dict[str, Alternative] = {}
+    for a, b, cos in degenerate:
+        for member, other in ((a, b), (b, a)):
+            if member not in named or other in named or other in out:
+                continue
+            match = next((x for x in ranking if x.effect == other), None)
+            if match is not None and match.delta_bic >= BIC_THRESHOLD:
+                out[other] = Alternative(other, match.delta_bic, f"in place of {member}: its signature is parallel "
+                                         f"to {member}'s (|cos| = {cos:.3f})", replaces=member)
     return list(out.values())
 
 
