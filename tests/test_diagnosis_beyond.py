@@ -139,6 +139,46 @@ def test_a_second_effect_is_searched_only_where_the_first_stands_and_leaves_stru
     assert partial_leader(pb, unsupported) is None
 
 
+def test_a_third_effect_is_searched_only_after_a_supported_pair_that_leaves_structure():
+    """The third round's trigger: a pair not named because it leaves a systematic residual, both
+    of whose effects pay their own way; never after a named pair, a pair that leaves noise but
+    failed another rule, or a pair whose first effect does not pay its way."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis.results import SecondSearch
+    from idm_rs.diagnosis.third_effect import wants_third
+
+    pb = SimpleNamespace(sigma=1.0)
+    first = _candidate("incline", 500.0, 1.5, 20.0)
+
+    def second(pair, named=False, over=50.0):
+        return SecondSearch(first=first, pair=pair, named=named, over_second_alone=over, base=object())
+
+    structured = _candidate("sensor_lowpass", 300.0, 1.3, 15.0)
+    assert wants_third(pb, second(structured))
+    assert not wants_third(pb, second(structured, named=True))
+    assert not wants_third(pb, second(_candidate("sensor_lowpass", 300.0, 1.02, 1.0)))  # leaves noise
+    assert not wants_third(pb, second(structured, over=4.0))  # the first does not pay its way
+    assert not wants_third(pb, second(_candidate("sensor_lowpass", 5.0, 1.3, 15.0)))  # not supported
+    assert not wants_third(pb, second(None))
+
+
+@pytest.mark.slow
+def test_three_catalogue_effects_are_named_together(tmp_path):
+    """Issue 51's device: an incline, a sensor lag and a thermal drift, each clear alone: the
+    search stopped at two ('unexplained', the pair at 1.09 x noise); the third round names all
+    three (or the incline's look-alike, friction asymmetry, with the incline as its alternative)."""
+    case = make_case(tmp_path / "three", nominal_params=NOMINAL,
+                     effects=idm_rs.Effects(theta_rad=-2e-3, tau_sensor=5e-6, drift_rate=-1e-6),
+                     experiments=EXPERIMENTS, noise_rms=1.5e-9, seed=5, dt=2e-8)
+    d = idm_rs.diagnose(case, progress=False)
+    named = set(d.verdict.split("+"))
+    assert len(named) == 3 and {"sensor_lowpass", "thermal_drift"} <= named, d.reason
+    assert "incline" in named or any(a.effect == "incline" for a in d.alternatives)
+    assert d.third is not None and d.third.named and d.rms_after <= 1.1 * d.noise.sigma
+    assert "ALL THREE NAMED" in text_report(d)
+
+
 def _tried(rms: float, delta_bic: float):
     """A refitted form that did not stand from the model with a first effect."""
     from types import SimpleNamespace

@@ -46,10 +46,11 @@ from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .progress import Clock, Progress, progress_bar
 from .proposals import determining_experiment, look_alike_experiment, separating_experiment, travel_experiment
 from .remeasure import artefacts_instead, remeasured
-from .results import Alternative, Candidate, Diagnosis, SecondSearch
+from .results import Alternative, Candidate, Diagnosis, SecondSearch, ThirdSearch
 from .rules import better_of, by_rank, candidate_explains, is_finite, null_leaves_noise
 from .screening import Screened, near_degenerate
 from .second_effect import joint_pair, partial_leader, search_second_effect
+from .third_effect import search_third_effect, wants_third
 from .thresholds import (
     FIT_DT,
     NULL_REFITS,
@@ -91,6 +92,7 @@ class _State:
     rms_after: float = math.nan
     lead: Optional[Refit] = None
     second: Optional[SecondSearch] = None
+    third: Optional[ThirdSearch] = None
     found: Optional[Discovery] = None
     degenerate: list[tuple[str, str, float]] = field(default_factory=list)
     alternatives: list[Alternative] = field(default_factory=list)
@@ -284,6 +286,16 @@ def _second_effect_stage(s: _State) -> None:
         s.reason += f"; second effect: {second.reason}"
     s.second = second
     s.clock.lap("second effect")
+    if wants_third(s.pb, second):
+        # a pair both effects support that leaves structure: a third from the model with the two
+        third = search_third_effect(s.pb, s.cal, second, s.heldout)
+        if third.named and third.third is not None:
+            s.verdict, s.reason, s.rms_after = ("+".join((*third.pair, third.third.effect)), third.reason,
+                                                third.third.rms_after)
+        else:
+            s.reason += f"; third effect: {third.reason}"
+        s.third = third
+        s.clock.lap("third effect")
 
 
 def _discovery_stage(s: _State) -> None:
@@ -374,7 +386,7 @@ def _result(s: _State) -> Diagnosis:
         screening={k: v.delta_chi2 for k, v in sorted(s.screened.items(), key=lambda kv: -kv[1].delta_chi2)},
         degenerate_pairs=[list(p) for p in s.degenerate], searched_wide=s.searched_wide,
         calibration_multistart=cal.search.multistart.to_dict() if cal.search.multistart is not None else {},
-        discovery=s.found, second=s.second, proposal=s.proposal, parameter_proposal=s.parameter_proposal,
+        discovery=s.found, second=s.second, third=s.third, proposal=s.proposal, parameter_proposal=s.parameter_proposal,
     )
 
 

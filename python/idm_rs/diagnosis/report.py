@@ -247,7 +247,20 @@ def plain_summary(d: Diagnosis) -> list[str]:
     where = next((loc for loc in d.locations if loc.systematic), None)
     alts = getattr(d, "alternatives", []) or []
     lines = ["In plain words"]
-    if sec is not None and sec.named and best is not None:
+    third = getattr(d, "third", None)
+    if third is not None and third.named and best is not None:
+        lines.append(f"  Found: three effects the nominal model lacks — {', '.join(third.pair)} and "
+                     f"{best.description} ({format_params(best)}). With all three added and the nominal values "
+                     f"re-fitted, the model matches the recordings to {ratio(best.rms_after):.2f} × their noise, "
+                     f"against {ratio(d.rms_calibrated):.2f} × with none.")
+        lines.append(f"  How sure: {_evidence(best.delta_bic)} evidence for the third beside the pair (ΔBIC "
+                     f"{best.delta_bic:.0f}); dropping either of the pair costs ΔBIC "
+                     + " and ".join(f"{v:.0f}" for v in third.over_without.values())
+                     + f"; the three predict an experiment they were not fitted to at {ratio(third.heldout_rms):.2f} "
+                     "× noise.")
+        lines.append("  What to do: add the three effects to your model with the fitted values (the refit model "
+                     "below).")
+    elif sec is not None and sec.named and best is not None:
         share = " and ".join(f"{k} {100 * v:.0f} %" for k, v in sec.shares.items())
         lines.append(f"  Found: two effects the nominal model lacks — {sec.first.description} "
                      f"({first_effect_params(d)}), and {best.description} ({format_params(best)}). With both added "
@@ -522,6 +535,15 @@ def _discovery_and_second_lines(d: Diagnosis, sigma: float) -> list[str]:
             lines.append("  share of the improvement over the calibrated null: "
                          + ", ".join(f"{k} {100 * v:.0f} %" for k, v in sec.shares.items()))
         lines.append(f"  {'BOTH NAMED' if sec.named else 'no second effect named'}: {sec.reason}")
+    third = getattr(d, "third", None)
+    if third is not None:
+        lines += ["", f"A third effect, searched from the model with {third.pair[0]} and {third.pair[1]}"]
+        rows = [[c.effect, format_params(c), _ratio(c.rms_after, sigma),
+                 f"{c.delta_bic:.1f}" if c.delta_bic >= 0 else "not supported", c.fit_label] for c in third.ranking]
+        if rows:
+            lines += _table(["effect (beside the pair)", "fitted parameters (±1σ)", "RMS / noise",
+                             "ΔBIC over the pair", "fit"], rows, "llrrl")
+        lines.append(f"  {'ALL THREE NAMED' if third.named else 'no third effect named'}: {third.reason}")
     return lines
 
 

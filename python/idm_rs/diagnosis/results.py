@@ -165,6 +165,31 @@ class SecondSearch:
 
 
 @dataclass
+class ThirdSearch:
+    """The search for a third effect from the model with a pair that both effects support but
+    that leaves a systematic residual."""
+
+    pair: tuple[str, str]  #: the pair's effects (first, second)
+    third: Optional[Candidate] = None  #: the best third effect fitted with the pair (its spec holds all three)
+    named: bool = False  #: all three stand: the verdict names them
+    reason: str = ""
+    #: the triple's held-out RMS [m], and the pair's
+    heldout_rms: float = math.nan
+    pair_heldout_rms: float = math.nan
+    #: ΔBIC of the triple over the other two without each of the pair's effects
+    over_without: dict[str, float] = field(default_factory=dict)
+    ranking: list[Candidate] = field(default_factory=list)  #: the third round's candidates (with the pair)
+    free: list[Any] = field(default_factory=list, repr=False)
+    base: Optional[ModelSpec] = field(default=None, repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"pair": list(self.pair), "third": self.third.effect if self.third else None, "named": self.named,
+                "reason": self.reason, "heldout_rms": self.heldout_rms, "pair_heldout_rms": self.pair_heldout_rms,
+                "delta_bic_without": self.over_without, "triple": self.third.to_dict() if self.third else None,
+                "ranking": [c.to_dict() for c in self.ranking]}
+
+
+@dataclass
 class Diagnosis:
     """What `diagnose` found. `verdict` is a catalogue id; "none" (the calibrated nominal model
     leaves noise and no effect is supported); "unexplained" (a systematic residual remains that
@@ -226,6 +251,9 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
     #: the search for a second effect (run when one effect stood but left a systematic
     #: residual); verdict "first+second" when both stood
     second: Optional[SecondSearch] = None
+    #: the search for a third effect (run when a supported pair left a systematic residual);
+    #: verdict "first+second+third" when all three stood
+    third: Optional[ThirdSearch] = None
     #: the drive that would best tell the verdict from its near-parallel alternative (None when
     #: there is none)
     proposal: Optional["Proposal"] = None
@@ -238,14 +266,19 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
 
     @property
     def effects(self) -> list[str]:
-        """The catalogue effects the verdict names (none, one, or two for "first+second")."""
+        """The catalogue effects the verdict names (none, one, or two or three joined by "+")."""
         ids = {c.effect for c in self.ranking}
+        for search in (self.second, self.third):
+            ids |= {c.effect for c in search.ranking} if search is not None else set()
         return [v for v in self.verdict.split("+") if v in ids]
 
     @property
     def verdict_candidate(self) -> Optional[Candidate]:
         """The fitted model of the verdict: the named effect's candidate, or for two effects the
-        second's fitted with the first (its spec holds both); None otherwise."""
+        second's fitted with the first (its spec holds both), for three the third's fitted with
+        the pair; None otherwise."""
+        if self.verdict.count("+") == 2 and self.third is not None and self.third.named:
+            return self.third.third
         if "+" in self.verdict and self.second is not None and self.second.named:
             return self.second.pair
         return next((c for c in self.ranking if c.effect == self.verdict), None)
@@ -283,6 +316,7 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
             "discovery": self.discovery.to_dict() if self.discovery is not None else None,
             "effects": self.effects,
             "second_effect": self.second.to_dict() if self.second is not None else None,
+            "third_effect": self.third.to_dict() if self.third is not None else None,
             "next_experiment": self.proposal.to_dict() if self.proposal is not None else None,
             "determining_experiment": (self.parameter_proposal.to_dict() if self.parameter_proposal is not None
                                        else None),
