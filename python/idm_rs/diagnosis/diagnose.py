@@ -279,9 +279,13 @@ def _second_effect_stage(s: _State) -> None:
         elif joint is not None:
             second.reason += (f"; fitted jointly, {joint.first.effect} with "
                               f"{joint.pair.effect if joint.pair else '-'}: {joint.reason}")
+            if joint.alone is not None and (second.alone is None or joint.alone.chi2 < second.alone.chi2):
+                second.alone = joint.alone
     if second.named and second.pair is not None:
         s.verdict, s.reason, s.rms_after = (f"{second.first.effect}+{second.pair.effect}", second.reason,
                                             second.pair.rms_after)
+    elif second.alone is not None:
+        _second_alone(s, second)
     else:
         s.reason += f"; second effect: {second.reason}"
     s.second = second
@@ -296,6 +300,22 @@ def _second_effect_stage(s: _State) -> None:
             s.reason += f"; third effect: {third.reason}"
         s.third = third
         s.clock.lap("third effect")
+
+
+def _second_alone(s: _State, second: SecondSearch) -> None:
+    """The second effect alone, refitted from the pair's values, explains the residual and the
+    first round's leader does not pay its own way beside it: the verdict is the second alone
+    (its candidate replaces its first-round fit in the ranking)."""
+    alone = second.alone
+    assert alone is not None and s.pb is not None
+    s.ranking = [alone] + [c for c in s.ranking if c.effect != alone.effect]
+    note = ("; held-out prediction does not improve" if is_finite(alone.heldout_rms) and is_finite(s.ho_cal)
+            and alone.heldout_rms > s.ho_cal * 1.02 else "")
+    s.verdict, s.rms_after = alone.effect, alone.rms_after
+    s.reason = (f"{alone.effect} improves BIC by {alone.delta_bic:.0f} over the best null fit and leaves noise "
+                f"(RMS {alone.rms_after / s.pb.sigma:.2f} x noise){note}: found beside the first round's leader "
+                f"{second.first.effect} (which left RMS {second.first.rms_after / s.pb.sigma:.2f} x noise) and "
+                f"refitted alone from there; {second.first.effect} does not pay its own way beside it")
 
 
 def _discovery_stage(s: _State) -> None:

@@ -151,6 +151,10 @@ class SecondSearch:
     #: how the pair was found: False, from the first's optimum (screening and multistart fits);
     #: True, the two fitted together from the nominal values, each at its fit alone
     joint: bool = False
+    #: the second effect alone, refitted from the pair's values, where it explains the residual
+    #: and the first does not pay its own way beside it: the first round's leader only mimicked
+    #: part of it, and this is the answer (scored against the calibrated null)
+    alone: Optional[Candidate] = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -160,6 +164,7 @@ class SecondSearch:
             "first_heldout_rms": self.first_heldout_rms, "delta_bic_over_first": self.over_first,
             "delta_bic_over_second_alone": self.over_second_alone,
             "pair": self.pair.to_dict() if self.pair else None,
+            "alone": self.alone.to_dict() if self.alone else None,
             "ranking": [c.to_dict() for c in self.ranking],
         }
 
