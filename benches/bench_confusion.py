@@ -265,7 +265,8 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
             # discovery beyond the catalogue: whether it ran (the catalogue left a systematic
             # residual) and whether it named a term (a "discovered" verdict)
             "discovery_ran": d.discovery is not None, "discovered": d.verdict == "discovered",
-            "discovery_seconds": d.discovery.seconds if d.discovery is not None else 0.0}
+            "discovery_seconds": d.discovery.seconds if d.discovery is not None else 0.0,
+            "timings": dict(d.timings)}
 
 
 def _margin(d: Any) -> dict[str, Any]:

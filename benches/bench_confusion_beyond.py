@@ -179,7 +179,7 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
             "right_with_look_alike": right(c, d) or _look_alike_right(c, d),
             "reason": d.reason,
             "shares": d.second.shares if d.second is not None else {},
-            "discovery_seconds": found.seconds if found is not None else 0.0}
+            "discovery_seconds": found.seconds if found is not None else 0.0, "timings": dict(d.timings)}
 
 
 def _bound(k: int, n: int) -> str:

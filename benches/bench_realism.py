@@ -165,7 +165,8 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
     return {**c, **info, "truth": truth, "verdict": d.verdict, "right": d.verdict == truth, "seconds": seconds,
             "calibrated_over_noise": d.rms_calibrated / d.noise.sigma, "after_over_noise": d.rms_after / d.noise.sigma,
             "key_error": _key_error(d, c, info) if c["kind"] == "effect" else None,
-            "reason": d.reason, "noise_truth": noise_truth({**c, **info}), "noise_reported": reported, **_margin(d)}
+            "reason": d.reason, "noise_truth": noise_truth({**c, **info}), "noise_reported": reported, **_margin(d),
+            "timings": dict(d.timings)}
 
 
 def wilson(k: int, n: int) -> tuple[float, float]:
