@@ -349,6 +349,63 @@ def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_a
     assert diag_second_effect.joint_pair(pb, cal, refits[:1], heldout) is None
 
 
+def test_a_second_effect_that_explains_alone_is_the_answer_when_the_first_does_not_pay(monkeypatch):
+    """A drag on the weight led the first round at 1.4 x noise (mimicking part of a Stribeck
+    peak); Stribeck beside it leaves noise, and alone, refitted from the pair's values, leaves
+    noise as well (the drag does not pay its own way): the pair is not named, and the second
+    alone is offered as the answer (SecondSearch.alone), scored against the calibrated null."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from idm_rs.diagnosis.case_model import ModelSpec, Structure
+    from idm_rs.diagnosis.catalogue import by_id
+    from idm_rs.diagnosis.fitting import FitResult
+    from idm_rs.diagnosis.results import SecondSearch
+    from idm_rs.diagnosis.thresholds import CALIBRATED
+
+    sigma, n = 1e-9, 4_000
+    rng = np.random.default_rng(1)
+    p = idm_rs.Params().to_dict(resolved=False)
+    structure = Structure("lps", 1, False)
+    nominal_free = diag_problem.calibration_params(p)
+    level = {frozenset(): 9.0, frozenset({"c_weight"}): 2.0, frozenset({"c_weight", "mu_s_excess"}): 1.0,
+             frozenset({"mu_s_excess"}): 1.0005}
+
+    def fake_fit(obj, base, start, max_nfev, progress=None):
+        names = {f.name for f in start} - set(CALIBRATED)
+        ratio = level[frozenset(names)]
+        values = {f.name: f.x0 for f in start}
+        return FitResult(values, {k: 0.01 * abs(v) + 1e-12 for k, v in values.items()}, ratio * n, n,
+                         [rng.normal(0.0, sigma * math.sqrt(ratio), n)], [0.0], base, 10, True, "fake")
+
+    monkeypatch.setattr(diag_second_effect, "fit", fake_fit)
+    pb = SimpleNamespace(sigma=sigma, ln_n=math.log(n), n_offsets=1, obj=SimpleNamespace(n=n), tick=None)
+    null = fake_fit(None, ModelSpec(structure, p, {}), nominal_free, 0)
+    cal = SimpleNamespace(fit=null, free=nominal_free, bic=null.chi2 + (len(nominal_free) + 1) * pb.ln_n)
+    drag, strib = by_id("weight_friction"), by_id("stribeck")
+    first_start = [f.at(f.x0) for f in nominal_free] + [ep.free(20.0) for ep in drag.params]
+    first_fit = fake_fit(None, null.spec, first_start, 0)
+    first = diag_candidates.make_candidate(pb, cal, drag, first_fit, False)
+    pair_start = first_start + [ep.free(0.1) for ep in strib.params]
+    pair_fit = fake_fit(None, null.spec, pair_start, 0)
+    with_first = SimpleNamespace(fit=first_fit, free=first_start, bic=first.bic)
+    pair = diag_problem.Refit(diag_candidates.make_candidate(pb, with_first, strib, pair_fit, False), null.spec,
+                              pair_start)
+    heldout = SimpleNamespace(rms=lambda spec, free: 1.1 * sigma)
+    out = diag_second_effect.judge_pair(pb, cal, SecondSearch(first=first, first_heldout_rms=1.5 * sigma), pair,
+                                        first.chi2, heldout, [])
+    assert not out.named and "does not pay its own way" in out.reason
+    assert out.alone is not None and out.alone.effect == "stribeck"
+    assert out.alone.rms_after == pytest.approx(sigma, rel=0.05) and out.alone.delta_bic > 10
+    assert out.alone.heldout_rms == pytest.approx(1.1 * sigma)
+    # a second alone that does not leave noise is no answer
+    level[frozenset({"mu_s_excess"})] = 1.3
+    out = diag_second_effect.judge_pair(pb, cal, SecondSearch(first=first, first_heldout_rms=1.5 * sigma), pair,
+                                        first.chi2, heldout, [])
+    assert out.alone is None
+
+
 def test_a_form_that_fails_only_the_held_out_check_gets_the_drive_that_would_decide_it(monkeypatch):
     """Of the forms tried, the one with the lowest RMS among those that leave noise, gain by BIC
     and fail the held-out prediction is the one the drive is proposed for (its wavelength when
