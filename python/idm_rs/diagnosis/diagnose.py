@@ -33,11 +33,11 @@ from .candidates import (
     structural_calibrations,
     wide_search,
 )
-from .case_model import CaseSimulator
+from .case_model import CaseSimulator, ModelSpec
 from .catalogue import Effect
 from .discovery import Discovery, NumericalFailure
 from .discovery import discover as run_discovery
-from .fitting import Objective
+from .fitting import FreeParam, Objective
 from .locate import Location, locate, merge_windows
 from .next_experiment import ParameterProposal, Proposal
 from .noise import NoiseEstimate, cross_check, estimate_noise
@@ -93,6 +93,7 @@ class _State:
     lead: Optional[Refit] = None
     second: Optional[SecondSearch] = None
     third: Optional[ThirdSearch] = None
+    found_other: Optional[Discovery] = None
     found: Optional[Discovery] = None
     degenerate: list[tuple[str, str, float]] = field(default_factory=list)
     alternatives: list[Alternative] = field(default_factory=list)
@@ -334,8 +335,29 @@ def _discovery_stage(s: _State) -> None:
     if not is_finite(s.ho_cal):
         s.ho_cal = heldout.rms(cal.fit.spec, cal.at)
     d_spec, d_free, d_ho, d_lead = discovery_start(s.verdict, s.lead, cal, nominal, s.ho_cal)
+    was = (s.verdict, s.reason, s.rms_after)
+    _discover_from(s, d_spec, d_free, d_ho, d_lead, s.verdict == "not_converged")
+    if d_lead is not None and s.verdict in ("unexplained", "not_converged"):
+        # a first effect that leaves structure has not earned the right to shape the search:
+        # discovery from the calibrated model without it too, the data deciding (the path
+        # beside the first is kept in the JSON)
+        beside = s.found
+        s.verdict, s.reason, s.rms_after = was
+        _discover_from(s, cal.fit.spec, list(cal.at), s.ho_cal, None, False)
+        s.found_other = beside
+        if beside is not None and s.verdict in ("unexplained", "not_converged"):
+            s.reason += f"; discovery from the model with {d_lead.candidate.effect}: {beside.reason}"
+    s.clock.lap("discovery")
+
+
+def _discover_from(s: _State, spec: ModelSpec, free: list[FreeParam], ho: float, lead: Optional[Refit],
+                   from_nominal: bool) -> None:
+    """Discovery from `spec` (free calibrated parameters `free`, the held-out RMS `ho` [m] a
+    found term must beat, beside the first effect `lead` or None), settled into the verdict."""
+    pb, cal, nominal, heldout = s.pb, s.cal, s.nominal, s.heldout
+    assert pb is not None and cal is not None and nominal is not None and heldout is not None
     try:
-        found = run_discovery(s.rec, d_spec, d_free, pb.obj, heldout, d_ho, nominal=nominal.spec, progress=pb.tick)
+        found = run_discovery(s.rec, spec, free, pb.obj, heldout, ho, nominal=nominal.spec, progress=pb.tick)
     except DivergenceError as e:
         # a model the simulator cannot run through the inferred force: no discovery, said so
         s.reason += f"; discovery stopped: the simulator could not follow the inferred force ({e})"
@@ -343,8 +365,7 @@ def _discovery_stage(s: _State) -> None:
         s.reason += f"; discovery stopped by a numerical failure, which says nothing about the physics: {e}"
     else:
         s.found, s.verdict, s.reason, s.rms_after = settle_discovery(
-            pb, cal, heldout, s.ho_cal, found, d_lead, s.verdict == "not_converged", s.verdict, s.reason, s.rms_after)
-    s.clock.lap("discovery")
+            pb, cal, heldout, s.ho_cal, found, lead, from_nominal, s.verdict, s.reason, s.rms_after)
 
 
 def _next_experiment_stage(s: _State) -> None:
@@ -406,7 +427,8 @@ def _result(s: _State) -> Diagnosis:
         screening={k: v.delta_chi2 for k, v in sorted(s.screened.items(), key=lambda kv: -kv[1].delta_chi2)},
         degenerate_pairs=[list(p) for p in s.degenerate], searched_wide=s.searched_wide,
         calibration_multistart=cal.search.multistart.to_dict() if cal.search.multistart is not None else {},
-        discovery=s.found, second=s.second, third=s.third, proposal=s.proposal, parameter_proposal=s.parameter_proposal,
+        discovery=s.found, discovery_other=s.found_other, second=s.second, third=s.third,
+        proposal=s.proposal, parameter_proposal=s.parameter_proposal,
     )
 
 

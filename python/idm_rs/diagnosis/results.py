@@ -253,6 +253,9 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
     #: discovery beyond the catalogue (run when no catalogue effect explained the residual):
     #: verdict "discovered" when its found term stood; None when it did not run
     discovery: Optional["Discovery"] = None
+    #: where discovery ran from the model with a first effect that left structure and then from
+    #: the calibrated model without it: the path not taken (``discovery`` holds the other)
+    discovery_other: Optional["Discovery"] = None
     #: the search for a second effect (run when one effect stood but left a systematic
     #: residual); verdict "first+second" when both stood
     second: Optional[SecondSearch] = None
@@ -319,6 +322,7 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
             "degenerate_pairs": self.degenerate_pairs,
             "searched_wide": self.searched_wide,
             "discovery": self.discovery.to_dict() if self.discovery is not None else None,
+            "discovery_other_path": self.discovery_other.to_dict() if self.discovery_other is not None else None,
             "effects": self.effects,
             "second_effect": self.second.to_dict() if self.second is not None else None,
             "third_effect": self.third.to_dict() if self.third is not None else None,
