@@ -185,6 +185,7 @@ def test_a_healthy_device_under_strongly_coloured_noise_is_healthy(tmp_path: Pat
     assert d.verdict == "none", d.reason
     m = d.noise.model
     assert m is not None and m.coloured and abs(m.lag1 - 0.95) < 0.05
+    assert m.sigma == d.noise.sigma  # the level stated is the level every figure uses
     assert abs(d.noise.sigma / 4e-9 - 1.0) < 0.2
     assert d.rms_calibrated / d.noise.sigma < 1.1
 
@@ -206,8 +207,10 @@ def test_a_healthy_device_under_a_lab_artefact_is_healthy(tmp_path: Path, name: 
     assert m is not None
     if name.startswith("hum"):
         assert m.lines and m.lines[0][0] == 50.0 and abs(m.lines[0][1] / noise.hum[0][1] - 1) < 0.2
+    assert m.sigma == d.noise.sigma  # stated as used: a spike in the rest once doubled the stated level
     if name == "spikes":
         assert 12 <= m.outliers <= 15
+        assert abs(m.sigma / noise.rms - 1.0) < 0.2
     if name == "delay":
         assert m.delay_applied and abs(m.delay_s / 10e-6 - 1) < 0.2
     if name.endswith("drift"):

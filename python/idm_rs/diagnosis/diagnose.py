@@ -45,7 +45,7 @@ from .noise_model import Learned
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .progress import Clock, Progress, progress_bar
 from .proposals import determining_experiment, look_alike_experiment, separating_experiment, travel_experiment
-from .remeasure import artefacts_instead, remeasured
+from .remeasure import artefacts_instead, remeasured, synced
 from .results import Alternative, Candidate, Diagnosis, SecondSearch, ThirdSearch
 from .rules import better_of, by_rank, candidate_explains, is_finite, null_leaves_noise
 from .screening import Screened, near_degenerate
@@ -152,7 +152,7 @@ def _calibration_stage(s: _State) -> None:
     s.pb, cal, s.noise, s.learned = remeasured(s.pb, cal, s.nominal, s.noise)
     s.rec = s.pb.rec
     # the noise floor cross-checked against the calibrated residual's high-frequency content
-    s.noise = cross_check(s.noise, cal.fit.residuals)
+    s.noise = synced(cross_check(s.noise, cal.fit.residuals))
     s.pb, s.cal = renoised(s.pb, cal, s.noise)
     s.clock.lap("calibration")
 

@@ -115,7 +115,7 @@ def _recoloured(pb: Problem, pb2: Problem, cal2: CalibratedNull, noise: NoiseEst
     m2 = replace(m, whiten=Whitener.from_acf(colour.rho, colour.rho.size - 1))
     rec2 = replace(pb2.rec, measurement=m2)
     # the level with the colour: a 600-sample rest read a lag-1 0.84 noise of 1.46 nm as 1.31 nm
-    noise = replace(noise, sigma=colour.sigma, source="the calibrated residual (coloured)")
+    noise = synced(replace(noise, sigma=colour.sigma, source="the calibrated residual (coloured)"))
     pb3 = Problem(rec2, noise, pb2.sim, Objective(rec2, pb2.sim, noise.sigma), pb2.tick)
     r3, _ = pb3.obj.profiled(pred)
     chi2 = float(sum(float((x * x).sum()) for x in r3)) / noise.sigma**2
@@ -229,6 +229,13 @@ def _jacobians(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseE
             memo[m] = obj.jacobian(nominal.spec, cal.at, np.zeros(len(cal.at)))[1]
         return memo[m]
     return jac
+
+
+def synced(noise: NoiseEstimate) -> NoiseEstimate:
+    """The noise with its model's stated level set to the level every fit uses (the rest's
+    estimate is cross-checked against the residual after the model is learned: a spike in a
+    2 ms rest doubles the rest's RMS, the residual's, spikes rejected, does not)."""
+    return replace(noise, model=replace(noise.model, sigma=noise.sigma)) if noise.model is not None else noise
 
 
 def _noise_of(noise: NoiseEstimate, found: Learned) -> NoiseEstimate:
