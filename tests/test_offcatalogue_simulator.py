@@ -95,8 +95,11 @@ def test_matches_engine_with_general_friction_parameters() -> None:
     assert err < ENGINE_TOL, f"max |x1 - engine| = {err * 1e9:.4f} nm"
 
 
-#: the structures a recording can declare beside the plain LPS: (model, piezo hysteresis)
-STRUCTURES = [("lps", True), ("dps", False), ("dps", True)]
+#: the structures a recording can declare beside the plain LPS: (model, piezo hysteresis); the
+#: DPS 4 with hysteresis runs both the bar and the hysteresis (the default run), the others
+#: under -m slow
+STRUCTURES = [pytest.param("lps", True, marks=pytest.mark.slow), pytest.param("dps", False, marks=pytest.mark.slow),
+              ("dps", True)]
 
 
 def _structure_run(model: str, hysteresis: bool, extra=None, dt: float = 1e-7, **effects: float
