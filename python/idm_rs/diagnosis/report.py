@@ -136,13 +136,15 @@ def refit_parameter_rows(d: Diagnosis) -> list[list[str]]:
     if cand is None:
         return []
     rows: list[list[str]] = []
-    sec = getattr(d, "second", None)
-    if "+" in d.verdict and sec is not None and sec.pair is not None and sec.pair.spec is not None:
-        spec = sec.pair.spec
-        for ep in by_id(sec.first.effect).params:  # the first effect as refitted beside the second
-            v = spec.effects.get(ep.name, spec.params.get(ep.name))
-            if v is not None:
-                rows.append([ep.name, "–", pm(float(v), None, ep.unit) + _bound_note(ep.name, float(v)), "effect"])
+    spec = cand.spec
+    if "+" in d.verdict and spec is not None:
+        # the other named effects as refitted beside the last one (its model holds them all)
+        for other in [e for e in d.verdict.split("+") if e != cand.effect]:
+            for ep in by_id(other).params:
+                v = spec.effects.get(ep.name, spec.params.get(ep.name))
+                if v is not None:
+                    rows.append([ep.name, "–", pm(float(v), None, ep.unit) + _bound_note(ep.name, float(v)),
+                                 "effect"])
     for name, v, sd in candidate_params(cand):
         rows.append([name, "–", pm(v, sd, _unit(name)) + _bound_note(name, v), "effect"])
     return rows + calibrated_rows(d, cand.calibrated, cand.calibrated_std)
