@@ -171,6 +171,28 @@ def test_hum_and_a_drifting_zero_are_told_apart_on_records_of_one_or_two_mains_p
         assert abs(drift - truth) < max(0.2 * abs(truth), 2e-9), (drift, truth)
 
 
+def test_a_residual_that_repeats_with_the_drive_is_told_from_noise() -> None:
+    # the recolouring's guard where the residual's colour disagrees with the rest's (1/f noise):
+    # noise does not repeat from one drive cycle to the next, a missing effect does
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis.remeasure import repeats_z
+
+    rng = np.random.default_rng(4)
+    exps = [SimpleNamespace(is_sampled=False, cycles=3, frequency_Hz=100.0, rest_s=0.002) for _ in range(3)]
+    rec = SimpleNamespace(experiments=exps, sample_rate_Hz=1e5)
+    n = 200 + 3 * 1000
+    zs = [repeats_z(rec, [rng.normal(0.0, 1.0, n) for _ in exps]) for _ in range(200)]
+    assert abs(float(np.mean(zs))) < 0.25 and 0.8 < float(np.std(zs)) < 1.2  # N(0, 1)
+    pattern = np.sin(2 * math.pi * np.arange(1000) / 1000 * 7) * math.sqrt(2)  # unit RMS, one cycle
+    effect = np.r_[np.zeros(200), np.tile(pattern, 3)]
+    z = repeats_z(rec, [rng.normal(0.0, 1.0, n) + 0.3 * effect for _ in exps])
+    assert z > 6.0  # 0.3 x noise repeating: 0.09 sqrt(1000) per pair, 9 pairs: ~8.5
+    assert math.isnan(repeats_z(SimpleNamespace(experiments=[SimpleNamespace(is_sampled=True, cycles=1,
+                                                                             frequency_Hz=0.0, rest_s=0.0)],
+                                                sample_rate_Hz=1e5), [np.zeros(10)]))
+
+
 def _healthy(tmp: Path, noise: SensorNoise, **kw) -> Path:
     true = idm_rs.Params()
     nominal = true.replace(m2=true.m2 * 1.1, mu_k=true.mu_k * 0.93, normal_force=true.effective_normal_force)

@@ -24,7 +24,15 @@ from .noise import NoiseEstimate, whiteness_z
 from .noise_model import Learned, Residuals, delay_significant, find_delay, find_drift, find_lines, fit_colour, learn
 from .problem import CalibratedNull, Nominal, Problem
 from .rules import null_leaves_noise
-from .thresholds import DELAY_PROGRESS, DELAY_ROUNDS, DELAY_TOL_S, RECOLOUR_SIGMAS, REMEASURE_NFEV, SEPARATION
+from .thresholds import (
+    DELAY_PROGRESS,
+    DELAY_ROUNDS,
+    DELAY_TOL_S,
+    RECOLOUR_SIGMAS,
+    REMEASURE_NFEV,
+    REPEAT_Z,
+    SEPARATION,
+)
 
 
 def remeasured(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate
@@ -112,16 +120,25 @@ def _recoloured(pb: Problem, pb2: Problem, cal2: CalibratedNull, noise: NoiseEst
     if not all(np.all(np.isfinite(r)) for r in res):
         return None
     colour = fit_colour(res)
-    if colour is None or colour.rho.size < 2 or not _agrees(colour.rho, m.whiten, pb.rec):
+    if colour is None or colour.rho.size < 2:
         return None
-    if abs(colour.sigma / noise.sigma - 1.0) > RECOLOUR_SIGMAS * _level_uncertainty(pb.rec, _lag1(m.whiten)):
-        return None  # a residual that holds more than noise: its level is not the noise's
+    agrees = _agrees(colour.rho, m.whiten, pb.rec) and abs(colour.sigma / noise.sigma - 1.0) <= (
+        RECOLOUR_SIGMAS * _level_uncertainty(pb.rec, _lag1(m.whiten)))
     m2 = replace(m, whiten=Whitener.from_acf(colour.rho, colour.rho.size - 1))
     rec2 = replace(pb2.rec, measurement=m2)
     # the level with the colour: a 600-sample rest read a lag-1 0.84 noise of 1.46 nm as 1.31 nm
-    noise = synced(replace(noise, sigma=colour.sigma, source="the calibrated residual (coloured)"))
+    noise = replace(noise, sigma=colour.sigma, source="the calibrated residual (coloured)")
+    if noise.model is not None:
+        note = () if agrees else ("the colour read off the whole residual is stronger than the rest's (1/f noise "
+                                  "reads so over a whole file); it does not repeat with the drive",)
+        noise = replace(noise, model=replace(noise.model, order=int(colour.rho.size - 1), lag1=float(colour.rho[1]),
+                                             rho=tuple(float(v) for v in colour.rho),
+                                             notes=noise.model.notes + note))
+    noise = synced(noise)
     pb3 = Problem(rec2, noise, pb2.sim, Objective(rec2, pb2.sim, noise.sigma), pb2.tick)
     r3, _ = pb3.obj.profiled(pred)
+    if not agrees and not repeats_z(pb.rec, [x / noise.sigma for x in r3]) <= REPEAT_Z:
+        return None  # stronger and louder than the rest's, and repeating with the drive: an effect
     chi2 = float(sum(float((x * x).sum()) for x in r3)) / noise.sigma**2
     fit3 = replace(cal2.fit, residuals=r3, chi2=chi2, jac=None)
     bic = chi2 + (len(cal2.free) + pb3.n_offsets) * pb3.ln_n
@@ -259,6 +276,28 @@ def _noise_of(noise: NoiseEstimate, found: Learned) -> NoiseEstimate:
         return noise
     return replace(noise, sigma=m.sigma, rest_sigma=m.sigma, relative_uncertainty=_level_uncertainty(found.rec, m.lag1),
                    source="rest (coloured)")
+
+
+def repeats_z(rec: Recording, w: list[NDArray[np.float64]]) -> float:
+    """How much a residual repeats from one drive cycle to the next: the sum over every pair of
+    cycles of a file (sawtooth drives: whole periods after the rest) of the inner product of the
+    whitened residual `w` (noise units, per experiment) over the pair, each divided by the root
+    of the cycle's samples, over the root of the number of pairs. N(0, 1) for white noise of unit
+    variance; large and positive for a missing effect (deterministic: it repeats with the drive).
+    NaN where no file has two whole cycles."""
+    total, pairs = 0.0, 0
+    for e, r in zip(rec.experiments, w):
+        if e.is_sampled or e.cycles < 2 or not e.frequency_Hz > 0:
+            continue
+        n = int(round(rec.sample_rate_Hz / e.frequency_Hz))
+        s0 = int(round(e.rest_s * rec.sample_rate_Hz))
+        cycles = [r[s0 + k * n: s0 + (k + 1) * n] for k in range(e.cycles)]
+        cycles = [c for c in cycles if c.size == n and np.all(np.isfinite(c))]
+        for a in range(len(cycles)):
+            for b in range(a + 1, len(cycles)):
+                total += float(cycles[a] @ cycles[b]) / math.sqrt(n)
+                pairs += 1
+    return total / math.sqrt(pairs) if pairs else math.nan
 
 
 def _refit(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, rec: Recording,

@@ -98,6 +98,12 @@ DELAY_PROGRESS = 0.9
 #: within this many standard errors of the rest estimate's (a healthy device's residual is noise:
 #: they agree; one that holds a missing effect reads a far stronger correlation)
 RECOLOUR_SIGMAS = 3.0
+#: where the residual's colour or level disagrees with the rest's, it is still noise (1/f noise
+#: reads stronger over a whole file than over a detrended 2 ms rest) when its whitened residual
+#: does not repeat from one drive cycle to the next: the sum over cycle pairs of their inner
+#: products is N(0, 1) for noise (z below this, one-sided p 0.0013), and a missing effect
+#: repeats with the drive
+REPEAT_Z = 3.0
 #: least-squares evaluations of the null's refit in the measurement's metric (it starts at the
 #: calibrated optimum, which the white metric already found: a few Gauss-Newton steps)
 REMEASURE_NFEV = 8
