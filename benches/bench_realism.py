@@ -125,7 +125,10 @@ def noise_truth(c: dict[str, Any]) -> dict[str, Any]:
     # a reading coarser than its noise: the rounding error (resolution^2 / 12) is noise too
     out: dict[str, Any] = {"sigma": math.sqrt(sigma**2 + res**2 / 12.0) if res > sigma else sigma}
     ar = s.get("ar") or []
-    out["lag1"] = ar[0] if ar else None
+    # under a reading coarser than its noise the rounding error is part of the reading's noise,
+    # correlated where the coloured noise moves less than a step: the reading's lag-1 is neither
+    # the sensor's nor a mixture with white rounding, so no truth to hold it to
+    out["lag1"] = ar[0] if ar and not res > sigma else None
     out["line"] = s["hum"][0][1] if s.get("hum") else None
     out["delay"] = s.get("delay_s")
     out["spikes"] = 3 * s["outliers"] if s.get("outliers") else None
@@ -207,6 +210,11 @@ def summary(rows: list[dict[str, Any]]) -> str:
         ok_n = [o for o in ok if o is not None]
         lvl = f"{sum(ok_n)}/{len(ok_n)} ({key})" if ok_n else "-"
         out.append(f"| {a} | {len(rs)} | {sum(1 for r in rs if r['verdict'] == 'none')} | {others} | {lvl} |")
+    no_hum = [r for r in healthy if "hum" not in r["artefacts"]]
+    spurious = [r for r in no_hum if r["noise_reported"].get("line") is not None]
+    out += ["", f"a hum line reported on a device without hum: {len(spurious)} of {len(no_hum)}"
+            + (" (" + ", ".join(f"case {r['id']}: {'+'.join(r['artefacts'])}" for r in spurious) + ")"
+               if spurious else "")]
     if effects:
         right = sum(1 for r in effects if r["right"])
         lo, hi = wilson(right, len(effects))
