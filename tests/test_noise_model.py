@@ -219,6 +219,8 @@ def test_a_healthy_device_under_strongly_coloured_noise_is_healthy(tmp_path: Pat
     ("delay", SensorNoise(rms=1.5e-9, delay_s=10e-6), {}),
     ("drift", SensorNoise(rms=1.5e-9, drift_m=(5e-9, 30e-9)), {}),
     ("hum+drift", SensorNoise(rms=1.2e-9, hum=((50.0, 2.2e-9),), drift_m=(5e-9, 30e-9)), {}),
+    # 1/f noise: over a whole file louder and more correlated than over the 2 ms rests
+    ("pink", SensorNoise(rms=1.5e-9, pink=0.9), {}),
     # the hum hidden in the residual of a null that mimics a 9 us delay (16 x noise)
     ("delay+hum", SensorNoise(rms=1.1e-9, delay_s=9e-6, hum=((50.0, 1.9e-9),)), {}),
     ("resolution", SensorNoise(rms=1e-9), {"resolution": 4e-9}),
