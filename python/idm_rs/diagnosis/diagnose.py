@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Optional, Union
 
@@ -45,7 +45,7 @@ from .noise_model import Learned
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .progress import Clock, Progress, progress_bar
 from .proposals import determining_experiment, look_alike_experiment, separating_experiment, travel_experiment
-from .remeasure import artefacts_instead, remeasured, synced
+from .remeasure import artefacts_instead, relearned, remeasured, synced
 from .results import Alternative, Candidate, Diagnosis, SecondSearch, ThirdSearch
 from .rules import better_of, by_rank, candidate_explains, is_finite, null_leaves_noise
 from .screening import Screened, near_degenerate
@@ -55,6 +55,7 @@ from .thresholds import (
     FIT_DT,
     NULL_REFITS,
     REFIT_TOP,
+    SEPARATION,
 )
 from .verdict import alternatives_to, decide_verdict, rank_with_heldout
 
@@ -94,6 +95,7 @@ class _State:
     second: Optional[SecondSearch] = None
     third: Optional[ThirdSearch] = None
     found_other: Optional[Discovery] = None
+    learned_chi2: float = math.inf  #: the null's chi^2 the artefacts were learned against
     found: Optional[Discovery] = None
     degenerate: list[tuple[str, str, float]] = field(default_factory=list)
     alternatives: list[Alternative] = field(default_factory=list)
@@ -154,6 +156,7 @@ def _calibration_stage(s: _State) -> None:
     # the noise floor cross-checked against the calibrated residual's high-frequency content
     s.noise = synced(cross_check(s.noise, cal.fit.residuals))
     s.pb, s.cal = renoised(s.pb, cal, s.noise)
+    s.learned_chi2 = s.cal.fit.chi2
     s.clock.lap("calibration")
 
 
@@ -227,12 +230,18 @@ def _heldout_stage(s: _State) -> None:
 
 
 def _verdict_stage(s: _State) -> None:
-    assert s.pb is not None and s.cal is not None
+    assert s.pb is not None and s.cal is not None and s.nominal is not None
     s.locations, windows = locate(s.rec, s.cal.fit.residuals, s.pb.sigma)
     s.spans = merge_windows(windows, s.pb.sigma)
     s.verdict, s.reason, s.rms_after = decide_verdict(s.ranking, s.cal, s.noise, s.ho_cal, s.searched_wide)
-    if s.verdict != "none" and s.learned is not None and s.learned.weighable:
-        _artefact_check(s)
+    if s.verdict != "none" and s.learned is not None:
+        if s.cal.fit.chi2 < s.learned_chi2 - SEPARATION:
+            # the null refitted from the candidates' optima left the calibration's far behind:
+            # its residual, not the calibration's misfit, says what the reading carries
+            s.learned = relearned(s.pb, s.cal, s.nominal, s.noise, s.learned)
+            s.noise = synced(replace(s.noise, model=s.learned.model))
+        if s.learned.weighable:
+            _artefact_check(s)
 
 
 def _artefact_check(s: _State) -> None:

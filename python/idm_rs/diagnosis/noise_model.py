@@ -507,21 +507,40 @@ def learn(rec: Recording, preds: Sequence[NDArray[np.float64]], sigma: float,
         m, s = measurement_of(colour)
         s = s if colour is not None else sigma
         lines = find_lines(res, m, s) or lines
+    rho = colour.rho if colour is not None and colour.rho.size > 1 else np.ones(1)
+    model = NoiseModel(
+        sigma=s if colour is not None and colour.rho.size > 1 else sigma, order=int(rho.size - 1),
+        lag1=float(rho[1]) if rho.size > 1 else 0.0, rho=tuple(float(v) for v in rho), lines=lines,
+        resolution=float(rec.resolution_m), outliers=n_out)
+    return _with_artefacts(res, m, s, lines, model)
+
+
+def _with_artefacts(res: Residuals, m: Measurement, s: float, lines: tuple[tuple[float, float], ...],
+                    model: NoiseModel) -> Learned:
+    """What :func:`learn` found, the delay and a drifting zero tested on `res` in the metric of
+    `m` (noise level `s` [m]) beside the hum `lines`, into `model`."""
     with_lines = replace(m, lines_Hz=tuple(f for f, _ in lines))
     # the delay before the drift: a late reading leaves a trend of its own in each file (the slow
     # phase read late), which the drift test would take for a drifting zero
     tau, gain, _ = find_delay(res, with_lines, s)
     drift, drift_m, common = find_drift(res, with_lines.with_delay(tau) if delay_significant(gain, tau) else with_lines,
                                         s)
-    notes = []
+    notes = [n for n in model.notes if "drifts alike" not in n]
     if common and not drift:
         notes.append("the reading drifts alike in every file: a sensor zero drifting so cannot be told "
                      "from the catalogue's thermal drift")
-    rho = colour.rho if colour is not None and colour.rho.size > 1 else np.ones(1)
-    model = NoiseModel(
-        sigma=s if colour is not None and colour.rho.size > 1 else sigma, order=int(rho.size - 1),
-        lag1=float(rho[1]) if rho.size > 1 else 0.0, rho=tuple(float(v) for v in rho), lines=lines,
-        resolution=float(rec.resolution_m), outliers=n_out, delay_s=tau, drift_m=drift_m if drift else (),
-        notes=tuple(notes))
-    return Learned(rec, m, model, with_lines.lines_Hz, drift, tau, gain)
+    model = replace(model, lines=lines, delay_s=tau, drift_m=drift_m if drift else (), notes=tuple(notes))
+    return Learned(res.rec, m, model, with_lines.lines_Hz, drift, tau, gain)
+
+
+def relearn(rec: Recording, preds: Sequence[NDArray[np.float64]], sigma: float, found: Learned,
+            jac_of: Optional[Callable[[Recording, Measurement], Optional[NDArray[np.float64]]]] = None) -> Learned:
+    """The hum, a drifting zero and a delay tested again against a later null's prediction
+    `preds` on the recording as cleaned (`rec`, its colour kept: `found.measurement`): the null
+    the calibration returned can sit far from the data (four values mis-set: 29 x noise, a
+    residual whose slopes were its own misfit) where the null refitted from the candidates'
+    optima reaches noise."""
+    res = Residuals.of(rec, preds, (lambda m: jac_of(rec, m)) if jac_of is not None else None)
+    m = replace(found.measurement, lines_Hz=(), drift=False, delay_s=0.0)
+    return _with_artefacts(res, m, sigma, find_lines(res, m, sigma), found.model)
 

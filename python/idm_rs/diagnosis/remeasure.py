@@ -21,7 +21,17 @@ from .case_model import ModelSpec
 from .fitting import Objective, apply, fit
 from .measurement import Measurement, Whitener
 from .noise import NoiseEstimate, whiteness_z
-from .noise_model import Learned, Residuals, delay_significant, find_delay, find_drift, find_lines, fit_colour, learn
+from .noise_model import (
+    Learned,
+    Residuals,
+    delay_significant,
+    find_delay,
+    find_drift,
+    find_lines,
+    fit_colour,
+    learn,
+    relearn,
+)
 from .problem import CalibratedNull, Nominal, Problem
 from .rules import null_leaves_noise
 from .thresholds import (
@@ -46,6 +56,13 @@ def remeasured(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseE
         return pb, cal, noise, found  # the white path as it was
     pb2, cal2 = _refit(pb, cal, nominal, noise, found.rec, found.measurement)
     return pb2, cal2, noise, found
+
+
+def relearned(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, found: Learned) -> Learned:
+    """The hum, a drifting zero and a delay tested again against the null `cal` (refitted since
+    the calibration from the candidates' optima), on the recording as the fits take it."""
+    preds = pb.sim.predict([cal.fit.spec])[0]
+    return relearn(pb.rec, preds, noise.sigma, found, _jacobians(pb, cal, nominal, noise))
 
 
 def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, found: Learned,
