@@ -184,8 +184,10 @@ def wilson(k: int, n: int) -> tuple[float, float]:
 
 
 def _within(rep: Optional[float], true: Optional[float], tol: float = 0.2) -> Optional[bool]:
-    if true is None or rep is None or not true:
+    if true is None or not true:
         return None
+    if rep is None:
+        return False  # there, and not found
     return abs(rep / true - 1.0) <= tol
 
 
