@@ -171,6 +171,29 @@ def test_hum_and_a_drifting_zero_are_told_apart_on_records_of_one_or_two_mains_p
         assert abs(drift - truth) < max(0.2 * abs(truth), 2e-9), (drift, truth)
 
 
+def test_artefacts_are_read_again_off_a_null_that_reaches_the_data(tmp_path: Path) -> None:
+    # a calibration far from the data (here: d33 12 % off) leaves per-file slopes of its own
+    # misfit, and the rest disagrees with them: no drifting zero is found. Against the null
+    # refitted to the data the zero's drift is found, and the colour learned first is kept
+    from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
+    from idm_rs.diagnosis.noise_model import learn, relearn
+    from idm_rs.recording import load_case
+
+    p = idm_rs.Params()
+    rec = load_case(make_case(tmp_path / "d", nominal_params=p, experiments=EXPERIMENTS, resolution=0.0, seed=5,
+                              dt=2e-8, noise=SensorNoise(rms=1.2e-9, ar=(0.6,), drift_m=(15e-9, 30e-9))))
+    sim = CaseSimulator(rec, dt=1e-7)
+
+    def preds(params):
+        return sim.predict([ModelSpec(Structure("lps", 1, False), params.to_dict(resolved=False), {})])[0]
+
+    far = learn(rec, preds(p.replace(d33=p.d33 * 1.12)), 1.2e-9)
+    assert not far.drift
+    again = relearn(far.rec, preds(p), 1.2e-9, far)
+    assert again.drift and again.measurement == far.measurement and again.model.order == far.model.order
+    assert all(abs(d) > 10e-9 for d in again.model.drift_m)
+
+
 def test_a_residual_that_repeats_with_the_drive_is_told_from_noise() -> None:
     # the recolouring's guard where the residual's colour disagrees with the rest's (1/f noise):
     # noise does not repeat from one drive cycle to the next, a missing effect does
