@@ -48,33 +48,10 @@ def search_second_effect(pb: Problem, cal: CalibratedNull, lead: Refit, heldout:
     BIC_THRESHOLD (else the first round's leader only mimicked part of the second)."""
     first = lead.candidate
     out = SecondSearch(first=first, first_heldout_rms=first.heldout_rms)
-    r1 = fit(pb.obj, lead.base, lead.free, max_nfev=POLISH_NFEV, progress=pb.tick)
-    at1 = [f.at(r1.values[f.name]) for f in lead.free]
-    bic1 = r1.chi2 + (len(at1) + pb.n_offsets) * pb.ln_n
-    # the second round's starts: the first's optimum ("null fit") and, always fitted, the nominal
-    # values as given with the first effect at its fit ("nominal values"): with two effects
-    # missing, the calibration can sit in a basin that compensates both, which no local fit
-    # from it leaves (an incline and a spring with the masses mis-set: m1, m2 and mu_k moved
-    # 13-15 % to mimic them and the pair stopped at 5.5 x noise)
-    calibrated_names = {f.name for f in cal.free}
-    nominal_start = list(cal.free) + [f for f in at1 if f.name not in calibrated_names]
-    # ignore: no population search behind this null (search None, which candidate_starts handles)
-    with_first = CalibratedNull(nominal_start, r1, at1, r1, at1, bic1, whiteness_z(r1.residuals), None)  # type: ignore[arg-type]
-    structure = r1.spec.structure
-    effects = [e for e in CATALOGUE if e.id != first.effect and e.applies(structure, r1.spec.params)]
-    if not effects:
+    r1, with_first, ranked = round_beside(pb, cal, lead.base, lead.free, {first.effect}, wide=True)
+    if ranked is None:
         out.reason = f"no other catalogue effect applies beside {first.effect}"
         return out
-    screened = {s.effect.id: s for s in screen(pb.obj, r1, at1, effects, pb.sigma, pb.tick)}
-    order = sorted(effects, key=lambda e: -screened[e.id].delta_chi2)
-    refits = fit_candidates(pb, with_first, order, screened, SECOND_TOP)
-    polish_leaders(pb, with_first, refits)
-    if not any(candidate_explains(pb, r.candidate) for r in refits):
-        # as in the first round: every candidate's own population search (over the first
-        # effect's parameters too) before the answer may be "no second effect"
-        refits = wide_search(pb, with_first, order, screened, refits)
-        polish_leaders(pb, with_first, refits)
-    ranked = by_rank(refits)
     out.ranking = [r.candidate for r in ranked]
     best = next((r for r in ranked if is_eligible(r.candidate)), None)
     if best is None:
@@ -84,6 +61,43 @@ def search_second_effect(pb: Problem, cal: CalibratedNull, lead: Refit, heldout:
         return out
     best = rescanned(pb, with_first, next(e for e in CATALOGUE if e.id == best.candidate.effect), best)
     return judge_pair(pb, cal, out, best, r1.chi2, heldout, first_round)
+
+
+def round_beside(pb: Problem, cal: CalibratedNull, base: ModelSpec, free: list[FreeParam], named: set[str],
+                 wide: bool) -> tuple[FitResult, CalibratedNull, Optional[list[Refit]]]:
+    """A round of the search from the model with the effects `named` (`base`, `free` at their
+    fit): that model refitted to convergence becomes the round's null, every other applicable
+    effect is screened there, the SECOND_TOP best scored fitted by multistart with the named
+    effects' parameters and the calibrated subset free, the leader polished (with `wide`, every
+    candidate's own population search where none explains, as in the first round). Returns (the
+    refitted model, the round's null, its candidates in rank order; None where no other effect
+    applies)."""
+    r = fit(pb.obj, base, free, max_nfev=POLISH_NFEV, progress=pb.tick)
+    at = [f.at(r.values[f.name]) for f in free]
+    bic = r.chi2 + (len(at) + pb.n_offsets) * pb.ln_n
+    # the round's starts: the named effects' optimum ("null fit") and, always fitted, the nominal
+    # values as given with the named effects at their fit ("nominal values"): with two effects
+    # missing, the calibration can sit in a basin that compensates both, which no local fit
+    # from it leaves (an incline and a spring with the masses mis-set: m1, m2 and mu_k moved
+    # 13-15 % to mimic them and the pair stopped at 5.5 x noise)
+    calibrated_names = {f.name for f in cal.free}
+    nominal_start = list(cal.free) + [f for f in at if f.name not in calibrated_names]
+    # ignore: no population search behind this null (search None, which candidate_starts handles)
+    null = CalibratedNull(nominal_start, r, at, r, at, bic, whiteness_z(r.residuals), None)  # type: ignore[arg-type]
+    structure = r.spec.structure
+    effects = [e for e in CATALOGUE if e.id not in named and e.applies(structure, r.spec.params)]
+    if not effects:
+        return r, null, None
+    screened = {s.effect.id: s for s in screen(pb.obj, r, at, effects, pb.sigma, pb.tick)}
+    order = sorted(effects, key=lambda e: -screened[e.id].delta_chi2)
+    refits = fit_candidates(pb, null, order, screened, SECOND_TOP)
+    polish_leaders(pb, null, refits)
+    if wide and not any(candidate_explains(pb, r.candidate) for r in refits):
+        # as in the first round: every candidate's own population search (over the named
+        # effects' parameters too) before the answer may be "no further effect"
+        refits = wide_search(pb, null, order, screened, refits)
+        polish_leaders(pb, null, refits)
+    return r, null, by_rank(refits)
 
 
 def rescanned(pb: Problem, null: CalibratedNull, eff: Effect, best: Refit) -> Refit:

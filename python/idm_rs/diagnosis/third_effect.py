@@ -5,16 +5,14 @@ pair) plus each of the pair paying its own way beside the other two."""
 
 from __future__ import annotations
 
-from .candidates import fit_candidates, polish_leaders
 from .case_model import ModelSpec
 from .catalogue import CATALOGUE, Effect
 from .fitting import FreeParam, fit
-from .noise import whiteness_z
 from .problem import CalibratedNull, HeldOut, Problem, Refit
 from .results import SecondSearch, ThirdSearch
-from .rules import by_rank, candidate_explains, is_eligible, is_finite
-from .screening import screen
-from .thresholds import BIC_THRESHOLD, POLISH_NFEV, SECOND_TOP
+from .rules import candidate_explains, is_eligible, is_finite
+from .second_effect import round_beside
+from .thresholds import BIC_THRESHOLD, POLISH_NFEV
 
 
 def wants_third(pb: Problem, second: SecondSearch) -> bool:
@@ -36,23 +34,10 @@ def search_third_effect(pb: Problem, cal: CalibratedNull, second: SecondSearch, 
     assert pair is not None and second.base is not None  # wants_third
     names = (second.first.effect, pair.effect)
     out = ThirdSearch(pair=names, pair_heldout_rms=second.heldout_rms)
-    r2 = fit(pb.obj, second.base, second.free, max_nfev=POLISH_NFEV, progress=pb.tick)
-    at2 = [f.at(r2.values[f.name]) for f in second.free]
-    bic2 = r2.chi2 + (len(at2) + pb.n_offsets) * pb.ln_n
-    calibrated_names = {f.name for f in cal.free}
-    nominal_start = list(cal.free) + [f for f in at2 if f.name not in calibrated_names]
-    # ignore: no population search behind this null (search None, which candidate_starts handles)
-    with_pair = CalibratedNull(nominal_start, r2, at2, r2, at2, bic2, whiteness_z(r2.residuals), None)  # type: ignore[arg-type]
-    structure = r2.spec.structure
-    effects = [e for e in CATALOGUE if e.id not in names and e.applies(structure, r2.spec.params)]
-    if not effects:
+    _, _, ranked = round_beside(pb, cal, second.base, second.free, set(names), wide=False)
+    if ranked is None:
         out.reason = f"no other catalogue effect applies beside {names[0]} and {names[1]}"
         return out
-    screened = {s.effect.id: s for s in screen(pb.obj, r2, at2, effects, pb.sigma, pb.tick)}
-    order = sorted(effects, key=lambda e: -screened[e.id].delta_chi2)
-    refits = fit_candidates(pb, with_pair, order, screened, SECOND_TOP)
-    polish_leaders(pb, with_pair, refits)
-    ranked = by_rank(refits)
     out.ranking = [r.candidate for r in ranked]
     best = next((r for r in ranked if is_eligible(r.candidate)), None)
     if best is None:
