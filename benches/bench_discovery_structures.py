@@ -29,8 +29,6 @@ import json
 import math
 import sys
 import tempfile
-import time
-import warnings
 from pathlib import Path
 from typing import Any, Optional
 
@@ -39,7 +37,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
-from bench_confusion import _misset  # noqa: E402
+from bench_confusion import _misset, diagnosed  # noqa: E402
 from bench_confusion_beyond import _bound, _look_alike_right, right  # noqa: E402
 
 #: (name, model, piezo hysteresis)
@@ -193,18 +191,13 @@ def write_device(directory: Path, c: dict[str, Any], rng: np.random.Generator) -
 
 
 def run_case(c: dict[str, Any], tmp: Path, seed: int, diagnose: bool = True) -> dict[str, Any]:
-    import idm_rs
 
     rng = np.random.default_rng([seed, 2000 + c["id"]])
     directory = tmp / f"case{c['id']:03d}"
     info = write_device(directory, c, rng)
     if not diagnose:
         return {**c, **info}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        t0 = time.perf_counter()
-        d = idm_rs.diagnose(directory, progress=False)
-        seconds = time.perf_counter() - t0
+    d, seconds = diagnosed(directory)
     found = d.discovery
     out = d.to_dict()
     return {**c, **info, "verdict": d.verdict, "right": right(c, d), "seconds": seconds,
