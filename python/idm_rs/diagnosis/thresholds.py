@@ -297,7 +297,7 @@ PRUNE_ROUNDS = 3
 #: least-squares evaluations of the refit with the found terms
 DISCOVERY_REFIT_NFEV = 25
 #: forms found beside a first effect that did not stand, refitted alone (lowest RMS first):
-#: beside the spurious effect the form nearest noise need not be the true one (session 21: the
+#: beside the spurious effect the form nearest noise need not be the true one (RESULTS §21: the
 #: 11.8 um periodic friction's true form came second, 1.05 against 1.04 x noise); each costs
 #: a refit and its elimination (~1-3 minutes on one core)
 ALONE_FORMS = 3
