@@ -14,6 +14,7 @@ import pytest
 
 import idm_rs
 from idm_rs.diagnosis import plot_diagnosis, text_report
+from idm_rs.interrupted import interrupted
 from idm_rs.synthetic import make_case
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -233,7 +234,9 @@ def test_ctrl_c_keeps_what_was_finished(spring_case, tmp_path, capsys, monkeypat
         raise KeyboardInterrupt
 
     monkeypatch.setattr(module, "calibrate_null", stop)
-    d = idm_rs.diagnose(spring_case, progress=False)
+    with pytest.raises(KeyboardInterrupt, match="during the calibration") as stopped:
+        idm_rs.diagnose(spring_case, progress=False)
+    d = idm_rs.partial_result(stopped.value)
     assert d.verdict == "interrupted" and not d.complete
     assert "stopped by Ctrl-C during the calibration" in d.reason
     assert d.rms_before > 0 and math.isnan(d.rms_calibrated) and d.ranking == []
@@ -279,7 +282,9 @@ def test_an_interrupted_diagnosis_reports_and_plots_only_what_finished(spring_ca
         raise KeyboardInterrupt
 
     monkeypatch.setattr(module, "screen_candidates", stop)
-    d = idm_rs.diagnose(spring_case, progress=False)
+    with pytest.raises(KeyboardInterrupt) as stopped:
+        idm_rs.diagnose(spring_case, progress=False)
+    d = idm_rs.partial_result(stopped.value)
     assert not d.complete and math.isfinite(d.rms_calibrated)
     text = text_report(d)
     assert "unexplained" not in text and "no systematic time window" not in text
@@ -290,6 +295,9 @@ def test_an_interrupted_diagnosis_reports_and_plots_only_what_finished(spring_ca
     assert names == sorted([f"fit_{e.name}.png" for e in d.recording.experiments]
                            + ["residual_phases.png", "rms_story.png"]), names
     # the command line on the same result (one interrupted run is enough: minutes of CI)
-    monkeypatch.setattr(importlib.import_module("idm_rs.diagnosis"), "diagnose", lambda *args, **kwargs: d)
+    def stopped_diagnose(*args, **kwargs):
+        raise interrupted("diagnose interrupted", partial=d)
+
+    monkeypatch.setattr(importlib.import_module("idm_rs.diagnosis"), "diagnose", stopped_diagnose)
     assert main(["diagnose", str(spring_case), "--plots", str(tmp_path / "cli"), "--no-progress"]) == 130
     assert "figures (of what finished before the interrupt)" in capsys.readouterr().out

@@ -375,9 +375,10 @@ def test_ctrl_c_keeps_the_finished_kernel_blocks(monkeypatch):
 
     monkeypatch.setattr(gpu, "run_cpu", interrupted)
     g = {"voltage": np.linspace(40.0, 120.0, 10)}
-    with pytest.warns(RuntimeWarning, match="interrupted"):
-        ds = idm_rs.sweep(P, W, g, t_end=1e-4, dt=1e-7, model="lps", progress=False, backend="kernel-cpu",
-                          block_size=4)
+    with pytest.raises(KeyboardInterrupt, match="of 10 points finished") as stop:
+        idm_rs.sweep(P, W, g, t_end=1e-4, dt=1e-7, model="lps", progress=False, backend="kernel-cpu",
+                     block_size=4)
+    ds = idm_rs.partial_result(stop.value)
     assert ds.attrs["complete"] == 0
     assert (ds.status.values[:4] == 1).all() and np.isfinite(ds.final_position.values[:4]).all()
     assert (ds.status.values[8:] == 0).all() and np.isnan(ds.final_position.values[8:]).all()

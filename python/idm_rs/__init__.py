@@ -15,6 +15,7 @@ from .diagnosis import Diagnosis, diagnose, plot_diagnosis, text_report
 from .effects import Effects
 from .engine import __version__
 from .external_force import ExternalForce
+from .interrupted import partial_result
 from .params import Params
 from .recording import Recording, RecordingError, load_case
 from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate
@@ -42,6 +43,7 @@ __all__ = [
     "METRICS",
     "diagnose",
     "load_case",
+    "partial_result",
     "plot_diagnosis",
     "simulate",
     "sweep",

@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from .batch import Point, Structure, run
 from .declarations import Model, elements_of
 from .effects import Effects
+from .interrupted import interrupted, partial_result
 from .methods import MethodName
 from .params import Params
 from .waveforms import STARTUP_CYCLES, Sawtooth
@@ -197,7 +198,10 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
       curve when no stall was found).
 
     Every run is a sawtooth train of ``cycles`` periods with the fast edge ``rise`` [s]; the
-    first ``skip_cycles`` are start-up. Defaults suit the paper's device (Table 1)."""
+    first ``skip_cycles`` are start-up. Defaults suit the paper's device (Table 1).
+
+    Ctrl-C raises a ``KeyboardInterrupt`` whose ``partial`` is a Dataset of the curves as
+    far as they ran (NaN where not, no stall force, ``attrs["complete"] == 0``)."""
     import xarray as xr
 
     from .engine import __version__
@@ -214,13 +218,11 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
                                   threads=threads, skip_cycles=skip_cycles, progress=progress)
     done: dict[str, Any] = {}
     try:
-        vmap = done["vmap"] = sweep(params, train, {"voltage": np.asarray(voltages, float),
-                                                    "frequency": np.asarray(frequencies, float)}, **common)
-        if not vmap.attrs["complete"]:
-            raise KeyboardInterrupt
-        steps = done["steps"] = sweep(params, train, {"voltage": np.asarray(step_voltages, float)}, **common)
-        if not steps.attrs["complete"]:
-            raise KeyboardInterrupt
+        vmap = done["vmap"] = _kept(sweep, params, train, {"voltage": np.asarray(voltages, float),
+                                                           "frequency": np.asarray(frequencies, float)},
+                                    done, "vmap", **common)
+        steps = done["steps"] = _kept(sweep, params, train, {"voltage": np.asarray(step_voltages, float)},
+                                      done, "steps", **common)
         stall = stall_force(params, train, model=model, n_elements=n_elements, effects=effects,
                             skip_cycles=skip_cycles, method=method, loads=loads, threads=threads)
         load_grid, load_v = stall.loads, stall.velocities
@@ -233,8 +235,11 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
                               skip_cycles=skip_cycles, method=method, threads=threads)
             load_v = np.array([_steady(out, i).mean_velocity for i in range(len(ps))])
     except KeyboardInterrupt:
-        return _interrupted(done, step_voltages, frequency, params, model, n_elements, rise, cycles, skip_cycles,
-                            voltage)
+        partial = _interrupted(done, step_voltages, frequency, params, model, n_elements, rise, cycles, skip_cycles,
+                               voltage)
+        raise interrupted(f"characterize interrupted: kept {partial.attrs['kept']} (as far as it ran; NaN where "
+                          "not), no stall force (the Dataset is the exception's .partial, attrs['complete'] = 0)",
+                          partial=partial) from None
     ds = xr.Dataset()
     for name in STEADY_METRICS:
         ds[name] = vmap[name]
@@ -259,12 +264,22 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
     return ds
 
 
+def _kept(sweep: Any, params: Params, train: Sawtooth, grid: dict[str, Any], done: dict[str, Any], key: str,
+          **common: Any) -> "xarray.Dataset":
+    """``sweep(params, train, grid, **common)``; on Ctrl-C its finished points go into
+    ``done[key]`` before the interrupt travels on."""
+    try:
+        return sweep(params, train, grid, **common)
+    except KeyboardInterrupt as stop:
+        if partial_result(stop) is not None:
+            done[key] = partial_result(stop)
+        raise
+
+
 def _interrupted(done: dict[str, Any], step_voltages: Any, frequency: float, params: Params, model: str,
                  n_elements: int, rise: float, cycles: int, skip_cycles: int, voltage: float) -> "xarray.Dataset":
     """What ``characterize`` had finished when Ctrl-C stopped it: the velocity map and the
     step curve as far as they ran (NaN where not), no stall force; ``attrs["complete"]`` 0."""
-    import warnings
-
     import xarray as xr
 
     from .engine import __version__
@@ -279,8 +294,6 @@ def _interrupted(done: dict[str, Any], step_voltages: Any, frequency: float, par
         ds = ds.assign_coords(step_voltage=("step_voltage", np.asarray(step_voltages, float),
                                             {"units": "V", "long_name": f"drive amplitude (at {frequency:g} Hz)"}))
     kept = ", ".join({"vmap": "the velocity map", "steps": "the step curve"}[k] for k in done) or "nothing"
-    warnings.warn(f"characterize interrupted: kept {kept} (as far as it ran; NaN where not); no stall force "
-                  "(attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
     ds.attrs.update({
         "idm_rs_version": __version__, "model": model, "n_elements": elements_of(model, n_elements),
         "rise_s": rise, "cycles": cycles, "skip_cycles": skip_cycles, "design_frequency_Hz": frequency,

@@ -14,7 +14,7 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal, Optional, Sequence
+from typing import TYPE_CHECKING, Any, Literal, Optional, Sequence
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from .cli_figures import plot_result, plot_sweep
 from .declarations import IDM_MODELS, structure_label
 from .effects import Effects
 from .engine import __version__
+from .interrupted import partial_result
 from .methods import METHODS
 from .params import Params
 from .simulation import DivergenceError, SimulationResult, simulate
@@ -627,8 +628,8 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     plot_every = (1 if adaptive else _largest_divisor_at_most(a.save_every, max(1, round(PLOT_INTERVAL / dt)))
                   ) if a.plot else a.save_every
     t0 = time.perf_counter()
-    full = simulate(
-        params, waveform, t_end=t_end, dt=None if adaptive else dt, model=a.model, n_elements=a.n_elements,
+    full = _kept_on_interrupt(
+        simulate, params, waveform, t_end=t_end, dt=None if adaptive else dt, model=a.model, n_elements=a.n_elements,
         save_every=plot_every, piezo_hysteresis=not a.no_hysteresis, effects=effects_from_overrides(a.effect),
         method=a.method, rtol=a.rtol, atol=a.atol,
         first_step=a.first_step if a.first_step is not None else a.dt if adaptive else None,
@@ -672,8 +673,6 @@ def _largest_divisor_at_most(n: int, limit: int) -> int:
 
 
 def cmd_sweep(a: argparse.Namespace) -> int:
-    import warnings
-
     from .sweep import sweep
 
     grid = parse_grid(a.grid)
@@ -706,21 +705,16 @@ def cmd_sweep(a: argparse.Namespace) -> int:
 
         client = Client(a.scheduler)
     try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", RuntimeWarning)
-            ds = sweep(
-                params, waveform, grid, t_end=t_end, dt=a.dt, model=a.model,
-                n_elements=a.n_elements, method=a.method, rtol=a.rtol, atol=a.atol, first_step=a.first_step,
-                retries=a.retries, effects=effects_from_overrides(a.effect), skip_cycles=a.skip_cycles,
-                piezo_hysteresis=not a.no_hysteresis, progress=not a.no_progress, client=client,
-                threads=a.threads, out=store,
-            )
+        ds = _kept_on_interrupt(
+            sweep, params, waveform, grid, t_end=t_end, dt=a.dt, model=a.model,
+            n_elements=a.n_elements, method=a.method, rtol=a.rtol, atol=a.atol, first_step=a.first_step,
+            retries=a.retries, effects=effects_from_overrides(a.effect), skip_cycles=a.skip_cycles,
+            piezo_hysteresis=not a.no_hysteresis, progress=not a.no_progress, client=client,
+            threads=a.threads, out=store,
+        )
     finally:
         if client is not None:
             client.close()
-    for w in caught:
-        if not (issubclass(w.category, RuntimeWarning) and "interrupted" in str(w.message)):
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     print(sweep_summary(ds, a.metric))
     if store is not None:
         print(f"wrote {store} (Zarr, written block by block)")
@@ -804,8 +798,8 @@ def cmd_characterize(a: argparse.Namespace) -> int:
 
     params = params_from_overrides(a.param)
     t0 = time.perf_counter()
-    ds = characterize(
-        params, model=a.model, n_elements=a.n_elements,
+    ds = _kept_on_interrupt(
+        characterize, params, model=a.model, n_elements=a.n_elements,
         frequencies=None if a.frequencies is None else _values(a.frequencies, "frequencies", log=True, positive=True),
         voltages=_values(a.voltages, "voltages"), step_voltages=_values(a.step_voltages, "step-voltages"),
         frequency=a.frequency, voltage=a.voltage, rise=a.rise, cycles=a.cycles, skip_cycles=a.skip_cycles,
@@ -870,7 +864,8 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
             paths = plot_rig_diagnosis(rd, a.plots)
             print(f"wrote {len(paths)} figures in {a.plots}: " + ", ".join(p.name for p in paths))
         return 0
-    d = diagnose(a.case_dir, progress=not a.no_progress, threads=a.threads, discover=not a.no_discover)
+    d = _kept_on_interrupt(diagnose, a.case_dir, progress=not a.no_progress, threads=a.threads,
+                           discover=not a.no_discover)
     print(text_report(d))
     if not d.complete:
         print("interrupted: the report above and the JSON (\"complete\": false) hold what was finished",
@@ -889,6 +884,19 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
         else:
             print(f"no figures: the run was interrupted before the calibration finished ({a.plots} not written)")
     return 0 if d.complete else EXIT_INTERRUPTED
+
+
+def _kept_on_interrupt(call: Any, *args: Any, **kwargs: Any) -> Any:
+    """``call(*args, **kwargs)``, or after Ctrl-C what it had finished (the KeyboardInterrupt's
+    ``partial``): the command writes that, says so and exits 130. A call stopped before it had
+    anything to keep lets the interrupt travel on."""
+    try:
+        return call(*args, **kwargs)
+    except KeyboardInterrupt as stop:
+        partial = partial_result(stop)
+        if partial is None:
+            raise
+        return partial
 
 
 def _one_line(exc: BaseException) -> str:

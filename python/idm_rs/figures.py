@@ -225,9 +225,14 @@ def fig7(
         dv = np.array([p.value for p in dense])
         dx = np.array([p.final_position * 1e6 for p in dense])
         axs.plot(dv, dx, ".-", color="0.35", lw=0.9, ms=3.5, label=dense_label or f"{len(dense)} values")
-        bad = ~np.isfinite(dx)
-        if bad.any():
-            axs.plot(dv[bad], np.zeros(int(bad.sum())), "x", color="0.5", ms=6, label=f"diverged ({int(bad.sum())})")
+        status = np.array([p.status for p in dense])
+        # a point is called diverged only when its run said so (status 3); one that never ran
+        # (status 0) is not a finding about the device
+        for flag, marker, what in ((3, "x", "diverged"), (0, "+", "not run")):
+            bad = (status == flag) & ~np.isfinite(dx)
+            if bad.any():
+                axs.plot(dv[bad], np.zeros(int(bad.sum())), marker, color="0.5", ms=6,
+                         label=f"{what} ({int(bad.sum())})")
     else:
         axs.plot([r.value for r in runs], [r.result.final_position * 1e6 for r in runs], "-", color="0.35", lw=0.9)
     for i, run in enumerate(runs):

@@ -15,6 +15,7 @@ from . import engine, methods
 from .declarations import Model, elements_of, structure_label
 from .effects import Effects
 from .external_force import ExternalForce
+from .interrupted import interrupted
 from .methods import MethodName
 from .params import PARAM_INFO, Params
 from .state import State
@@ -314,6 +315,9 @@ def simulate(
     ``external_force``: an :class:`idm_rs.ExternalForce`, a sampled force [N] on the main body or
     the weight added to the model's forces (an unknown load, a disturbance, a force a test puts
     on the device); its samples are differentiable as ``"f_ext[k]"`` (``force.knot_names()``).
+
+    Ctrl-C stops the run within about 50 ms and raises a ``KeyboardInterrupt`` whose ``partial``
+    (:func:`idm_rs.partial_result`) is the result up to there (``complete`` False).
     """
     if not isinstance(params, Params):
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
@@ -340,9 +344,9 @@ def simulate(
     y0 = None if initial_state is None else np.ascontiguousarray(initial_state, dtype=float).ravel()
     if not adaptive and (t_end - t_start) / step > LONG_RUN_STEPS:
         n = (t_end - t_start) / step
-        warnings.warn(f"{n:.2g} RK4 steps (t_end = {t_end:g} s at dt = {step:g} s) take minutes or more; Ctrl-C "
-                      "stops the run and keeps the trajectory so far (or use method='auto')", RuntimeWarning,
-                      stacklevel=2)
+        warnings.warn(f"{n:.2g} RK4 steps (t_end = {t_end:g} s at dt = {step:g} s) take minutes or more (or use "
+                      "method='auto'); Ctrl-C stops the run and raises KeyboardInterrupt, whose .partial keeps the "
+                      "trajectory so far", RuntimeWarning, stacklevel=2)
     out = engine.simulate(
         params._given(),
         effects.active(),
@@ -358,9 +362,6 @@ def simulate(
         None if external_force is None else external_force.engine_arg(),
     )
     complete = bool(out["complete"])
-    if not complete:
-        warnings.warn(f"simulate interrupted at t = {out['t'][-1]:g} s: the result holds the trajectory up to there "
-                      "(result.complete is False; no final_state)", RuntimeWarning, stacklevel=2)
     budget = None
     if energy:
         acc = out["accounting"]
@@ -376,7 +377,7 @@ def simulate(
             rayleigh_impulse=acc[:, 5],
             external_impulse=acc[:, 6],
         )
-    return SimulationResult(
+    result = SimulationResult(
         t=out["t"],
         nodes=out["nodes"],
         velocities=out["velocities"],
@@ -405,4 +406,8 @@ def simulate(
         sensitivities=out.get("sensitivities", np.zeros((0, 0))),
         final_state_sensitivities=out.get("final_state_sensitivities", np.zeros((0, 0))),
     )
+    if not complete:
+        raise interrupted(f"simulate interrupted at t = {result.t[-1]:g} s (the trajectory up to there is in "
+                          "the exception's .partial, complete False, no final_state)", partial=result)
+    return result
 

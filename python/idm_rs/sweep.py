@@ -13,7 +13,6 @@ import dataclasses
 import math
 import os
 import time
-import warnings
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, Mapping, Optional, Sequence, Union
@@ -26,6 +25,7 @@ from .batch import Structure, Tables, param_row
 from .batch import start as start_batch
 from .declarations import EFFECT_PARAMS, GRAVITY, Model, structure
 from .effects import Effects
+from .interrupted import interrupted
 from .methods import MethodName
 from .params import PARAM_INFO, Params
 from .waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
@@ -332,8 +332,9 @@ def sweep(
     asked for by name on a kernel backend they are refused; by default (``metrics=None``: all)
     they are left out of the Dataset there (``attrs["metrics_not_computed"]`` names them).
 
-    Ctrl-C stops within about a second and returns the finished points (others NaN,
-    ``attrs["complete"] == 0``).
+    Ctrl-C stops within about a second and raises a ``KeyboardInterrupt`` whose ``partial``
+    (:func:`idm_rs.partial_result`) is the Dataset of the finished points (others NaN,
+    ``attrs["complete"] == 0``), or with ``out`` the store with the slabs written.
 
     Memory: the results take :data:`BYTES_PER_POINT` bytes per point; a grid whose results do
     not fit in the memory available is refused up front with what it needs. ``out`` (a path
@@ -447,10 +448,13 @@ def sweep(
     bar = None
     try:
         bar = _progress_bar(plan.size, progress)
-        ds, _ = _run_in_memory(plan, run, bar)
+        ds, complete = _run_in_memory(plan, run, bar)
     finally:
         if bar is not None:
             bar.close()
+    if not complete:
+        raise interrupted(f"sweep interrupted: {ds.attrs['points_finished']} of {plan.size} points finished; the "
+                          "rest are NaN (attrs['complete'] = 0; the Dataset is the exception's .partial)", partial=ds)
     return ds
 
 
@@ -485,8 +489,6 @@ def _run_in_memory(plan: _Plan, run: _Run, bar: Any) -> tuple["xarray.Dataset", 
             complete = _run_local(plan, out, run.threads, run.block_size, bar)
     except KeyboardInterrupt:  # between blocks or before the first: nothing finished is lost
         complete = False
-        warnings.warn(f"sweep interrupted: {int(np.count_nonzero(out['status']))} of {n} points finished; "
-                      "the rest are NaN (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
     wall = time.perf_counter() - t0
 
     names, shape = plan.names, plan.shape
@@ -579,10 +581,8 @@ def _run_to_store(plan: _Plan, run: _Run, path: Path, progress: bool) -> "xarray
         bar = _progress_bar(plan.size, progress)
         for a in range(0, shape[0], rows):
             b = min(shape[0], a + rows)
-            with warnings.catch_warnings():  # the store says once what was written
-                warnings.filterwarnings("ignore", message="sweep interrupted", category=RuntimeWarning)
-                slab, done = _run_in_memory(dataclasses.replace(plan, values=(plan.values[0][a:b], *plan.values[1:])),
-                                            run, bar)
+            slab, done = _run_in_memory(dataclasses.replace(plan, values=(plan.values[0][a:b], *plan.values[1:])),
+                                        run, bar)
             slab["reason"] = slab["reason"].astype(_TEXT)
             if a == 0:
                 _store_template(plan, slab, rows).to_zarr(path, compute=False, mode="w-", consolidated=False)
@@ -600,10 +600,12 @@ def _run_to_store(plan: _Plan, run: _Run, path: Path, progress: bool) -> "xarray
     group = zarr.open_group(str(path), mode="r+")
     group.attrs.update({"complete": int(complete), "points_finished": finished,
                         "wall_time_s": time.perf_counter() - t0})
+    store = xr.open_zarr(path, consolidated=False)
     if not complete:
-        warnings.warn(f"sweep interrupted: {finished} of {plan.size} points written to {str(path)!r}; the rest "
-                      "have status 0 (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
-    return xr.open_zarr(path, consolidated=False)
+        raise interrupted(f"sweep interrupted: {finished} of {plan.size} points written to {str(path)!r}; the rest "
+                          "have status 0 (attrs['complete'] = 0; the store is the exception's .partial)",
+                          partial=store)
+    return store
 
 
 #: the reasons' type in a store: variable-length text (numpy >= 2), else fixed width
@@ -730,8 +732,6 @@ def _run_local(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_si
                 _store(out, run.result(), start, stop)
             except RuntimeError:
                 pass  # the block's result was already taken
-        warnings.warn(f"sweep interrupted: {int(np.count_nonzero(out['status']))} of {n} points finished; "
-                      "the rest are NaN (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
         return False
     return True
 
@@ -807,8 +807,6 @@ def _run_kernel(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_s
                 _finish_kernel_block(plan, out, *pending, threads, bar)
             except KeyboardInterrupt:
                 pass
-        warnings.warn(f"sweep interrupted: {int(np.count_nonzero(out['status']))} of {n} points finished; "
-                      "the rest are NaN (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
         return False
     return True
 
@@ -888,6 +886,5 @@ def _run_dask(plan: _Plan, out: dict[str, NDArray[Any]], client: Any, block: int
     except KeyboardInterrupt:
         for fut in futures:
             fut.cancel()
-        warnings.warn("sweep interrupted: finished blocks kept (attrs['complete'] = 0)", RuntimeWarning, stacklevel=3)
         return False
     return True

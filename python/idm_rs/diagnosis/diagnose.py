@@ -20,6 +20,7 @@ from typing import Callable, Optional, Union
 import numpy as np
 
 from ..engine import DivergenceError
+from ..interrupted import interrupted
 from ..recording import Recording, load_case
 from .beyond_catalogue import discovery_start, settle_discovery
 from .candidates import (
@@ -109,9 +110,10 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     """Diagnose a recorded case (a directory in the `idm-recording/1` format, or a Recording).
     With `discover` (the default), a case no catalogue effect explains goes on to discovery
     (:mod:`.discovery`): the missing force inferred, its form found in a library, modelled and
-    refitted; verdict "discovered" when it stands. Ctrl-C (KeyboardInterrupt) returns what was
-    finished — the calibration and the candidates fitted so far — as a Diagnosis with verdict
-    "interrupted" and ``complete`` False."""
+    refitted; verdict "discovered" when it stands. Ctrl-C raises a KeyboardInterrupt whose
+    ``partial`` (:func:`idm_rs.partial_result`) is what was finished — the calibration and the
+    candidates fitted so far — as a Diagnosis with verdict "interrupted" and ``complete`` False, which
+    :func:`text_report` and :func:`plot_diagnosis` show."""
     t_start = time.perf_counter()
     rec = case if isinstance(case, Recording) else load_case(case)
     noise = estimate_noise(rec)
@@ -130,7 +132,9 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     except KeyboardInterrupt:
         if bar is not None:
             bar.close(done=False)
-        return _interrupted(s, noise)
+        partial = _interrupted(s, noise)
+        raise interrupted(f"diagnose interrupted: {partial.reason} (the Diagnosis of what finished is the "
+                          "exception's .partial)", partial=partial) from None
     if bar is not None:
         bar.close()
     return _result(s)

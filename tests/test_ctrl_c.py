@@ -1,0 +1,86 @@
+"""Ctrl-C as a user sends it: SIGINT to a separate process running a script or a command. A
+library call stops and raises KeyboardInterrupt (what it finished in its `partial`) so the script stops; every
+command exits 130, keeps what finished and never draws an unfinished point as a finding."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _start(args: list[str], cwd: Path) -> subprocess.Popen[str]:
+    env = dict(os.environ, PYTHONUNBUFFERED="1", OMP_NUM_THREADS="1")
+    python_dir = str(ROOT / "python")
+    if (ROOT / "python" / "idm_rs" / "_core.abi3.so").exists():  # a development checkout
+        env["PYTHONPATH"] = python_dir + os.pathsep + env.get("PYTHONPATH", "")
+    # a shell's background jobs start with SIGINT ignored and a child inherits that: restore the
+    # default so that Python installs its KeyboardInterrupt handler, as in a terminal
+    return subprocess.Popen([sys.executable, *args], cwd=cwd, env=env, text=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+
+
+def _interrupt(proc: subprocess.Popen[str], after: float, limit: float = 10.0) -> tuple[int, str, str, float]:
+    """SIGINT ``after`` s after the process said it started (its first stdout line); (exit code,
+    stdout, stderr, seconds from the signal to the exit)."""
+    first = proc.stdout.readline() if proc.stdout else ""
+    time.sleep(after)
+    assert proc.poll() is None, "the process ended before it was interrupted"
+    proc.send_signal(signal.SIGINT)
+    sent = time.perf_counter()
+    out, err = proc.communicate(timeout=limit)
+    return proc.returncode, first + out, err, time.perf_counter() - sent
+
+
+LOOP = """
+import idm_rs
+print("started", flush=True)
+for i in range(1000):
+    r = idm_rs.simulate(idm_rs.Params(), idm_rs.Triangle(), t_end=10e-3, dt=1e-8, model="dps")
+    print(i, r.final_position, flush=True)
+print("ran to the end", flush=True)
+"""
+
+
+def test_a_script_looping_over_simulate_stops_on_ctrl_c(tmp_path):
+    proc = _start(["-c", LOOP], tmp_path)
+    rc, out, err, took = _interrupt(proc, after=1.5)
+    assert "ran to the end" not in out
+    # the uncaught KeyboardInterrupt: Python re-raises SIGINT on itself (a shell shows 130)
+    assert rc in (-signal.SIGINT, 130), (rc, err[-2000:])
+    assert "KeyboardInterrupt: simulate interrupted at t = " in err, err[-2000:]
+    assert took < 3.0, f"{took:.1f} s from Ctrl-C to the end"
+
+
+@pytest.mark.parametrize("after", [1.0, 4.0])
+def test_reproduce_exits_130_and_draws_nothing_it_did_not_finish(tmp_path, after):
+    proc = _start(["-c", "print('started', flush=True); from idm_rs.cli import main; raise SystemExit(main())",
+                   "reproduce", "--quick", "--no-progress", "--out", str(tmp_path / "figs")], tmp_path)
+    rc, out, err, took = _interrupt(proc, after=after)
+    assert rc == 130, (rc, err[-2000:])
+    assert "error: interrupted" in err
+    assert took < 3.0, f"{took:.1f} s from Ctrl-C to the end"
+    assert not (tmp_path / "figs" / "fig7a.png").exists(), "a Fig. 7 was drawn from an interrupted sweep"
+    assert "total time" not in out
+
+
+def test_the_sweep_command_exits_130_and_writes_the_finished_points(tmp_path):
+    xr = pytest.importorskip("xarray")
+    out = tmp_path / "s.nc"
+    proc = _start(["-c", "print('started', flush=True); from idm_rs.cli import main; raise SystemExit(main())",
+                   "sweep", "--model", "lps", "--grid", "voltage=40:120:2000", "--t-end", "0.002", "--dt", "1e-8",
+                   "--method", "rk4", "--threads", "1", "--no-progress", "--out", str(out)], tmp_path)
+    rc, stdout, err, took = _interrupt(proc, after=6.0, limit=20.0)
+    assert rc == 130, (rc, err[-2000:])
+    assert took < 5.0, f"{took:.1f} s from Ctrl-C to the end"
+    with xr.open_dataset(out) as ds:
+        status = ds["status"].values
+        assert ds.attrs["complete"] == 0
+        assert 0 < (status == 1).sum() < status.size and set(status.tolist()) <= {0, 1}
