@@ -70,7 +70,7 @@ def test_options_that_do_not_apply_are_refused(argv, needle, capsys):
 
 def test_invalid_sweep_points_keep_their_reason():
     ds = idm_rs.sweep(P, idm_rs.Sawtooth(cycles=2, frequency=1000.0, rise=1e-4), {"cycles": [1.5, 2.0]}, t_end=2e-3,
-                      model="lps", method="auto", progress=False)
+                      model="lps", method="auto", skip_cycles=1, progress=False)
     assert ds.status.values.tolist() == [4, 1]
     assert "'cycles'" in ds.reason.values[0] and "1.5" in ds.reason.values[0]
     assert ds.reason.values[1] == ""

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any, Iterable, Optional, Sequence, Union
 import numpy as np
 from numpy.typing import NDArray
 
+from . import options
 from .batch import Point, Structure, run
 from .declarations import Model, elements_of
 from .effects import Effects
@@ -78,11 +79,7 @@ class SteadyState:
 def _check_train(waveform: Any, skip_cycles: int) -> Sawtooth:
     if not isinstance(waveform, Sawtooth):
         raise ValueError(f"steady-state metrics need a Sawtooth train, got {type(waveform).__name__}")
-    if isinstance(skip_cycles, bool) or int(skip_cycles) != skip_cycles or skip_cycles < 0:
-        raise ValueError(f"parameter 'skip_cycles' must be a non-negative integer, got {skip_cycles!r}")
-    if waveform.cycles <= skip_cycles:
-        raise ValueError(f"the train has {waveform.cycles} cycles and skip_cycles = {skip_cycles} skips them all; "
-                         "use more cycles or skip fewer")
+    options.skip_cycles(skip_cycles, waveform.cycles)
     return waveform
 
 
@@ -208,6 +205,8 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
     from .sweep import sweep
 
     params = params or Params()
+    loads = options.count("loads", loads, minimum=2)
+    threads = options.threads(threads)
     if frequencies is None:
         f_max = min(1500.0, 0.9 / (2.0 * rise))
         frequencies = np.geomspace(20.0, f_max, 12)

@@ -20,6 +20,7 @@ import numpy as np
 
 from . import methods
 from .cli_figures import plot_result, plot_sweep
+from .cli_outputs import check_outputs
 from .declarations import IDM_MODELS, structure_label
 from .effects import Effects
 from .engine import __version__
@@ -620,8 +621,6 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     if not adaptive:
         t_end = _snap(t_end, dt)
     out = Path(a.out) if a.out else None
-    if out is not None and out.suffix.lower() not in (".csv", ".nc"):
-        raise CliError(f"--out: unknown file type {out.suffix!r} (use .csv or .nc)")
     # the figure draws every accepted step of an adaptive run and at most PLOT_INTERVAL of an
     # RK4 one (the step a run saves at is no measure of its dynamics: every 100th adaptive step
     # aliases a slip into a zig-zag); the CSV keeps every --save-every-th of those states
@@ -679,13 +678,6 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     if a.plot and len(grid) not in (1, 2):
         raise CliError(f"--plot draws sweeps of 1 or 2 axes; --grid gives {len(grid)} ({', '.join(grid)})")
     store = a.out if a.out and Path(a.out).suffix.lower() == ".zarr" else None
-    if a.out and store is None and Path(a.out).suffix.lower() != ".nc":
-        raise CliError(f"--out: unknown file type {Path(a.out).suffix!r} (use .nc, or .zarr to write blocks as they "
-                       "finish)")
-    if a.plot and Path(a.plot).suffix.lower() != ".png":
-        raise CliError(f"--plot: unknown file type {Path(a.plot).suffix!r} (use .png)")
-    if a.retries < 0:
-        raise CliError(f"--retries must be 0 or more, got {a.retries}")
     params = params_from_overrides(a.param)
     waveform = waveform_from_args(a)
     if a.metric in (*STEADY_METRICS, "step_per_cycle") and not isinstance(waveform, Sawtooth):
@@ -961,6 +953,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
 def _run(a: argparse.Namespace) -> int:
     try:
+        check_outputs(a)
         command = {"reproduce": cmd_reproduce, "simulate": cmd_simulate, "sweep": cmd_sweep,
                    "characterize": cmd_characterize, "rig-fit": cmd_rig_fit, "diagnose": cmd_diagnose}[a.command]
         return command(a)

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any, Optional, Sequence, Union
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import engine, methods
+from . import engine, methods, options
 from .declarations import Model, elements_of, structure_label
 from .effects import Effects
 from .external_force import ExternalForce
@@ -324,9 +324,7 @@ def simulate(
     if external_force is not None and not isinstance(external_force, ExternalForce):
         raise TypeError(f"external_force must be idm_rs.ExternalForce, got {type(external_force).__name__}")
     effects = effects or Effects()
-    for name, value in (("n_elements", n_elements), ("save_every", save_every)):
-        if isinstance(value, bool) or int(value) != value or value < 1:
-            raise ValueError(f"parameter '{name}' must be a positive integer, got {value!r}")
+    n_elements, save_every = options.count("n_elements", n_elements), options.count("save_every", save_every)
     method, rtol, atol = methods.resolve(method, rtol, atol)
     adaptive = methods.is_adaptive(method)
     if not adaptive and dt is None:

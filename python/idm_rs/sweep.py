@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, Literal, Mapping, Optional, Sequence, Uni
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import engine, methods
+from . import engine, methods, options
 from .batch import Structure, Tables, param_row
 from .batch import start as start_batch
 from .declarations import EFFECT_PARAMS, GRAVITY, Model, structure
@@ -382,9 +382,11 @@ def sweep(
     names, values = _check_grid(grid, waveform)
     effects = effects or Effects()
     first = float(first_step) if first_step is not None else 1e-8
-    if isinstance(skip_cycles, bool) or int(skip_cycles) != skip_cycles or skip_cycles < 0:
-        raise ValueError(f"parameter 'skip_cycles' must be a non-negative integer, got {skip_cycles!r}")
-    skips = int(skip_cycles)
+    skips = options.skip_cycles(skip_cycles, _fewest_cycles(waveform, names, values))
+    retries = options.count("retries", retries, minimum=0)
+    block_size = options.count("block_size", block_size)
+    threads = options.threads(threads)
+    n_elements = options.count("n_elements", n_elements)
     shortest, longest, where = _train_span(waveform, names, values)
     given = t_end is not None
     if t_end is None:
@@ -456,6 +458,18 @@ def sweep(
         raise interrupted(f"sweep interrupted: {ds.attrs['points_finished']} of {plan.size} points finished; the "
                           "rest are NaN (attrs['complete'] = 0; the Dataset is the exception's .partial)", partial=ds)
     return ds
+
+
+def _fewest_cycles(waveform: Waveform, names: Sequence[str], values: Sequence[NDArray[np.float64]]) -> Optional[int]:
+    """The fewest cycles of a sawtooth train over the grid (None for another input), for the
+    start-up cycles' check."""
+    if not isinstance(waveform, Sawtooth):
+        return None
+    if "cycles" in names:  # a value that is no count is an invalid point with its own reason
+        v = np.asarray(values[list(names).index("cycles")], dtype=float)
+        whole = v[(v >= 1) & (v == np.floor(v))]
+        return int(whole.min()) if whole.size else None
+    return int(waveform.cycles)
 
 
 @dataclass(frozen=True)
