@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 import time
 from pathlib import Path
@@ -572,6 +573,31 @@ def write_sweep_netcdf(ds: "xarray.Dataset", path: Path, engine: Optional[Netcdf
 STATUS_NAMES = ("not run", "ok", "ok at a smaller dt", "diverged", "invalid")
 
 
+#: points read at a time when a summary scans a sweep's variable (a store of 10^8 points is
+#: never loaded whole)
+SUMMARY_BLOCK = 10_000_000
+
+
+def _row_blocks(var: "xarray.DataArray") -> Any:
+    """``var``'s values in blocks of whole rows of its first axis, about SUMMARY_BLOCK points each."""
+    if var.ndim == 0 or var.size <= SUMMARY_BLOCK:
+        yield np.asarray(var.values)
+        return
+    rows = max(1, SUMMARY_BLOCK // max(var.size // var.shape[0], 1))
+    for i in range(0, var.shape[0], rows):
+        yield np.asarray(var[i:i + rows].values)
+
+
+def _finite_range(var: "xarray.DataArray") -> Optional[tuple[float, float]]:
+    """(min, max) of ``var``'s finite values, read block by block; None when there is none."""
+    lo, hi = math.inf, -math.inf
+    for block in _row_blocks(var):
+        finite = block[np.isfinite(block.astype(float))]
+        if finite.size:
+            lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
+    return (lo, hi) if lo <= hi else None
+
+
 def sweep_summary(ds: "xarray.Dataset", metric: str) -> str:
     """A few lines: the grid, the wall time and rate, the statuses and the metric's range."""
     a = ds.attrs
@@ -581,7 +607,9 @@ def sweep_summary(ds: "xarray.Dataset", metric: str) -> str:
     model = structure_label(a["model"], a["n_elements"])
     step = (f"rtol = {a['rtol']:g}, atol = {a['atol']:g}" if methods.is_adaptive(a["method"])
             else f"dt = {a['dt_s']:g} s")
-    counts = np.bincount(ds["status"].values.ravel().astype(np.int64), minlength=len(STATUS_NAMES))
+    counts = np.zeros(len(STATUS_NAMES), dtype=np.int64)
+    for block in _row_blocks(ds["status"]):
+        counts += np.bincount(block.ravel().astype(np.int64), minlength=len(STATUS_NAMES))
     statuses = ", ".join(f"{name} {int(c)}" for name, c in zip(STATUS_NAMES, counts) if c or name in ("ok", "diverged"))
     rule = a.get("t_end_rule", "as given")
     t_end = f"t_end = {a['t_end_s']:g} s" if rule in ("as given", "the waveform's end") else f"t_end: {rule}"
@@ -592,15 +620,15 @@ def sweep_summary(ds: "xarray.Dataset", metric: str) -> str:
         f"wall time {wall:.2f} s, {rate}" + (f" ({finished} of {n} points)" if finished != n else ""),
         f"status: {statuses}",
     ]
-    if any(m in ds for m in STEADY_METRICS) and np.isfinite(ds[next(m for m in STEADY_METRICS if m in ds)]).any():
+    steady = next((m for m in STEADY_METRICS if m in ds), None)
+    if steady is not None and _finite_range(ds[steady]) is not None:
         k = int(a.get("skip_cycles", STARTUP_CYCLES))
         lines.append(f"steady state: the cycles after the first {k} (--skip-cycles)")
     if metric in ds:
-        v = ds[metric].values.astype(float)
-        finite = v[np.isfinite(v)]
+        span = _finite_range(ds[metric])
         units = ds[metric].attrs.get("units", "")
-        if finite.size:
-            lines.append(f"{metric}: min {finite.min():.6g}, max {finite.max():.6g} [{units}]")
+        if span is not None:
+            lines.append(f"{metric}: min {span[0]:.6g}, max {span[1]:.6g} [{units}]")
     if not a.get("complete", 1):
         lines.append(f"interrupted: {int(a['points_finished'])} of {n} points finished; the rest are NaN")
     return "\n".join(lines)

@@ -9,7 +9,6 @@ each block is a Dask task on the cluster instead.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import time
@@ -571,78 +570,26 @@ def _check_memory(points: int, out_hint: bool) -> None:
 
 
 def _run_to_store(plan: _Plan, run: _Run, path: Path, progress: bool) -> "xarray.Dataset":
-    """The grid in slabs along its first axis, each run in memory and written into the Zarr
-    store at ``path`` as it finishes (xarray region writes), so a sweep larger than memory runs;
-    returns the store opened lazily. Ctrl-C keeps the slabs written (the rest ``status`` 0)."""
-    import xarray as xr
+    """The grid slab by slab into the Zarr store at ``path`` (:mod:`.sweep_store`); returns the
+    store opened lazily. Ctrl-C keeps the slabs written (the rest ``status`` 0)."""
+    from .sweep_store import chunk_shape, run_to_store
 
     if path.suffix.lower() != ".zarr":
         raise ValueError(f"parameter 'out' must name a Zarr store (…/name.zarr), got {str(path)!r}")
     if path.exists():
         raise ValueError(f"parameter 'out': {str(path)!r} exists; remove it or name another store")
     try:
-        import zarr
+        import zarr  # noqa: F401
     except ImportError:
         raise ImportError("sweep(..., out=...) writes a Zarr store: pip install 'idm-rs[store]' (zarr)") from None
-    shape, first = plan.shape, plan.names[0]
-    rest = int(np.prod(shape[1:], dtype=np.int64))
-    _check_memory(rest, out_hint=False)  # one row of the first axis is the smallest slab
-    rows = max(1, run.block_size // max(rest, 1))
-    t0 = time.perf_counter()
-    complete, finished = True, 0
+    _check_memory(int(np.prod(chunk_shape(plan.shape, run.block_size))), out_hint=False)  # one slab in memory
     bar = None
     try:
         bar = _progress_bar(plan.size, progress)
-        for a in range(0, shape[0], rows):
-            b = min(shape[0], a + rows)
-            slab, done = _run_in_memory(dataclasses.replace(plan, values=(plan.values[0][a:b], *plan.values[1:])),
-                                        run, bar)
-            slab["reason"] = slab["reason"].astype(_TEXT)
-            if a == 0:
-                _store_template(plan, slab, rows).to_zarr(path, compute=False, mode="w-", consolidated=False)
-            other = [v for v in slab.variables if first not in slab[v].dims]
-            slab.drop_vars(other).drop_attrs().to_zarr(path, region={first: slice(a, b)}, mode="r+", consolidated=False)
-            finished += int(slab.attrs["points_finished"])
-            if not done:
-                complete = False
-                break
+        return run_to_store(plan, run, path, bar, _run_in_memory)
     finally:
         if bar is not None:
             bar.close()
-    import zarr
-
-    group = zarr.open_group(str(path), mode="r+")
-    group.attrs.update({"complete": int(complete), "points_finished": finished,
-                        "wall_time_s": time.perf_counter() - t0})
-    store = xr.open_zarr(path, consolidated=False)
-    if not complete:
-        raise interrupted(f"sweep interrupted: {finished} of {plan.size} points written to {str(path)!r}; the rest "
-                          "have status 0 (attrs['complete'] = 0; the store is the exception's .partial)",
-                          partial=store)
-    return store
-
-
-#: the reasons' type in a store: variable-length text (numpy >= 2), else fixed width
-_TEXT: Any = np.dtypes.StringDType() if hasattr(np.dtypes, "StringDType") else np.dtype("<U240")
-
-
-def _store_template(plan: _Plan, slab: "xarray.Dataset", rows: int) -> "xarray.Dataset":
-    """The whole grid's Dataset as lazy arrays (Dask) shaped like ``slab``'s variables, chunked
-    by slab, with the whole grid's coordinates and attributes: what ``to_zarr(compute=False)``
-    needs to lay out the store before any slab is written."""
-    import dask.array as da
-    import xarray as xr
-
-    shape = plan.shape
-    chunks = (rows, *shape[1:])
-    data_vars = {}
-    for name, var in slab.data_vars.items():
-        fill = "" if var.dtype == _TEXT else (0 if var.dtype.kind in "ui" else np.nan)
-        data_vars[name] = (var.dims, da.full(shape, fill, dtype=var.dtype, chunks=chunks), var.attrs)
-    coords = {name: (name, vals, slab[name].attrs) for name, vals in zip(plan.names, plan.values)}
-    ds = xr.Dataset(data_vars, coords=coords, attrs=dict(slab.attrs))
-    ds.attrs.update({"points": plan.size, "complete": 0, "points_finished": 0})
-    return ds
 
 
 #: what a derived axis sets (the gate refuses a derived axis as it refuses the parameter)
