@@ -122,24 +122,28 @@ def test_dt_not_dividing_a_breakpoint_suggests_one():
 
 
 def test_dt_too_large_for_the_dps_structure_is_refused_up_front():
-    """100 elements have a highest mode of 2.9e7 rad/s; dt = 1e-7 s puts ω dt = 2.9 beyond
-    RK4's stability limit: refused before integrating, naming the mode and a dt that works.
-    (The brief's example, 40 elements at 1e-7 s, is NOT refused up front: its highest mode,
-    1.15e7 rad/s, gives ω dt = 1.15, structurally stable; that run then diverges in the
-    friction state at t = 0.9 µs - see test_too_large_step_for_40_elements_diverges.)"""
-    with pytest.raises(ValueError, match="highest structural mode") as exc:
+    """100 elements at dt = 1e-7 s: the bar's fastest modes, pushed onto the negative real axis
+    by the stiffness-proportional damping (|λ| = 4.1e8 1/s), need dt <= 5.96e-9 s: refused
+    before integrating, naming the mode, the limit and a step that fits the input. 40 elements
+    at 1e-7 s, once let through (its undamped ω dt = 1.15 is stable) and then diverging at
+    0.9 µs with the friction blamed, is refused the same way (limit 3.84e-8 s)."""
+    with pytest.raises(ValueError, match="unstable for the structure's fastest mode") as exc:
         idm_rs.simulate(idm_rs.Params(), SHORT_WAVE, 1e-3, dt=1e-7, model="dps", n_elements=100)
     m = re.search(r"use dt <= ([0-9.eE+-]+) s", str(exc.value))
     assert m, str(exc.value)
-    w = engine.highest_frequency(idm_rs.Params()._given(), engine.RunConfig(model="dps", n_elements=100))
-    assert float(m.group(1)) * w == pytest.approx(2.5, rel=1e-3)
-    with pytest.raises(ValueError, match="highest structural mode"):
-        idm_rs.simulate(idm_rs.Params(), SHORT_WAVE, 1e-3, dt=5e-7, model="dps", n_elements=40)
-
-
-def test_too_large_step_for_40_elements_diverges():
-    with pytest.raises(idm_rs.DivergenceError, match="try dt"):
+    limit = engine.rk4_step_limit(idm_rs.Params()._given(), engine.RunConfig(model="dps", n_elements=100))
+    assert float(m.group(1)) == pytest.approx(limit, rel=1e-3) and 5.9e-9 < limit < 6.0e-9
+    assert "overdamped mode at 4.13" in str(exc.value) and "dt = 5e-9 s fits this input" in str(exc.value)
+    with pytest.raises(ValueError, match=r"use dt <= 3\.84\de-8 s"):
         idm_rs.simulate(idm_rs.Params(), SHORT_WAVE, 1e-3, dt=1e-7, model="dps", n_elements=40)
+
+
+def test_a_coarse_bar_is_held_by_its_undamped_frequency_as_before():
+    """4 elements: the damping barely moves the fastest mode; the limit stays within 3 % of
+    2.5 / ω (the rule for an undamped structure)."""
+    config = engine.RunConfig(model="dps", n_elements=4)
+    w = engine.highest_frequency(idm_rs.Params()._given(), config)
+    assert engine.rk4_step_limit(idm_rs.Params()._given(), config) * w == pytest.approx(2.5, rel=0.03)
 
 
 def test_diverging_step_raises_divergence_error_with_time_and_hint():

@@ -237,6 +237,10 @@ def wave_fields(kind: str) -> list[str]:
 def highest_frequency(params: dict[str, float], config: RunConfig) -> float:
     """Highest structural natural frequency [rad/s] of the model of ``config``'s structure."""
 
+def rk4_step_limit(params: dict[str, float], config: RunConfig) -> float:
+    """The largest RK4 step [s] the damped structure of ``config`` allows: every eigenvalue of
+    the first-order system inside RK4's stability region, with the up-front check's margin."""
+
 def kernel_constants(config: RunConfig, params: NDArray[np.float64]) -> NDArray[np.float64]:
     """The GPU kernel's constants per point: ``params`` (P, len(param_names())), NaN
     normal_force = derived; returns (P, kernel_constant_count()[0]). Refuses, naming the point,

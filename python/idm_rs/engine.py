@@ -25,6 +25,7 @@ metric_columns = _core.metric_columns
 effect_names = _core.effect_names
 wave_fields = _core.wave_fields
 highest_frequency = _core.highest_frequency
+rk4_step_limit = _core.rk4_step_limit
 kernel_constants = _core.kernel_constants
 kernel_constant_count = _core.kernel_constant_count
 kernel_header = _core.kernel_header
@@ -51,6 +52,7 @@ __all__ = [
     "effect_declarations",
     "effect_names",
     "highest_frequency",
+    "rk4_step_limit",
     "kernel_constants",
     "kernel_constant_count",
     "kernel_header",

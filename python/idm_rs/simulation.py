@@ -279,7 +279,9 @@ def simulate(
     ``method="rk4"`` (the reference): fixed step ``dt`` [s] (default 1e-8). The waveform's
     breakpoints must fall on step boundaries and ``dt`` must divide the span; otherwise a
     ValueError says which breakpoint and suggests a ``dt``. A step too large for the structure is
-    refused up front; one too large for the friction state during sliding raises
+    refused up front (its damped modes: a fine bar's stiffness-proportional damping, not its
+    undamped frequency, sets the limit; ``engine.rk4_step_limit``), with a step that fits the
+    input; one too large for the friction state during sliding raises
     :class:`DivergenceError` with the time and a smaller step to try.
     ``method="dopri5"`` (explicit Dormand-Prince 5(4)) or ``"rodas4"`` (linearly implicit
     Rosenbrock 4(3), L-stable: far fewer steps where the friction state is stiff): adaptive, with

@@ -71,15 +71,71 @@ pub fn plan_steps(
             )));
         }
     }
-    let w = model.mech.highest_frequency();
-    if w * dt > RK4_STABLE_OMEGA_DT {
+    let (limit, fastest) = rk4_structure_limit(&model.mech.eigenvalues());
+    if dt > limit {
+        let works = fitting_step(wave, t_start, t_end, limit)
+            .map(|d| format!(" (dt = {d:e} s fits this input)"))
+            .unwrap_or_default();
+        let mode = if fastest.im.abs() < 1e-9 * fastest.norm() {
+            format!("an overdamped mode at {:.4e} 1/s, from the stiffness-proportional damping", -fastest.re)
+        } else {
+            format!("{:.4e} rad/s, damping ratio {:.2}", fastest.norm(), -fastest.re / fastest.norm())
+        };
         return Err(SimError::Input(format!(
-            "dt = {dt:e} s is unstable for the highest structural mode ({w:.4e} rad/s); \
-             use dt <= {:.3e} s",
-            RK4_STABLE_OMEGA_DT / w
+            "dt = {dt:e} s is unstable for the structure's fastest mode ({mode}); use dt <= {limit:.3e} s{works}, \
+             or an adaptive method"
         )));
     }
     Ok(steps as usize)
+}
+
+/// The largest RK4 step [s] that keeps every eigenvalue `lambdas` [1/s] of the damped structure
+/// inside RK4's region of absolute stability, with the margin RK4_STABLE_OMEGA_DT / 2√2 that the
+/// undamped check keeps on the imaginary axis; and the eigenvalue that sets it (∞ and 0 when
+/// there is none, as for a rigid body).
+pub fn rk4_structure_limit(lambdas: &[nalgebra::Complex<f64>]) -> (f64, nalgebra::Complex<f64>) {
+    let margin = RK4_STABLE_OMEGA_DT / (2.0 * std::f64::consts::SQRT_2);
+    let mut best = (f64::INFINITY, nalgebra::Complex::new(0.0, 0.0));
+    for &l in lambdas {
+        let r = l.norm();
+        if !(r > 0.0 && r.is_finite()) {
+            continue;
+        }
+        let h = margin * rk4_reach(l / r) / r;
+        if h < best.0 {
+            best = (h, l);
+        }
+    }
+    best
+}
+
+/// How far RK4's region of absolute stability reaches along the ray `dir` (|dir| = 1) from the
+/// origin: the first |z| at which |R(z)| = |1 + z + z²/2 + z³/6 + z⁴/24| exceeds 1 (0 for a ray
+/// into the right half-plane, where a growing mode is physics, not instability: ∞).
+fn rk4_reach(dir: nalgebra::Complex<f64>) -> f64 {
+    let grows = |r: f64| {
+        let z = dir * r;
+        (1.0 + z + z * z / 2.0 + z * z * z / 6.0 + z * z * z * z / 24.0).norm() > 1.0 + 1e-12
+    };
+    if dir.re > 1e-12 {
+        return f64::INFINITY;
+    }
+    // the region lies within |z| < 3; scan, then bisect the first crossing
+    let step = 1e-3;
+    let mut r = step;
+    while r < 4.0 && !grows(r) {
+        r += step;
+    }
+    let (mut lo, mut hi) = (r - step, r);
+    for _ in 0..50 {
+        let mid = 0.5 * (lo + hi);
+        if grows(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    lo
 }
 
 /// An RK4 step not above `dt` [s] that puts `t_start`, `t_end` and every breakpoint of `wave` in
@@ -152,12 +208,9 @@ pub fn divergence_message(
 ) -> String {
     let l = model.layout;
     let stiff = model.friction.sliding_stiffness(v_last);
-    let w = model.mech.highest_frequency().max(stiff);
-    let stable = if w.is_finite() && w > 0.0 {
-        RK4_STABLE_OMEGA_DT / w
-    } else {
-        f64::NAN
-    };
+    let structure = rk4_structure_limit(&model.mech.eigenvalues()).0;
+    let friction = if stiff.is_finite() && stiff > 0.0 { RK4_STABLE_OMEGA_DT / stiff } else { f64::INFINITY };
+    let stable = if structure.min(friction).is_finite() { structure.min(friction) } else { f64::NAN };
     // RK4 failed at dt: the hint is below it, and a blown-up estimate is not trusted below dt/64
     let raw = if stable.is_finite() { stable.clamp(dt / 64.0, dt / 2.0) } else { dt / 4.0 };
     let hint = fit
@@ -172,4 +225,43 @@ pub fn divergence_message(
         model.presliding_bound(),
         v_last
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::mechanics::{Mechanics, Structure};
+    use crate::physics::params::Params;
+    use nalgebra::Complex;
+
+    #[test]
+    fn rk4_reaches_its_textbook_limits_on_the_axes() {
+        // the negative real axis to 2.7853, the imaginary axis to 2√2
+        assert!((rk4_reach(Complex::new(-1.0, 0.0)) - 2.785_293_563).abs() < 1e-6);
+        assert!((rk4_reach(Complex::new(0.0, 1.0)) - 2.0 * std::f64::consts::SQRT_2).abs() < 1e-3);
+        assert!(rk4_reach(Complex::new(1.0, 0.0)).is_infinite());
+    }
+
+    #[test]
+    fn the_undamped_limit_is_the_old_omega_dt_rule() {
+        let w = 1.0e6;
+        let (h, _) = rk4_structure_limit(&[Complex::new(0.0, w), Complex::new(0.0, -w)]);
+        assert!((h * w / RK4_STABLE_OMEGA_DT - 1.0).abs() < 1e-3, "{}", h * w);
+    }
+
+    #[test]
+    fn a_fine_bar_is_held_by_its_damped_modes_not_by_its_undamped_frequency() {
+        // stiffness-proportional damping moves the fastest modes of a fine bar onto the negative
+        // real axis at |λ| ≈ β ω², far beyond ω: the limit is far below 2.5 / ω
+        let p = Params::paper();
+        let m = Mechanics::new(&p, Structure::Dps(200)).unwrap();
+        let (h, fastest) = rk4_structure_limit(&m.eigenvalues());
+        let undamped = RK4_STABLE_OMEGA_DT / m.highest_frequency();
+        assert!(h < 0.5 * undamped, "limit {h:e} vs undamped {undamped:e}");
+        assert!(fastest.re < 0.0 && fastest.im.abs() < 1e-6 * fastest.norm(), "{fastest}");
+        // and a coarse bar is still held by its undamped frequency
+        let m = Mechanics::new(&p, Structure::Dps(4)).unwrap();
+        let (h, _) = rk4_structure_limit(&m.eigenvalues());
+        assert!((h * m.highest_frequency() / RK4_STABLE_OMEGA_DT - 1.0).abs() < 0.05);
+    }
 }

@@ -364,6 +364,23 @@ impl Mechanics {
         w2.max(0.0).sqrt()
     }
 
+    /// The eigenvalues [1/s] of the damped structure's first-order system
+    /// d/dt (q, v) = [[0, I], [-M⁻¹K, -M⁻¹C]] (q, v): what an explicit step must keep inside its
+    /// stability region. Stiffness-proportional damping puts the fine bar's fastest modes far out
+    /// on the negative real axis (|λ| ≈ β ω²), beyond the undamped ω.
+    pub fn eigenvalues(&self) -> Vec<nalgebra::Complex<f64>> {
+        let n = self.dof;
+        let mut a = DMatrix::zeros(2 * n, 2 * n);
+        for i in 0..n {
+            a[(i, n + i)] = 1.0;
+            for j in 0..n {
+                a[(n + i, j)] = -self.minv_k[i * n + j];
+                a[(n + i, n + j)] = -self.minv_c[i * n + j];
+            }
+        }
+        a.complex_eigenvalues().iter().copied().collect()
+    }
+
     /// Quadratic forms for the energy budget: 1/2 v'Mv, 1/2 q'Kq [J].
     pub fn kinetic(&self, v: &[f64]) -> f64 {
         0.5 * quad(&self.mass, v)

@@ -340,6 +340,14 @@ fn highest_frequency(params: HashMap<String, f64>, config: &RunConfig) -> PyResu
     Ok(m.mech.highest_frequency())
 }
 
+/// The largest RK4 step [s] the damped structure of the model allows (the up-front check's
+/// limit: every eigenvalue inside RK4's stability region, with its margin).
+#[pyfunction]
+fn rk4_step_limit(params: HashMap<String, f64>, config: &RunConfig) -> PyResult<f64> {
+    let m = config.model(parse_params(&params)?, Effects::default(), false)?;
+    Ok(crate::integrate::plan::rk4_structure_limit(&m.mech.eigenvalues()).0)
+}
+
 /// Name and unit of every state component of the model (see `Layout::components`).
 #[pyfunction]
 #[pyo3(signature = (params, effects, config, energy=false))]
@@ -650,6 +658,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(metric_columns, m)?)?;
     m.add_function(wrap_pyfunction!(effect_names, m)?)?;
     m.add_function(wrap_pyfunction!(highest_frequency, m)?)?;
+    m.add_function(wrap_pyfunction!(rk4_step_limit, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_constants, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_constant_count, m)?)?;
     m.add_function(wrap_pyfunction!(kernel_header, m)?)?;
