@@ -1,5 +1,5 @@
-"""Session 24 device run (the GPU machine's 16-core host; the card not used): the LPS `auto`
-sweep over the 10^6 grid's ranges with this session's engine, 200 x 200 on 1 and 16 threads,
+"""§24 device run (the GPU machine's 16-core host; the card not used): the LPS `auto`
+sweep over the 10^6 grid's ranges with this section's engine, 200 x 200 on 1 and 16 threads,
 then the whole 1,000 x 1,000 on 16 threads. Prints one JSON line per run."""
 import json
 import os

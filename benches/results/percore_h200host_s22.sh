@@ -1,5 +1,5 @@
 #!/bin/bash
-# session 22 device run (one NVIDIA H200's 16-core host; the card not used): per-method, per-level
+# §22 device run (one NVIDIA H200's 16-core host; the card not used): per-method, per-level
 # cost of one thread, and thread scaling (issue 34 part 4). Output: percore_h200host_s22.jsonl.
 # Run as benches/percore_tmp.py 20 1,2,4,8,16 48: the same code as benches/bench_per_thread.py.
 set -x
