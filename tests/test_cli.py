@@ -12,6 +12,7 @@ import pytest
 import idm_rs
 from idm_rs import paper
 from idm_rs.cli import main, paper_case_csv, parse_param_overrides
+from idm_rs.units import si
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 FIGURES = [f"fig6{c}.png" for c in "abcd"] + [f"fig7{c}.png" for c in "abcd"]
@@ -44,10 +45,10 @@ def test_paper_case_csv_columns(tmp_path):
     path = tmp_path / "pc.csv"
     paper_case_csv(lps, dps, path, every=3)
     data = np.genfromtxt(path, delimiter=",", names=True)
-    assert data.dtype.names[:4] == ("t", "voltage", "x1_lps", "x2_lps")
-    assert data["t"][-1] == pytest.approx(10e-3)
-    assert data["x1_lps"][-1] == lps.final_position
-    assert data["x1_dps"][-1] == dps.final_position
+    assert data.dtype.names[:4] == ("t_s", "voltage_V", "x1_lps_m", "x2_lps_m")
+    assert data["t_s"][-1] == pytest.approx(10e-3)
+    assert data["x1_lps_m"][-1] == lps.final_position
+    assert data["x1_dps_m"][-1] == dps.final_position
 
 
 def test_simulate_csv_matches_api(tmp_path, capsys):
@@ -58,15 +59,15 @@ def test_simulate_csv_matches_api(tmp_path, capsys):
     ]
     assert main(argv) == 0
     data = np.genfromtxt(csv, delimiter=",", names=True)
-    assert data.dtype.names == ("t", "voltage", "x1", "x2", "friction", "fh")
+    assert data.dtype.names == ("t_s", "voltage_V", "x1_m", "x2_m", "friction_N", "fh_N")
     ref = idm_rs.simulate(
         idm_rs.Params(m2=0.4, mu_k=0.45), idm_rs.Triangle(80.0, 1e-3, 4e-3), t_end=6e-3, dt=2e-8, model="lps"
     )
-    assert data["x1"][-1] == ref.final_position
-    np.testing.assert_array_equal(data["x1"], ref.main_body)
-    np.testing.assert_array_equal(data["voltage"], ref.voltage)
+    assert data["x1_m"][-1] == ref.final_position
+    np.testing.assert_array_equal(data["x1_m"], ref.main_body)
+    np.testing.assert_array_equal(data["voltage_V"], ref.voltage)
     text = capsys.readouterr().out
-    assert f"{ref.final_position * 1e6:.6f} µm" in text
+    assert si(ref.final_position, "m", 7) in text
     assert "run time" in text
 
 

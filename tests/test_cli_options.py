@@ -18,6 +18,7 @@ from idm_rs.cli import main
 from idm_rs.interrupted import interrupted
 from idm_rs.rigs import RigData
 from idm_rs.rigs.diagnosis import _linear_rig, diagnose_spring_slider
+from idm_rs.units import si
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata"
 needs_real = pytest.mark.skipif(not REAL.exists(), reason="the measured data sets are not here")
@@ -34,7 +35,7 @@ def test_simulate_options_reach_the_run(tmp_path, capsys):
     with xr.open_dataset(out) as ds:
         assert ds.attrs["n_elements"] == 3 and ds.sizes["time"] == api.t.size and ds.sizes["node"] == 4
         np.testing.assert_array_equal(ds["main_body"].values, api.main_body)
-    assert f"{api.final_position * 1e6:.6f} µm" in capsys.readouterr().out
+    assert si(api.final_position, "m", 7) in capsys.readouterr().out
 
 
 def test_sweep_method_options_reach_the_dataset(tmp_path):

@@ -95,8 +95,8 @@ def test_csv_has_the_reading_when_a_sensor_effect_is_on_and_titles_name_the_effe
     base = ["simulate", "--model", "lps", "--t-end", "1e-3", "--save-every", "10"]
     assert main([*base, "--out", str(plain)]) == 0
     assert main([*base, "--effect", "tau_sensor=2e-5", "--out", str(sensed)]) == 0
-    assert plain.read_text().splitlines()[0] == "t,voltage,x1,x2,friction,fh"
-    assert sensed.read_text().splitlines()[0] == "t,voltage,x1,x2,friction,fh,reading"
+    assert plain.read_text().splitlines()[0] == "t_s,voltage_V,x1_m,x2_m,friction_N,fh_N"
+    assert sensed.read_text().splitlines()[0] == "t_s,voltage_V,x1_m,x2_m,friction_N,fh_N,reading_m"
     data = np.loadtxt(sensed, delimiter=",", skiprows=1)
     r = idm_rs.simulate(idm_rs.Params(), idm_rs.Triangle(), t_end=1e-3, model="lps", save_every=10,
                         effects=idm_rs.Effects(tau_sensor=2e-5))

@@ -37,6 +37,7 @@ from .effects import Effects
 from .interrupted import interrupted, partial_result
 from .methods import MethodName
 from .params import Params
+from .units import si
 from .waveforms import STARTUP_CYCLES, Sawtooth
 
 if TYPE_CHECKING:
@@ -74,6 +75,11 @@ class SteadyState:
     def motion(self) -> str:
         """"forward", "backward", "stalled" or "unknown"."""
         return {1.0: "forward", -1.0: "backward", 0.0: "stalled"}.get(self.direction, "unknown")
+
+    def __str__(self) -> str:
+        return (f"SteadyState({self.motion}: mean velocity {si(self.mean_velocity, 'm/s')}, step "
+                f"{si(self.step_mean, 'm')} ± {si(self.step_std, 'm')} per cycle, back-slip {si(self.backslip, 'm')} "
+                f"per cycle ({self.backslip_ratio:.3g} of the travel along the net direction))")
 
 
 def _check_train(waveform: Any, skip_cycles: int) -> Sawtooth:
@@ -128,6 +134,13 @@ class StallForce:
     velocities: np.ndarray  #: mean velocity at each load [m/s]
     xtol: float  #: bracket width at the end [N]
     direction: float  #: the unloaded motion's direction (+1 or -1)
+
+    def __str__(self) -> str:
+        if not math.isfinite(self.force):
+            return (f"StallForce(not bracketed: the mean velocity kept its sign up to {si(float(self.loads[-1]), 'N')}"
+                    " of opposing load)")
+        return (f"StallForce({si(self.force, 'N')} ± {si(self.xtol / 2, 'N', 2)}: the opposing load on the main "
+                f"body at zero mean velocity; unloaded {si(float(self.velocities[0]), 'm/s')})")
 
 
 def stall_force(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_elements: int = 4,

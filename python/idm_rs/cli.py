@@ -30,6 +30,7 @@ from .methods import METHODS
 from .params import Params
 from .simulation import DivergenceError, SimulationResult, simulate
 from .sweep import METRICS, STEADY_METRICS
+from .units import si
 from .waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
 
 if TYPE_CHECKING:
@@ -38,7 +39,7 @@ if TYPE_CHECKING:
 EXIT_ERROR = 2
 #: every command stopped by Ctrl-C exits with this (128 + SIGINT), after saying what it kept
 EXIT_INTERRUPTED = 130
-CSV_COLUMNS = ("t", "voltage", "x1", "x2", "friction", "fh")
+CSV_COLUMNS = ("t_s", "voltage_V", "x1_m", "x2_m", "friction_N", "fh_N")
 #: the xarray netCDF writers the CLI uses (netCDF4 when installed, else scipy's netCDF3)
 NetcdfEngine = Literal["netcdf4", "scipy"]
 
@@ -121,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_case_arguments(sp)
     sp.add_argument("--out", default=None, metavar="FILE",
                     help="save the trajectory: FILE.csv (columns " + ", ".join(CSV_COLUMNS) + ", and reading "
-                         "where a sensor effect makes it differ from x1; SI units) "
+                         "where a sensor effect makes it differ from x1; the unit in each name) "
                          "or FILE.nc (netCDF, every variable)")
     sp.add_argument("--plot", default=None, metavar="FILE.png", help="plot voltage, x1, x2 and friction")
 
@@ -452,7 +453,7 @@ def write_csv(result: SimulationResult, path: Path) -> None:
     names = list(CSV_COLUMNS)
     if not np.array_equal(result.reading, result.main_body):
         cols.append(result.reading)
-        names.append("reading")
+        names.append("reading_m")
     np.savetxt(path, np.column_stack(cols), delimiter=",", header=",".join(names), comments="", fmt="%.17g")
 
 
@@ -484,10 +485,10 @@ def paper_case_csv(lps: SimulationResult, dps: SimulationResult, path: Path, eve
     if idx[-1] != lps.t.size - 1:
         idx = np.append(idx, lps.t.size - 1)
     cols = [lps.t, lps.voltage]
-    names = ["t", "voltage"]
+    names = ["t_s", "voltage_V"]
     for tag, r in (("lps", lps), ("dps", dps)):
         cols += [r.main_body, r.weight, r.friction, r.fh]
-        names += [f"x1_{tag}", f"x2_{tag}", f"friction_{tag}", f"fh_{tag}"]
+        names += [f"x1_{tag}_m", f"x2_{tag}_m", f"friction_{tag}_N", f"fh_{tag}_N"]
     data = np.column_stack(cols)[idx]
     np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
 
@@ -672,7 +673,7 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     if not result.complete:
         print(f"interrupted at t = {t_last:g} s: the trajectory up to there is kept")
     print(f"{'final' if result.complete else 'last'} position x1({t_last * 1e3:g} ms) = "
-          f"{result.final_position * 1e6:.6f} µm")
+          f"{si(result.final_position, 'm', 7)}")
     if adaptive:
         print(f"run time {elapsed:.3f} s ({result.t.size} saved times, every {a.save_every} accepted steps)")
     else:

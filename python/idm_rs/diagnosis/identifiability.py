@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Optional, Sequence
 
+from .. import units
 from .thresholds import DETERMINED_WITHIN, STRONG_CORRELATION
 
 #: the normal quantile of a two-sided 95 % interval
@@ -43,7 +44,7 @@ class ParamStatus:
 
     def words(self, unit: str = "") -> str:
         u = f" {unit}" if unit and unit != "1" else ""
-        interval = f"95 % interval [{self.low:.4g}, {self.high:.4g}]{u}"
+        interval = f"95 % interval {units.interval(self.low, self.high, unit if unit != '1' else '')}"
         if self.determined:
             return f"{self.name} = {self.value:.4g}{u} ({interval}): determined"
         tail = (f"; it trades off against {self.partner} (correlation {self.correlation:+.2f}): the experiments fix "
