@@ -143,3 +143,14 @@ def test_kernel_backends_never_return_train_metrics_as_silent_nan():
     assert np.isfinite(ds.step_per_cycle.values).all()
     with pytest.raises(ValueError, match=r"does not compute the steady-state metric\(s\) \['mean_velocity'\]"):
         idm_rs.sweep(idm_rs.Params(), saw, {"voltage": [60.0]}, metrics=["mean_velocity"], **kw)
+
+
+def test_a_sweep_title_says_the_method_asked_and_each_points_own_end():
+    """Before: a heat map titled "dopri5" under an `auto` command, and one t_end when each
+    point ran to the end of its own train."""
+    train = idm_rs.Sawtooth(amplitude=80.0, frequency=500.0, cycles=3, rise=1e-4)
+    ds = idm_rs.sweep(idm_rs.Params(), train, {"frequency": [500.0, 1000.0]}, model="lps", method="auto",
+                      progress=False)
+    title = sweep_title(ds, "mean_velocity")
+    assert title.split("\n", 1)[1].replace("\n", " ").count("auto (") == 1, title
+    assert "each point to its own waveform's end" in title and "t_end =" not in title

@@ -110,7 +110,7 @@ def _steady(out: dict[str, Any], i: int) -> SteadyState:
     return SteadyState(*(float(out[k][i]) for k in STEADY_METRICS))
 
 
-def steady_state(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_elements: int = 4,
+def steady_state(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_elements: Optional[int] = None,
                  effects: Optional[Effects] = None, skip_cycles: int = STARTUP_CYCLES, method: MethodName = "auto",
                  threads: Optional[int] = None, piezo_hysteresis: bool = True, t_end: Optional[float] = None,
                  **how: Any) -> SteadyState:
@@ -118,6 +118,7 @@ def steady_state(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_
     or to ``t_end`` [s]), averaged over its full cycles after the first ``skip_cycles``.
     ``method`` (default ``"auto"``) and ``how`` (``dt`` for RK4, ``rtol``/``atol``/``first_step``
     for adaptive methods) as in :func:`idm_rs.sweep`. A run that diverges gives NaN metrics."""
+    n_elements = options.elements(model, n_elements)
     _check_train(waveform, skip_cycles)
     out = _run_trains([params], [waveform], model=model, n_elements=n_elements, effects=effects,
                       skip_cycles=skip_cycles, method=method, threads=threads, piezo_hysteresis=piezo_hysteresis,
@@ -143,7 +144,7 @@ class StallForce:
                 f"body at zero mean velocity; unloaded {si(float(self.velocities[0]), 'm/s')})")
 
 
-def stall_force(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_elements: int = 4,
+def stall_force(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_elements: Optional[int] = None,
                 effects: Optional[Effects] = None, skip_cycles: int = STARTUP_CYCLES, method: MethodName = "auto",
                 loads: int = 9, xtol: Optional[float] = None, threads: Optional[int] = None,
                 **how: Any) -> StallForce:
@@ -157,9 +158,9 @@ def stall_force(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_e
     drive stalls or the curve never changes sign."""
     from scipy.optimize import brentq
 
+    n_elements = options.elements(model, n_elements)
     _check_train(waveform, skip_cycles)
-    if int(loads) < 3:
-        raise ValueError(f"parameter 'loads' must be at least 3, got {loads!r}")
+    loads = options.count("loads", loads, minimum=3)
     fs = max(params.mu_s, params.mu_k) * params.effective_normal_force
     xtol = float(xtol) if xtol is not None else STALL_XTOL_FRACTION * fs
     kw = dict(model=model, n_elements=n_elements, effects=effects, skip_cycles=skip_cycles, method=method,
@@ -189,7 +190,7 @@ def stall_force(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_e
     return StallForce(float(force), grid, v, xtol, sign)
 
 
-def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_elements: int = 4,
+def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_elements: Optional[int] = None,
                  effects: Optional[Effects] = None, frequencies: Optional[Floats] = None,
                  voltages: Floats = (40.0, 60.0, 80.0, 100.0, 120.0),
                  step_voltages: Optional[Floats] = None, frequency: float = 100.0,
@@ -217,8 +218,9 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
     from .engine import __version__
     from .sweep import sweep
 
+    n_elements = options.elements(model, n_elements)
     params = params or Params()
-    loads = options.count("loads", loads, minimum=2)
+    loads = options.count("loads", loads, minimum=3)
     threads = options.threads(threads)
     if frequencies is None:
         f_max = min(1500.0, 0.9 / (2.0 * rise))

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, Literal, Optional, Sequence
 
 import numpy as np
 
-from . import methods
+from . import methods, options
 from .cli_figures import plot_result, plot_sweep
 from .cli_outputs import check_outputs
 from .declarations import IDM_MODELS, structure_label
@@ -112,7 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Simulate one IDM case from rest and print x1(t_end).",
     )
     sp.add_argument("--model", choices=IDM_MODELS, default="dps", help="lumped or FEM model (default: dps)")
-    sp.add_argument("--n-elements", type=_positive_int, default=4, metavar="N",
+    sp.add_argument("--n-elements", type=_positive_int, default=None, metavar="N",
                     help="FEM elements of the DPS (default: 4)")
     _add_method_arguments(sp)
     sp.add_argument("--t-end", type=_positive_float, default=None, metavar="T",
@@ -140,7 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     ch.add_argument("--out", default="idm-rs-characteristics", metavar="DIR",
                     help="output folder (default: %(default)s)")
     ch.add_argument("--model", choices=IDM_MODELS, default="dps", help="lumped or FEM model (default: dps)")
-    ch.add_argument("--n-elements", type=_positive_int, default=4, metavar="N",
+    ch.add_argument("--n-elements", type=_positive_int, default=None, metavar="N",
                     help="FEM elements of the DPS (default: 4)")
     ch.add_argument("--frequencies", default=None, metavar="SPEC",
                     help="drive frequencies [Hz]: A:B:N (log-spaced) or F1,F2,... "
@@ -209,7 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="a sweep axis: NAME=A:B:N (numpy.linspace(A, B, N)), NAME=V1,V2,... or NAME=V; "
                          "repeat for more axes (dimensions in the given order)")
     sw.add_argument("--model", choices=IDM_MODELS, default="dps", help="lumped or FEM model (default: dps)")
-    sw.add_argument("--n-elements", type=_positive_int, default=4, metavar="N",
+    sw.add_argument("--n-elements", type=_positive_int, default=None, metavar="N",
                     help="FEM elements of the DPS (default: 4)")
     _add_method_arguments(sw)
     sw.add_argument("--retries", type=int, default=2, metavar="K",
@@ -398,10 +398,21 @@ def sampled_from_csv(path: Path) -> Sampled:
         i = int(back[0])
         raise CliError(f"{where}: times must increase strictly; sample {i + 2} (t = {data[i + 1, 0]:g} s) is not after "
                        f"sample {i + 1} (t = {data[i, 0]:g} s)")
+    if data[-1, 0] > LONG_DRIVE_S:
+        import warnings
+
+        warnings.warn(f"{where}: the times run to {data[-1, 0]:g} s (read in seconds): a drive of "
+                      f"{data[-1, 0] - data[0, 0]:g} s; if they are milliseconds, divide the column by 1000",
+                      UserWarning, stacklevel=2)
     try:
         return Sampled(data[:, 0], data[:, 1])
     except ValueError as exc:
         raise CliError(f"{where}: {exc}") from None
+
+
+#: a sampled drive longer than this [s] is said to be long (an IDM's records last milliseconds;
+#: a column in milliseconds read as seconds runs a thousand times too long)
+LONG_DRIVE_S = 1.0
 
 
 def _is_number(text: str) -> bool:
@@ -983,6 +994,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 def _run(a: argparse.Namespace) -> int:
     try:
         check_outputs(a)
+        if hasattr(a, "n_elements"):  # 4 for the DPS by default; the LPS has none (said if given)
+            a.n_elements = options.elements(a.model, a.n_elements, say_ignored=True)
         command = {"reproduce": cmd_reproduce, "simulate": cmd_simulate, "sweep": cmd_sweep,
                    "characterize": cmd_characterize, "rig-fit": cmd_rig_fit, "diagnose": cmd_diagnose}[a.command]
         return command(a)

@@ -179,7 +179,13 @@ def sweep_title(ds: "xarray.Dataset", metric: str) -> str:
     model = structure_label(str(a.get("model")), int(a.get("n_elements", 1)))
     step = f"rtol = {a.get('rtol'):g}" if is_adaptive(str(a.get("method"))) else f"dt = {a.get('dt_s'):g} s"
     on = [k[len("effect_"):] + f" = {v:g}" for k, v in a.items() if k.startswith("effect_")]
-    details = (f"{model}, {a.get('method')} ({step}), t_end = {a.get('t_end_s'):g} s, "
+    method = str(a.get("method"))
+    asked = str(a.get("method_asked", method))
+    how = f"{asked} ({method}, {step})" if asked != method else f"{method} ({step})"
+    rule = str(a.get("t_end_rule", "as given"))
+    span = (f"t_end = {a.get('t_end_s'):g} s" if rule in ("as given", "the waveform's end")
+            else "each point to its own waveform's end")
+    details = (f"{model}, {how}, {span}, "
                f"{_waveform_title(str(a.get('waveform')), [str(d) for d in ds[metric].dims])}"
                + (f"; effects: {', '.join(on)}" if on else ""))
     return ds[metric].attrs.get("long_name", metric) + "\n" + textwrap.fill(details, 95)

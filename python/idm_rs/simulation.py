@@ -19,7 +19,7 @@ from .interrupted import interrupted
 from .methods import MethodName
 from .params import PARAM_INFO, Params
 from .state import State
-from .waveforms import STARTUP_CYCLES, Waveform
+from .waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
 
 #: above this many RK4 steps simulate() warns that the run will be long
 LONG_RUN_STEPS = 1e8
@@ -255,7 +255,7 @@ def simulate(
     t_end: float,
     dt: Optional[float] = None,
     model: Union[Model, "Rig"] = "dps",
-    n_elements: int = 4,
+    n_elements: Optional[int] = None,
     save_every: int = 100,
     *,
     piezo_hysteresis: bool = True,
@@ -273,8 +273,9 @@ def simulate(
     """Simulate the IDM over [``t_start``, ``t_end``] s, from rest or from ``initial_state``.
 
     ``model`` is ``"lps"`` (two lumped masses), ``"dps"`` (the PE as ``n_elements`` FEM bar
-    elements), or an :class:`idm_rs.batch.Rig` (a friction test rig: one body on the friction
-    element, the waveform its drive position [m] or force [N]; use ``piezo_hysteresis=False``).
+    elements, default 4; another model warns that it ignores a count other than 1), or an
+    :class:`idm_rs.batch.Rig` (a friction test rig: one body on the friction element, the
+    waveform its drive position [m] or force [N]; use ``piezo_hysteresis=False``).
 
     ``method="rk4"`` (the reference): fixed step ``dt`` [s] (default 1e-8). The waveform's
     breakpoints must fall on step boundaries and ``dt`` must divide the span; otherwise a
@@ -325,8 +326,13 @@ def simulate(
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
     if external_force is not None and not isinstance(external_force, ExternalForce):
         raise TypeError(f"external_force must be idm_rs.ExternalForce, got {type(external_force).__name__}")
+    if not isinstance(waveform, (Triangle, Sawtooth, Sampled)):
+        raise TypeError(f"waveform must be an idm_rs waveform (Triangle, Sawtooth or Sampled), got {waveform!r}")
+    t_end = options.time("t_end", t_end)
     effects = effects or Effects()
-    n_elements, save_every = options.count("n_elements", n_elements), options.count("save_every", save_every)
+    n_elements = options.elements(model, n_elements)
+    save_every = options.count("save_every", save_every)
+    options.tolerances_for(method, rtol, atol)
     method, rtol, atol = methods.resolve(method, rtol, atol)
     adaptive = methods.is_adaptive(method)
     if not adaptive and dt is None:
@@ -339,6 +345,11 @@ def simulate(
         method=method, dt=step, rtol=float(rtol), atol=float(atol), first_step=step)
     if t_start is None:
         t_start = initial_state.t if isinstance(initial_state, State) else 0.0
+    elif initial_state is None and t_start > 0:
+        v0 = float(np.interp(t_start, *waveform.breakpoints()))
+        warnings.warn(f"t_start = {t_start:g} s without an initial_state: the run starts from rest with the drive "
+                      f"already at {v0:.4g} V (a voltage step); pass initial_state=<a result's final_state> to "
+                      "continue a run", UserWarning, stacklevel=2)
     names = sensitivity_names(sensitivities)
     bt, bv = waveform.breakpoints()
     y0 = None if initial_state is None else np.ascontiguousarray(initial_state, dtype=float).ravel()

@@ -262,7 +262,7 @@ def sweep(
     t_end: Optional[float] = None,
     dt: Optional[float] = None,
     model: Model = "dps",
-    n_elements: int = 4,
+    n_elements: Optional[int] = None,
     metrics: Optional[Sequence[str]] = None,
     method: MethodName = "rk4",
     rtol: Optional[float] = None,
@@ -364,6 +364,7 @@ def sweep(
     metrics = [m for m in METRICS if m not in not_computed] if metrics is None else metrics
     structure(model)  # an IDM structure, else a ValueError naming the choices
     asked = methods.check(method)
+    options.tolerances_for(method, rtol, atol)
     method, rtol, atol = methods.resolve(method, rtol, atol)
     adaptive = method in methods.ADAPTIVE
     if adaptive and first_step is None and dt is not None:
@@ -385,7 +386,7 @@ def sweep(
     retries = options.count("retries", retries, minimum=0)
     block_size = options.count("block_size", block_size)
     threads = options.threads(threads)
-    n_elements = options.count("n_elements", n_elements)
+    n_elements = options.elements(model, n_elements)
     shortest, longest, where = _train_span(waveform, names, values)
     given = t_end is not None
     if t_end is None:

@@ -4,6 +4,7 @@ to the Rust core, which steps exactly onto them."""
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Literal, Mapping, Union
 
@@ -159,6 +160,10 @@ class Sampled:
         if np.any(np.diff(tt) <= 0):
             bad = int(np.flatnonzero(np.diff(tt) <= 0)[0])
             raise ValueError(f"Sampled: times must increase strictly (t[{bad}] >= t[{bad + 1}])")
+        if tt[0] > 0 and vv[0] != 0:
+            warnings.warn(f"Sampled: the first sample is at t = {tt[0]:g} s with {vv[0]:g} V and the drive holds that "
+                          "value before it, a voltage step at t = 0; start the samples at t = 0 (or at 0 V) if the "
+                          "step is not meant", UserWarning, stacklevel=2)
         object.__setattr__(self, "t", tt)
         object.__setattr__(self, "voltage", vv)
 
