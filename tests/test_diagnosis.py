@@ -301,3 +301,29 @@ def test_an_interrupted_diagnosis_reports_and_plots_only_what_finished(spring_ca
     monkeypatch.setattr(importlib.import_module("idm_rs.diagnosis"), "diagnose", stopped_diagnose)
     assert main(["diagnose", str(spring_case), "--plots", str(tmp_path / "cli"), "--no-progress"]) == 130
     assert "figures (of what finished before the interrupt)" in capsys.readouterr().out
+
+
+def test_the_ranking_table_and_figure_show_the_same_numbers(spring_diagnosis, tmp_path, monkeypatch):
+    """Before: every score-only row read "~ RMS 2.71 x noise (linearised estimate)", the null's
+    RMS, not the candidate's; a ΔBIC "not supported" in the table was drawn at -8 in the figure.
+    Now a candidate never fitted shows no RMS, and both show the same ΔBIC words."""
+    import importlib
+
+    plots = importlib.import_module("idm_rs.diagnosis.plots")
+    figures = []
+    real_save = plots._save
+    monkeypatch.setattr(plots, "_save", lambda fig, path: (figures.append(fig), real_save(fig, path))[1])
+    d = spring_diagnosis
+    plots.plot_ranking(d, tmp_path)
+    notes = [t.get_text() for t in figures[0].axes[0].texts]
+    table = text_report(d).split("Candidate effects")[1]
+    sigma = d.noise.sigma
+    for c, note in zip(d.ranking, notes):
+        assert note.startswith(f"ΔBIC {c.delta_bic_words}, "), (c.effect, note)
+        row = next(line for line in table.splitlines() if f" {c.effect} " in line)
+        assert c.delta_bic_words in row, (c.effect, row)
+        if c.screened_only:
+            assert "not fitted (score" in note and "RMS" not in note
+            assert math.isnan(c.rms_over_noise(sigma))
+        else:
+            assert f"RMS {c.rms_after / sigma:.2f}× noise" in note and f"{c.rms_after / sigma:.2f} ×" in row

@@ -230,7 +230,8 @@ def plot_ranking(d: Diagnosis, directory: Path) -> Path:
     y = np.arange(len(cands))[::-1]
     vals = np.array([c.delta_bic for c in cands], dtype=float)
     colours = [C_REFIT if c.effect == d.verdict else ("0.75" if c.screened_only else "0.5") for c in cands]
-    bars = ax.barh(y, np.nan_to_num(vals), color=colours, hatch=None)
+    # a candidate no better than the null is "not supported" in the report: no bar here either
+    bars = ax.barh(y, np.clip(np.nan_to_num(vals), 0.0, None), color=colours, hatch=None)
     for b, c in zip(bars, cands):
         if c.screened_only:
             b.set_hatch("//")
@@ -241,13 +242,13 @@ def plot_ranking(d: Diagnosis, directory: Path) -> Path:
     ax.set_yticks(y, [c.effect + ("" if c.fit_label == "fitted" else f" ({c.fit_label})") for c in cands], fontsize=9)
     if any(c.screened_only for c in cands):
         ax.barh(np.nan, 0, color="0.75", hatch="//", edgecolor="0.4",
-                label="score only: not fitted, the screening step's linearised numbers")
+                label="score only: not fitted, its linearised ΔBIC")
     lo, hi = ax.get_xlim()
     ax.set_xlim(lo, hi * 10 if hi > 0 else hi)
     for yi, c in zip(y, cands):
-        text = f"RMS {c.rms_after / sigma:.2f}× noise" if math.isfinite(c.rms_after) else "RMS –"
-        if c.screened_only:
-            text = "≈ " + text + " (linearised estimate)"
+        ratio = c.rms_over_noise(sigma)
+        text = f"ΔBIC {c.delta_bic_words}, " + (f"RMS {ratio:.2f}× noise" if math.isfinite(ratio)
+                                                  else f"not fitted (score {c.score:.0f})")
         if math.isfinite(c.heldout_rms):
             text += f", held-out {c.heldout_rms * 1e9:.2f} nm"
         xpos = max(c.delta_bic, 0.0) if math.isfinite(c.delta_bic) else 0.0

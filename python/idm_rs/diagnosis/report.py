@@ -460,7 +460,7 @@ def _ranking_lines(d: Diagnosis, sigma: float) -> list[str]:
     lines += ["", "Candidate effects (score: the chi² one linearised step from the null optimum would gain, "
                   "which orders the fits; \"fitted\": multistart local fits with the calibrated subset and the "
                   "offsets, the null it contains among the starts; \"at null\": the fit ended no better than that "
-                  "null; \"score only\": not fitted, its numbers are the linearised step's; ΔBIC > 0: better than "
+                  "null; \"score only\": not fitted, only its score and linearised ΔBIC; ΔBIC > 0: better than "
                   "the best null fit; LR: likelihood ratio against the null it contains, with its 1e-3 critical "
                   "value)"]
     rows = []
@@ -468,9 +468,11 @@ def _ranking_lines(d: Diagnosis, sigma: float) -> list[str]:
         mark = "*" if c.effect == d.verdict else " "
         lr = getattr(c, "lr_chi2", math.nan)
         score = getattr(c, "score", math.nan)
-        rows.append([f"{mark}{i}", c.effect, format_params(c), _nm(c.rms_after), _ratio(c.rms_after, sigma),
+        ratio = c.rms_over_noise(sigma)
+        rows.append([f"{mark}{i}", c.effect, format_params(c), _nm(c.rms_after) if _finite(ratio) else "–",
+                     f"{ratio:.2f} ×" if _finite(ratio) else "–",
                      f"{score:.0f}" if _finite(score) else "–",
-                     f"{c.delta_bic:.1f}" if c.delta_bic >= 0 else "not supported",
+                     c.delta_bic_words,
                      f"{lr:.0f} / {c.lr_critical:.1f}" if _finite(lr) and not c.screened_only else "–",
                      _nm(c.heldout_rms) if _finite(c.heldout_rms) else "–",
                      c.fit_label])

@@ -70,6 +70,20 @@ class Candidate:
         no better than the null model it contains: reported at that null) or "fitted"."""
         return "score only" if self.screened_only else "at null" if self.at_null else "fitted"
 
+    def rms_over_noise(self, sigma: float) -> float:
+        """RMS after / noise where the candidate was fitted; NaN for a score-only one, whose
+        fit never ran (its residual is the null's: no number of its own to show)."""
+        return self.rms_after / sigma if not self.screened_only and sigma > 0 else math.nan
+
+    @property
+    def delta_bic_words(self) -> str:
+        """ΔBIC as the report's table and the ranking figure both show it: the number where the
+        candidate beats the null, else "not supported" (a large negative number says nothing
+        more, and the figure draws no bar for it)."""
+        if not math.isfinite(self.delta_bic):
+            return "–"
+        return f"{self.delta_bic:.1f}" if self.delta_bic > 0 else "not supported"
+
     @property
     def lr_critical(self) -> float:
         from scipy.stats import chi2
