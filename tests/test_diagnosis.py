@@ -327,3 +327,23 @@ def test_the_ranking_table_and_figure_show_the_same_numbers(spring_diagnosis, tm
             assert math.isnan(c.rms_over_noise(sigma))
         else:
             assert f"RMS {c.rms_after / sigma:.2f}× noise" in note and f"{c.rms_after / sigma:.2f} ×" in row
+
+
+def test_the_diagnosis_figures_keep_their_legends_off_the_data(spring_diagnosis, tmp_path, monkeypatch):
+    """The fit figure's residual panel and the ranking figure's last row were under a legend."""
+    from matplotlib.figure import Figure
+    from test_figure_legends import _covered
+
+    figures = []
+    real = Figure.savefig
+
+    def keep(self, *args, **kwargs):
+        out = real(self, *args, **kwargs)
+        figures.append(self)
+        return out
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    plot_diagnosis(spring_diagnosis, tmp_path)
+    assert len(figures) >= 3
+    for fig in figures:
+        assert _covered(fig) == [], fig.axes[0].get_title()

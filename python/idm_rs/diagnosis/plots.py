@@ -178,7 +178,8 @@ def plot_fits(d: Diagnosis, directory: Path) -> list[Path]:
         ax_r.axhline(0, color="0.3", lw=0.5)
         ax_r.set_ylabel("residual [nm]\n(data − model − segment offset)")
         ax_r.set_xlabel("time [ms]")
-        ax_r.legend(loc="upper left", fontsize=8, ncol=2)
+        # below the panel: the residual fills its axes, and a legend inside covered it
+        ax_r.legend(loc="upper center", bbox_to_anchor=(0.5, -0.32), fontsize=8, ncol=2, frameon=False)
         ax_r.grid(alpha=0.3)
         paths.append(_save(fig, directory / f"fit_{_safe(e.name)}.png"))
     return paths
@@ -255,7 +256,9 @@ def plot_ranking(d: Diagnosis, directory: Path) -> Path:
         ax.annotate(text, (xpos, yi), xytext=(4, 0), textcoords="offset points", va="center", fontsize=8)
     ax.set_xlabel("ΔBIC against the best null fit (symlog; > 0: better)")
     ax.set_title(f"{d.case}: candidate effects — verdict: {d.verdict}")
-    ax.legend(loc="lower right", fontsize=8)
+    # under the axes, outside them: inside, it covered the last row's bar and numbers
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=8, frameon=False)
     ax.grid(axis="x", alpha=0.3)
     return _save(fig, directory / "ranking.png")
 
