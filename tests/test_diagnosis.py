@@ -332,6 +332,7 @@ def test_the_ranking_table_and_figure_show_the_same_numbers(spring_diagnosis, tm
 def test_the_diagnosis_figures_keep_their_legends_off_the_data(spring_diagnosis, tmp_path, monkeypatch):
     """The fit figure's residual panel and the ranking figure's last row were under a legend."""
     from matplotlib.figure import Figure
+
     from test_figure_legends import _covered
 
     figures = []
