@@ -348,3 +348,24 @@ def test_the_diagnosis_figures_keep_their_legends_off_the_data(spring_diagnosis,
     assert len(figures) >= 3
     for fig in figures:
         assert _covered(fig) == [], fig.axes[0].get_title()
+
+
+def test_the_bar_is_not_at_100_percent_while_discovery_runs():
+    """Before: discovery sat at "100% [06:00<00:00]" for six more minutes. An optional stage that
+    starts lengthens the bar; one that is skipped leaves it as it was."""
+    from idm_rs.diagnosis.progress import OPTIONAL_SHARE, Progress
+
+    p = Progress("test")
+    p.stage_done("held-out")
+    assert p.bar.n == pytest.approx(100.0) and p.bar.total == pytest.approx(100.0)
+    p.update(20)  # the verdict's work: the bar waits
+    assert p.bar.total == pytest.approx(100.0)
+    p.stage_begins("discovery")  # the second and third effects were skipped: nothing ran in them
+    p.update(50)
+    total = 100.0 + OPTIONAL_SHARE["discovery"]
+    assert p.bar.total == pytest.approx(total) and 100.0 < p.bar.n < total
+    assert p.bar.n / p.bar.total < 0.8  # the percentage the user reads
+    p.stage_done("discovery")
+    assert p.bar.n == pytest.approx(total)
+    p.close()
+    assert p.bar.n == pytest.approx(p.bar.total)

@@ -229,14 +229,14 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
     train = Sawtooth(amplitude=voltage, frequency=frequency, cycles=cycles, rise=rise)
     _check_train(train, skip_cycles)
     common: dict[str, Any] = dict(model=model, n_elements=n_elements, effects=effects, method=method,
-                                  threads=threads, skip_cycles=skip_cycles, progress=progress)
+                                  threads=threads, skip_cycles=skip_cycles)
     done: dict[str, Any] = {}
     try:
         vmap = done["vmap"] = _kept(sweep, params, train, {"voltage": np.asarray(voltages, float),
                                                            "frequency": np.asarray(frequencies, float)},
-                                    done, "vmap", **common)
+                                    done, "vmap", **common, progress=progress and "characterize: velocity map")
         steps = done["steps"] = _kept(sweep, params, train, {"voltage": np.asarray(step_voltages, float)},
-                                      done, "steps", **common)
+                                      done, "steps", **common, progress=progress and "characterize: step curve")
         stall = stall_force(params, train, model=model, n_elements=n_elements, effects=effects,
                             skip_cycles=skip_cycles, method=method, loads=loads, threads=threads)
         load_grid, load_v = stall.loads, stall.velocities

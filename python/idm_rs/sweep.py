@@ -272,7 +272,7 @@ def sweep(
     retries: int = 2,
     piezo_hysteresis: bool = True,
     effects: Optional[Effects] = None,
-    progress: bool = True,
+    progress: Union[bool, str] = True,
     client: Any = None,
     threads: Optional[int] = None,
     block_size: int = 65_536,
@@ -330,6 +330,9 @@ def sweep(
     GPU). The kernels do not compute the steady-state train metrics (:data:`STEADY_METRICS`):
     asked for by name on a kernel backend they are refused; by default (``metrics=None``: all)
     they are left out of the Dataset there (``attrs["metrics_not_computed"]`` names them).
+
+    ``progress``: a tqdm bar of the points (a string: the bar's label), its estimate from the
+    whole run's average rate.
 
     Ctrl-C stops within about a second and raises a ``KeyboardInterrupt`` whose ``partial``
     (:func:`idm_rs.partial_result`) is the Dataset of the finished points (others NaN,
@@ -570,7 +573,7 @@ def _check_memory(points: int, out_hint: bool) -> None:
                          "CLI --out sweep.zarr), which keeps one block in memory" if out_hint else ""))
 
 
-def _run_to_store(plan: _Plan, run: _Run, path: Path, progress: bool) -> "xarray.Dataset":
+def _run_to_store(plan: _Plan, run: _Run, path: Path, progress: Union[bool, str]) -> "xarray.Dataset":
     """The grid slab by slab into the Zarr store at ``path`` (:mod:`.sweep_store`); returns the
     store opened lazily. Ctrl-C keeps the slabs written (the rest ``status`` 0)."""
     from .sweep_store import chunk_shape, run_to_store
@@ -659,12 +662,15 @@ def _validate_axes(plan: _Plan) -> None:
                          0.0, plan.t_end, config)
 
 
-def _progress_bar(total: int, show: bool) -> Any:
+def _progress_bar(total: int, show: Union[bool, str]) -> Any:
+    """A points bar (``show`` a string: its label). Its estimate is the whole run's average rate
+    (tqdm's smoothing 0): the points that finish first are the easy ones, and a rate smoothed
+    over the last few blocks promised 28 s for a sweep of ten minutes."""
     if not show:
         return None
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, unit="pt", desc="idm-rs sweep", smoothing=0.1)
+    return tqdm(total=total, unit="pt", desc=show if isinstance(show, str) else "idm-rs sweep", smoothing=0.0)
 
 
 def _run_local(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_size: int, bar: Any) -> bool:

@@ -283,6 +283,7 @@ def _second_effect_stage(s: _State) -> None:
         s.lead = partial_leader(s.pb, s.refits)
     if s.lead is None:
         return
+    s.clock.begin("second effect")
     second = search_second_effect(s.pb, s.cal, s.lead, s.heldout, s.refits)
     if not second.named:
         # two effects that each mimic part of the other from the leader's optimum: the
@@ -306,6 +307,7 @@ def _second_effect_stage(s: _State) -> None:
     s.clock.lap("second effect")
     if wants_third(s.pb, second):
         # a pair both effects support that leaves structure: a third from the model with the two
+        s.clock.begin("third effect")
         third = search_third_effect(s.pb, s.cal, second, s.heldout)
         if third.named and third.third is not None:
             s.verdict, s.reason, s.rms_after = ("+".join((*third.pair, third.third.effect)), third.reason,
@@ -345,6 +347,7 @@ def _discovery_stage(s: _State) -> None:
     assert pb is not None and cal is not None and nominal is not None and heldout is not None
     if not (s.discover and s.verdict in ("unexplained", "not_converged")):
         return
+    s.clock.begin("discovery")
     if not is_finite(s.ho_cal):
         s.ho_cal = heldout.rms(cal.fit.spec, cal.at)
     d_spec, d_free, d_ho, d_lead = discovery_start(s.verdict, s.lead, cal, nominal, s.ho_cal)
@@ -390,9 +393,11 @@ def _next_experiment_stage(s: _State) -> None:
     if s.alternatives:
         s.reason += "; cannot be told apart from " + ", ".join(f"{a.effect} ({a.why})" for a in s.alternatives)
         first = s.alternatives[0]
+        s.clock.begin("next experiment")
         s.proposal = separating_experiment(s.pb, s.refits, first.replaces or s.verdict, first.effect)
         s.clock.lap("next experiment")
     elif s.found is not None and s.found.discovered and s.found.look_alike is not None:
+        s.clock.begin("next experiment (look-alike)")
         s.proposal = look_alike_experiment(s.pb, s.found)
         s.clock.lap("next experiment (look-alike)")
     s.parameter_proposal = determining_experiment(s.pb, s.refits, s.verdict)

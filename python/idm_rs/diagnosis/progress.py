@@ -16,6 +16,11 @@ class Clock:
         self._last = time.perf_counter()
         self._progress = progress
 
+    def begin(self, name: str) -> None:
+        """An optional stage starts: the progress bar, if any, grows by its share."""
+        if self._progress is not None:
+            self._progress.stage_begins(name)
+
     def lap(self, name: str) -> None:
         now = time.perf_counter()
         self.timings[name] = self.timings.get(name, 0.0) + now - self._last
@@ -36,11 +41,21 @@ STAGES: tuple[tuple[str, float, float], ...] = (
     ("held-out", 4.0, 10.0),
     # the stages that run only on some cases (a first effect leaving a systematic residual, an
     # unexplained residual, an alternative or an undetermined parameter): no share of the bar
+    # until they start; one that starts lengthens the bar by OPTIONAL_SHARE (it can take longer
+    # than everything before it, and a bar at 100 % for minutes says the run is over)
     ("second effect", 0.0, 300.0),
+    ("third effect", 0.0, 300.0),
     ("discovery", 0.0, 100.0),
     ("next experiment", 0.0, 50.0),
+    ("next experiment (look-alike)", 0.0, 50.0),
     ("next experiment (parameter)", 0.0, 50.0),
 )
+
+#: how much longer a run gets when an optional stage starts [% of the first stages' 100]
+OPTIONAL_SHARE: dict[str, float] = {
+    "second effect": 60.0, "third effect": 60.0, "discovery": 80.0, "next experiment": 10.0,
+    "next experiment (look-alike)": 10.0, "next experiment (parameter)": 10.0,
+}
 
 
 class Progress:
@@ -57,6 +72,7 @@ class Progress:
         self.bar = tqdm(total=100.0, desc=f"diagnosing {name}", unit="%", smoothing=0.0,
                         bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
         self.stage, self.start, self.in_stage, self.evals = 0, 0.0, 0.0, 0
+        self.started: set[str] = set()  # the optional stages that ran
         self.runs = runs
         self._show()
 
@@ -65,21 +81,42 @@ class Progress:
         count = self.runs() if self.runs is not None else self.evals
         self.bar.set_postfix_str(f"{name}, {count} simulated runs", refresh=False)
 
+    def _share(self, index: int) -> float:
+        stage, share, _ = STAGES[index]
+        return OPTIONAL_SHARE.get(stage, 0.0) if stage in self.started else share
+
     def update(self, n: int = 1) -> None:
         """``n`` more simulations."""
         self.evals += int(n)
         if self.stage < len(STAGES):
-            _, share, typical = STAGES[self.stage]
+            _, _, typical = STAGES[self.stage]
             self.in_stage += n
-            target = self.start + share * (1.0 - 0.5 ** (self.in_stage / typical))
+            target = self.start + self._share(self.stage) * (1.0 - 0.5 ** (self.in_stage / typical))
             self.bar.update(max(0.0, target - self.bar.n))
+        self._show()
+
+    def stage_begins(self, name: str) -> None:
+        """An optional stage starts (``Clock.begin``): the stages before it are passed over and
+        the bar lengthens by its OPTIONAL_SHARE (the percentage drops: the run has grown)."""
+        names = [st[0] for st in STAGES]
+        if name not in names or names.index(name) < self.stage:
+            return
+        while self.stage < names.index(name):
+            self.start += self._share(self.stage)
+            self.stage += 1
+        if name not in self.started:
+            self.started.add(name)
+            self.bar.total += OPTIONAL_SHARE.get(name, 0.0)
+        self.in_stage = 0.0
+        self.bar.update(max(0.0, self.start - self.bar.n))
+        self.bar.refresh()
         self._show()
 
     def stage_done(self, name: str) -> None:
         while self.stage < len(STAGES):
-            stage, share, _ = STAGES[self.stage]
+            stage = STAGES[self.stage][0]
+            self.start += self._share(self.stage)
             self.stage += 1
-            self.start += share
             if stage == name:
                 break
         self.in_stage = 0.0
@@ -88,7 +125,7 @@ class Progress:
 
     def close(self, done: bool = True) -> None:
         if done:
-            self.bar.update(max(0.0, 100.0 - self.bar.n))
+            self.bar.update(max(0.0, self.bar.total - self.bar.n))
         self.bar.close()
 
 
