@@ -23,4 +23,22 @@ def test_the_site_builds_strict(tmp_path):
         assert name in api, name  # the API reference is generated from the docstrings
     for page in ("guide/simulate", "guide/sweep", "guide/characterize", "guide/gpu", "DIAGNOSIS", "REALDATA"):
         assert (tmp_path / "site" / page / "index.html").exists(), page
+    # what users look up: every result attribute, the numpydoc sections, diagnose as a function
+    assert "x1(t_end) [m]" in api and "False when Ctrl-C stopped the run" in api
+    assert "diagnose a measured friction rig" in api.lower() and "partial_result" in api
+    assert 'id="idm_rs.diagnosis.diagnose.diagnose"' in api
+    assert "DivergenceError" in api and "Raises" in api and "Examples" in api
+    bench = (tmp_path / "site" / "BENCHMARKS" / "index.html").read_text(encoding="utf-8")
+    assert "idm-rs / numba" in bench  # the current figures, on the site
+    params = (tmp_path / "site" / "PARAMETERS" / "index.html").read_text(encoding="utf-8")
+    assert "k_ground" in params and "main body mass" in params
+    assert (tmp_path / "site" / "guide" / "getting-started" / "index.html").exists()
     shutil.rmtree(tmp_path / "site")
+
+
+def test_the_parameter_tables_are_the_declarations():
+    """docs/PARAMETERS.md is written from the declarations the engine reads; regenerate it with
+    `python -m idm_rs.reference_tables > docs/PARAMETERS.md` when a parameter changes."""
+    from idm_rs.reference_tables import markdown
+
+    assert (ROOT / "docs" / "PARAMETERS.md").read_text(encoding="utf-8") == markdown()

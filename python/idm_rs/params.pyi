@@ -10,7 +10,8 @@ PARAM_INFO: dict[str, tuple[str, str, str]]
 @dataclass(frozen=True)
 class Params:
     """IDM parameters in SI units; defaults are the paper's Table 1. Symbols, units and meanings:
-    `PARAM_INFO` and the runtime docstring, both from the declaration."""
+    `PARAM_INFO`, and the table of docs/PARAMETERS.md (field, symbol, unit, default, valid range,
+    meaning), both written from the declaration."""
 
     m1: float = ...
     m2: float = ...

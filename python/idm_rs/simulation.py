@@ -82,38 +82,60 @@ class SimulationResult:
     plus t = 0 and t_end); ``nodes`` and ``velocities`` have one column per node (node 0 is the
     main body at z = l, the last the weight at z = 0)."""
 
-    t: NDArray[np.float64]  #: time [s]
-    nodes: NDArray[np.float64]  #: nodal displacements [m], shape (time, node)
-    velocities: NDArray[np.float64]  #: nodal velocities [m/s]
-    friction: NDArray[np.float64]  #: friction force Ff on the main body [N]
-    fh: NDArray[np.float64]  #: presliding (hysteresis) friction force Fh [N]
-    g: NDArray[np.float64]  #: asperity deformation g [m]
-    h: NDArray[np.float64]  #: piezo hysteresis state h [m]
-    voltage: NDArray[np.float64]  #: commanded voltage [V]
-    piezo_force: NDArray[np.float64]  #: piezo force Fp [N]
-    reading: NDArray[np.float64]  #: what the sensor reads [m] (x1 unless a sensor effect is on)
-    final_position: float  #: x1(t_end) [m]
+    t: NDArray[np.float64]
+    """time [s]"""
+    nodes: NDArray[np.float64]
+    """nodal displacements [m], shape (time, node)"""
+    velocities: NDArray[np.float64]
+    """nodal velocities [m/s]"""
+    friction: NDArray[np.float64]
+    """friction force Ff on the main body [N]"""
+    fh: NDArray[np.float64]
+    """presliding (hysteresis) friction force Fh [N]"""
+    g: NDArray[np.float64]
+    """asperity deformation g [m]"""
+    h: NDArray[np.float64]
+    """piezo hysteresis state h [m]"""
+    voltage: NDArray[np.float64]
+    """commanded voltage [V]"""
+    piezo_force: NDArray[np.float64]
+    """piezo force Fp [N]"""
+    reading: NDArray[np.float64]
+    """what the sensor reads [m] (x1 unless a sensor effect is on)"""
+    final_position: float
+    """x1(t_end) [m]"""
     params: Params
+    """the device simulated"""
     waveform: Waveform
+    """the drive"""
     model: str
+    """the structure: "lps", "dps" or the rig's name"""
     n_elements: int
-    dt: float  #: RK4 step, or the first step of an adaptive run [s]
+    """FEM elements (1 for the LPS)"""
+    dt: float
+    """RK4 step, or the first step of an adaptive run [s]"""
     piezo_hysteresis: bool
+    """whether the PE force had its hysteresis"""
     effects: Effects
+    """the catalogue's extra physics that were on"""
     energy: Optional[EnergyBudget] = None
-    #: the state at t_end; pass it as ``initial_state`` (with ``t_start=t_end``) to continue
+    """the energy and momentum budgets (``simulate(..., energy=True)``), else None"""
     final_state: State = field(default_factory=lambda: State([], []), repr=False)
-    method: str = "rk4"  #: "rk4", "dopri5" or "rodas4" (what "auto" resolved to)
-    rtol: float = math.nan  #: adaptive tolerances (NaN for RK4)
+    """the state at t_end; pass it as ``initial_state`` (with ``t_start=t_end``) to continue"""
+    method: str = "rk4"
+    """the integrator that ran: "rk4", "dopri5" or "rodas4" (what "auto" resolved to)"""
+    rtol: float = math.nan
+    """the adaptive method's relative tolerance (NaN for RK4)"""
     atol: float = math.nan
-    #: False when Ctrl-C stopped the run: the arrays end where it stopped (``final_state`` empty)
+    """the adaptive method's absolute tolerance, in each state's natural scale (NaN for RK4)"""
     complete: bool = True
-    #: the names whose derivatives were asked for (``simulate(..., sensitivities=...)``)
+    """False when Ctrl-C stopped the run: the arrays end where it stopped (``final_state`` empty)"""
     sensitivity_names: tuple[str, ...] = ()
-    #: d reading / d name, shape (time, name) [m per unit of the name]
+    """the names whose derivatives were asked for (``simulate(..., sensitivities=...)``)"""
     sensitivities: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
-    #: d final_state / d name, shape (state component, name)
+    """d reading / d name, shape (time, name) [m per unit of the name]"""
     final_state_sensitivities: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+    """d final_state / d name, shape (state component, name)"""
 
     def __repr__(self) -> str:
         """A one-line summary (the arrays are attributes: ``result.t``, ``result.nodes``, ...)."""
@@ -321,6 +343,66 @@ def simulate(
 
     Ctrl-C stops the run within about 50 ms and raises a ``KeyboardInterrupt`` whose ``partial``
     (:func:`idm_rs.partial_result`) is the result up to there (``complete`` False).
+
+    Parameters
+    ----------
+    params : Params
+        The device (SI units; defaults: the paper's Table 1; docs/PARAMETERS.md lists every field).
+    waveform : Triangle, Sawtooth or Sampled
+        The PE voltage [V] against time [s].
+    t_end : float
+        End of the run [s].
+    dt : float, optional
+        RK4 step [s] (default 1e-8); for an adaptive method, taken as its first trial step.
+    model : {"lps", "dps"} or Rig
+        The lumped 2-DOF model, the FEM bar, or a friction test rig.
+    n_elements : int, optional
+        FEM elements of the DPS (default 4).
+    save_every : int
+        Keep every ``save_every``-th step (accepted step of an adaptive method).
+    piezo_hysteresis : bool
+        Bouc-Wen hysteresis of the PE force (the paper's model has it).
+    effects : Effects, optional
+        Extra physics of the catalogue (docs/PARAMETERS.md); none by default.
+    energy : bool
+        Integrate the energy and momentum budgets alongside (``result.energy``).
+    method : {"rk4", "dopri5", "rodas4", "auto"}
+        The integrator.
+    rtol, atol : float, optional
+        Tolerances of the adaptive methods (``atol`` in each state's natural scale).
+    first_step : float, optional
+        First trial step of an adaptive method [s].
+    t_start : float, optional
+        Start of the run [s] (default: the state's own time, or 0).
+    initial_state : State or array, optional
+        The state to start from (a previous result's ``final_state``).
+    sensitivities : sequence of str, optional
+        Names to differentiate the readings with respect to.
+    external_force : ExternalForce, optional
+        A sampled force [N] on the main body or the weight.
+
+    Returns
+    -------
+    SimulationResult
+        The saved trajectory, ``final_position`` x1(t_end) [m] and ``final_state``.
+
+    Raises
+    ------
+    ValueError
+        A setting out of its domain, a step that does not fit the input or is unstable for the
+        structure; the message names the parameter and a value that works.
+    DivergenceError
+        The run left its bounds (the time and a step to try in the message).
+    KeyboardInterrupt
+        Ctrl-C; its ``partial`` holds the trajectory so far.
+
+    Examples
+    --------
+    >>> import idm_rs
+    >>> r = idm_rs.simulate(idm_rs.Params(), idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=9.5e-3),
+    ...                     t_end=10e-3, model="lps", method="auto")
+    >>> round(r.final_position * 1e6, 2)   # x1(10 ms) [µm]
+    1.68
     """
     if not isinstance(params, Params):
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")

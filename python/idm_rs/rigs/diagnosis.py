@@ -377,4 +377,28 @@ def diagnose_spring_slider(data: RigData) -> RigDiagnosis:
 
 
 def diagnose_rig(data: RigData) -> RigDiagnosis:
+    """Diagnose a measured friction rig's recording: fit the friction model the rig's structure
+    calls for, rank the candidate effects of that rig against it and say which one (if any) the
+    data support.
+
+    Parameters
+    ----------
+    data : RigData
+        A recording loaded by :func:`idm_rs.rigs.load` (its ``rig`` says which: ``"emps"``, a
+        linear axis driven in force; ``"frame"``, a block pulled in a frame; ``"spring_slider"``,
+        a slider pulled through a spring, stick-slip).
+
+    Returns
+    -------
+    RigDiagnosis
+        The verdict (a candidate effect, or none), the reason in words, the residual RMS before
+        and after [the rig's unit], the noise, the ranked candidates and where the misfit lives;
+        ``.report()`` prints it, :func:`idm_rs.rigs.plot_rig_diagnosis` draws it.
+
+    Examples
+    --------
+    >>> from idm_rs.rigs import load, diagnose_rig            # doctest: +SKIP
+    >>> rd = diagnose_rig(load("k1002Nm_v42.mat"))            # doctest: +SKIP
+    >>> print(rd.report())                                    # doctest: +SKIP
+    """
     return {"emps": diagnose_emps, "frame": diagnose_frame, "spring_slider": diagnose_spring_slider}[data.rig](data)
