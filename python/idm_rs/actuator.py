@@ -212,7 +212,48 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
     first ``skip_cycles`` are start-up. Defaults suit the paper's device (Table 1).
 
     Ctrl-C raises a ``KeyboardInterrupt`` whose ``partial`` is a Dataset of the curves as
-    far as they ran (NaN where not, no stall force, ``attrs["complete"] == 0``)."""
+    far as they ran (NaN where not, no stall force, ``attrs["complete"] == 0``).
+
+    Parameters
+    ----------
+    params : Params, optional
+        The device (default: the paper's).
+    model : {"lps", "dps"}
+        The structure; ``n_elements`` FEM elements for the DPS (default 4).
+    effects : Effects, optional
+        Extra physics of the catalogue.
+    frequencies, voltages : arrays [Hz], [V]
+        The velocity map's grid.
+    step_voltages : array [V], optional
+        The step curve's amplitudes (at ``frequency``).
+    frequency, voltage : float [Hz], [V]
+        The design point of the step curve and the load curve.
+    rise : float
+        The sawtooth's fast edge [s].
+    cycles, skip_cycles : int
+        Periods per run, and the start-up ones left out of the steady state.
+    loads : int
+        Loads of the stall force's first bracket (>= 3).
+    method : str
+        The integrator (default ``"auto"``).
+    threads : int, optional
+        Threads (default: every core).
+    progress : bool
+        Progress bars, one per curve.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``mean_velocity(voltage, frequency)`` [m/s] and the other steady-state metrics,
+        ``step_mean`` / ``backslip`` ... ``_vs_voltage`` [m], ``load_velocity(load)`` [m/s],
+        ``stall_force`` [N]; the design point in the attributes.
+
+    Examples
+    --------
+    >>> from idm_rs.actuator import characterize
+    >>> ds = characterize(model="lps", progress=False)   # doctest: +SKIP
+    >>> float(ds["stall_force"])                          # [N]   # doctest: +SKIP
+    """
     import xarray as xr
 
     from .engine import __version__

@@ -345,6 +345,67 @@ def sweep(
     opened lazily (``xarray.open_zarr``); an interrupted one keeps the slabs written.
     ``client`` (a ``dask.distributed.Client``) runs blocks of at least 10⁴ points as Dask tasks,
     each capped at the worker's thread count.
+
+    Parameters
+    ----------
+    params : Params
+        The device every point starts from; the grid's axes override its fields.
+    waveform : Triangle, Sawtooth or Sampled
+        The drive every point starts from ([V], [s]).
+    grid : mapping of str to 1-D array
+        Axis name -> values; the points are the outer product, in the given order.
+    t_end : float, optional
+        End of every run [s]; None: each point to its own waveform's end.
+    dt, method, rtol, atol, first_step
+        The integrator, as for :func:`idm_rs.simulate`.
+    model : {"lps", "dps"}
+        The structure; ``n_elements`` FEM elements for the DPS (default 4).
+    metrics : sequence of str, optional
+        The metrics kept (default all of :data:`METRICS`).
+    skip_cycles : int
+        Start-up cycles left out of the steady state (fewer than the train's cycles).
+    retries : int
+        RK4 retries at dt/2, dt/4, ... of a point that diverges (>= 0).
+    piezo_hysteresis : bool
+        Bouc-Wen hysteresis of the PE force.
+    effects : Effects, optional
+        Extra physics of the catalogue.
+    progress : bool or str
+        A progress bar (a string: its label).
+    client : dask.distributed.Client, optional
+        Run blocks as Dask tasks.
+    threads : int, optional
+        Threads on this machine (default: every core).
+    block_size : int
+        Points per block (and, with ``out``, the most points of a slab in memory).
+    backend : {"cpu", "cuda", "kernel-cpu"}
+        Where the points run.
+    out : path, optional
+        A Zarr store (``….zarr``) to write the results into slab by slab.
+
+    Returns
+    -------
+    xarray.Dataset
+        One variable per metric plus ``status``, ``diverged_at`` [s], ``dt_used`` [s],
+        ``steps`` and ``reason`` over the grid's dimensions, with units in the attributes; with
+        ``out`` the store opened lazily.
+
+    Raises
+    ------
+    ValueError
+        An unknown axis or metric, a bad option (named), a ``t_end`` that cuts a train short.
+    MemoryError
+        A grid whose results cannot fit in memory (with ``out`` the hint to write a store).
+    KeyboardInterrupt
+        Ctrl-C; its ``partial`` holds the finished points.
+
+    Examples
+    --------
+    >>> import numpy as np, idm_rs
+    >>> ds = idm_rs.sweep(idm_rs.Params(), idm_rs.Sawtooth(amplitude=80.0, frequency=200.0, cycles=6),
+    ...                   {"voltage": np.linspace(40, 120, 5)}, model="lps", method="auto", progress=False)
+    >>> ds["mean_velocity"].sizes["voltage"]
+    5
     """
 
     from .engine import __version__

@@ -113,7 +113,45 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     refitted; verdict "discovered" when it stands. Ctrl-C raises a KeyboardInterrupt whose
     ``partial`` (:func:`idm_rs.partial_result`) is what was finished — the calibration and the
     candidates fitted so far — as a Diagnosis with verdict "interrupted" and ``complete`` False, which
-    :func:`text_report` and :func:`plot_diagnosis` show."""
+    :func:`text_report` and :func:`plot_diagnosis` show.
+
+    Parameters
+    ----------
+    case : path or Recording
+        A case directory (``meta.json`` and one CSV per experiment) or a loaded recording.
+    progress : bool
+        A progress bar by stage with an estimate of the time left.
+    dt : float
+        RK4 step of the fits' simulations [s].
+    threads : int, optional
+        Threads of the engine (default: every core).
+    refit_top : int
+        Candidates refitted over every experiment after the screening.
+    discover : bool
+        Go beyond the catalogue when no effect of it explains the residual.
+
+    Returns
+    -------
+    Diagnosis
+        ``verdict`` (a catalogue id, a pair "a+b", "none", "discovered", "unexplained" or
+        "not_converged"), ``reason`` in words, the residual RMS before / calibrated / after [m],
+        the noise model, the ranked candidates with their fitted values ±1σ, the look-alikes and
+        the experiment that would separate them; ``to_dict()`` is the JSON.
+
+    Raises
+    ------
+    RecordingError
+        A recording that does not follow the format (file, line and column named).
+    KeyboardInterrupt
+        Ctrl-C; its ``partial`` is the Diagnosis of what finished.
+
+    Examples
+    --------
+    >>> d = idm_rs.diagnose("path/to/case")          # doctest: +SKIP
+    >>> d.verdict, d.rms_after / d.noise.sigma       # doctest: +SKIP
+    ('spring_to_ground', 1.01)
+    >>> print(idm_rs.text_report(d))                 # doctest: +SKIP
+    """
     t_start = time.perf_counter()
     rec = case if isinstance(case, Recording) else load_case(case)
     noise = estimate_noise(rec)

@@ -1,0 +1,22 @@
+"""The Examples sections of the public docstrings run and print what they say (doctest)."""
+
+from __future__ import annotations
+
+import doctest
+
+import pytest
+
+import idm_rs
+from idm_rs.actuator import characterize
+from idm_rs.rigs import diagnose_rig
+
+
+@pytest.mark.parametrize("obj", [idm_rs.simulate, idm_rs.sweep, idm_rs.diagnose, characterize, diagnose_rig,
+                                 idm_rs.partial_result], ids=lambda o: o.__name__)
+def test_the_examples_run(obj):
+    finder = doctest.DocTestFinder(recurse=False)
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    tests = finder.find(obj, globs={"idm_rs": idm_rs})
+    for t in tests:
+        runner.run(t)
+    assert runner.failures == 0
