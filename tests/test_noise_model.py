@@ -264,3 +264,28 @@ def test_a_healthy_device_under_a_lab_artefact_is_healthy(tmp_path: Path, name: 
         assert m.delay_applied and abs(m.delay_s / noise.delay_s - 1) < 0.2
     if name.endswith("drift"):
         assert m.drift_m
+
+
+def test_a_colour_the_rest_shows_by_chance_is_not_taken_for_the_noise(tmp_path: Path) -> None:
+    # white noise's rest passes the colour test now and then, near its critical value (a healthy
+    # LPS+h: AR(2), lag-1 -0.09, LR 18.8 against 18.4); whitening the white residual by it made
+    # the residual look systematic (whiteness z -1.9 -> 6.4) and the device "unexplained". Such a
+    # colour must whiten the calibrated residual to stand; a real one does.
+    from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
+    from idm_rs.diagnosis.noise_model import Colour, Residuals, _confirmed, whitens
+    from idm_rs.recording import load_case
+
+    p = idm_rs.Params()
+    spec = ModelSpec(Structure("lps", 1, False), p.to_dict(resolved=False), {})
+    spurious = Measurement(whiten=Whitener.from_acf(np.array([1.0, -0.0886, -0.1432]), 2))
+    kw = dict(nominal_params=p, experiments=EXPERIMENTS, resolution=0.0, seed=3, dt=2e-8)
+    white = load_case(make_case(tmp_path / "w", noise=SensorNoise(rms=1.9e-9), **kw))
+    res = Residuals.of(white, CaseSimulator(white, dt=1e-7).predict([spec])[0])
+    assert not whitens(res, spurious)
+    near = Colour(1.9e-9, np.array([1.0, -0.0886, -0.1432]), 600, 18.8)
+    assert not _confirmed(near, res, spurious)
+    coloured = load_case(make_case(tmp_path / "c", noise=SensorNoise(rms=1.9e-9, ar=(0.7,)), **kw))
+    res_c = Residuals.of(coloured, CaseSimulator(coloured, dt=1e-7).predict([spec])[0])
+    assert whitens(res_c, Measurement(whiten=Whitener.from_acf(np.array([1.0, 0.7]), 1)))
+    strong = Colour(1.9e-9, np.array([1.0, -0.0886, -0.1432]), 600, 100.0)  # far past the critical value
+    assert _confirmed(strong, res, spurious)

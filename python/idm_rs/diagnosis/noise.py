@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from ..recording import Recording
 from .noise_model import NoiseModel
 from .thresholds import DISAGREE_SIGMAS
+from .whiteness import whiteness_z  # noqa: F401  (the residual test, named here as before)
 
 
 @dataclass(frozen=True)
@@ -105,16 +106,3 @@ def cross_check(noise: NoiseEstimate, residuals: Sequence[NDArray[np.float64]]) 
     pooled = (w_a * a + w_b * b) / (w_a + w_b)
     return replace(noise, sigma=pooled, residual_sigma=b, relative_uncertainty=1.0 / math.sqrt(w_a + w_b) / pooled,
                    source="rest and residual (pooled)")
-
-
-def whiteness_z(residuals: Sequence[NDArray[np.float64]]) -> float:
-    """Lag-1 autocorrelation of the residuals (per file, pooled) times sqrt(n): about N(0, 1) for
-    white noise, large for a smooth systematic residual — without needing the noise level."""
-    num = den = 0.0
-    n = 0
-    for r in residuals:
-        r = r - r.mean()
-        num += float(np.dot(r[1:], r[:-1]))
-        den += float(np.dot(r, r))
-        n += r.size
-    return num / den * math.sqrt(n) if den > 0 else 0.0

@@ -20,6 +20,7 @@ from .measurement import Measurement, Profile, Whitener
 from .segments import segment_starts
 from .thresholds import (
     AR_MAX_ORDER,
+    COLOUR_CONFIRM_LR,
     COLOUR_ITERATIONS,
     COLOUR_SEGMENT_MAX,
     DELAY_MIN_S,
@@ -33,6 +34,7 @@ from .thresholds import (
     OUTLIER_ISOLATION,
     OUTLIER_Z,
 )
+from .whiteness import whiteness_z
 
 
 @dataclass(frozen=True)
@@ -480,6 +482,36 @@ class Learned:
         return self.artefacts or self.measurement.whiten.order > 0
 
 
+def _confirmed(colour: Optional[Colour], res: Residuals, m: Measurement) -> bool:
+    """A colour found on the rest stands when its evidence is well past the test's critical value,
+    or when it whitens the calibrated residual (COLOUR_CONFIRM_LR)."""
+    from scipy.stats import chi2 as chi2_dist
+
+    if colour is None or colour.rho.size < 2:
+        return True
+    if colour.lr > COLOUR_CONFIRM_LR * chi2_dist.isf(MEASUREMENT_ALPHA, colour.rho.size - 1):
+        return True
+    return whitens(res, m)
+
+
+def whitens(res: Residuals, m: Measurement) -> bool:
+    """Whether the colour of `m` (read off the short rest before the drive: a few hundred samples
+    per file) makes the calibrated residual (thousands) whiter, by the lag-1 test on each file's
+    residual with its nuisances removed. White noise's rest passes the colour test now and then
+    (the order chosen by AIC: a healthy LPS+h, 1.9 nm white, gave AR(2), lag-1 -0.09, LR 18.8
+    against 18.4), and whitening a white residual by it makes the residual look systematic
+    (whiteness z -1.9 -> 6.4, a false alarm): such a colour is not the noise's. A coloured
+    noise's own model whitens its residual, whatever else the residual holds."""
+    if m.whiten.order == 0:
+        return True
+    z = []
+    for metric in (Measurement(), m):
+        ws = [res.profile(metric, f).residual(e.x - metric.shifted(p, res.rec.sample_step))[0]
+              for f, (e, p) in enumerate(zip(res.rec.experiments, res.preds))]
+        z.append(abs(whiteness_z(ws)))
+    return z[1] <= z[0]
+
+
 def learn(rec: Recording, preds: Sequence[NDArray[np.float64]], sigma: float,
           jac_of: Optional[Callable[[Recording, Measurement], Optional[NDArray[np.float64]]]] = None) -> Learned:
     """The noise model from the recording and the calibrated model's prediction `preds` (per
@@ -497,6 +529,7 @@ def learn(rec: Recording, preds: Sequence[NDArray[np.float64]], sigma: float,
             return white, (c.sigma if c is not None else sigma)
         return Measurement(whiten=Whitener.from_acf(c.rho, c.rho.size - 1)), c.sigma
 
+    colour = colour if _confirmed(colour, res, measurement_of(colour)[0]) else None
     m, s = measurement_of(colour)
     s = s if colour is not None else sigma
     lines = find_lines(res, m, s)
@@ -504,6 +537,7 @@ def learn(rec: Recording, preds: Sequence[NDArray[np.float64]], sigma: float,
         # the colour again, of the rest without the hum, and the hum tested in it
         colour = fit_colour(rest_segments(rec, line_values(rec, res, replace(m, lines_Hz=tuple(
             f for f, _ in lines)), s)))
+        colour = colour if _confirmed(colour, res, measurement_of(colour)[0]) else None
         m, s = measurement_of(colour)
         s = s if colour is not None else sigma
         lines = find_lines(res, m, s) or lines

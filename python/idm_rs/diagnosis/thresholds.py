@@ -65,6 +65,12 @@ OUTLIER_Z = 8.0
 #: square in them), and the fixed-point iterations of the autocovariances' correction
 COLOUR_SEGMENT_MAX = 2000
 COLOUR_ITERATIONS = 4
+#: a colour whose likelihood ratio against white noise is within this factor of its critical
+#: value is kept only if it whitens the calibrated residual (noise_model.whitens): white noise's
+#: rest passes the test now and then, near the critical value (LR 18.8 against 18.4); a real
+#: colour's LR on the rest is far above (lag-1 0.5 over 600 samples: 172 against 15.1), and its
+#: check would be read off a residual that can be mostly systematic
+COLOUR_CONFIRM_LR = 3.0
 #: significance at which a line is refused because its amplitude differs between files more than
 #: their standard errors allow: the mains feed every file alike, where low-frequency noise gives
 #: each file its own amplitude. An ordinary level: it guards the line against noise
