@@ -7,12 +7,12 @@ import doctest
 import pytest
 
 import idm_rs
-from idm_rs.actuator import characterize
+from idm_rs.actuator import characterize, stall_force, steady_state
 from idm_rs.rigs import diagnose_rig
 
 
-@pytest.mark.parametrize("obj", [idm_rs.simulate, idm_rs.sweep, idm_rs.diagnose, characterize, diagnose_rig,
-                                 idm_rs.partial_result], ids=lambda o: o.__name__)
+@pytest.mark.parametrize("obj", [idm_rs.simulate, idm_rs.sweep, idm_rs.diagnose, characterize, steady_state,
+                                 stall_force, diagnose_rig, idm_rs.partial_result], ids=lambda o: o.__name__)
 def test_the_examples_run(obj):
     finder = doctest.DocTestFinder(recurse=False)
     runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)

@@ -117,7 +117,38 @@ def steady_state(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_
     """Steady-state metrics of ``params`` driven by the sawtooth train ``waveform`` (to its end,
     or to ``t_end`` [s]), averaged over its full cycles after the first ``skip_cycles``.
     ``method`` (default ``"auto"``) and ``how`` (``dt`` for RK4, ``rtol``/``atol``/``first_step``
-    for adaptive methods) as in :func:`idm_rs.sweep`. A run that diverges gives NaN metrics."""
+    for adaptive methods) as in :func:`idm_rs.sweep`. A run that diverges gives NaN metrics.
+
+    Parameters
+    ----------
+    params : Params
+        The device.
+    waveform : Sawtooth
+        The drive train ([V], [Hz], its fast edge ``rise`` [s]).
+    model : {"lps", "dps"}
+        The structure; ``n_elements`` FEM elements for the DPS (default 4).
+    effects : Effects, optional
+        Extra physics of the catalogue.
+    skip_cycles : int
+        Start-up cycles left out (fewer than the train's cycles).
+    method : str
+        The integrator (default ``"auto"``).
+    t_end : float, optional
+        End of the run [s] (default: the train's end).
+
+    Returns
+    -------
+    SteadyState
+        ``mean_velocity`` [m/s], ``step_mean`` and ``step_std`` [m] per cycle, ``backslip`` [m]
+        per cycle, ``backslip_ratio``, ``direction`` (+1, -1, 0 stalled).
+
+    Examples
+    --------
+    >>> from idm_rs.actuator import steady_state
+    >>> s = steady_state(idm_rs.Params(), idm_rs.Sawtooth(amplitude=80.0, frequency=100.0, cycles=6), model="lps")
+    >>> s.motion
+    'forward'
+    """
     n_elements = options.elements(model, n_elements)
     _check_train(waveform, skip_cycles)
     out = _run_trains([params], [waveform], model=model, n_elements=n_elements, effects=effects,
@@ -155,7 +186,35 @@ def stall_force(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_e
     body cannot hold the load at all) runs as one parallel batch; the first sign change of the
     mean velocity is then narrowed by :func:`scipy.optimize.brentq` to ``xtol`` [N] (default
     ``STALL_XTOL_FRACTION`` · μs·Fn), each evaluation one steady-state run. NaN when the unloaded
-    drive stalls or the curve never changes sign."""
+    drive stalls or the curve never changes sign.
+
+    Parameters
+    ----------
+    params : Params
+        The device (its ``load_force`` is the load's starting point).
+    waveform : Sawtooth
+        The drive train.
+    model, n_elements, effects, skip_cycles, method, threads
+        As for :func:`steady_state`.
+    loads : int
+        Points of the coarse curve (>= 3).
+    xtol : float, optional
+        Width of the final bracket [N].
+
+    Returns
+    -------
+    StallForce
+        ``force`` [N] (NaN when not bracketed), the coarse curve ``loads`` [N] and
+        ``velocities`` [m/s], ``xtol`` [N] and the unloaded ``direction``.
+
+    Examples
+    --------
+    >>> from idm_rs.actuator import stall_force
+    >>> f = stall_force(idm_rs.Params(), idm_rs.Sawtooth(amplitude=80.0, frequency=100.0, cycles=6),
+    ...                 model="lps")  # doctest: +SKIP
+    >>> print(f)  # doctest: +SKIP
+    StallForce(558 mN ± ...)
+    """
     from scipy.optimize import brentq
 
     n_elements = options.elements(model, n_elements)
