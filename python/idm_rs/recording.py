@@ -618,8 +618,27 @@ def _sampled_from_table(e: dict[str, Any], table: NDArray[np.float64]) -> dict[s
 def load_case(path: PathLike) -> Recording:
     """Read and validate the case directory ``path`` (``meta.json`` + CSV files).
 
-    Returns a :class:`Recording`; raises :class:`RecordingError` naming the file, line and column
-    of the first problem found."""
+    Parameters
+    ----------
+    path : path
+        A case directory in the ``idm-recording/1`` format (docs/RECORDINGS.md).
+
+    Returns
+    -------
+    Recording
+        The nominal model, the sensor (sample rate [Hz], resolution [m]) and the experiments
+        (time [s], voltage [V], position [m]).
+
+    Raises
+    ------
+    RecordingError
+        The file, line and column of the first problem found.
+
+    Examples
+    --------
+    >>> rec = idm_rs.load_case("path/to/case")   # doctest: +SKIP
+    >>> [e.name for e in rec.experiments]         # doctest: +SKIP
+    """
     case = Path(path)
     meta_path = case / META
     data = _read_meta(case)

@@ -334,7 +334,26 @@ def plot_rms_story(d: Diagnosis, directory: Path) -> Path:
 
 def plot_diagnosis(d: Diagnosis, directory: Union[str, Path]) -> list[Path]:
     """Write every figure of the diagnosis `d` into `directory` (created); returns their paths.
-    An interrupted diagnosis gets the figures of what it finished (none before its calibration)."""
+    An interrupted diagnosis gets the figures of what it finished (none before its calibration).
+
+    Parameters
+    ----------
+    d : Diagnosis
+        What :func:`idm_rs.diagnose` returned.
+    directory : path
+        Where the PNG files go (created if missing).
+
+    Returns
+    -------
+    list of Path
+        ``fit_<experiment>.png`` per experiment (data, nominal, calibrated and refitted model,
+        residuals with the systematic windows), ``residual_phases.png``, ``ranking.png``,
+        ``rms_story.png``, and ``discovery.png`` when discovery ran.
+
+    Examples
+    --------
+    >>> idm_rs.plot_diagnosis(d, "plots")   # doctest: +SKIP
+    """
     import matplotlib
 
     matplotlib.use("Agg")

@@ -356,7 +356,23 @@ def text_report(d: Diagnosis) -> str:
     """The diagnosis `d` as text: the verdict in plain words, the RMS story against the noise
     floor, the calibrated parameters, where the residual lives, the ranking with its evidence,
     discovery and a second effect when they ran, what the data do not determine, the experiment
-    that would separate look-alikes, and the refitted model in one line (units throughout)."""
+    that would separate look-alikes, and the refitted model in one line (units throughout).
+
+    Parameters
+    ----------
+    d : Diagnosis
+        What :func:`idm_rs.diagnose` returned (or an interrupted run's ``partial``: then only
+        what it finished is printed).
+
+    Returns
+    -------
+    str
+        The report, lines of at most about 100 characters.
+
+    Examples
+    --------
+    >>> print(idm_rs.text_report(idm_rs.diagnose("path/to/case")))   # doctest: +SKIP
+    """
     sigma = d.noise.sigma
     rec = d.recording
     lines: list[str] = []
