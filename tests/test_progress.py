@@ -21,3 +21,18 @@ def test_a_sweep_bar_estimates_from_the_whole_run():
     bar = importlib.import_module("idm_rs.sweep")._progress_bar(10, "label")
     assert bar.smoothing == 0 and bar.desc == "label"
     bar.close()
+
+
+def test_a_long_simulate_shows_progress_and_gives_the_same_result(capsys):
+    """`simulate` had no progress for 1e8 steps: with progress=True an RK4 run goes in pieces on
+    its save grid, each continued from the last one's state, bit for bit the one-piece result."""
+    import numpy as np
+
+    p = idm_rs.Params()
+    w = idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=9.5e-3)
+    one = idm_rs.simulate(p, w, t_end=10e-3, dt=1e-8, model="lps", save_every=7)
+    pieces = idm_rs.simulate(p, w, t_end=10e-3, dt=1e-8, model="lps", save_every=7, progress=True)
+    assert "idm-rs simulate" in capsys.readouterr().err
+    for name in ("t", "nodes", "velocities", "friction", "fh", "voltage", "reading"):
+        assert np.array_equal(getattr(one, name), getattr(pieces, name)), name
+    assert one.final_position == pieces.final_position and np.array_equal(one.final_state, pieces.final_state)

@@ -125,6 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "where a sensor effect makes it differ from x1; the unit in each name) "
                          "or FILE.nc (netCDF, every variable)")
     sp.add_argument("--plot", default=None, metavar="FILE.png", help="plot voltage, x1, x2 and friction")
+    sp.add_argument("--no-progress", action="store_true",
+                    help="no progress bar (an RK4 run of more than 10^7 steps shows one)")
 
     ch = sub.add_parser(
         "characterize",
@@ -672,6 +674,7 @@ def cmd_simulate(a: argparse.Namespace) -> int:
         save_every=plot_every, piezo_hysteresis=not a.no_hysteresis, effects=effects_from_overrides(a.effect),
         method=a.method, rtol=a.rtol, atol=a.atol,
         first_step=a.first_step if a.first_step is not None else a.dt if adaptive else None,
+        progress=not a.no_progress and not adaptive and t_end / dt > PROGRESS_STEPS,
     )
     elapsed = time.perf_counter() - t0
     result = full.thinned(a.save_every // plot_every)
@@ -698,6 +701,10 @@ def cmd_simulate(a: argparse.Namespace) -> int:
         every = "every accepted step" if plot_every == 1 and adaptive else f"every {plot_every * dt:g} s"
         print(f"wrote {a.plot} ({full.t.size} states: {every})")
     return 0 if result.complete else EXIT_INTERRUPTED
+
+
+#: an RK4 run of more steps than this shows a progress bar (seconds and more)
+PROGRESS_STEPS = 1e7
 
 
 #: the coarsest spacing [s] of the states an RK4 run's figure draws (the PE's fastest modes of

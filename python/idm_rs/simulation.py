@@ -15,7 +15,7 @@ from . import engine, methods, options
 from .declarations import Model, elements_of, structure_label
 from .effects import Effects
 from .external_force import ExternalForce
-from .interrupted import interrupted
+from .interrupted import interrupted, partial_result
 from .methods import MethodName
 from .params import PARAM_INFO, Params
 from .state import State
@@ -271,6 +271,51 @@ class SimulationResult:
         return ds
 
 
+#: pieces a long RK4 run is cut into for its progress bar
+PROGRESS_PIECES = 100
+
+
+def _in_pieces(common: dict[str, Any], t_start: Optional[float], t_end: float, dt: float, save_every: int,
+               initial_state: Optional[ArrayLike]) -> SimulationResult:
+    """An RK4 run in pieces of whole ``save_every`` blocks of steps, each continued from the last
+    one's final state, under a progress bar of steps: the same saved times and, RK4 being
+    continued bit for bit on its step grid, the same values as one run."""
+    from tqdm.auto import tqdm
+
+    if t_start is None:
+        t_start = initial_state.t if isinstance(initial_state, State) else 0.0
+    steps = int(round((t_end - t_start) / dt))
+    per = max(save_every, (steps // PROGRESS_PIECES) // save_every * save_every)
+    ends = [t_start + k * per * dt for k in range(1, -(-steps // per))] + [t_end]
+    pieces: list[SimulationResult] = []
+    state, start = initial_state, t_start
+    with tqdm(total=steps, unit="step", unit_scale=True, desc="idm-rs simulate", smoothing=0.0) as bar:
+        for end in ends:
+            try:
+                r = simulate(t_start=start, t_end=end, initial_state=state, **common)
+            except KeyboardInterrupt as stop:
+                done = _joined(pieces + ([partial_result(stop)] if partial_result(stop) is not None else []))
+                raise interrupted(str(stop), partial=done if pieces else partial_result(stop)) from None
+            pieces.append(r)
+            bar.update(int(round((end - start) / dt)))
+            state, start = r.final_state, end
+    return _joined(pieces)
+
+
+def _joined(pieces: list[SimulationResult]) -> SimulationResult:
+    """Consecutive pieces of one run as one result (each piece's first saved time is the last's
+    final one, kept once)."""
+    first, last = pieces[0], pieces[-1]
+    n = first.t.size
+    joined = {}
+    for f in dataclasses.fields(SimulationResult):
+        v = getattr(first, f.name)
+        if isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == n and f.name not in (
+                "sensitivities", "final_state_sensitivities"):
+            joined[f.name] = np.concatenate([v] + [getattr(p, f.name)[1:] for p in pieces[1:]])
+    return dataclasses.replace(last, **joined)
+
+
 def simulate(
     params: Params,
     waveform: Waveform,
@@ -291,6 +336,7 @@ def simulate(
     initial_state: Optional[ArrayLike] = None,
     sensitivities: Optional[Sequence[str]] = None,
     external_force: Optional[ExternalForce] = None,
+    progress: bool = False,
 ) -> SimulationResult:
     """Simulate the IDM over [``t_start``, ``t_end``] s, from rest or from ``initial_state``.
 
@@ -380,6 +426,10 @@ def simulate(
         Names to differentiate the readings with respect to.
     external_force : ExternalForce, optional
         A sampled force [N] on the main body or the weight.
+    progress : bool
+        A progress bar over the steps, for a long RK4 run: the run is cut into about 100 pieces
+        on its save grid, each continued from the last one's final state (bit for bit the same
+        result). Ignored by the adaptive methods and with ``energy`` or ``sensitivities``.
 
     Returns
     -------
@@ -420,6 +470,12 @@ def simulate(
     if not adaptive and dt is None:
         dt = 1e-8
     step = float(first_step if adaptive and first_step is not None else (dt if dt is not None else 1e-8))
+    if progress and not adaptive and not energy and not sensitivities:
+        return _in_pieces(dict(params=params, waveform=waveform, dt=dt, model=model, n_elements=n_elements,
+                               save_every=save_every, piezo_hysteresis=piezo_hysteresis, effects=effects,
+                               method=method, external_force=external_force),
+                          0.0 if t_start is None and initial_state is None else t_start, t_end, step, save_every,
+                          initial_state)
     from .batch import Structure, sensitivity_names
 
     structure = Structure.of(model, int(n_elements), bool(piezo_hysteresis))
@@ -427,7 +483,7 @@ def simulate(
         method=method, dt=step, rtol=float(rtol), atol=float(atol), first_step=step)
     if t_start is None:
         t_start = initial_state.t if isinstance(initial_state, State) else 0.0
-    elif initial_state is None and t_start > 0:
+    elif initial_state is None and t_start > 0 and float(np.interp(t_start, *waveform.breakpoints())) != 0.0:
         v0 = float(np.interp(t_start, *waveform.breakpoints()))
         warnings.warn(f"t_start = {t_start:g} s without an initial_state: the run starts from rest with the drive "
                       f"already at {v0:.4g} V (a voltage step); pass initial_state=<a result's final_state> to "
