@@ -8,11 +8,14 @@ import pytest
 
 import idm_rs
 from idm_rs.actuator import characterize, stall_force, steady_state
-from idm_rs.rigs import diagnose_rig
+from idm_rs.rigs import diagnose_rig, rig_fit
+from idm_rs.synthetic import make_case
 
 
 @pytest.mark.parametrize("obj", [idm_rs.simulate, idm_rs.sweep, idm_rs.diagnose, characterize, steady_state,
-                                 stall_force, diagnose_rig, idm_rs.partial_result], ids=lambda o: o.__name__)
+                                 stall_force, diagnose_rig, idm_rs.partial_result, idm_rs.Triangle,
+                                 idm_rs.Sawtooth, idm_rs.Sampled, make_case, rig_fit, idm_rs.text_report,
+                                 idm_rs.plot_diagnosis, idm_rs.load_case], ids=lambda o: o.__name__)
 def test_the_examples_run(obj):
     finder = doctest.DocTestFinder(recurse=False)
     runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)

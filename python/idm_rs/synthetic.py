@@ -96,6 +96,48 @@ def make_case(
     step ``dt``) + an offset (``offsets[i]``, or uniform in ±2 µm) + white Gaussian noise of RMS
     ``noise_rms`` [m], rounded to multiples of ``resolution`` [m] (``None`` or 0: no rounding).
     Everything random comes from ``numpy.random.default_rng(seed)``.
+
+    Parameters
+    ----------
+    directory : path
+        The case directory to write (created).
+    nominal_params, model, n_elements, piezo_hysteresis
+        The nominal model written to ``meta.json``.
+    true_params, true_model, true_n_elements, true_piezo_hysteresis
+        The device simulated (default: the nominal one).
+    effects : Effects, optional
+        Physics the nominal model lacks, simulated.
+    experiments : sequence of dict, optional
+        The drives, one file each (default :data:`DEFAULT_EXPERIMENTS`).
+    noise_rms : float
+        White noise of the reading [m].
+    resolution : float, optional
+        The reading's quantisation step [m] (None or 0: none).
+    offsets : sequence of float, optional
+        Each file's zero [m] (default uniform in ±2 µm).
+    seed : int
+        The random generator's seed.
+    dt : float
+        RK4 step of the simulation [s].
+    rest_s, edge_s : float
+        Rest before the drive and the sawtooth's fast edge [s], unless an experiment gives its own.
+    sample_rate_Hz : float
+        The reading's sample rate [Hz].
+    write_noise_rms : bool
+        Put the noise RMS in meta.json.
+    noise : SensorNoise, optional
+        A lab's reading (coloured noise, hum, spikes, drift, a late channel) instead of white noise.
+
+    Returns
+    -------
+    Path
+        The directory, ready for :func:`idm_rs.load_case` and :func:`idm_rs.diagnose`.
+
+    Examples
+    --------
+    >>> from idm_rs.synthetic import make_case
+    >>> case = make_case("/tmp/spring_case", nominal_params=idm_rs.Params(),
+    ...                  effects=idm_rs.Effects(k_ground=2e4))   # doctest: +SKIP
     """
     if not isinstance(nominal_params, Params):
         raise TypeError(f"nominal_params must be idm_rs.Params, got {type(nominal_params).__name__}")

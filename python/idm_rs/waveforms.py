@@ -36,7 +36,22 @@ STARTUP_CYCLES: int = 2
 class Triangle:
     """Single triangular wave: 0 V until ``delay`` [s], linear to ``amplitude`` [V] at
     delay + ``rise`` [s], linear back to 0 V at delay + rise + ``fall`` [s], then 0 V.
-    The paper case is ``Triangle(80.0, 0.5e-3, 9.5e-3)``."""
+    The paper case is ``Triangle(80.0, 0.5e-3, 9.5e-3)``.
+
+    Parameters
+    ----------
+    amplitude : float
+        Peak voltage [V].
+    rise, fall : float
+        Durations of the rising and the falling edge [s] (> 0).
+    delay : float
+        0 V before the rise [s] (>= 0).
+
+    Examples
+    --------
+    >>> idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=9.5e-3).duration
+    0.01
+    """
 
     amplitude: float = 80.0
     rise: float = 0.5e-3
@@ -78,7 +93,28 @@ class Sawtooth:
 
     ``direction="forward"``: rise 0 → ``amplitude`` [V] in ``rise`` [s], then a linear fall to 0
     over the rest of the period (fast extension, slow contraction: the body steps forward).
-    ``"backward"``: rise over (period − rise), fall in ``rise``. 0 V before and after."""
+    ``"backward"``: rise over (period − rise), fall in ``rise``. 0 V before and after.
+
+    Parameters
+    ----------
+    amplitude : float
+        Peak voltage [V].
+    frequency : float
+        Periods per second [Hz] (> 0; ``rise`` shorter than the period).
+    cycles : int
+        Periods in the train (>= 1).
+    rise : float
+        The fast edge [s].
+    direction : {"forward", "backward"}
+        Which edge is the fast one.
+    delay : float
+        0 V before the train [s] (>= 0).
+
+    Examples
+    --------
+    >>> idm_rs.Sawtooth(amplitude=80.0, frequency=200.0, cycles=6).duration
+    0.03
+    """
 
     amplitude: float = 80.0
     frequency: float = 100.0
@@ -138,7 +174,22 @@ class Sawtooth:
 class Sampled:
     """Any sampled waveform, piecewise linear through (``t`` [s], ``voltage`` [V]); the first
     value holds before ``t[0]`` and the last after ``t[-1]``. Times must increase strictly; the
-    step ``dt`` of a simulation must divide every sample time that falls inside the run."""
+    step ``dt`` of a simulation must divide every sample time that falls inside the run.
+
+    Parameters
+    ----------
+    t : array
+        Sample times [s], strictly increasing (a first sample after t = 0 at a non-zero voltage
+        is a step at t = 0, and is said).
+    voltage : array
+        The voltage at them [V].
+
+    Examples
+    --------
+    >>> w = idm_rs.Sampled([0.0, 0.5e-3, 10e-3], [0.0, 80.0, 0.0])   # the paper's triangle
+    >>> w.duration
+    0.01
+    """
 
     t: NDArray[np.float64] = field(repr=False)
     voltage: NDArray[np.float64] = field(repr=False)

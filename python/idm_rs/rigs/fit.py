@@ -378,7 +378,28 @@ def fit_frame(data: RigData, *, simulate: bool = True) -> RigFit:
 def rig_fit(data: RigData, *, simulate: bool = True) -> RigFit:
     """Identify the rig that recorded ``data`` and judge whether the identified model describes
     the record (:func:`judge`). For the EMPS estimation run, the validation run
-    (``DATA_EMPS_PULSES.mat`` beside it) is evaluated too when present."""
+    (``DATA_EMPS_PULSES.mat`` beside it) is evaluated too when present.
+
+    Parameters
+    ----------
+    data : RigData
+        A recording loaded by :func:`idm_rs.rigs.load` (its ``rig``: ``"emps"``, ``"frame"`` or
+        ``"spring_slider"``).
+    simulate : bool
+        Also simulate the identified model against the record (what :func:`judge` reads).
+
+    Returns
+    -------
+    RigFit
+        The identified parameters with their 1σ [SI], the fit's RMS and the noise RMS [the rig's
+        unit: N for the EMPS force equation], what the record cannot identify, and whether the
+        identified model describes the record; ``.report()`` prints it.
+
+    Examples
+    --------
+    >>> from idm_rs.rigs import load, rig_fit          # doctest: +SKIP
+    >>> print(rig_fit(load("DATA_EMPS.mat")).report())  # doctest: +SKIP
+    """
     if data.rig == "emps":
         fit = fit_emps(data, simulate=simulate)
         other = data.path.with_name("DATA_EMPS_PULSES.mat")
