@@ -36,7 +36,7 @@ def test_a_t_end_that_cuts_a_train_short_is_refused_with_the_point_and_the_fix()
                      method="auto", progress=False)
     with pytest.raises(ValueError, match=r"cycles = 8"):
         idm_rs.sweep(idm_rs.Params(), TRAIN, {"cycles": [2, 8]}, t_end=0.05, model="lps", method="auto",
-                     progress=False)
+                     skip_cycles=1, progress=False)
     # long enough is run as given: the shorter train rests after its end
     ds = idm_rs.sweep(idm_rs.Params(), TRAIN, {"frequency": [100.0]}, t_end=0.05, model="lps", method="auto",
                       progress=False, metrics=["step_mean"])

@@ -307,7 +307,7 @@ def _joined(pieces: list[SimulationResult]) -> SimulationResult:
     final one, kept once)."""
     first, last = pieces[0], pieces[-1]
     n = first.t.size
-    joined = {}
+    joined: dict[str, Any] = {}
     for f in dataclasses.fields(SimulationResult):
         v = getattr(first, f.name)
         if isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == n and f.name not in (

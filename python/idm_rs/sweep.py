@@ -446,7 +446,10 @@ def sweep(
     names, values = _check_grid(grid, waveform)
     effects = effects or Effects()
     first = float(first_step) if first_step is not None else 1e-8
-    skips = options.skip_cycles(skip_cycles, _fewest_cycles(waveform, names, values))
+    # start-up cycles that skip a whole train leave its steady-state metrics NaN: refused where
+    # they are computed (a sweep of final positions alone may run short trains)
+    steady = any(m in STEADY_METRICS for m in metrics)
+    skips = options.skip_cycles(skip_cycles, _fewest_cycles(waveform, names, values) if steady else None)
     retries = options.count("retries", retries, minimum=0)
     block_size = options.count("block_size", block_size)
     threads = options.threads(threads)

@@ -352,6 +352,7 @@ def _noise_model_lines(d: Diagnosis) -> list[str]:
     return out
 
 
+# Long: a public function's numpydoc docstring; the body is the report's sections in order
 def text_report(d: Diagnosis) -> str:
     """The diagnosis `d` as text: the verdict in plain words, the RMS story against the noise
     floor, the calibrated parameters, where the residual lives, the ranking with its evidence,
