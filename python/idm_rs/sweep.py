@@ -363,7 +363,8 @@ def sweep(
     metrics : sequence of str, optional
         The metrics kept (default all of :data:`METRICS`).
     skip_cycles : int
-        Start-up cycles left out of the steady state (fewer than the train's cycles).
+        Start-up cycles left out of the steady state (fewer than the train's cycles where a
+        steady-state metric is computed).
     retries : int
         RK4 retries at dt/2, dt/4, ... of a point that diverges (>= 0).
     piezo_hysteresis : bool
