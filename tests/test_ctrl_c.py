@@ -43,7 +43,7 @@ LOOP = """
 import idm_rs
 print("started", flush=True)
 for i in range(1000):
-    r = idm_rs.simulate(idm_rs.Params(), idm_rs.Triangle(), t_end=10e-3, dt=1e-8, model="dps")
+    r = idm_rs.simulate(idm_rs.Params(), idm_rs.Triangle(), t_end=50e-3, dt=1e-8, model="dps")
     print(i, r.final_position, flush=True)
 print("ran to the end", flush=True)
 """
@@ -55,7 +55,9 @@ def test_a_script_looping_over_simulate_stops_on_ctrl_c(tmp_path):
     assert "ran to the end" not in out
     # the uncaught KeyboardInterrupt: Python re-raises SIGINT on itself (a shell shows 130)
     assert rc in (-signal.SIGINT, 130), (rc, err[-2000:])
-    assert "KeyboardInterrupt: simulate interrupted at t = " in err, err[-2000:]
+    # inside the engine's run the interrupt says where it stopped (and carries the trajectory);
+    # between two runs it is Python's own
+    assert "KeyboardInterrupt" in err.splitlines()[-1], err[-2000:]
     assert took < 3.0, f"{took:.1f} s from Ctrl-C to the end"
 
 
