@@ -367,3 +367,20 @@ def fastest_slew(w) -> float:
     t, v = w.breakpoints()
     d = np.diff(np.asarray(t, dtype=float))
     return float(np.max(np.abs(np.diff(np.asarray(v, dtype=float))[d > 0] / d[d > 0]), initial=0.0))
+
+
+@pytest.fixture
+def saved(monkeypatch):
+    """Every matplotlib figure saved while the test runs (the figure objects, to inspect)."""
+    from matplotlib.figure import Figure
+
+    figs = []
+    real = Figure.savefig
+
+    def keep(self, *args, **kwargs):
+        out = real(self, *args, **kwargs)
+        figs.append(self)
+        return out
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    return figs

@@ -329,24 +329,13 @@ def test_the_ranking_table_and_figure_show_the_same_numbers(spring_diagnosis, tm
             assert f"RMS {c.rms_after / sigma:.2f}× noise" in note and f"{c.rms_after / sigma:.2f} ×" in row
 
 
-def test_the_diagnosis_figures_keep_their_legends_off_the_data(spring_diagnosis, tmp_path, monkeypatch):
+def test_the_diagnosis_figures_keep_their_legends_off_the_data(spring_diagnosis, tmp_path, saved):
     """The fit figure's residual panel and the ranking figure's last row were under a legend."""
-    from matplotlib.figure import Figure
-
     from test_figure_legends import _covered
 
-    figures = []
-    real = Figure.savefig
-
-    def keep(self, *args, **kwargs):
-        out = real(self, *args, **kwargs)
-        figures.append(self)
-        return out
-
-    monkeypatch.setattr(Figure, "savefig", keep)
     plot_diagnosis(spring_diagnosis, tmp_path)
-    assert len(figures) >= 3
-    for fig in figures:
+    assert len(saved) >= 3
+    for fig in saved:
         assert _covered(fig) == [], fig.axes[0].get_title()
 
 

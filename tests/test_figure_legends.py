@@ -14,23 +14,6 @@ matplotlib.use("Agg")
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata"
 
 
-@pytest.fixture
-def saved(monkeypatch):
-    """Every figure saved while the test runs, drawn."""
-    from matplotlib.figure import Figure
-
-    figs = []
-    real = Figure.savefig
-
-    def keep(self, *args, **kwargs):
-        out = real(self, *args, **kwargs)
-        figs.append(self)
-        return out
-
-    monkeypatch.setattr(Figure, "savefig", keep)
-    return figs
-
-
 def _covered(fig) -> list[str]:
     """Axes whose legend box holds a plotted point."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
