@@ -171,6 +171,27 @@ def test_hum_and_a_drifting_zero_are_told_apart_on_records_of_one_or_two_mains_p
         assert abs(drift - truth) < max(0.2 * abs(truth), 2e-9), (drift, truth)
 
 
+def test_a_hum_is_found_through_a_delay_read_slightly_short(tmp_path: Path) -> None:
+    # the delay is estimated in turn with the null, and each round's estimate is a little short
+    # (12.1 us read 11.9): the motion read at the wrong time leaves each file a residual of its
+    # own velocity's shape, which projects unevenly on a 60 Hz sinusoid. The hum's test credits
+    # the line only with what a slightly different delay could not take up
+    from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
+    from idm_rs.diagnosis.noise_model import Residuals, find_lines
+    from idm_rs.recording import load_case
+
+    p = idm_rs.Params()
+    rec = load_case(make_case(tmp_path / "h", nominal_params=p, experiments=EXPERIMENTS, resolution=0.0, seed=3,
+                              dt=2e-8, noise=SensorNoise(rms=1.5e-9, hum=((60.0, 1.8e-9),), delay_s=12.1e-6)))
+    preds = CaseSimulator(rec, dt=1e-7).predict([ModelSpec(Structure("lps", 1, False), p.to_dict(resolved=False),
+                                                           {})])[0]
+    res = Residuals.of(rec, preds)
+    for tau in (12.1e-6, 11.6e-6, 12.6e-6):
+        lines = find_lines(res, Measurement(delay_s=tau), 1.5e-9)
+        assert lines[:1] and lines[0][0] == 60.0, tau
+        assert abs(lines[0][1] / 1.8e-9 - 1.0) < 0.15, (tau, lines)
+
+
 def test_artefacts_are_read_again_off_a_null_that_reaches_the_data(tmp_path: Path) -> None:
     # a calibration far from the data (here: d33 12 % off) leaves per-file slopes of its own
     # misfit, and the rest disagrees with them: no drifting zero is found. Against the null
