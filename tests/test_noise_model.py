@@ -192,6 +192,24 @@ def test_a_hum_is_found_through_a_delay_read_slightly_short(tmp_path: Path) -> N
         assert abs(lines[0][1] / 1.8e-9 - 1.0) < 0.15, (tau, lines)
 
 
+def test_a_drifting_zero_is_found_under_a_reading_coarser_than_its_noise(tmp_path: Path) -> None:
+    # at 6 nm steps over 1.4 nm noise the rounding is not dithered: over a 2 ms rest it is the
+    # staircase of the slow drift, and the rest's slope reads 6-17 nm (over the file) off the
+    # file's own where white noise would allow 5. The rest's check allows the rounding's ramp
+    from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
+    from idm_rs.diagnosis.noise_model import Residuals, find_drift, rounding_slope
+    from idm_rs.recording import load_case
+
+    p = idm_rs.Params()
+    rec = load_case(make_case(tmp_path / "q", nominal_params=p, experiments=EXPERIMENTS, resolution=6e-9, seed=5,
+                              dt=2e-8, noise=SensorNoise(rms=1.4e-9, drift_m=(5e-9, 30e-9))))
+    preds = CaseSimulator(rec, dt=1e-7).predict([ModelSpec(Structure("lps", 1, False), p.to_dict(resolved=False),
+                                                           {})])[0]
+    drift, per_file, _ = find_drift(Residuals.of(rec, preds), Measurement(), 2.2e-9)
+    assert drift and all(5e-9 * 0.8 < abs(d) < 30e-9 * 1.2 for d in per_file), per_file
+    assert rounding_slope(6e-9, 2e-3) == pytest.approx(6e-9 / math.sqrt(3.0) / 2e-3)
+
+
 def test_artefacts_are_read_again_off_a_null_that_reaches_the_data(tmp_path: Path) -> None:
     # a calibration far from the data (here: d33 12 % off) leaves per-file slopes of its own
     # misfit, and the rest disagrees with them: no drifting zero is found. Against the null
