@@ -73,21 +73,29 @@ def plan(seed: int) -> list[dict[str, Any]]:
 
 def pair_case(directory: Path, c: dict[str, Any], rng: np.random.Generator) -> dict[str, Any]:
     """Write a two-effect case, each effect at the large size when alone."""
+    return effects_case(directory, c["effects"], c["device"], rng)
+
+
+def effects_case(directory: Path, effects: list[str], device: str, rng: np.random.Generator,
+                 size_range: Optional[tuple[float, float]] = None) -> dict[str, Any]:
+    """Write a case with every effect of `effects` on `device`, each tuned alone to a size (RMS
+    after a linearised refit, in noise units) drawn from `size_range` (default: the large size,
+    SIZES["large"]), 1-3 calibrated parameters mis-set in meta.json."""
     import idm_rs
     from idm_rs.synthetic import make_case
 
-    a, b = c["effects"]
-    device = c["device"]
     noise = float(rng.uniform(1.0e-9, 2.0e-9))
     seed = int(rng.integers(0, 2**31))
     true0 = idm_rs.Params()
     given, misset = _misset(true0, rng)
+    targets = ([float(rng.uniform(*size_range)) for _ in effects] if size_range is not None
+               else [SIZES["large"]] * len(effects))
     mags, sizes = {}, {}
     p = true0
     fields: dict[str, float] = {}
     model = nominal_model = device
-    for e in (a, b):
-        m, size = _tuned(e, device, SIZES["large"], noise)
+    for e, target in zip(effects, targets):
+        m, size = _tuned(e, device, target, noise)
         pe, eff, model_e, _ = _true_device(e, m, device)
         if e == "stribeck":
             p = p.replace(mu_s=pe.mu_s)
@@ -95,12 +103,12 @@ def pair_case(directory: Path, c: dict[str, Any], rng: np.random.Generator) -> d
         mags[e], sizes[e] = m, size
         model = model_e
     p_true = p.replace(normal_force=p.effective_normal_force)
-    nominal = _nominal_of([a, b], p, true0, given)
+    nominal = _nominal_of(list(effects), p, true0, given)
     make_case(directory, nominal_params=nominal.replace(normal_force=p_true.normal_force), true_params=p_true,
               model=nominal_model, n_elements=4, piezo_hysteresis=False, true_model=model,
               effects=idm_rs.Effects(**fields), experiments=EXPERIMENTS, noise_rms=noise, seed=seed, dt=2e-8)
     return {"misset": misset, "magnitude": mags, "size_after_refit": sizes, "noise_rms": noise,
-            "truth": f"{a}+{b}"}
+            "truth": "+".join(effects)}
 
 
 def offcat_case(directory: Path, c: dict[str, Any], rng: np.random.Generator) -> dict[str, Any]:
