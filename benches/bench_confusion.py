@@ -40,6 +40,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_false_alarm import EXPERIMENTS, null_case
+from bench_rows import append, finished, shard
 from idm_rs.diagnosis.thresholds import CALIBRATED
 
 #: the two sizes: RMS of the effect's signal after a linearised refit, in noise units
@@ -373,7 +374,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--healthy", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--limit", type=int, help="run at most this many new cases, then write the table")
-    ap.add_argument("--shard", default="0/1", metavar="K/N",
+    ap.add_argument("--shard", type=shard, default=(0, 1), metavar="K/N",
                     help="run only the cases whose id is K modulo N (N processes side by side, one JSONL)")
     ap.add_argument("--only", type=int, nargs="+", metavar="ID",
                     help="run only these case ids (e.g. a quiet re-run of the slowest: --only 24 25 39 54)")
@@ -381,27 +382,16 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--out", type=Path)
     ap.add_argument("--figure", type=Path)
     a = ap.parse_args(argv)
-    try:
-        k, n = (int(x) for x in a.shard.split("/"))
-        if not 0 <= k < n:
-            raise ValueError
-    except ValueError:
-        ap.error(f"--shard {a.shard!r}: expected K/N with 0 <= K < N, e.g. 0/2 and 1/2 for two processes")
-
-    def finished() -> list[dict[str, Any]]:
-        return [json.loads(x) for x in a.jsonl.read_text().splitlines()] if a.jsonl.exists() else []
-
-    done = {r["id"] for r in finished()}
+    k, n = a.shard
+    done = {r["id"] for r in finished(a.jsonl)}
     todo = [c for c in plan(a.healthy) if c["id"] not in done and c["id"] % n == k
             and (a.only is None or c["id"] in a.only)][: a.limit]
     with tempfile.TemporaryDirectory() as tmp:
         for c in todo:
             row = run_case(c, Path(tmp), a.seed)
             print(json.dumps(row), flush=True)
-            # one short append per case: shards side by side share the file
-            with a.jsonl.open("a") as f:
-                f.write(json.dumps(row) + "\n")
-    rows = finished()
+            append(a.jsonl, row)
+    rows = finished(a.jsonl)
     md = table(rows)
     print(md)
     if a.out:

@@ -40,6 +40,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 from bench_confusion import EXPERIMENTS, SIZES, _misset, _nominal_of, _true_device, _tuned  # noqa: E402
+from bench_rows import append, finished  # noqa: E402
 
 #: two-effect devices (the first three: issue 31's unseen ones)
 PAIRS: tuple[tuple[str, str], ...] = (
@@ -232,19 +233,15 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
 
-    def finished() -> list[dict[str, Any]]:
-        return [json.loads(x) for x in a.jsonl.read_text().splitlines()] if a.jsonl.exists() else []
-
-    done = {r["id"] for r in finished()}
+    done = {r["id"] for r in finished(a.jsonl)}
     todo = [c for c in plan(a.seed) if c["id"] not in done and c["kind"] in a.kinds
             and (a.only is None or c["id"] in a.only)][: a.limit]
     with tempfile.TemporaryDirectory() as tmp:
         for c in todo:
             row = run_case(c, Path(tmp), a.seed)
             print(json.dumps(row, default=str), flush=True)
-            with a.jsonl.open("a") as f:
-                f.write(json.dumps(row, default=str) + "\n")
-    md = table(finished())
+            append(a.jsonl, row)
+    md = table(finished(a.jsonl))
     print(md)
     if a.out:
         a.out.write_text(md)

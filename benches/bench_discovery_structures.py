@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 import sys
 import tempfile
@@ -39,6 +38,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 from bench_confusion import _misset, diagnosed  # noqa: E402
 from bench_confusion_beyond import _bound, _look_alike_right, right  # noqa: E402
+from bench_rows import append, finished, shard  # noqa: E402
 
 #: (name, model, piezo hysteresis)
 STRUCTURES: tuple[tuple[str, str, bool], ...] = (
@@ -238,21 +238,18 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--limit", type=int)
     ap.add_argument("--only", type=int, nargs="+", metavar="ID")
-    ap.add_argument("--shard", default="0/1")
+    ap.add_argument("--shard", type=shard, default=(0, 1), metavar="K/N")
     ap.add_argument("--code", default="", help="the commit the diagnosis runs (kept in every row)")
     ap.add_argument("--write-only", type=Path, metavar="DIR",
                     help="write the cases into DIR and print their sizes; no diagnosis")
     ap.add_argument("--summary", action="store_true", help="print the tables of the finished cases and stop")
     a = ap.parse_args(argv)
 
-    def finished() -> list[dict[str, Any]]:
-        return [json.loads(x) for x in a.jsonl.read_text().splitlines() if x.strip()] if a.jsonl.exists() else []
-
     if a.summary:
-        print(summary(finished()))
+        print(summary(finished(a.jsonl)))
         return 0
-    k, n = (int(x) for x in a.shard.split("/"))
-    done = {r["id"] for r in finished()}
+    k, n = a.shard
+    done = {r["id"] for r in finished(a.jsonl)}
     todo = [c for c in plan(a.repeats) if c["id"] % n == k and (a.write_only or c["id"] not in done)
             and (a.only is None or c["id"] in a.only)][: a.limit]
     if a.write_only:
@@ -264,8 +261,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for c in todo:
             row = {**run_case(c, Path(tmp), a.seed), "code": a.code}
-            with a.jsonl.open("a") as f:
-                f.write(json.dumps(row, default=str) + "\n")
+            append(a.jsonl, row)
             print(f"{c['id']:3d} {c['structure']:7s} {c['mechanism']:24s} -> {row['verdict']:<22s} "
                   f"{'right' if row['right'] else 'WRONG'} {row['seconds']:5.0f} s", flush=True)
     return 0

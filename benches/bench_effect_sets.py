@@ -22,7 +22,6 @@ A line of JSON per finished case goes to ``--jsonl`` (resumable). Run it from a 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
@@ -36,6 +35,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 from bench_confusion_beyond import _bound, effects_case  # noqa: E402
+from bench_rows import append, finished, shard  # noqa: E402
 
 #: the catalogue's near-parallel pairs (degenerate on the standard experiments: |cos| 0.95-0.99)
 TWINS: dict[str, str] = {"incline": "friction_asymmetry", "friction_asymmetry": "incline",
@@ -135,27 +135,23 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--kinds", nargs="+", default=["lookalike_pair", "triple"])
     ap.add_argument("--limit", type=int)
     ap.add_argument("--only", type=int, nargs="+", metavar="ID")
-    ap.add_argument("--shard", default="0/1")
+    ap.add_argument("--shard", type=shard, default=(0, 1), metavar="K/N")
     ap.add_argument("--code", default="", help="the commit the diagnosis runs (kept in every row)")
     ap.add_argument("--jsonl", type=Path, required=True)
     ap.add_argument("--summary", action="store_true", help="print the table of the finished cases and stop")
     a = ap.parse_args(argv)
 
-    def finished() -> list[dict[str, Any]]:
-        return [json.loads(x) for x in a.jsonl.read_text().splitlines() if x.strip()] if a.jsonl.exists() else []
-
     if a.summary:
-        print(summary(finished()))
+        print(summary(finished(a.jsonl)))
         return 0
-    k, n = (int(x) for x in a.shard.split("/"))
-    done = {r["id"] for r in finished()}
+    k, n = a.shard
+    done = {r["id"] for r in finished(a.jsonl)}
     todo = [c for c in plan(a.seed) if c["id"] not in done and c["kind"] in a.kinds and c["id"] % n == k
             and (a.only is None or c["id"] in a.only)][: a.limit]
     with tempfile.TemporaryDirectory() as tmp:
         for c in todo:
             row = {**run_case(c, Path(tmp), a.seed), "code": a.code}
-            with a.jsonl.open("a") as f:
-                f.write(json.dumps(row, default=str) + "\n")
+            append(a.jsonl, row)
             print(f"{c['id']:3d} {row['truth']:>55s} -> {row['verdict']:<40s} {row['seconds']:5.0f} s "
                   f"alternatives {row['alternatives']}", flush=True)
     return 0

@@ -23,7 +23,6 @@ can share one file). Run it from a separate install: a case takes a diagnosis's 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import tempfile
@@ -35,6 +34,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_confusion import _key_error, _margin, diagnosed, effect_case
 from bench_false_alarm import EXPERIMENTS
+from bench_rows import append, finished, shard
 from idm_rs.diagnosis.thresholds import CALIBRATED
 
 ARTEFACTS = ("ar1", "pink", "spikes", "resolution", "hum", "delay", "drift")
@@ -239,29 +239,23 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--healthy", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--limit", type=int)
-    ap.add_argument("--shard", default="0/1")
+    ap.add_argument("--shard", type=shard, default=(0, 1), metavar="K/N")
     ap.add_argument("--summary", action="store_true", help="print the table of the finished cases and stop")
     ap.add_argument("--code", default="", help="the commit the diagnosis runs (kept in every row)")
     a = ap.parse_args(argv)
 
-    def finished() -> list[dict[str, Any]]:
-        if not a.jsonl.exists():
-            return []
-        return [json.loads(x) for x in a.jsonl.read_text().splitlines() if x.strip()]
-
     if a.summary:
-        print(summary(finished()))
+        print(summary(finished(a.jsonl)))
         return 0
-    k, n = (int(x) for x in a.shard.split("/"))
+    k, n = a.shard
     cases = plan(a.healthy)[: a.limit]
     with tempfile.TemporaryDirectory() as tmp:
         for c in cases:
-            if c["id"] % n != k or c["id"] in {r["id"] for r in finished()}:
+            if c["id"] % n != k or c["id"] in {r["id"] for r in finished(a.jsonl)}:
                 continue
             row = {**run_case(c, Path(tmp), a.seed), "code": a.code}
             row["noise_truth"] = noise_truth(row)
-            with a.jsonl.open("a") as f:
-                f.write(json.dumps(row) + "\n")
+            append(a.jsonl, row)
             print(f"{c['id']:3d} {row['truth']:>20s} -> {row['verdict']:<20s} {row['seconds']:5.0f} s "
                   f"{row['noise_reported']['summary']}", flush=True)
     return 0
