@@ -356,16 +356,36 @@ class _LibraryView:
         extra = {"lib_wavelength": wavelength} if wavelength > 0 else {}
         n = pb.objs[j].samples[j]
         try:
-            out, _ = run_with_force(pb.rec, j, self.at, pb.body, pb.knots[j], self.values[j], names=names,
-                                    effects=extra)
+            out, tr = run_with_force(pb.rec, j, self.at, pb.body, pb.knots[j], self.values[j], names=names,
+                                     effects=extra)
             d = np.asarray(out["sensitivities"]).T[:, :n]
+            bad = _blown_up(d, out["reading"][:n], library_columns(tr, missing, wavelength)[:n])
         except engine.DivergenceError:
-            d = np.full((len(names), n), np.nan)
-        if not np.all(np.isfinite(d)):
-            return knot_view(self.force, j, missing, wavelength)
+            d, bad = np.full((len(names), n), np.nan), np.ones(len(names), dtype=bool)
         dpred = [np.zeros((len(names), 0))] * pb.n_exp
-        dpred[j] = d
-        return pb.objs[j].profiled_columns(dpred)
+        dpred[j] = np.where(bad[:, None], 0.0, d)
+        cols = pb.objs[j].profiled_columns(dpred)
+        if np.any(bad):
+            # a term whose exact derivative blew up is seen through the force's own (repaired)
+            # knot derivatives instead
+            cols[:, bad] = knot_view(self.force, j, [t for t, b in zip(missing, bad) if b], wavelength)
+        return cols
+
+
+def _blown_up(d: NDArray[np.float64], reading: NDArray[np.float64], functions: NDArray[np.float64]
+              ) -> NDArray[np.bool_]:
+    """Which library terms' reading derivatives (terms x samples [m per unit coefficient]) blew
+    up: not finite, or beyond what the term's largest force along the run (`functions`, samples
+    x terms [N per unit coefficient]) could do by the knots' own test (BLOWN_UP times the range
+    of motion per newton, :func:`_repair_columns`). From the nominal values of a DPS 4 with a
+    quadratic spring every term's derivative overflowed in one experiment (|column| ~ 1e154):
+    the regression saw no term reproduce a force that took chi^2 from 3.06e6 to 1.9e4."""
+    from ..thresholds import BLOWN_UP
+
+    scale = BLOWN_UP * (float(np.ptp(reading)) + 1e-6) * np.max(np.abs(functions), axis=0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        size = np.max(np.abs(d), axis=1) if d.size else np.zeros(d.shape[0])
+    return ~np.all(np.isfinite(d), axis=1) | ~(size <= scale)
 
 
 def direct_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main", *,

@@ -16,6 +16,7 @@ from ..fitting import FitResult, FreeParam, Objective, fit, set_effect
 from ..thresholds import (
     BIC_THRESHOLD,
     DISCOVERY_REFIT_NFEV,
+    DISCOVERY_WIDE_FORMS,
     NOISE_RATIO_OK,
     PRUNE_ROUNDS,
     PRUNE_Z,
@@ -149,16 +150,34 @@ def describe(form: FoundForm, values: dict[str, float], force: InferredForce) ->
     return "; ".join(words)
 
 
+def _with_form(spec: ModelSpec, form: FoundForm) -> tuple[ModelSpec, list[FreeParam]]:
+    """`spec` ready for the form's terms (its wavelength set), and their free parameters."""
+    effects = dict(spec.effects)
+    if form.wavelength > 0:
+        effects["lib_wavelength"] = form.wavelength
+    return ModelSpec(spec.structure, dict(spec.params), effects), _free_library(form)
+
+
 def _refit(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[FreeParam], form: FoundForm,
            progress: Optional[Callable[..., Any]]) -> tuple[FitResult, list[FreeParam]]:
     """The whole model refitted with the form's coefficients (and wavelength) free."""
-    lib = _free_library(form)
-    effects = dict(spec.effects)
-    base = ModelSpec(spec.structure, dict(spec.params), effects)
-    if form.wavelength > 0:
-        effects["lib_wavelength"] = form.wavelength
+    base, lib = _with_form(spec, form)
     r = fit(objective, base, list(calibrated_free) + lib, max_nfev=DISCOVERY_REFIT_NFEV, progress=progress)
     return r, lib
+
+
+def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[FreeParam], form: FoundForm,
+              progress: Optional[Callable[..., Any]]) -> tuple[FitResult, list[FreeParam], str]:
+    """The whole model with the form's terms calibrated as the null is (:func:`.calibration.calibrate`:
+    a population search over the calibrated parameters' ranges and the coefficients', 1-D scans,
+    local fits from the best distinct starts): the refit's global search, for a form that gains
+    but whose refits from the calibration's optima stop short of noise. Returns (the best local
+    fit, the library's free parameters, the search's summary)."""
+    from ..calibration import calibrate
+
+    base, lib = _with_form(spec, form)
+    g = calibrate(objective, base, list(calibrated_free) + lib, progress=progress)
+    return g.fit, lib, g.summary()
 
 
 def _refit_from(objective: Objective, spec: ModelSpec, starts: Sequence[Sequence[FreeParam]], form: FoundForm,
@@ -308,6 +327,7 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
     reasons: list[str] = []
     standing: list[Discovery] = []
     tried: list[Discovery] = []
+    attempts: list[tuple[Discovery, str, FoundForm, InferredForce]] = []
     for body in order:
         force = forces[body]
         done = False
@@ -339,6 +359,7 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
                     continue
                 refitted.add(key)
                 trial = _judged(cx, body, with_quadrature(form), force, forces)
+                attempts.append((trial, body, with_quadrature(form), force))
                 if trial.discovered:
                     standing.append(trial)
                     if trial.rms_after <= NOISE_RATIO_OK * sigma:
@@ -355,6 +376,8 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
                 break
         if done:
             break
+    if not standing:
+        standing = _searched_forms(cx, attempts, forces, reasons, tried)
     if standing:
         best = _separated(cx, _best_standing(standing), forces)
         best.reason += look_alike_note(best.form) + best.separation
@@ -368,6 +391,38 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
     out.tried = [x for x in tried if x is not out]
     out.seconds = time.perf_counter() - t0
     return out
+
+
+def _searched_forms(cx: _Context, attempts: list[tuple[Discovery, str, FoundForm, InferredForce]],
+                    forces: dict[str, InferredForce], reasons: list[str], tried: list[Discovery]) -> list[Discovery]:
+    """When no form stood: the DISCOVERY_WIDE_FORMS forms whose refits gained (BIC_THRESHOLD
+    over the null, the held-out prediction better) nearest noise, judged again with the global
+    search (:func:`_judged` with `wide`); the forms as found, before pruning (pruned in a wrong
+    basin, the true term may have gone). Returns those that stand; the others' reasons join
+    `reasons` and their trials `tried`."""
+    def gained(t: Discovery) -> bool:
+        return t.delta_bic >= BIC_THRESHOLD and not (
+            math.isfinite(t.heldout_rms_after) and math.isfinite(cx.heldout_rms_null)
+            and t.heldout_rms_after >= cx.heldout_rms_null)
+
+    standing: list[Discovery] = []
+    seen: set[tuple[str, frozenset[str]]] = set()
+    for trial0, body, form, force in sorted(attempts, key=lambda a: a[0].rms_after):
+        key = (body, frozenset(t.param for t in form.terms))
+        if len(seen) >= DISCOVERY_WIDE_FORMS or not gained(trial0) or key in seen:
+            continue
+        seen.add(key)
+        trial = _judged(cx, body, form, force, forces, wide=True)
+        if trial.discovered:
+            standing.append(trial)
+            if trial.rms_after <= NOISE_RATIO_OK * cx.sigma:
+                break
+            continue
+        terms = ", ".join(t.symbol for t in trial.form.terms) if trial.form is not None else ""
+        reasons.append(f"searched globally, the form found on the {'main body' if body == 'main' else 'weight'} "
+                       f"({terms}) does not stand: {trial.reason}")
+        tried.append(trial)
+    return standing
 
 
 def look_alike_note(form: Optional[FoundForm]) -> str:
@@ -467,12 +522,14 @@ def _forms(cx: _Context, body: str, force: InferredForce, phase: str, reasons: l
     return forms
 
 
-def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forces: dict[str, InferredForce]
-            ) -> Discovery:
+def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forces: dict[str, InferredForce],
+            wide: bool = False) -> Discovery:
     """The form refitted (with its quadrature partners) and pruned, its figures, and the rule:
     discovered when it improves BIC by BIC_THRESHOLD over the calibrated model, predicts the
     held-out experiment better, and explains the residual (the refit and the held-out prediction
-    at noise); otherwise its `reason` says why not."""
+    at noise); otherwise its `reason` says why not. With `wide`, the refit is the global search's
+    (:func:`_searched`, whose starts include the calibrated values): for a form whose refits from
+    the calibration's optima stopped short of noise."""
     objective, sigma = cx.objective, cx.sigma
     heldout_rms_null, rms_null = cx.heldout_rms_null, cx.rms_null
     # the refit starts at the calibration's optimum, then (while a start leaves more than noise)
@@ -485,7 +542,13 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
         starts.append([f.at(float(cx.nominal.params.get(f.name) or f.x0)) for f in cx.calibrated_free])
     if force.parameters:
         starts.append([f.at(force.parameters.get(f.name, f.x0)) for f in cx.calibrated_free])
-    r, lib, start = _refit_from(objective, cx.spec, starts, form, cx.progress)
+    searched = ""
+    start: Sequence[FreeParam]
+    if wide:
+        r, lib, searched = _searched(objective, cx.spec, cx.calibrated_free, form, cx.progress)
+        start = [f.at(r.values[f.name]) for f in cx.calibrated_free]
+    else:
+        r, lib, start = _refit_from(objective, cx.spec, starts, form, cx.progress)
     for _ in range(PRUNE_ROUNDS):
         smaller, r, lib = _pruned(objective, cx.spec, start, form, r, lib, cx.progress)
         if smaller is form:
@@ -530,4 +593,6 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
                         f"{rms_null / sigma:.2f} → {trial.rms_after / sigma:.2f} x noise, held out "
                         f"{heldout_rms_null / sigma:.2f} → {trial.heldout_rms_after / sigma:.2f} x noise "
                         f"(both must reach {NOISE_RATIO_OK:g})")
+    if searched:
+        trial.reason += f" (refitted from a global search: {searched})"
     return trial
