@@ -206,8 +206,9 @@ def settle_discovery(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal:
                         f"({found.description}) improves BIC by {found.delta_bic:.0f} over the best calibrated "
                         f"null (RMS {cal.fit.rms / sigma:.2f} → {found.rms_after / sigma:.2f} x noise) and "
                         f"predicts the held-out experiment ({ho_cal * 1e9:.2f} → "
-                        f"{found.heldout_rms_after * 1e9:.2f} nm)" + look_alike_note(found.form)
-                        + found.separation)
+                        f"{found.heldout_rms_after * 1e9:.2f} nm)"
+                        + (f" (refitted from a global search: {found.searched})" if found.searched else "")
+                        + look_alike_note(found.form) + found.separation)
     if found.discovered:
         verdict, reason, rms_after = "discovered", found.reason, found.rms_after
         if d_lead is not None:

@@ -59,6 +59,8 @@ class Discovery:
     #: a look-alike refitted in the found term's place that fits as well (within BIC_THRESHOLD):
     #: the two the next experiment must tell apart
     look_alike: Optional["Discovery"] = field(default=None, repr=False)
+    #: the global search the refit came from (:func:`_searched`'s summary), or ""
+    searched: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -75,7 +77,7 @@ class Discovery:
             "equation": self.equation, "seconds": self.seconds, "failures": self.failures,
             "notes": self.form.notes if self.form else [],
             "look_alikes": [list(a) for a in self.form.look_alikes] if self.form else [],
-            "separation": self.separation,
+            "separation": self.separation, "searched": self.searched,
             "inferred_force": {b: {"chi2_before": f.chi2_before, "chi2_after": f.chi2_after, "dof": f.dof,
                                    "smoothing": f.smoothing} for b, f in self.forces.items()},
         }
@@ -594,5 +596,6 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
                         f"{heldout_rms_null / sigma:.2f} → {trial.heldout_rms_after / sigma:.2f} x noise "
                         f"(both must reach {NOISE_RATIO_OK:g})")
     if searched:
+        trial.searched = searched
         trial.reason += f" (refitted from a global search: {searched})"
     return trial
