@@ -480,3 +480,65 @@ def test_discovery_after_a_calibration_that_did_not_converge_starts_from_the_nom
     assert first is lead and ho == 3e-9 and [f.x0 for f in start] == [f.x0 for f in lead.free]
     spec, start, ho, first = diag_beyond_catalogue.discovery_start("unexplained", None, cal, nominal, 5e-9)
     assert spec is cal_spec and first is None and [f.x0 for f in start] == [f.x0 for f in cal.at]
+
+
+@pytest.mark.parametrize("pays", [True, False])
+def test_a_triple_whose_first_effect_is_a_look_alike_of_the_third_names_the_other_two(monkeypatch, pays):
+    """An incline led (the look-alike of the true friction asymmetry), an amplifier lag beside it
+    left structure, friction asymmetry as the third left noise and the incline did not pay its
+    way beside the other two: the verdict was `unexplained` (bench_effect_sets device 1, a DPS).
+    The other two, refitted without the incline, leave noise, predict the held-out experiment
+    better and each pays its own way: they are named. Where one of them does not pay, nothing is."""
+    from types import SimpleNamespace
+
+    import idm_rs.diagnosis.third_effect as third_effect
+    from idm_rs.diagnosis.case_model import ModelSpec, Structure
+    from idm_rs.diagnosis.catalogue import CATALOGUE
+    from idm_rs.diagnosis.fitting import FreeParam, set_effect, set_param
+    from idm_rs.diagnosis.problem import Refit
+    from idm_rs.diagnosis.results import ThirdSearch
+
+    n, sigma = 20_000, 1.5e-9
+    by = {e.id: e for e in CATALOGUE}
+    own = {e: by[e].params[0].name for e in ("incline", "amplifier_lowpass", "friction_asymmetry")}
+    # chi^2 of each set of effects fitted (the nominal subset beside them): the incline adds 3
+    extra = {frozenset({"incline", "amplifier_lowpass", "friction_asymmetry"}): 0.0,
+             frozenset({"amplifier_lowpass", "friction_asymmetry"}): 3.0,
+             frozenset({"incline", "friction_asymmetry"}): 5_000.0,
+             frozenset({"amplifier_lowpass"}): 6_000.0,
+             frozenset({"friction_asymmetry"}): 4_000.0 if pays else 5.0}
+    fitted = []
+
+    def fit(obj, base, start, max_nfev, progress):
+        names = {f.name for f in start}
+        effects = frozenset(e for e, p in own.items() if p in names)
+        fitted.append(effects)
+        chi2 = n + extra[effects]
+        return SimpleNamespace(chi2=chi2, rms=math.sqrt(chi2 / n) * sigma, residuals=[],
+                               values={f.name: f.x0 for f in start})
+
+    monkeypatch.setattr(third_effect, "fit", fit)
+    monkeypatch.setattr(third_effect, "whiteness_z", lambda res: 0.5)
+    monkeypatch.setattr(third_effect, "make_candidate",
+                        lambda pb, cal, eff, r, screened_only: SimpleNamespace(effect=eff.id, rms_after=r.rms,
+                                                                               heldout_rms=math.nan))
+    calibrated = [FreeParam("m1", 0.4, 0.2, 0.6, 0.01, set_param("m1"))]
+    free = calibrated + [FreeParam(p, 1e-3, -1.0, 1.0, 1e-4, set_effect(p)) for p in own.values()]
+    spec = ModelSpec(Structure("dps", 4, False), {"m1": 0.4}, {})
+    cal = SimpleNamespace(fit=SimpleNamespace(spec=spec), free=calibrated, bic=0.0)
+    pb = SimpleNamespace(obj=None, tick=None, n_offsets=12, ln_n=math.log(n), sigma=sigma)
+    third = SimpleNamespace(effect="friction_asymmetry", bic=n + 16 * math.log(n), delta_bic=1e5, rms_after=sigma,
+                            whiteness_z=0.5, screened_only=False, present=True, heldout_rms=math.nan)
+    heldout = SimpleNamespace(rms=lambda base, at: 1.6e-9)
+    out = ThirdSearch(pair=("incline", "amplifier_lowpass"), pair_heldout_rms=5.0e-9)
+    out = third_effect.judge_triple(pb, cal, out, Refit(third, spec, free), heldout)
+    assert not out.named and "incline does not pay its own way" in out.reason
+    if pays:
+        assert out.instead == ("amplifier_lowpass", "friction_asymmetry")
+        assert out.instead_candidate.effect == "friction_asymmetry" and out.instead_rms == pytest.approx(
+            math.sqrt((n + 3.0) / n) * sigma)
+        assert "two effects: amplifier_lowpass and friction_asymmetry" in out.reason
+    else:
+        assert out.instead is None and "amplifier_lowpass does not pay its own way beside the other" in out.reason
+    # the triple less each of the pair, then each of the other two alone
+    assert fitted[2:] == [frozenset({"friction_asymmetry"}), frozenset({"amplifier_lowpass"})]

@@ -350,6 +350,9 @@ def _second_effect_stage(s: _State) -> None:
         if third.named and third.third is not None:
             s.verdict, s.reason, s.rms_after = ("+".join((*third.pair, third.third.effect)), third.reason,
                                                 third.third.rms_after)
+        elif third.instead is not None:
+            # one of the first pair was the look-alike of the third: the other two are the answer
+            s.verdict, s.reason, s.rms_after = "+".join(third.instead), third.reason, third.instead_rms
         else:
             s.reason += f"; third effect: {third.reason}"
         s.third = third

@@ -262,6 +262,17 @@ def plain_summary(d: Diagnosis) -> list[str]:
                      "× noise.")
         lines.append("  What to do: add the three effects to your model with the fitted values (the refit model "
                      "below).")
+    elif third is not None and third.instead is not None and best is not None:
+        lines.append(f"  Found: two effects the nominal model lacks — {third.instead[0]} and {best.description} "
+                     f"({format_params(best)}). With both added and the nominal values re-fitted, the model matches "
+                     f"the recordings to {ratio(best.rms_after):.2f} × their noise, against "
+                     f"{ratio(d.rms_calibrated):.2f} × with neither; the search had gone through "
+                     f"{next(e for e in third.pair if e not in third.instead)}, which does not pay its own way "
+                     "beside them.")
+        lines.append(f"  How sure: the pair predicts an experiment it was not fitted to at "
+                     f"{ratio(best.heldout_rms):.2f} × noise; the reason below gives each effect's ΔBIC.")
+        lines.append("  What to do: add the two effects to your model with the fitted values (the refit model "
+                     "below).")
     elif sec is not None and sec.named and best is not None:
         share = " and ".join(f"{k} {100 * v:.0f} %" for k, v in sec.shares.items())
         lines.append(f"  Found: two effects the nominal model lacks — {sec.first.description} "

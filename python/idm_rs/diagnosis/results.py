@@ -200,9 +200,17 @@ class ThirdSearch:
     ranking: list[Candidate] = field(default_factory=list)  #: the third round's candidates (with the pair)
     free: list[Any] = field(default_factory=list, repr=False)
     base: Optional[ModelSpec] = field(default=None, repr=False)
+    #: the two effects named instead of the triple when one of the first pair does not pay its
+    #: own way beside the other two and those two leave noise (the pair's first effect was the
+    #: look-alike of the third), with their RMS [m]; else None
+    instead: Optional[tuple[str, str]] = None
+    instead_rms: float = math.nan
+    #: the two's fit (the second's candidate; its spec holds both), when `instead` is set
+    instead_candidate: Optional[Candidate] = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"pair": list(self.pair), "third": self.third.effect if self.third else None, "named": self.named,
+                "instead": list(self.instead) if self.instead else None, "instead_rms": self.instead_rms,
                 "reason": self.reason, "heldout_rms": self.heldout_rms, "pair_heldout_rms": self.pair_heldout_rms,
                 "delta_bic_without": self.over_without, "triple": self.third.to_dict() if self.third else None,
                 "ranking": [c.to_dict() for c in self.ranking]}
@@ -303,6 +311,8 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
             return self.third.third
         if "+" in self.verdict and self.second is not None and self.second.named:
             return self.second.pair
+        if self.third is not None and self.third.instead is not None and self.verdict == "+".join(self.third.instead):
+            return self.third.instead_candidate
         return next((c for c in self.ranking if c.effect == self.verdict), None)
 
     def to_dict(self) -> dict[str, Any]:
