@@ -542,3 +542,20 @@ def test_a_triple_whose_first_effect_is_a_look_alike_of_the_third_names_the_othe
         assert out.instead is None and "amplifier_lowpass does not pay its own way beside the other" in out.reason
     # the triple less each of the pair, then each of the other two alone
     assert fitted[2:] == [frozenset({"friction_asymmetry"}), frozenset({"amplifier_lowpass"})]
+
+
+def test_the_plain_words_for_two_effects_named_instead_of_a_triple():
+    """The report names the two effects and the one the search went through (it did not pay)."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis import report
+
+    sigma = 1.5e-9
+    d = SimpleNamespace(noise=SimpleNamespace(sigma=sigma), rms_calibrated=8.5 * sigma)
+    third = SimpleNamespace(pair=("incline", "amplifier_lowpass"), instead=("amplifier_lowpass", "friction_asymmetry"))
+    best = SimpleNamespace(description="friction differs by direction", rms_after=0.98 * sigma,
+                           heldout_rms=1.1 * sigma, effect="friction_asymmetry", params={"eps": 0.04},
+                           reported_std={"eps": 0.001})
+    lines = report._instead_lines(d, third, best)
+    assert "two effects the nominal model lacks — amplifier_lowpass and friction differs by direction" in lines[0]
+    assert "0.98 × their noise" in lines[0] and "through incline" in lines[0] and "1.10 × noise" in lines[1]

@@ -15,7 +15,7 @@ from .thresholds import AT_BOUND_SHARE, BIC_THRESHOLD, CALIBRATION_RANGE
 if TYPE_CHECKING:
     from typing_extensions import TypeGuard  # typing.TypeGuard from Python 3.10
 
-    from .results import Candidate, Diagnosis
+    from .results import Candidate, Diagnosis, ThirdSearch
 
 #: experiment x phase locations listed in the report
 TOP_LOCATIONS = 6
@@ -247,9 +247,8 @@ def plain_summary(d: Diagnosis) -> list[str]:
                     if _finite(p_meta.get(n)) and p_meta[n]), key=lambda kv: -abs(kv[1]))
     biggest = f"; the largest change is {moved[0][0]} {100 * moved[0][1]:+.1f} % against meta.json" if moved else ""
     where = next((loc for loc in d.locations if loc.systematic), None)
-    alts = getattr(d, "alternatives", []) or []
+    alts, third = getattr(d, "alternatives", []) or [], getattr(d, "third", None)
     lines = ["In plain words"]
-    third = getattr(d, "third", None)
     if third is not None and third.named and best is not None:
         lines.append(f"  Found: three effects the nominal model lacks — {', '.join(third.pair)} and "
                      f"{best.description} ({format_params(best)}). With all three added and the nominal values "
@@ -263,16 +262,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
         lines.append("  What to do: add the three effects to your model with the fitted values (the refit model "
                      "below).")
     elif third is not None and third.instead is not None and best is not None:
-        lines.append(f"  Found: two effects the nominal model lacks — {third.instead[0]} and {best.description} "
-                     f"({format_params(best)}). With both added and the nominal values re-fitted, the model matches "
-                     f"the recordings to {ratio(best.rms_after):.2f} × their noise, against "
-                     f"{ratio(d.rms_calibrated):.2f} × with neither; the search had gone through "
-                     f"{next(e for e in third.pair if e not in third.instead)}, which does not pay its own way "
-                     "beside them.")
-        lines.append(f"  How sure: the pair predicts an experiment it was not fitted to at "
-                     f"{ratio(best.heldout_rms):.2f} × noise; the reason below gives each effect's ΔBIC.")
-        lines.append("  What to do: add the two effects to your model with the fitted values (the refit model "
-                     "below).")
+        lines += _instead_lines(d, third, best)
     elif sec is not None and sec.named and best is not None:
         share = " and ".join(f"{k} {100 * v:.0f} %" for k, v in sec.shares.items())
         lines.append(f"  Found: two effects the nominal model lacks — {sec.first.description} "
@@ -349,6 +339,24 @@ def plain_summary(d: Diagnosis) -> list[str]:
 
 RMS_TITLE = "Residual RMS (a position offset fitted per drive-cycle segment: multiple shooting by translation)"
 
+
+
+def _instead_lines(d: Diagnosis, third: "ThirdSearch", best: "Candidate") -> list[str]:
+    """The plain words for two effects named instead of a triple (`third.instead`: one of the
+    first pair stood in for the third, its look-alike); `best` is the two's fit."""
+    sigma = d.noise.sigma
+    ratio = lambda x: x / sigma if sigma > 0 else math.nan  # noqa: E731
+    instead = third.instead
+    assert instead is not None  # the caller's condition
+    dropped = next(e for e in third.pair if e not in instead)
+    return [f"  Found: two effects the nominal model lacks — {instead[0]} and {best.description} "
+            f"({format_params(best)}). With both added and the nominal values re-fitted, the model matches "
+            f"the recordings to {ratio(best.rms_after):.2f} × their noise, against "
+            f"{ratio(d.rms_calibrated):.2f} × with neither; the search had gone through {dropped}, which "
+            "does not pay its own way beside them.",
+            f"  How sure: the pair predicts an experiment it was not fitted to at {ratio(best.heldout_rms):.2f} × "
+            "noise; the reason below gives each effect's ΔBIC.",
+            "  What to do: add the two effects to your model with the fitted values (the refit model below)."]
 
 def _noise_model_lines(d: Diagnosis) -> list[str]:
     """What the reading carries besides the motion, and the metric the figures below are in."""
