@@ -170,11 +170,9 @@ def _refit(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[Free
 
 def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[FreeParam], form: FoundForm,
               progress: Optional[Callable[..., Any]]) -> tuple[FitResult, list[FreeParam], str]:
-    """The whole model with the form's terms calibrated as the null is (:func:`.calibration.calibrate`:
-    a population search over the calibrated parameters' ranges and the coefficients', 1-D scans,
-    local fits from the best distinct starts): the refit's global search, for a form that gains
-    but whose refits from the calibration's optima stop short of noise. Returns (the best local
-    fit, the library's free parameters, the search's summary)."""
+    """The refit's global search: the model with the form's terms calibrated as the null is
+    (:func:`.calibration.calibrate` over the calibrated parameters and the coefficients). Returns
+    (the best local fit, the library's free parameters, the search's summary)."""
     from ..calibration import calibrate
 
     base, lib = _with_form(spec, form)
@@ -360,17 +358,16 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
                 if key in refitted:
                     continue
                 refitted.add(key)
-                trial = _judged(cx, body, with_quadrature(form), force, forces)
-                attempts.append((trial, body, with_quadrature(form), force))
+                paired = with_quadrature(form)
+                trial = _judged(cx, body, paired, force, forces)
+                attempts.append((trial, body, paired, force))
                 if trial.discovered:
                     standing.append(trial)
                     if trial.rms_after <= NOISE_RATIO_OK * sigma:
                         done = True  # it leaves noise: another form could at best tie
                         break
                     continue
-                terms = ", ".join(t.symbol for t in trial.form.terms) if trial.form is not None else ""
-                reasons.append(f"the form found on the {'main body' if body == 'main' else 'weight'} ({terms}) "
-                               f"does not stand: {trial.reason}")
+                reasons.append(_not_standing(body, trial))
                 tried.append(trial)
                 if out.refit is None:
                     out = trial
@@ -397,15 +394,10 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
 
 def _searched_forms(cx: _Context, attempts: list[tuple[Discovery, str, FoundForm, InferredForce]],
                     forces: dict[str, InferredForce], reasons: list[str], tried: list[Discovery]) -> list[Discovery]:
-    """When no form stood: the DISCOVERY_WIDE_FORMS forms whose refits gained (BIC_THRESHOLD
-    over the null, the held-out prediction better) nearest noise, judged again with the global
-    search (:func:`_judged` with `wide`); the forms as found, before pruning (pruned in a wrong
-    basin, the true term may have gone). Returns those that stand; the others' reasons join
-    `reasons` and their trials `tried`."""
+    """When no form stood: the DISCOVERY_WIDE_FORMS forms nearest noise that gained (BIC, held out),
+    as found (unpruned), judged with the global search; those that stand (others: `reasons`, `tried`)."""
     def gained(t: Discovery) -> bool:
-        return t.delta_bic >= BIC_THRESHOLD and not (
-            math.isfinite(t.heldout_rms_after) and math.isfinite(cx.heldout_rms_null)
-            and t.heldout_rms_after >= cx.heldout_rms_null)
+        return t.delta_bic >= BIC_THRESHOLD and _predicts_better(t.heldout_rms_after, cx.heldout_rms_null)
 
     standing: list[Discovery] = []
     seen: set[tuple[str, frozenset[str]]] = set()
@@ -420,11 +412,21 @@ def _searched_forms(cx: _Context, attempts: list[tuple[Discovery, str, FoundForm
             if trial.rms_after <= NOISE_RATIO_OK * cx.sigma:
                 break
             continue
-        terms = ", ".join(t.symbol for t in trial.form.terms) if trial.form is not None else ""
-        reasons.append(f"searched globally, the form found on the {'main body' if body == 'main' else 'weight'} "
-                       f"({terms}) does not stand: {trial.reason}")
+        reasons.append("searched globally, " + _not_standing(body, trial))
         tried.append(trial)
     return standing
+
+
+def _not_standing(body: str, trial: Discovery) -> str:
+    """'the form found on the main body (x1^2) does not stand: <why>'."""
+    terms = ", ".join(t.symbol for t in trial.form.terms) if trial.form is not None else ""
+    where = "main body" if body == "main" else "weight"
+    return f"the form found on the {where} ({terms}) does not stand: {trial.reason}"
+
+
+def _predicts_better(heldout_rms: float, heldout_rms_null: float) -> bool:
+    """Better than the null's held-out prediction (or one of them could not be taken)."""
+    return not (math.isfinite(heldout_rms) and math.isfinite(heldout_rms_null) and heldout_rms >= heldout_rms_null)
 
 
 def look_alike_note(form: Optional[FoundForm]) -> str:
@@ -529,9 +531,7 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
     """The form refitted (with its quadrature partners) and pruned, its figures, and the rule:
     discovered when it improves BIC by BIC_THRESHOLD over the calibrated model, predicts the
     held-out experiment better, and explains the residual (the refit and the held-out prediction
-    at noise); otherwise its `reason` says why not. With `wide`, the refit is the global search's
-    (:func:`_searched`, whose starts include the calibrated values): for a form whose refits from
-    the calibration's optima stopped short of noise."""
+    at noise); otherwise its `reason` says why not. With `wide`, the refit is :func:`_searched`'s."""
     objective, sigma = cx.objective, cx.sigma
     heldout_rms_null, rms_null = cx.heldout_rms_null, cx.rms_null
     # the refit starts at the calibration's optimum, then (while a start leaves more than noise)
@@ -568,8 +568,7 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
         trial.heldout_rms_after = cx.heldout.rms(r.spec, [f.at(r.values[f.name]) for f in list(start) + lib])
     trial.equation = _equation(form, vals)
     trial.description = describe(form, vals, force)
-    improves = not (math.isfinite(trial.heldout_rms_after) and math.isfinite(heldout_rms_null)
-                    and trial.heldout_rms_after >= heldout_rms_null)
+    improves = _predicts_better(trial.heldout_rms_after, heldout_rms_null)
     # "discovered" means the residual is explained, not merely lowered: the refit leaves noise and
     # so does the held-out experiment's prediction (a floor vibration, which no library term
     # represents, was "explained" by sgn v1 and a periodic term at 2.16 x noise, held out 3.2 x,
