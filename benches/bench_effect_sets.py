@@ -75,17 +75,21 @@ def plan(seed: int) -> list[dict[str, Any]]:
     return out
 
 
-def judged(effects: list[str], verdict: str, alternatives: list[str]) -> dict[str, Any]:
+def judged(effects: list[str], verdict: str, alternatives: list[str], separated: Optional[list[str]] = None
+           ) -> dict[str, Any]:
     """How a verdict on a device with `effects` reads: every true effect named or stood in for by
     its twin (the true one then among `alternatives`), no effect named beyond them and their
-    twins, and every named effect that has a twin reported with it."""
+    twins, and every named effect that has a twin reported with it: the twin among
+    `alternatives`, or refitted in its place and separated by the data (`separated`: "a~b", b
+    refitted in place of a left a systematic residual, which the reason says)."""
     named = [v for v in verdict.split("+") if v] if verdict not in ("none", "unexplained", "not_converged") else []
     accounted = all(e in named or (TWINS.get(e) in named and e in alternatives) for e in effects)
     allowed = set(effects) | {TWINS[e] for e in effects if e in TWINS}
     wrong = [v for v in named if v not in allowed]
     twin_named = [v for v in named if v in TWINS]
     return {"named": named, "right": accounted and not wrong, "wrong_effects": wrong,
-            "look_alike_reported": all(TWINS[v] in alternatives for v in twin_named) if twin_named else None}
+            "look_alike_reported": all(TWINS[v] in alternatives or f"{v}~{TWINS[v]}" in (separated or [])
+                                       for v in twin_named) if twin_named else None}
 
 
 def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
@@ -100,7 +104,10 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
         d = idm_rs.diagnose(directory, progress=False)
         seconds = time.perf_counter() - t0
     alts = [a.effect for a in d.alternatives]
-    return {**c, **info, "verdict": d.verdict, "alternatives": alts, **judged(c["effects"], d.verdict, alts),
+    twins = [t for t in (d.second.twins if d.second is not None else [])]
+    separated = [f"{t.member}~{t.twin}" for t in twins if not t.stands]
+    return {**c, **info, "verdict": d.verdict, "alternatives": alts, "twins_separated": separated,
+            **judged(c["effects"], d.verdict, alts, separated),
             "seconds": seconds, "calibrated_over_noise": d.rms_calibrated / d.noise.sigma,
             "after_over_noise": d.rms_after / d.noise.sigma, "reason": d.reason, "timings": dict(d.timings)}
 

@@ -323,6 +323,8 @@ def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_a
                          [rng.normal(0.0, sigma * math.sqrt(ratio), n)], [0.0], base, 10, True, "fake")
 
     monkeypatch.setattr(diag_second_effect, "fit", fake_fit)
+    # look-alikes judged in place need the engine's screening: none here
+    monkeypatch.setattr(diag_second_effect, "twins_in_place", lambda *a, **k: [])
     pb = SimpleNamespace(sigma=sigma, ln_n=math.log(n), n_offsets=1, obj=SimpleNamespace(n=n), tick=None)
     null = fake_fit(None, ModelSpec(structure, p, {}), nominal_free, 0)
     cal = SimpleNamespace(fit=null, free=nominal_free, bic=null.chi2 + (len(nominal_free) + 1) * pb.ln_n)
@@ -338,7 +340,7 @@ def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_a
               first_round("weight_friction", {"c_weight": 50.9}), first_round("incline", {"theta_rad": -0.0105})]
     heldout = SimpleNamespace(rms=lambda spec, free: 1.2 * sigma)
     starts.clear()
-    out = diag_second_effect.joint_pair(pb, cal, refits, heldout)
+    out = diag_second_effect.joint_pair(pb, cal, refits, heldout, [])
     # three pairs, each from the nominal values as given with its effects at their fits alone
     pairs = starts[:3]  # then the second alone, refitted from the pair (the first pays its way)
     assert [sorted(set(s) - set(CALIBRATED)) for s in pairs] == [
@@ -352,7 +354,7 @@ def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_a
     assert out.pair.rms_after == pytest.approx(sigma, rel=0.05)
     assert set(out.shares) == {"weight_friction", "incline"} and sum(out.shares.values()) == pytest.approx(1.0)
     # fewer than two supported candidates: nothing to pair
-    assert diag_second_effect.joint_pair(pb, cal, refits[:1], heldout) is None
+    assert diag_second_effect.joint_pair(pb, cal, refits[:1], heldout, []) is None
 
 
 def test_a_second_effect_that_explains_alone_is_the_answer_when_the_first_does_not_pay(monkeypatch):
@@ -386,6 +388,7 @@ def test_a_second_effect_that_explains_alone_is_the_answer_when_the_first_does_n
                          [rng.normal(0.0, sigma * math.sqrt(ratio), n)], [0.0], base, 10, True, "fake")
 
     monkeypatch.setattr(diag_second_effect, "fit", fake_fit)
+    monkeypatch.setattr(diag_second_effect, "twins_in_place", lambda *a, **k: [])  # needs the engine
     pb = SimpleNamespace(sigma=sigma, ln_n=math.log(n), n_offsets=1, obj=SimpleNamespace(n=n), tick=None)
     null = fake_fit(None, ModelSpec(structure, p, {}), nominal_free, 0)
     cal = SimpleNamespace(fit=null, free=nominal_free, bic=null.chi2 + (len(nominal_free) + 1) * pb.ln_n)
@@ -400,7 +403,7 @@ def test_a_second_effect_that_explains_alone_is_the_answer_when_the_first_does_n
                               pair_start)
     heldout = SimpleNamespace(rms=lambda spec, free: 1.1 * sigma)
     out = diag_second_effect.judge_pair(pb, cal, SecondSearch(first=first, first_heldout_rms=1.5 * sigma), pair,
-                                        first.chi2, heldout, [])
+                                        (first_fit, first_start), heldout, [], [])
     assert not out.named and "does not pay its own way" in out.reason
     assert out.alone is not None and out.alone.effect == "stribeck"
     assert out.alone.rms_after == pytest.approx(sigma, rel=0.05) and out.alone.delta_bic > 10
@@ -408,7 +411,7 @@ def test_a_second_effect_that_explains_alone_is_the_answer_when_the_first_does_n
     # a second alone that does not leave noise is no answer
     level[frozenset({"mu_s_excess"})] = 1.3
     out = diag_second_effect.judge_pair(pb, cal, SecondSearch(first=first, first_heldout_rms=1.5 * sigma), pair,
-                                        first.chi2, heldout, [])
+                                        (first_fit, first_start), heldout, [], [])
     assert out.alone is None
 
 

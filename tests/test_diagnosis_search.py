@@ -359,3 +359,48 @@ def test_a_pair_stuck_in_a_side_basin_is_refitted_from_its_own_1d_scans(long_rec
     assert diag_rules.candidate_explains(pb, out.candidate)
     # a pair that already explains the data is returned as it is (no scan, no fit)
     assert diag_second_effect.rescanned(pb, null, eff, out) is out
+
+
+def test_a_pairs_look_alike_is_refitted_in_its_place_beside_the_other_effect(tmp_path):
+    """issue 51, effect-sets device 3: a sensor lag + friction asymmetry named right, the
+    asymmetry's twin (incline) neither named nor said to be separated: the first round compares
+    signatures at the calibrated null, which compensates for both effects at once. Beside the
+    sensor lag (the model with the pair's other effect) every near signature is refitted in the
+    asymmetry's place; what leaves noise there is an alternative, what does not is separated by
+    the data, with its figures."""
+    from idm_rs.diagnosis.pair_twins import judged_pairs, twins_in_place
+
+    case = make_case(tmp_path / "pair", nominal_params=NOMINAL,
+                     effects=idm_rs.Effects(tau_sensor=5e-6, eps=0.04), experiments=SHORT, noise_rms=NOISE,
+                     seed=11, dt=2e-8)
+    rec = load_case(case)
+    obj = Objective(rec, CaseSimulator(rec), NOISE)
+    pb = diag_problem.Problem(rec, estimate_noise(rec), obj.sim, obj, None)
+    lag, asym = by_id("sensor_lowpass"), by_id("friction_asymmetry")
+    free = diag_problem.calibration_params(SPEC.params) + [ep.free(5e-6) for ep in lag.params]
+    with_lag = lag.structure(SPEC.structure)
+    pair = fit(obj, ModelSpec(asym.structure(with_lag), dict(SPEC.params), {}),
+               free + [ep.free(0.04) for ep in asym.params], max_nfev=10)
+    assert pair.rms <= 1.1 * NOISE
+    # the sensor lag alone refitted from the pair's values, as the pair's judge does
+    beside = fit(obj, ModelSpec(with_lag, dict(SPEC.params), {}), [f.at(pair.values[f.name]) for f in free],
+                 max_nfev=10)
+    at = [f.at(beside.values[f.name]) for f in free]
+    twins = twins_in_place(pb, beside, at, "friction_asymmetry", {"sensor_lowpass"}, pair.chi2, {"thermal_drift"})
+    assert twins is not None
+    by_twin = {t.twin: t for t in twins}
+    assert "incline" in by_twin and by_twin["incline"].cos >= 0.9, twins
+    # a first-round twin is refitted whatever its angle here
+    assert "thermal_drift" in by_twin and by_twin["thermal_drift"].cos < 0.9
+    assert all(t.member == "friction_asymmetry" and t.twin not in ("sensor_lowpass", "friction_asymmetry")
+               for t in twins)
+    for t in twins:  # each judged by its refit: leaves noise (or ties the pair), else separated
+        assert t.stands == (t.rms <= 1.1 * pb.sigma or t.chi2 - pair.chi2 < SEPARATION)
+        assert ("tell them apart" in t.words()) != t.stands
+    # the refit in place supersedes the first round's angle for the member judged
+    assert not by_twin["thermal_drift"].stands
+    first_round = [("friction_asymmetry", "thermal_drift", 0.96), ("amplifier_lowpass", "sensor_lowpass", 0.99)]
+    judged = judged_pairs(first_round, twins, {"friction_asymmetry"})
+    assert ("amplifier_lowpass", "sensor_lowpass", 0.99) in judged
+    assert not any("thermal_drift" in p for p in judged)
+    assert {p[1] for p in judged if p[0] == "friction_asymmetry"} == {t.twin for t in twins if t.stands}

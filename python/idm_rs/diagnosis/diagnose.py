@@ -43,6 +43,7 @@ from .locate import Location, locate, merge_windows
 from .next_experiment import ParameterProposal, Proposal
 from .noise import NoiseEstimate, cross_check, estimate_noise
 from .noise_model import Learned
+from .pair_twins import judged_pairs
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .progress import Clock, Progress, progress_bar
 from .proposals import determining_experiment, look_alike_experiment, separating_experiment, travel_experiment
@@ -322,11 +323,12 @@ def _second_effect_stage(s: _State) -> None:
     if s.lead is None:
         return
     s.clock.begin("second effect")
-    second = search_second_effect(s.pb, s.cal, s.lead, s.heldout, s.refits)
+    first_twins = near_degenerate(list(s.screened.values()))
+    second = search_second_effect(s.pb, s.cal, s.lead, s.heldout, s.refits, first_twins)
     if not second.named:
         # two effects that each mimic part of the other from the leader's optimum: the
         # supported candidates' pairs fitted together from their fits alone
-        joint = joint_pair(s.pb, s.cal, s.refits, s.heldout)
+        joint = joint_pair(s.pb, s.cal, s.refits, s.heldout, first_twins)
         if joint is not None and joint.named:
             second = joint
         elif joint is not None:
@@ -430,7 +432,12 @@ def _next_experiment_stage(s: _State) -> None:
     from it, and the one that determines what the data left undetermined."""
     assert s.pb is not None
     s.degenerate = near_degenerate(list(s.screened.values()))
-    s.alternatives = alternatives_to(s.ranking, s.verdict, s.degenerate)
+    judged = s.degenerate
+    if s.second is not None and s.second.named and s.second.pair is not None and s.verdict == (
+            f"{s.second.first.effect}+{s.second.pair.effect}"):
+        # the pair's look-alikes as judged in each effect's place (over the first round's angles)
+        judged = judged_pairs(s.degenerate, s.second.twins, set(s.second.twins_judged))
+    s.alternatives = alternatives_to(s.ranking, s.verdict, judged)
     if s.alternatives:
         s.reason += "; cannot be told apart from " + ", ".join(f"{a.effect} ({a.why})" for a in s.alternatives)
         first = s.alternatives[0]

@@ -169,10 +169,15 @@ class SecondSearch:
     #: and the first does not pay its own way beside it: the first round's leader only mimicked
     #: part of it, and this is the answer (scored against the calibrated null)
     alone: Optional[Candidate] = None
+    #: a named pair's look-alikes refitted in each effect's place (:class:`.pair_twins.Twin`), and
+    #: the effects so judged
+    twins: list[Any] = field(default_factory=list)
+    twins_judged: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "first": self.first.effect, "joint": self.joint, "second": self.pair.effect if self.pair else None,
+            "first": self.first.effect, "joint": self.joint, "twins": [t.to_dict() for t in self.twins],
+            "second": self.pair.effect if self.pair else None,
             "named": self.named,
             "reason": self.reason, "shares": self.shares, "heldout_rms": self.heldout_rms,
             "first_heldout_rms": self.first_heldout_rms, "delta_bic_over_first": self.over_first,

@@ -14,6 +14,7 @@ from .case_model import ModelSpec
 from .catalogue import CATALOGUE, Effect
 from .fitting import FitResult, FreeParam, fit
 from .noise import whiteness_z
+from .pair_twins import twins_in_place
 from .problem import CalibratedNull, HeldOut, Problem, Refit
 from .results import SecondSearch
 from .rules import by_rank, candidate_explains, is_eligible, is_finite
@@ -38,14 +39,16 @@ def partial_leader(pb: Problem, refits: list[Refit]) -> Optional[Refit]:
 
 
 def search_second_effect(pb: Problem, cal: CalibratedNull, lead: Refit, heldout: HeldOut,
-                   first_round: list[Refit]) -> SecondSearch:
+                         first_round: list[Refit], first_twins: list[tuple[str, str, float]]) -> SecondSearch:
     """A second catalogue effect searched from the model *with* the first (`lead`): the first's
     optimum becomes the null of a second round (screening, multistart fits of the SECOND_TOP
     best scored, the polish) under the same rules as the first round (likelihood ratio, ΔBIC
     over the model with the first alone, a residual at noise, the held-out experiment predicted
     better). The pair is named only when, in addition, the first effect pays its own way beside
     the second: the second alone, refitted from the pair's values, must be worse than the pair by
-    BIC_THRESHOLD (else the first round's leader only mimicked part of the second)."""
+    BIC_THRESHOLD (else the first round's leader only mimicked part of the second).
+    `first_twins`: the first round's near-parallel pairs (a named pair's look-alikes are judged
+    in place, :func:`judge_pair`)."""
     first = lead.candidate
     out = SecondSearch(first=first, first_heldout_rms=first.heldout_rms)
     r1, with_first, ranked = round_beside(pb, cal, lead.base, lead.free, {first.effect}, wide=True)
@@ -60,7 +63,7 @@ def search_second_effect(pb: Problem, cal: CalibratedNull, lead: Refit, heldout:
                       + (f" (best: {top.effect}, ΔBIC {top.delta_bic:.0f} over {first.effect} alone)" if top else ""))
         return out
     best = rescanned(pb, with_first, next(e for e in CATALOGUE if e.id == best.candidate.effect), best)
-    return judge_pair(pb, cal, out, best, r1.chi2, heldout, first_round)
+    return judge_pair(pb, cal, out, best, (r1, with_first.at), heldout, first_round, first_twins)
 
 
 def round_beside(pb: Problem, cal: CalibratedNull, base: ModelSpec, free: list[FreeParam], named: set[str],
@@ -127,8 +130,8 @@ def rescanned(pb: Problem, null: CalibratedNull, eff: Effect, best: Refit) -> Re
     return out
 
 
-def joint_pair(pb: Problem, cal: CalibratedNull, first_round: list[Refit], heldout: HeldOut
-                ) -> Optional[SecondSearch]:
+def joint_pair(pb: Problem, cal: CalibratedNull, first_round: list[Refit], heldout: HeldOut,
+               first_twins: list[tuple[str, str, float]]) -> Optional[SecondSearch]:
     """Two effects fitted together from the start each found alone. With two large effects
     missing, the calibration and each candidate's own fit settle in basins that compensate for
     the other effect (two-effect pair 3: an incline and a drag on the weight, the masses and
@@ -169,16 +172,21 @@ def joint_pair(pb: Problem, cal: CalibratedNull, first_round: list[Refit], heldo
     refit = rescanned(pb, with_first, eb, Refit(make_candidate(pb, with_first, eb, r, screened_only=False), base,
                                                    [f.at(r.values[f.name]) for f in start]))
     out = SecondSearch(first=first, first_heldout_rms=first.heldout_rms, joint=True, ranking=[refit.candidate])
-    return judge_pair(pb, cal, out, refit, first.chi2, heldout, first_round)
+    return judge_pair(pb, cal, out, refit, (r1, ra.free), heldout, first_round, first_twins)
 
 
-def judge_pair(pb: Problem, cal: CalibratedNull, out: SecondSearch, best: Refit, chi2_first: float,
-                heldout: HeldOut, first_round: list[Refit]) -> SecondSearch:
+def judge_pair(pb: Problem, cal: CalibratedNull, out: SecondSearch, best: Refit,
+               with_first: tuple[FitResult, list[FreeParam]], heldout: HeldOut, first_round: list[Refit],
+               first_round_twins: list[tuple[str, str, float]]) -> SecondSearch:
     """The rules a pair must pass to be named (`best`: the pair's refit, its candidate scored
-    against the first effect alone, whose chi^2 is `chi2_first`): its residual is noise, the
-    held-out experiment is predicted better than with the first alone, and the first pays its own
-    way (the second alone, refitted from the pair's values, worse by BIC_THRESHOLD)."""
+    against the first effect alone, `with_first`: that model's fit and free parameters at it):
+    its residual is noise, the held-out experiment is predicted better than with the first alone,
+    and the first pays its own way (the second alone, refitted from the pair's values, worse by
+    BIC_THRESHOLD). A named pair's look-alikes are judged at each effect's place
+    (:func:`.pair_twins.twins_in_place`; `first_round_twins`: the first round's near-parallel
+    pairs, whose members are refitted in place too)."""
     first = out.first
+    chi2_first = with_first[0].chi2
     pair = best.candidate
     out.pair, out.free, out.base = pair, best.free, best.base
     out.over_first = pair.delta_bic
@@ -231,4 +239,25 @@ def judge_pair(pb: Problem, cal: CalibratedNull, out: SecondSearch, best: Refit,
                       f"{out.over_second_alone:.0f}, and the held-out experiment is predicted better "
                       f"({first.heldout_rms * 1e9:.2f} → {out.heldout_rms * 1e9:.2f} nm); share of the improvement: "
                       f"{share}")
+        _judge_twins(pb, out, with_first, (r2, [f.at(r2.values[f.name]) for f in start2]), first_round_twins)
     return out
+
+
+
+def _judge_twins(pb: Problem, out: SecondSearch, with_first: tuple[FitResult, list[FreeParam]],
+                 with_second: tuple[FitResult, list[FreeParam]], first_round_twins: list[tuple[str, str, float]]
+                 ) -> None:
+    """Each effect of the named pair in `out` judged against its look-alikes at the model with the
+    other (`with_first`, `with_second`: those fits and their free parameters): `out.twins`, the
+    members judged in `out.twins_judged`, what the data separate said in `out.reason`."""
+    assert out.pair is not None
+    first, second = out.first.effect, out.pair.effect
+    for member, other, (fit_, at) in ((second, first, with_first), (first, second, with_second)):
+        also = {b if a == member else a for a, b, _ in first_round_twins if member in (a, b)}
+        twins = twins_in_place(pb, fit_, at, member, {other}, out.pair.chi2, also)
+        if twins is not None:
+            out.twins += twins
+            out.twins_judged.append(member)
+    for t in out.twins:
+        if not t.stands:
+            out.reason += f"; {t.words()}"

@@ -197,6 +197,12 @@ SCAN_CYCLES = 2
 #: |cos| of the angle between two effects' projected columns above which the data cannot tell
 #: them apart to first order
 DEGENERATE_COS = 0.95
+#: |cos| at a named pair's model (the other effect in place) above which an effect of the pair and
+#: another are refitted in each other's place to learn whether the data tell them apart (below
+#: DEGENERATE_COS too: a twin at 0.949 there may still leave noise in its place, or not)
+TWIN_CHECK_COS = 0.9
+#: least-squares evaluations of a pair refitted with a twin in place of one of its effects
+TWIN_NFEV = 25
 #: leading candidates whose nominal parameters seed a refit of the null model
 NULL_REFITS = 1
 #: least-squares evaluations of the final polish of the leading candidate (and of rivals within

@@ -1,0 +1,93 @@
+"""A named pair's look-alikes, judged where each effect stands.
+
+The first round compares effects' signatures at the calibrated null, which compensates for every
+missing effect at once; with two effects missing it can bend a twin toward or away from the one
+it resembles. After a pair is named, each of its effects is compared with the others at the model
+with the pair's *other* effect in place (screened there), and every effect whose signature is
+near (|cos| >= TWIN_CHECK_COS) is refitted in its place: where the pair with the twin instead
+leaves noise, or is within SEPARATION of the pair, the data cannot tell them apart and the twin
+is an alternative; where it leaves a systematic residual, the data separate them and the reason
+says so with the figures."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Optional
+
+from .case_model import ModelSpec
+from .catalogue import CATALOGUE
+from .fitting import FitResult, FreeParam, fit
+from .problem import Problem
+from .screening import screen
+from .thresholds import NOISE_RATIO_OK, SEPARATION, TWIN_CHECK_COS, TWIN_NFEV
+
+
+@dataclass(frozen=True)
+class Twin:
+    """An effect of a named pair (`member`) and a look-alike (`twin`) refitted in its place."""
+
+    member: str
+    twin: str
+    cos: float  #: |cos| of their projected signatures at the model with the pair's other effect
+    chi2: float  #: the pair with `twin` in place of `member`, refitted
+    chi2_pair: float  #: the named pair's
+    rms: float  #: that refit's residual RMS [m]
+    sigma: float  #: the noise RMS [m]
+
+    @property
+    def stands(self) -> bool:
+        """The data cannot tell them apart: in its place the twin leaves noise as well, or comes
+        within SEPARATION of the pair."""
+        return self.rms <= NOISE_RATIO_OK * self.sigma or self.chi2 - self.chi2_pair < SEPARATION
+
+    def words(self) -> str:
+        if self.stands:
+            return (f"{self.twin} in place of {self.member} fits as well (RMS {self.rms / self.sigma:.2f} x noise, "
+                    f"Δχ² {self.chi2 - self.chi2_pair:.0f}; |cos| = {self.cos:.3f} beside the other effect)")
+        return (f"{self.twin} in place of {self.member} leaves a systematic residual (RMS "
+                f"{self.rms / self.sigma:.2f} x noise, Δχ² {self.chi2 - self.chi2_pair:.0f} against the pair; "
+                f"|cos| = {self.cos:.3f} beside the other effect): the data tell them apart")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"member": self.member, "twin": self.twin, "cos": self.cos, "chi2": self.chi2,
+                "chi2_pair": self.chi2_pair, "rms": self.rms, "stands": self.stands}
+
+
+def twins_in_place(pb: Problem, without: FitResult, at: list[FreeParam], member: str, others: set[str],
+                   chi2_pair: float, also: set[str]) -> Optional[list[Twin]]:
+    """The look-alikes of `member`, one effect of a named set whose fit has chi^2 `chi2_pair`:
+    at the model with the `others` alone (`without`, its free parameters `at`), every effect not
+    in the set screened beside `member`; each whose projected signature is within TWIN_CHECK_COS
+    of `member`'s, or is in `also` (the first round's twins of it), refitted there in its place
+    (from its screened step, TWIN_NFEV evaluations). None where `member` has no signature there
+    (nothing judged)."""
+    import numpy as np
+
+    structure, params = without.spec.structure, without.spec.params
+    effects = [e for e in CATALOGUE if e.id not in others and e.applies(structure, params)]
+    screened = {s.effect.id: s for s in screen(pb.obj, without, at, effects, pb.sigma, pb.tick)}
+    own = screened.get(member)
+    if own is None or own.direction is None:
+        return None
+    out: list[Twin] = []
+    for eid, s in screened.items():
+        if eid == member or s.direction is None:
+            continue
+        cos = abs(float(np.dot(own.direction, s.direction)))
+        if cos < TWIN_CHECK_COS and eid not in also:
+            continue
+        eff = s.effect
+        base = ModelSpec(eff.structure(structure), dict(params), dict(without.spec.effects))
+        start = list(at) + [ep.free(v) for ep, v in zip(eff.params, s.estimate)]
+        r = fit(pb.obj, base, start, max_nfev=TWIN_NFEV, progress=pb.tick)
+        out.append(Twin(member, eid, cos, r.chi2, chi2_pair, r.rms, pb.sigma))
+    return out
+
+
+def judged_pairs(degenerate: list[tuple[str, str, float]], twins: list[Twin], judged: set[str]
+                 ) -> list[tuple[str, str, float]]:
+    """The near-parallel pairs an alternative to a named pair is read from: the first round's,
+    except that an effect of the pair judged in place (`judged`) is paired only with the twins
+    that stood there (the refit in place supersedes the first-order angle at the calibrated null)."""
+    kept = [p for p in degenerate if not ({p[0], p[1]} & judged)]
+    return sorted(kept + [(t.member, t.twin, t.cos) for t in twins if t.stands], key=lambda p: -p[2])
