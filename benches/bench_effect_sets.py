@@ -104,7 +104,7 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
         d = idm_rs.diagnose(directory, progress=False)
         seconds = time.perf_counter() - t0
     alts = [a.effect for a in d.alternatives]
-    twins = [t for t in (d.second.twins if d.second is not None else [])]
+    twins = [t for search in (d.second, d.third) if search is not None for t in search.twins]
     separated = [f"{t.member}~{t.twin}" for t in twins if not t.stands]
     return {**c, **info, "verdict": d.verdict, "alternatives": alts, "twins_separated": separated,
             **judged(c["effects"], d.verdict, alts, separated),

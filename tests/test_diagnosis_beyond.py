@@ -324,7 +324,7 @@ def test_two_effects_that_mimic_each_other_are_fitted_together_from_their_fits_a
 
     monkeypatch.setattr(diag_second_effect, "fit", fake_fit)
     # look-alikes judged in place need the engine's screening: none here
-    monkeypatch.setattr(diag_second_effect, "twins_in_place", lambda *a, **k: [])
+    monkeypatch.setattr(diag_second_effect, "judge_set", lambda *a, **k: ([], [], ""))
     pb = SimpleNamespace(sigma=sigma, ln_n=math.log(n), n_offsets=1, obj=SimpleNamespace(n=n), tick=None)
     null = fake_fit(None, ModelSpec(structure, p, {}), nominal_free, 0)
     cal = SimpleNamespace(fit=null, free=nominal_free, bic=null.chi2 + (len(nominal_free) + 1) * pb.ln_n)
@@ -388,7 +388,7 @@ def test_a_second_effect_that_explains_alone_is_the_answer_when_the_first_does_n
                          [rng.normal(0.0, sigma * math.sqrt(ratio), n)], [0.0], base, 10, True, "fake")
 
     monkeypatch.setattr(diag_second_effect, "fit", fake_fit)
-    monkeypatch.setattr(diag_second_effect, "twins_in_place", lambda *a, **k: [])  # needs the engine
+    monkeypatch.setattr(diag_second_effect, "judge_set", lambda *a, **k: ([], [], ""))  # needs the engine
     pb = SimpleNamespace(sigma=sigma, ln_n=math.log(n), n_offsets=1, obj=SimpleNamespace(n=n), tick=None)
     null = fake_fit(None, ModelSpec(structure, p, {}), nominal_free, 0)
     cal = SimpleNamespace(fit=null, free=nominal_free, bic=null.chi2 + (len(nominal_free) + 1) * pb.ln_n)
@@ -485,7 +485,7 @@ def test_discovery_after_a_calibration_that_did_not_converge_starts_from_the_nom
     assert spec is cal_spec and first is None and [f.x0 for f in start] == [f.x0 for f in cal.at]
 
 
-@pytest.mark.parametrize("pays", [True, False])
+@pytest.mark.parametrize("pays", [True, False, "all"])
 def test_a_triple_whose_first_effect_is_a_look_alike_of_the_third_names_the_other_two(monkeypatch, pays):
     """An incline led (the look-alike of the true friction asymmetry), an amplifier lag beside it
     left structure, friction asymmetry as the third left noise and the incline did not pay its
@@ -506,7 +506,8 @@ def test_a_triple_whose_first_effect_is_a_look_alike_of_the_third_names_the_othe
     own = {e: by[e].params[0].name for e in ("incline", "amplifier_lowpass", "friction_asymmetry")}
     # chi^2 of each set of effects fitted (the nominal subset beside them): the incline adds 3
     extra = {frozenset({"incline", "amplifier_lowpass", "friction_asymmetry"}): 0.0,
-             frozenset({"amplifier_lowpass", "friction_asymmetry"}): 3.0,
+             frozenset({"amplifier_lowpass", "friction_asymmetry"}): 4_000.0 if pays == "all" else 3.0,
+             frozenset({"incline", "amplifier_lowpass"}): 6_000.0,
              frozenset({"incline", "friction_asymmetry"}): 5_000.0,
              frozenset({"amplifier_lowpass"}): 6_000.0,
              frozenset({"friction_asymmetry"}): 4_000.0 if pays else 5.0}
@@ -530,19 +531,41 @@ def test_a_triple_whose_first_effect_is_a_look_alike_of_the_third_names_the_othe
     spec = ModelSpec(Structure("dps", 4, False), {"m1": 0.4}, {})
     cal = SimpleNamespace(fit=SimpleNamespace(spec=spec), free=calibrated, bic=0.0)
     pb = SimpleNamespace(obj=None, tick=None, n_offsets=12, ln_n=math.log(n), sigma=sigma)
-    third = SimpleNamespace(effect="friction_asymmetry", bic=n + 16 * math.log(n), delta_bic=1e5, rms_after=sigma,
-                            whiteness_z=0.5, screened_only=False, present=True, heldout_rms=math.nan)
+    third = SimpleNamespace(effect="friction_asymmetry", bic=n + 16 * math.log(n), chi2=float(n), delta_bic=1e5,
+                            rms_after=sigma, whiteness_z=0.5, screened_only=False, present=True, heldout_rms=math.nan)
     heldout = SimpleNamespace(rms=lambda base, at: 1.6e-9)
     out = ThirdSearch(pair=("incline", "amplifier_lowpass"), pair_heldout_rms=5.0e-9)
-    out = third_effect.judge_triple(pb, cal, out, Refit(third, spec, free), heldout)
+    placed_seen = []
+
+    def judge_set(pb, placed, chi2_set, first_twins):
+        placed_seen.append([(m, others) for m, others, _, _ in placed])
+        return ["twin"], [m for m, *_ in placed], "; a twin separated"
+
+    monkeypatch.setattr(third_effect, "judge_set", judge_set)
+    out = third_effect.judge_triple(pb, cal, out, Refit(third, spec, free), heldout, [])
+    if pays == "all":
+        # all three pay: named, each one's look-alikes judged at the model with the other two
+        # (the third's place: the pair alone, refitted from the triple's values)
+        assert out.named and out.reason.endswith("; a twin separated")
+        assert placed_seen == [[("incline", {"amplifier_lowpass", "friction_asymmetry"}),
+                                ("amplifier_lowpass", {"incline", "friction_asymmetry"}),
+                                ("friction_asymmetry", {"incline", "amplifier_lowpass"})]]
+        assert fitted[-1] == frozenset({"incline", "amplifier_lowpass"})
+        return
     assert not out.named and "incline does not pay its own way" in out.reason
     if pays:
+        # the two named instead: each one's look-alikes judged at the model with the other alone
+        assert placed_seen == [[("amplifier_lowpass", {"friction_asymmetry"}),
+                                ("friction_asymmetry", {"amplifier_lowpass"})]]
+        assert out.twins_judged == ["amplifier_lowpass", "friction_asymmetry"]
+        assert out.reason.endswith("; a twin separated")
         assert out.instead == ("amplifier_lowpass", "friction_asymmetry")
         assert out.instead_candidate.effect == "friction_asymmetry" and out.instead_rms == pytest.approx(
             math.sqrt((n + 3.0) / n) * sigma)
         assert "two effects: amplifier_lowpass and friction_asymmetry" in out.reason
     else:
         assert out.instead is None and "amplifier_lowpass does not pay its own way beside the other" in out.reason
+        assert placed_seen == [] and out.twins == []
     # the triple less each of the pair, then each of the other two alone
     assert fitted[2:] == [frozenset({"friction_asymmetry"}), frozenset({"amplifier_lowpass"})]
 

@@ -348,7 +348,7 @@ def _second_effect_stage(s: _State) -> None:
     if wants_third(s.pb, second):
         # a pair both effects support that leaves structure: a third from the model with the two
         s.clock.begin("third effect")
-        third = search_third_effect(s.pb, s.cal, second, s.heldout)
+        third = search_third_effect(s.pb, s.cal, second, s.heldout, first_twins)
         if third.named and third.third is not None:
             s.verdict, s.reason, s.rms_after = ("+".join((*third.pair, third.third.effect)), third.reason,
                                                 third.third.rms_after)
@@ -432,12 +432,7 @@ def _next_experiment_stage(s: _State) -> None:
     from it, and the one that determines what the data left undetermined."""
     assert s.pb is not None
     s.degenerate = near_degenerate(list(s.screened.values()))
-    judged = s.degenerate
-    if s.second is not None and s.second.named and s.second.pair is not None and s.verdict == (
-            f"{s.second.first.effect}+{s.second.pair.effect}"):
-        # the pair's look-alikes as judged in each effect's place (over the first round's angles)
-        judged = judged_pairs(s.degenerate, s.second.twins, set(s.second.twins_judged))
-    s.alternatives = alternatives_to(s.ranking, s.verdict, judged)
+    s.alternatives = alternatives_to(s.ranking, s.verdict, _judged_twins(s))
     if s.alternatives:
         s.reason += "; cannot be told apart from " + ", ".join(f"{a.effect} ({a.why})" for a in s.alternatives)
         first = s.alternatives[0]
@@ -454,6 +449,16 @@ def _next_experiment_stage(s: _State) -> None:
         s.parameter_proposal = travel_experiment(s.pb, s.found)
     if s.parameter_proposal is not None:
         s.clock.lap("next experiment (parameter)")
+
+
+def _judged_twins(s: _State) -> list[tuple[str, str, float]]:
+    """The near-parallel pairs the verdict's alternatives are read from: the first round's, and
+    for a verdict of two or three effects their look-alikes as judged in each one's place."""
+    named = set(s.verdict.split("+"))
+    for search in (s.third, s.second):
+        if search is not None and search.twins_judged and set(search.twins_judged) == named:
+            return judged_pairs(s.degenerate, search.twins, named)
+    return s.degenerate
 
 
 #: the diagnosis: (what it is doing, for an interrupted run's report; the stage), in order

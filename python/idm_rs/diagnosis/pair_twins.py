@@ -1,12 +1,12 @@
-"""A named pair's look-alikes, judged where each effect stands.
+"""A named set's look-alikes (two or three effects), judged where each effect stands.
 
 The first round compares effects' signatures at the calibrated null, which compensates for every
-missing effect at once; with two effects missing it can bend a twin toward or away from the one
-it resembles. After a pair is named, each of its effects is compared with the others at the model
-with the pair's *other* effect in place (screened there), and every effect whose signature is
-near (|cos| >= TWIN_CHECK_COS) is refitted in its place: where the pair with the twin instead
-leaves noise, or is within SEPARATION of the pair, the data cannot tell them apart and the twin
-is an alternative; where it leaves a systematic residual, the data separate them and the reason
+missing effect at once; with several effects missing it can bend a twin toward or away from the
+one it resembles. After a set is named, each of its effects is compared with the others at the
+model with the set's *other* effects in place (screened there), and every effect whose signature
+is near (|cos| >= TWIN_CHECK_COS) is refitted in its place: where the set with the twin instead
+leaves noise, or is within SEPARATION of the set, the data cannot tell them apart and the twin is
+an alternative; where it leaves a systematic residual, the data separate them and the reason
 says so with the figures."""
 
 from __future__ import annotations
@@ -24,29 +24,29 @@ from .thresholds import NOISE_RATIO_OK, SEPARATION, TWIN_CHECK_COS, TWIN_NFEV
 
 @dataclass(frozen=True)
 class Twin:
-    """An effect of a named pair (`member`) and a look-alike (`twin`) refitted in its place."""
+    """An effect of a named set (`member`) and a look-alike (`twin`) refitted in its place."""
 
     member: str
     twin: str
-    cos: float  #: |cos| of their projected signatures at the model with the pair's other effect
-    chi2: float  #: the pair with `twin` in place of `member`, refitted
-    chi2_pair: float  #: the named pair's
+    cos: float  #: |cos| of their projected signatures at the model with the set's other effects
+    chi2: float  #: the set with `twin` in place of `member`, refitted
+    chi2_pair: float  #: the named set's
     rms: float  #: that refit's residual RMS [m]
     sigma: float  #: the noise RMS [m]
 
     @property
     def stands(self) -> bool:
         """The data cannot tell them apart: in its place the twin leaves noise as well, or comes
-        within SEPARATION of the pair."""
+        within SEPARATION of the set."""
         return self.rms <= NOISE_RATIO_OK * self.sigma or self.chi2 - self.chi2_pair < SEPARATION
 
     def words(self) -> str:
         if self.stands:
             return (f"{self.twin} in place of {self.member} fits as well (RMS {self.rms / self.sigma:.2f} x noise, "
-                    f"Δχ² {self.chi2 - self.chi2_pair:.0f}; |cos| = {self.cos:.3f} beside the other effect)")
+                    f"Δχ² {self.chi2 - self.chi2_pair:.0f}; |cos| = {self.cos:.3f} beside the others)")
         return (f"{self.twin} in place of {self.member} leaves a systematic residual (RMS "
-                f"{self.rms / self.sigma:.2f} x noise, Δχ² {self.chi2 - self.chi2_pair:.0f} against the pair; "
-                f"|cos| = {self.cos:.3f} beside the other effect): the data tell them apart")
+                f"{self.rms / self.sigma:.2f} x noise, Δχ² {self.chi2 - self.chi2_pair:.0f} against the named effects; "
+                f"|cos| = {self.cos:.3f} beside the others): the data tell them apart")
 
     def to_dict(self) -> dict[str, Any]:
         return {"member": self.member, "twin": self.twin, "cos": self.cos, "chi2": self.chi2,
@@ -84,10 +84,27 @@ def twins_in_place(pb: Problem, without: FitResult, at: list[FreeParam], member:
     return out
 
 
+def judge_set(pb: Problem, placed: list[tuple[str, set[str], FitResult, list[FreeParam]]], chi2_set: float,
+              first_round_twins: list[tuple[str, str, float]]) -> tuple[list[Twin], list[str], str]:
+    """Every effect of a named set judged against its look-alikes in its place: `placed` holds,
+    per member, (member, the set's other effects, the fit of the model with those others alone,
+    its free parameters at it); `chi2_set` the named set's chi^2. Returns (the twins refitted, the
+    members judged, what the data separate in words: "; ..." or "")."""
+    twins: list[Twin] = []
+    judged: list[str] = []
+    for member, others, fit_, at in placed:
+        also = {b if a == member else a for a, b, _ in first_round_twins if member in (a, b)}
+        found = twins_in_place(pb, fit_, at, member, others, chi2_set, also)
+        if found is not None:
+            twins += found
+            judged.append(member)
+    return twins, judged, "".join(f"; {t.words()}" for t in twins if not t.stands)
+
+
 def judged_pairs(degenerate: list[tuple[str, str, float]], twins: list[Twin], judged: set[str]
                  ) -> list[tuple[str, str, float]]:
-    """The near-parallel pairs an alternative to a named pair is read from: the first round's,
-    except that an effect of the pair judged in place (`judged`) is paired only with the twins
+    """The near-parallel pairs an alternative to a named set is read from: the first round's,
+    except that an effect of the set judged in place (`judged`) is paired only with the twins
     that stood there (the refit in place supersedes the first-order angle at the calibrated null)."""
     kept = [p for p in degenerate if not ({p[0], p[1]} & judged)]
     return sorted(kept + [(t.member, t.twin, t.cos) for t in twins if t.stands], key=lambda p: -p[2])

@@ -212,13 +212,17 @@ class ThirdSearch:
     instead_rms: float = math.nan
     #: the two's fit (the second's candidate; its spec holds both), when `instead` is set
     instead_candidate: Optional[Candidate] = None
+    #: the named effects' look-alikes refitted in each one's place (:class:`.pair_twins.Twin`),
+    #: and the effects so judged (the triple's, or the two's named instead)
+    twins: list[Any] = field(default_factory=list)
+    twins_judged: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return {"pair": list(self.pair), "third": self.third.effect if self.third else None, "named": self.named,
                 "instead": list(self.instead) if self.instead else None, "instead_rms": self.instead_rms,
                 "reason": self.reason, "heldout_rms": self.heldout_rms, "pair_heldout_rms": self.pair_heldout_rms,
                 "delta_bic_without": self.over_without, "triple": self.third.to_dict() if self.third else None,
-                "ranking": [c.to_dict() for c in self.ranking]}
+                "ranking": [c.to_dict() for c in self.ranking], "twins": [t.to_dict() for t in self.twins]}
 
 
 @dataclass

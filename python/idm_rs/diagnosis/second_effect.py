@@ -14,7 +14,7 @@ from .case_model import ModelSpec
 from .catalogue import CATALOGUE, Effect
 from .fitting import FitResult, FreeParam, fit
 from .noise import whiteness_z
-from .pair_twins import twins_in_place
+from .pair_twins import judge_set
 from .problem import CalibratedNull, HeldOut, Problem, Refit
 from .results import SecondSearch
 from .rules import by_rank, candidate_explains, is_eligible, is_finite
@@ -239,25 +239,10 @@ def judge_pair(pb: Problem, cal: CalibratedNull, out: SecondSearch, best: Refit,
                       f"{out.over_second_alone:.0f}, and the held-out experiment is predicted better "
                       f"({first.heldout_rms * 1e9:.2f} → {out.heldout_rms * 1e9:.2f} nm); share of the improvement: "
                       f"{share}")
-        _judge_twins(pb, out, with_first, (r2, [f.at(r2.values[f.name]) for f in start2]), first_round_twins)
+        placed = [(pair.effect, {first.effect}, with_first[0], with_first[1]),
+                  (first.effect, {pair.effect}, r2, [f.at(r2.values[f.name]) for f in start2])]
+        out.twins, out.twins_judged, separated = judge_set(pb, placed, pair.chi2, first_round_twins)
+        out.reason += separated
     return out
 
 
-
-def _judge_twins(pb: Problem, out: SecondSearch, with_first: tuple[FitResult, list[FreeParam]],
-                 with_second: tuple[FitResult, list[FreeParam]], first_round_twins: list[tuple[str, str, float]]
-                 ) -> None:
-    """Each effect of the named pair in `out` judged against its look-alikes at the model with the
-    other (`with_first`, `with_second`: those fits and their free parameters): `out.twins`, the
-    members judged in `out.twins_judged`, what the data separate said in `out.reason`."""
-    assert out.pair is not None
-    first, second = out.first.effect, out.pair.effect
-    for member, other, (fit_, at) in ((second, first, with_first), (first, second, with_second)):
-        also = {b if a == member else a for a, b, _ in first_round_twins if member in (a, b)}
-        twins = twins_in_place(pb, fit_, at, member, {other}, out.pair.chi2, also)
-        if twins is not None:
-            out.twins += twins
-            out.twins_judged.append(member)
-    for t in out.twins:
-        if not t.stands:
-            out.reason += f"; {t.words()}"

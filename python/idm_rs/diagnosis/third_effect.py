@@ -9,6 +9,7 @@ from .candidates import make_candidate
 from .case_model import ModelSpec
 from .catalogue import CATALOGUE, Effect
 from .fitting import FitResult, FreeParam, fit
+from .pair_twins import judge_set
 from .problem import CalibratedNull, HeldOut, Problem, Refit
 from .results import SecondSearch, ThirdSearch
 from .rules import candidate_explains, is_eligible, is_finite
@@ -26,12 +27,14 @@ def wants_third(pb: Problem, second: SecondSearch) -> bool:
             and second.over_second_alone >= BIC_THRESHOLD)
 
 
-def search_third_effect(pb: Problem, cal: CalibratedNull, second: SecondSearch, heldout: HeldOut) -> ThirdSearch:
+def search_third_effect(pb: Problem, cal: CalibratedNull, second: SecondSearch, heldout: HeldOut,
+                        first_twins: list[tuple[str, str, float]]) -> ThirdSearch:
     """A third catalogue effect from the model with the pair (`second`): the pair's optimum is
     the null of a third round (screening, multistart fits of the SECOND_TOP best scored, the
     polish); the triple is named when it leaves noise, predicts the held-out experiment better
     than the pair, and dropping either of the pair's effects (the other two refitted from the
-    triple's values) costs BIC_THRESHOLD."""
+    triple's values) costs BIC_THRESHOLD. The named effects' look-alikes are judged in their
+    places (:func:`.pair_twins.judge_set`; `first_twins`: the first round's near-parallel pairs)."""
     pair = second.pair
     assert pair is not None and second.base is not None  # wants_third
     names = (second.first.effect, pair.effect)
@@ -47,7 +50,7 @@ def search_third_effect(pb: Problem, cal: CalibratedNull, second: SecondSearch, 
         out.reason = (f"no third effect is supported beside {names[0]} and {names[1]}"
                       + (f" (best: {top.effect}, ΔBIC {top.delta_bic:.0f} over the pair)" if top else ""))
         return out
-    return judge_triple(pb, cal, out, best, heldout)
+    return judge_triple(pb, cal, out, best, heldout, first_twins)
 
 
 def without(cal: CalibratedNull, keep: list[Effect], free: list[FreeParam]) -> tuple[ModelSpec, list[FreeParam]]:
@@ -61,7 +64,8 @@ def without(cal: CalibratedNull, keep: list[Effect], free: list[FreeParam]) -> t
             [f for f in free if f.name in own])
 
 
-def judge_triple(pb: Problem, cal: CalibratedNull, out: ThirdSearch, best: Refit, heldout: HeldOut) -> ThirdSearch:
+def judge_triple(pb: Problem, cal: CalibratedNull, out: ThirdSearch, best: Refit, heldout: HeldOut,
+                 first_twins: list[tuple[str, str, float]]) -> ThirdSearch:
     """The rules a triple must pass to be named (`best`: its refit, scored against the pair)."""
     third = best.candidate
     out.third, out.free, out.base = third, best.free, best.base
@@ -86,7 +90,7 @@ def judge_triple(pb: Problem, cal: CalibratedNull, out: ThirdSearch, best: Refit
     elif out.over_without[weakest] < BIC_THRESHOLD:
         out.reason = (f"{trio} leaves noise, but without {weakest} the other two fit nearly as well (ΔBIC "
                       f"{out.over_without[weakest]:.0f} < {BIC_THRESHOLD:g}): {weakest} does not pay its own way")
-        _the_other_two(pb, cal, out, [m for m in members if m.id != weakest], fits[weakest], heldout)
+        _the_other_two(pb, cal, out, [m for m in members if m.id != weakest], fits[weakest], heldout, first_twins)
     else:
         out.named = True
         out.reason = (f"three effects: {out.pair[0]}, {out.pair[1]} and {third.effect}. With all three the residual "
@@ -95,11 +99,20 @@ def judge_triple(pb: Problem, cal: CalibratedNull, out: ThirdSearch, best: Refit
                       f"{out.over_without[out.pair[0]]:.0f} and {out.over_without[out.pair[1]]:.0f}, and the held-out "
                       f"experiment is predicted better ({out.pair_heldout_rms * 1e9:.2f} → "
                       f"{out.heldout_rms * 1e9:.2f} nm)")
+        # the third's place: the model with the pair alone, refitted from the triple's values
+        base3, start3 = without(cal, members[:2], best.free)
+        r3 = fit(pb.obj, base3, start3, max_nfev=POLISH_NFEV, progress=pb.tick)
+        fits[third.effect] = (r3, base3, start3)
+        placed = [(e.id, {m.id for m in members if m is not e}, fits[e.id][0],
+                   [f.at(fits[e.id][0].values[f.name]) for f in fits[e.id][2]]) for e in members]
+        out.twins, out.twins_judged, separated = judge_set(pb, placed, third.chi2, first_twins)
+        out.reason += separated
     return out
 
 
 def _the_other_two(pb: Problem, cal: CalibratedNull, out: ThirdSearch, kept: list[Effect],
-                   refit: tuple[FitResult, ModelSpec, list[FreeParam]], heldout: HeldOut) -> None:
+                   refit: tuple[FitResult, ModelSpec, list[FreeParam]], heldout: HeldOut,
+                   first_twins: list[tuple[str, str, float]]) -> None:
     """The triple less the effect that did not pay its own way: `kept`, the other two, refitted
     from the triple's values (`refit`: the fit, its model and free parameters). They are named
     (``out.instead``) when they leave noise, predict the held-out experiment better than the
@@ -122,10 +135,13 @@ def _the_other_two(pb: Problem, cal: CalibratedNull, out: ThirdSearch, kept: lis
         return
     bic2 = r.chi2 + (len(free) + pb.n_offsets) * pb.ln_n
     costs: dict[str, float] = {}
+    placed = []
     for e in kept:
         one_base, one_start = without(cal, [m for m in kept if m is not e], at)
         r1 = fit(pb.obj, one_base, one_start, max_nfev=POLISH_NFEV, progress=pb.tick)
         costs[e.id] = (r1.chi2 + (len(one_start) + pb.n_offsets) * pb.ln_n) - bic2
+        # e's place: the model with the other alone, for its look-alikes
+        placed.append((e.id, {m.id for m in kept if m is not e}, r1, [f.at(r1.values[f.name]) for f in one_start]))
     if min(costs.values()) < BIC_THRESHOLD:
         weak = min(costs, key=lambda k: costs[k])
         out.reason += (f"; {names} leave noise, but {weak} does not pay its own way beside the other "
@@ -138,3 +154,5 @@ def _the_other_two(pb: Problem, cal: CalibratedNull, out: ThirdSearch, kept: lis
                    f"{r.rms / sigma:.2f} x noise), dropping either costs ΔBIC {costs[kept[0].id]:.0f} and "
                    f"{costs[kept[1].id]:.0f}, and the held-out experiment is predicted better than with "
                    f"{out.pair[0]} and {out.pair[1]} ({out.pair_heldout_rms * 1e9:.2f} → {ho * 1e9:.2f} nm)")
+    out.twins, out.twins_judged, separated = judge_set(pb, placed, r.chi2, first_twins)
+    out.reason += separated
