@@ -58,9 +58,7 @@ where
     let m = tasks.len();
     let lane = |i: usize| i.min(m - 1); // idle lanes point at a real model
     let slack = stepper.bound_slack();
-    let bound: [f64; L] = std::array::from_fn(|i| {
-        tasks[lane(i)].model.presliding_bound() * (1.0 + slack) + 1e-12
-    });
+    let bound: [f64; L] = std::array::from_fn(|i| tasks[lane(i)].model.presliding_bound() * (1.0 + slack) + 1e-12);
     let mut active = [false; L];
     let mut t = [0.0; L];
     let mut end = [0.0; L];
@@ -86,7 +84,9 @@ where
         stepper.restart(i);
         v_last[i] = ys[i].as_ref()[task.model.layout.dof].value();
         match resume {
-            Some(r) => (steps[i], min_step[i], v_last[i], watch[i]) = (r[i].steps, r[i].min_step, r[i].v_last, r[i].watch),
+            Some(r) => {
+                (steps[i], min_step[i], v_last[i], watch[i]) = (r[i].steps, r[i].min_step, r[i].v_last, r[i].watch)
+            }
             None => observer.start(first + i, task.t_start, ys[i].as_ref()),
         }
     }
@@ -173,7 +173,11 @@ where
             if !St::FIXED_STEP && !done {
                 if let Some(why) = watch[i].observe(steps[i], t_new, tasks[i].t_end, stepper.crawl_hint(i)) {
                     active[i] = false;
-                    out[i] = Some(LaneEnd::Diverged { t: t_new, why: Some(why), v_last: v_last[i] });
+                    out[i] = Some(LaneEnd::Diverged {
+                        t: t_new,
+                        why: Some(why),
+                        v_last: v_last[i],
+                    });
                     continue;
                 }
             }
@@ -193,11 +197,7 @@ where
             }
         }
     }
-    Some(
-        out.into_iter()
-            .map(|o| o.expect("every lane ends"))
-            .collect(),
-    )
+    Some(out.into_iter().map(|o| o.expect("every lane ends")).collect())
 }
 
 /// Run one group of up to `L` tasks of one state layout with `method` (`D` components fixed at
@@ -246,14 +246,24 @@ where
 
 /// Each lane's adaptive options for a group of tasks (idle lanes take the last task's).
 #[inline(always)]
-fn group_options<T: Scalar, const L: usize>(chunk: &[Task<T>], rtol: f64, atol: f64, first_step: f64, held: &Held) -> [AdaptiveOptions; L] {
+fn group_options<T: Scalar, const L: usize>(
+    chunk: &[Task<T>],
+    rtol: f64,
+    atol: f64,
+    first_step: f64,
+    held: &Held,
+) -> [AdaptiveOptions; L] {
     std::array::from_fn(|i| adaptive_options(&chunk[i.min(chunk.len() - 1)], rtol, atol, first_step, held))
 }
 
 /// `method="auto"`'s stepper for a group; runs handed over from the vector lanes (`resume`)
 /// start with their Rodas4 trial pending.
 #[inline(always)]
-fn switching<S: State, const D: usize, const L: usize>(opts: [AdaptiveOptions; L], zero: S, resume: Option<&[Resume]>) -> Switching<S, L, D> {
+fn switching<S: State, const D: usize, const L: usize>(
+    opts: [AdaptiveOptions; L],
+    zero: S,
+    resume: Option<&[Resume]>,
+) -> Switching<S, L, D> {
     let mut st: Switching<S, L, D> = Switching::new(opts, zero);
     if let Some(r) = resume {
         for (i, r) in r.iter().enumerate() {
@@ -328,7 +338,10 @@ impl<T: Scalar, O: Observer<T>> Observer<T> for Renumbered<'_, '_, O> {
 /// do not run these tasks (another shape, or Rodas4).
 enum LaneRun {
     Fallback,
-    Ran { ends: Vec<Option<(LaneEnd, Vec<f64>)>>, handoffs: Vec<Handoff> },
+    Ran {
+        ends: Vec<Option<(LaneEnd, Vec<f64>)>>,
+        handoffs: Vec<Handoff>,
+    },
 }
 
 /// The vector lane drivers over f64 tasks with `N` nodes and `D` state components (`EXTRAS`:
@@ -355,20 +368,34 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool
     #[inline(always)]
     fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<LaneRun> {
         let shape = self.tasks[0].model.shape();
-        if !self.tasks.iter().all(|t| PlainLanes::<N, L, E>::accepts(t.model) && t.model.shape() == shape && t.model.layout.dim == D) {
+        if !self
+            .tasks
+            .iter()
+            .all(|t| PlainLanes::<N, L, E>::accepts(t.model) && t.model.shape() == shape && t.model.layout.dim == D)
+        {
             return Some(LaneRun::Fallback);
         }
         // the state stored component by component, lanes refilled from the queue
         Some(match *self.method {
             Method::Rk4 { dt } => {
                 let ends = run_rk4_lanes::<O, E, N, D, EXTRAS, L>(self.tasks, dt, self.observer, self.cancel)?;
-                LaneRun::Ran { ends: ends.into_iter().map(Some).collect(), handoffs: Vec::new() }
+                LaneRun::Ran {
+                    ends: ends.into_iter().map(Some).collect(),
+                    handoffs: Vec::new(),
+                }
             }
             Method::Dopri5 { rtol, atol, first_step } | Method::Auto { rtol, atol, first_step } => {
                 let auto = matches!(self.method, Method::Auto { .. });
                 let mut handoffs = Vec::new();
                 let ends = run_dopri5_lanes::<O, E, N, D, EXTRAS, L>(
-                    self.tasks, rtol, atol, first_step, self.observer, self.cancel, auto, &mut handoffs,
+                    self.tasks,
+                    rtol,
+                    atol,
+                    first_step,
+                    self.observer,
+                    self.cancel,
+                    auto,
+                    &mut handoffs,
                 )?;
                 LaneRun::Ran { ends, handoffs }
             }
@@ -400,23 +427,57 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTRAS: bool
         if self.handoffs.is_empty() {
             return Some(()); // any method: only auto hands runs over
         }
-        let Method::Auto { rtol, atol, first_step } = *self.method else { unreachable!("only auto hands runs over") };
+        let Method::Auto { rtol, atol, first_step } = *self.method else {
+            unreachable!("only auto hands runs over")
+        };
         for group in self.handoffs.chunks(L) {
-            let chunk: Vec<Task> = group.iter().map(|h| Task { t_start: h.t, y0: &h.y, ..self.tasks[h.task] }).collect();
+            let chunk: Vec<Task> = group
+                .iter()
+                .map(|h| Task {
+                    t_start: h.t,
+                    y0: &h.y,
+                    ..self.tasks[h.task]
+                })
+                .collect();
             let resume: Vec<Resume> = group.iter().map(|h| h.resume).collect();
             let index: Vec<usize> = group.iter().map(|h| h.task).collect();
             let mut done = Vec::with_capacity(group.len());
             let opts = group_options(&chunk, rtol, atol, first_step, &Held::default());
             let st = switching::<[f64; D], D, L>(opts, [0.0; D], Some(&resume));
-            let observer = &mut Renumbered { inner: &mut *self.observer, index: &index };
+            let observer = &mut Renumbered {
+                inner: &mut *self.observer,
+                index: &index,
+            };
             if EXTRAS {
                 // lag states run lane by lane
                 let rhs = ModelRhs::<f64, N, EXTRAS, L>::for_tasks;
-                drive_group(&chunk, 0, 0.0, st, [0.0; D], rhs, observer, self.cancel, &mut done, Some(&resume))?;
+                drive_group(
+                    &chunk,
+                    0,
+                    0.0,
+                    st,
+                    [0.0; D],
+                    rhs,
+                    observer,
+                    self.cancel,
+                    &mut done,
+                    Some(&resume),
+                )?;
             } else {
                 // the stages of both methods as vectors where half the lanes are busy
                 let rhs = LanesRhs::<E, N, D, L, EXTRAS>::for_tasks;
-                drive_group(&chunk, 0, 0.0, st, [0.0; D], rhs, observer, self.cancel, &mut done, Some(&resume))?;
+                drive_group(
+                    &chunk,
+                    0,
+                    0.0,
+                    st,
+                    [0.0; D],
+                    rhs,
+                    observer,
+                    self.cancel,
+                    &mut done,
+                    Some(&resume),
+                )?;
             }
             for (h, end) in group.iter().zip(done) {
                 self.ends[h.task] = Some(end);
@@ -457,11 +518,25 @@ impl<O: Observer, E: LaneExp, const N: usize, const D: usize, const L: usize> pu
 
     #[inline(always)]
     fn with_simd<Sd: pulp::Simd>(self, _simd: Sd) -> Option<()> {
-        let Method::Rodas4 { rtol, atol, first_step } = *self.method else { unreachable!("Rodas4 groups") };
+        let Method::Rodas4 { rtol, atol, first_step } = *self.method else {
+            unreachable!("Rodas4 groups")
+        };
         for (c, chunk) in self.tasks.chunks(L).enumerate() {
-            let st: Rodas4<[f64; D], L, D> = Rodas4::new(group_options(chunk, rtol, atol, first_step, &Held::default()), [0.0; D]);
+            let st: Rodas4<[f64; D], L, D> =
+                Rodas4::new(group_options(chunk, rtol, atol, first_step, &Held::default()), [0.0; D]);
             let rhs = LanesRhs::<E, N, D, L>::for_tasks;
-            drive_group(chunk, c * L, 0.0, st, [0.0; D], rhs, &mut *self.observer, self.cancel, &mut *self.out, None)?;
+            drive_group(
+                chunk,
+                c * L,
+                0.0,
+                st,
+                [0.0; D],
+                rhs,
+                &mut *self.observer,
+                self.cancel,
+                &mut *self.out,
+                None,
+            )?;
         }
         Some(())
     }
@@ -482,7 +557,13 @@ fn run_fixed<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTR
     // three runs of a lag model on 8 lanes 1.07-1.36x their time one by one, nine 0.52x), so a
     // group that fills less than half its lanes runs lane by lane (the same bits either way)
     let run = if 2 * tasks.len() >= L {
-        let groups = PlainGroups::<O, E, N, D, EXTRAS, L> { tasks, method, observer: &mut *observer, cancel, _exp: PhantomData };
+        let groups = PlainGroups::<O, E, N, D, EXTRAS, L> {
+            tasks,
+            method,
+            observer: &mut *observer,
+            cancel,
+            _exp: PhantomData,
+        };
         simd_arch().dispatch(groups)?
     } else {
         LaneRun::Fallback
@@ -492,7 +573,15 @@ fn run_fixed<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTR
             // lanes that turned stiff go on with the implicit method, L at a time: for the plain
             // shapes (no lag states: the sweeps'), compiled for AVX2 (+FMA) as well as for the
             // baseline (RESULTS §22); with lag states (the diagnosis's) once, for the baseline
-            let op = HandOvers::<O, E, N, D, EXTRAS, L> { tasks, _exp: PhantomData, handoffs: &handoffs, method, observer: &mut *observer, cancel, ends: &mut ends };
+            let op = HandOvers::<O, E, N, D, EXTRAS, L> {
+                tasks,
+                _exp: PhantomData,
+                handoffs: &handoffs,
+                method,
+                observer: &mut *observer,
+                cancel,
+                ends: &mut ends,
+            };
             if !EXTRAS {
                 hand_over_dispatch(op)?;
             } else {
@@ -503,7 +592,14 @@ fn run_fixed<O: Observer, E: LaneExp, const N: usize, const D: usize, const EXTR
         LaneRun::Fallback => {
             if !EXTRAS && matches!(method, Method::Rodas4 { .. }) {
                 // its stages as vectors, compiled for AVX2 as the hand-overs
-                hand_over_dispatch(Rodas4Groups::<O, E, N, D, L> { tasks, method, observer, cancel, out, _exp: PhantomData })?;
+                hand_over_dispatch(Rodas4Groups::<O, E, N, D, L> {
+                    tasks,
+                    method,
+                    observer,
+                    cancel,
+                    out,
+                    _exp: PhantomData,
+                })?;
             } else {
                 for (c, chunk) in tasks.chunks(L).enumerate() {
                     run_group::<[f64; D], O, _, D, L>(
@@ -558,7 +654,11 @@ pub fn run_tasks_exp<O: Observer, E: LaneExp, const L: usize>(
     }
     // one state layout for the fixed-size path: every task's, when all have the same size
     let dim = tasks[0].model.layout.dim;
-    let lags = tasks[0].model.lane_lags().filter(|_| tasks.iter().all(|t| t.model.layout.dim == dim && t.model.lane_lags().is_some()));
+    let lags = tasks[0].model.lane_lags().filter(|_| {
+        tasks
+            .iter()
+            .all(|t| t.model.layout.dim == dim && t.model.lane_lags().is_some())
+    });
     with_state_size!(lags, tasks[0].model.layout.dof, fixed, {
         return run_tasks_one_by_one(tasks, method, &Held::default(), observer, cancel);
     });
@@ -580,9 +680,16 @@ pub fn run_tasks_one_by_one<T: Scalar, O: Observer<T>>(
     for (c, task) in tasks.iter().enumerate() {
         let zero = vec![T::zero(); task.model.layout.dim];
         run_group::<Vec<T>, O, _, 0, 1>(
-            std::slice::from_ref(task), c, method, held, zero,
+            std::slice::from_ref(task),
+            c,
+            method,
+            held,
+            zero,
             |c, slack| ModelRhs::<T, 0, true, 1>::for_tasks(c, slack),
-            observer, cancel, &mut out, None,
+            observer,
+            cancel,
+            &mut out,
+            None,
         )?;
     }
     Some(out)

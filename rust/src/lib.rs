@@ -10,16 +10,16 @@
 //! - [`simulate`], [`sensitivity`], [`batch`]: one saved run, exact derivatives, many points in parallel;
 //! - [`gpu`] (the CUDA kernel's constants) and `python` (the PyO3 binding, `python` feature).
 
-pub mod numbers;
-pub mod physics;
-pub mod model;
+pub mod batch;
+pub mod drive;
+pub mod gpu;
 pub mod integrate;
 pub mod lanes;
-pub mod drive;
+pub mod model;
+pub mod numbers;
+pub mod physics;
 pub mod sensitivity;
 pub mod simulate;
-pub mod batch;
-pub mod gpu;
 
 #[cfg(test)]
 mod paper_case_tests;

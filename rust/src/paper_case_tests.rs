@@ -1,11 +1,11 @@
 //! End-to-end checks of the paper case against MODEL.md's reference values.
 
+use crate::model::Model;
 use crate::physics::effects::Effects;
 use crate::physics::mechanics::Structure;
-use crate::model::Model;
 use crate::physics::params::Params;
-use crate::simulate::simulate_from_rest as simulate;
 use crate::physics::waveform::PiecewiseLinear;
+use crate::simulate::simulate_from_rest as simulate;
 
 fn paper_run(structure: Structure, dt: f64) -> f64 {
     let m = Model::new(Params::paper(), Effects::default(), structure, true, false).unwrap();
@@ -25,14 +25,7 @@ fn paper_case_final_positions_match_model_md() {
 
 #[test]
 fn too_large_step_is_reported_as_divergence() {
-    let m = Model::new(
-        Params::paper(),
-        Effects::default(),
-        Structure::Lps,
-        true,
-        false,
-    )
-    .unwrap();
+    let m = Model::new(Params::paper(), Effects::default(), Structure::Lps, true, false).unwrap();
     let w = PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap();
     match simulate(&m, &w, 10e-3, 5e-7, 100) {
         Err(crate::integrate::task::SimError::Diverged { t, message }) => {
@@ -104,7 +97,14 @@ fn rk4_batch_outputs_are_pinned_to_the_bit() {
         let r = run_batch(&cfg, &specs, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
         for o in &r {
             let m = o.metrics;
-            let values = [m.final_position, m.step_per_cycle, m.peak_velocity, m.peak_friction, m.slip_fraction, m.dt_used];
+            let values = [
+                m.final_position,
+                m.step_per_cycle,
+                m.peak_velocity,
+                m.peak_friction,
+                m.slip_fraction,
+                m.dt_used,
+            ];
             for x in values.iter().chain(&o.trace) {
                 digest = digest.rotate_left(5) ^ x.to_bits();
             }

@@ -15,17 +15,17 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use num_dual::{Dual64, DualSVec64};
 
-use crate::integrate::stepper::Held;
 use crate::drive::run_tasks_one_by_one;
 use crate::integrate::method::Method;
+use crate::integrate::stepper::Held;
 use crate::integrate::task::{LaneEnd, Observer, SimError, Task};
-use crate::physics::effects::{EFFECTS, EFFECT_NAMES, LAGS};
-use crate::numbers::lane_real::Lanewise;
 use crate::model::Model;
-use crate::physics::params::PARAM_NAMES;
+use crate::numbers::lane_real::Lanewise;
 use crate::numbers::real::Real;
 use crate::numbers::scalar::Seedable as Dual;
 use crate::numbers::tangent::Tangent;
+use crate::physics::effects::{EFFECTS, EFFECT_NAMES, LAGS};
+use crate::physics::params::PARAM_NAMES;
 use crate::physics::waveform::{Cursor, PiecewiseLinear};
 
 /// Widest dual number one pass carries; more names take several passes.
@@ -49,7 +49,11 @@ pub enum Seed {
 /// The knot `k` a name `f_ext[k]` asks for, if it is one.
 fn force_knot(name: &str) -> Option<Result<usize, String>> {
     let inner = name.strip_prefix("f_ext[")?.strip_suffix(']')?;
-    Some(inner.parse::<usize>().map_err(|_| format!("sensitivity '{name}': the knot must be a whole number, as f_ext[12]")))
+    Some(
+        inner
+            .parse::<usize>()
+            .map_err(|_| format!("sensitivity '{name}': the knot must be a whole number, as f_ext[12]")),
+    )
 }
 
 impl Seed {
@@ -71,10 +75,12 @@ pub fn parse_seeds(model: &Model, names: &[String], normal_force_derived: bool) 
         }
         let seed = if let Some(n) = PARAM_NAMES.iter().find(|n| **n == name.as_str()) {
             if *n == "normal_force" && normal_force_derived {
-                return Err("sensitivity 'normal_force': the normal force is derived from the masses here \
+                return Err(
+                    "sensitivity 'normal_force': the normal force is derived from the masses here \
                             ((m1 + m2 + mPE) g, and its derivative follows theirs); give normal_force a value \
                             to take a derivative with respect to it"
-                    .into());
+                        .into(),
+                );
             }
             Seed::Param(n)
         } else if let Some(n) = EFFECT_NAMES.iter().find(|n| **n == name.as_str()) {
@@ -97,7 +103,10 @@ pub fn parse_seeds(model: &Model, names: &[String], normal_force_derived: bool) 
                 return Err(if knots == 0 {
                     format!("sensitivity '{name}': the run has no external force; give one to take derivatives with respect to its samples")
                 } else {
-                    format!("sensitivity '{name}': the external force has {knots} samples (f_ext[0] .. f_ext[{}])", knots - 1)
+                    format!(
+                        "sensitivity '{name}': the external force has {knots} samples (f_ext[0] .. f_ext[{}])",
+                        knots - 1
+                    )
                 });
             }
             Seed::ForceKnot(k)
@@ -107,7 +116,11 @@ pub fn parse_seeds(model: &Model, names: &[String], normal_force_derived: bool) 
                  component of the initial state ({}) or a sample of the external force (f_ext[k])",
                 PARAM_NAMES.join(", "),
                 EFFECT_NAMES.join(", "),
-                components.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", ")
+                components
+                    .iter()
+                    .map(|(n, _)| n.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ));
         };
         seeds.push(seed);
@@ -173,7 +186,18 @@ pub fn derivatives(
             vec![chunk]
         };
         for group in groups {
-            let run = Pass { model, wave, t_start, t_end, y0, method, held, schedule, seeds: group, normal_force_derived };
+            let run = Pass {
+                model,
+                wave,
+                t_start,
+                t_end,
+                y0,
+                method,
+                held,
+                schedule,
+                seeds: group,
+                normal_force_derived,
+            };
             let pass = match group.len() {
                 1 => run.go::<Dual64>(cancel),
                 _ => match method.fixed_step() {
@@ -277,13 +301,21 @@ impl Pass<'_> {
             Ok(x) => x,
             Err(e) => return Some(Err(e)),
         };
-        let task = Task { model: &dual, wave: self.wave, t_start: self.t_start, t_end: self.t_end, y0: &y0 };
+        let task = Task {
+            model: &dual,
+            wave: self.wave,
+            t_start: self.t_start,
+            t_end: self.t_end,
+            y0: &y0,
+        };
         let stop = AtomicBool::new(cancel.load(Ordering::Relaxed));
         let mut rec = self.recorder(&dual);
         rec.halt = Some((cancel, &stop));
         let Some(mut ends) = run_tasks_one_by_one(&[task], self.method, self.held, &mut rec, &stop) else {
             return match rec.blew_up {
-                Some(t) if !cancel.load(Ordering::Relaxed) => Some(Err(unbounded(self.model, t, rec.v_peak, self.method))),
+                Some(t) if !cancel.load(Ordering::Relaxed) => {
+                    Some(Err(unbounded(self.model, t, rec.v_peak, self.method)))
+                }
                 _ => None,
             };
         };
@@ -303,7 +335,16 @@ impl Pass<'_> {
         let model: Model<Tangent<K>> = Lanewise::splat(&dual);
         let y0: Vec<Tangent<K>> = y0.iter().map(Lanewise::splat).collect();
         let mut rec = self.recorder(&model);
-        let run = TangentRun { model: &model, wave: self.wave, t_start: self.t_start, t_end: self.t_end, y0: &y0, dt, rec: &mut rec, cancel };
+        let run = TangentRun {
+            model: &model,
+            wave: self.wave,
+            t_start: self.t_start,
+            t_end: self.t_end,
+            y0: &y0,
+            dt,
+            rec: &mut rec,
+            cancel,
+        };
         let (end, y) = crate::lanes::simd_arch().dispatch(run)?;
         Some(self.finish(rec, end, &y))
     }
@@ -353,7 +394,16 @@ impl<const K: usize> pulp::WithSimd for TangentRun<'_, '_, K> {
     type Output = Option<(LaneEnd, Vec<Tangent<K>>)>;
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
-        rk4_pass(self.model, self.wave, self.t_start, self.t_end, self.y0, self.dt, self.rec, self.cancel)
+        rk4_pass(
+            self.model,
+            self.wave,
+            self.t_start,
+            self.t_end,
+            self.y0,
+            self.dt,
+            self.rec,
+            self.cancel,
+        )
     }
 }
 
@@ -380,7 +430,13 @@ fn rk4_pass<const K: usize>(
     let bound = model.presliding_bound() * (1.0 + crate::integrate::rk4::BOUND_SLACK) + 1e-12;
     let mut y = y0.to_vec();
     let zero = Tangent::constant(0.0);
-    let (mut k1, mut k2, mut k3, mut k4, mut tmp) = (vec![zero; n], vec![zero; n], vec![zero; n], vec![zero; n], vec![zero; n]);
+    let (mut k1, mut k2, mut k3, mut k4, mut tmp) = (
+        vec![zero; n],
+        vec![zero; n],
+        vec![zero; n],
+        vec![zero; n],
+        vec![zero; n],
+    );
     let (h2, h6) = (0.5 * dt, dt / 6.0);
     let mut k = (t_start / dt).round() as usize;
     let k_end = k + ((t_end - t_start) / dt).round() as usize;
@@ -389,7 +445,8 @@ fn rk4_pass<const K: usize>(
     let mut steps = 0u64;
     rec.record(t_start, &y);
     loop {
-        if steps.is_multiple_of(crate::integrate::task::CANCEL_CHECK_ATTEMPTS as u64) && cancel.load(Ordering::Relaxed) {
+        if steps.is_multiple_of(crate::integrate::task::CANCEL_CHECK_ATTEMPTS as u64) && cancel.load(Ordering::Relaxed)
+        {
             return None;
         }
         let t0 = k as f64 * dt;
@@ -410,7 +467,14 @@ fn rk4_pass<const K: usize>(
         k += 1;
         let t_new = k as f64 * dt;
         if model.is_diverged(&y, bound) {
-            return Some((LaneEnd::Diverged { t: t_new, why: None, v_last }, y));
+            return Some((
+                LaneEnd::Diverged {
+                    t: t_new,
+                    why: None,
+                    v_last,
+                },
+                y,
+            ));
         }
         v_last = y[dof].re;
         steps += 1;
@@ -425,7 +489,15 @@ fn rk4_pass<const K: usize>(
 /// The right-hand side at `tau` [s] into the step from `t0` [s], the input `v0 + s tau` [V]
 /// (as `integrate::model_rhs::ModelRhs::eval`).
 #[inline(always)]
-fn stage_rate<const K: usize>(model: &Model<Tangent<K>>, t0: f64, v0: f64, s: f64, tau: f64, y: &[Tangent<K>], dy: &mut [Tangent<K>]) {
+fn stage_rate<const K: usize>(
+    model: &Model<Tangent<K>>,
+    t0: f64,
+    v0: f64,
+    s: f64,
+    tau: f64,
+    y: &[Tangent<K>],
+    dy: &mut [Tangent<K>],
+) {
     model.rhs_impl::<0, true>(t0 + tau, Tangent::constant(v0 + s * tau), s, y, dy);
 }
 
@@ -436,7 +508,6 @@ fn axpy<const K: usize>(out: &mut [Tangent<K>], y: &[Tangent<K>], h: f64, k: &[T
         out[j] = y[j] + k[j] * h;
     }
 }
-
 
 /// A number a pass records: a value and `WIDTH` derivative parts.
 pub trait Carries: Real<Value = f64> {
@@ -527,16 +598,7 @@ impl<D: Dual> Observer<D> for Recorder<'_, D> {
         self.record(t, y);
     }
 
-    fn step(
-        &mut self,
-        _task: usize,
-        t: f64,
-        _span: f64,
-        y: &[D],
-        _v: f64,
-        _s: Option<(D, D)>,
-        last: bool,
-    ) {
+    fn step(&mut self, _task: usize, t: f64, _span: f64, y: &[D], _v: f64, _s: Option<(D, D)>, last: bool) {
         self.on_step(t, y, last);
     }
 }
@@ -598,7 +660,18 @@ mod tests {
 
         /// Readings on the saver's schedule, and the steps and states an adaptive run held.
         fn readings(&self, y0: &[f64]) -> (Vec<f64>, Held) {
-            let (r, _) = simulate_keeping(&self.model(), &self.wave, 0.0, self.t_end, y0, &self.method, self.every, true, &NEVER).unwrap();
+            let (r, _) = simulate_keeping(
+                &self.model(),
+                &self.wave,
+                0.0,
+                self.t_end,
+                y0,
+                &self.method,
+                self.every,
+                true,
+                &NEVER,
+            )
+            .unwrap();
             (r.reading, r.held)
         }
 
@@ -609,10 +682,25 @@ mod tests {
             let (base, held) = self.readings(&rest);
             let names_s: Vec<String> = names.iter().map(|s| s.to_string()).collect();
             let seeds = parse_seeds(&m, &names_s, self.derived_fn).unwrap();
-            let schedule = Schedule { every: self.every, also_last: true };
-            let d = derivatives(&m, &self.wave, 0.0, self.t_end, &rest, &self.method, &held, schedule, &seeds, self.derived_fn, &NEVER)
-                .unwrap()
-                .unwrap();
+            let schedule = Schedule {
+                every: self.every,
+                also_last: true,
+            };
+            let d = derivatives(
+                &m,
+                &self.wave,
+                0.0,
+                self.t_end,
+                &rest,
+                &self.method,
+                &held,
+                schedule,
+                &seeds,
+                self.derived_fn,
+                &NEVER,
+            )
+            .unwrap()
+            .unwrap();
             assert_eq!(d.readings.len(), base.len() * names.len());
             d.readings
         }
@@ -635,7 +723,10 @@ mod tests {
                     }
                     _ => {
                         let v = m.params.get(name).or(m.effects.get(name)).unwrap();
-                        (self.with(name, v + h[j]).readings(&rest).0, self.with(name, v - h[j]).readings(&rest).0)
+                        (
+                            self.with(name, v + h[j]).readings(&rest).0,
+                            self.with(name, v - h[j]).readings(&rest).0,
+                        )
                     }
                 };
                 if fd.is_empty() {
@@ -670,34 +761,63 @@ mod tests {
                     assert!(scale > 0.0, "{name}: the reading does not depend on it");
                     let noise = fd.iter().zip(&fd2).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
                     let worst = (0..nt).map(|t| (d[t * n + j] - fd[t]).abs()).fold(0.0, f64::max);
-                    verdicts.push(format!("h x {f}: {:.2e} of the scale (spread {:.2e})", worst / scale, noise / scale));
+                    verdicts.push(format!(
+                        "h x {f}: {:.2e} of the scale (spread {:.2e})",
+                        worst / scale,
+                        noise / scale
+                    ));
                     noise <= 1e-3 * scale && worst <= rel * scale + 4.0 * noise
                 });
                 eprintln!("{name}: {}", verdicts.join("; "));
-                assert!(passed, "{name}: engine and central differences disagree: {}", verdicts.join("; "));
+                assert!(
+                    passed,
+                    "{name}: engine and central differences disagree: {}",
+                    verdicts.join("; ")
+                );
             }
         }
     }
 
     /// One pass over `names` on num-dual's 8-wide numbers and on `Tangent<8>`.
-    fn both_passes(c: &Case, names: &[&str], y0: &[f64]) -> (Result<PassOutput, SimError>, Result<PassOutput, SimError>) {
+    fn both_passes(
+        c: &Case,
+        names: &[&str],
+        y0: &[f64],
+    ) -> (Result<PassOutput, SimError>, Result<PassOutput, SimError>) {
         let m = c.model();
         let names_s: Vec<String> = names.iter().map(|s| s.to_string()).collect();
         let seeds = parse_seeds(&m, &names_s, c.derived_fn).unwrap();
         let held = Held::default();
         let dt = c.method.fixed_step().unwrap();
         let pass = Pass {
-            model: &m, wave: &c.wave, t_start: 0.0, t_end: c.t_end, y0, method: &c.method, held: &held,
-            schedule: Schedule { every: c.every, also_last: true }, seeds: &seeds, normal_force_derived: c.derived_fn,
+            model: &m,
+            wave: &c.wave,
+            t_start: 0.0,
+            t_end: c.t_end,
+            y0,
+            method: &c.method,
+            held: &held,
+            schedule: Schedule {
+                every: c.every,
+                also_last: true,
+            },
+            seeds: &seeds,
+            normal_force_derived: c.derived_fn,
         };
-        (pass.go::<DualSVec64<MAX_PER_PASS>>(&NEVER).unwrap(), pass.go_tangent::<MAX_PER_PASS>(dt, &NEVER).unwrap())
+        (
+            pass.go::<DualSVec64<MAX_PER_PASS>>(&NEVER).unwrap(),
+            pass.go_tangent::<MAX_PER_PASS>(dt, &NEVER).unwrap(),
+        )
     }
 
     /// Equal, a -0.0 for a +0.0 allowed (num-dual's "no derivative" is 0 in a tangent).
     fn assert_same(a: &[f64], b: &[f64], what: &str) {
         assert_eq!(a.len(), b.len(), "{what}");
         for (i, (x, y)) in a.iter().zip(b).enumerate() {
-            assert!(x.to_bits() == y.to_bits() || (*x == 0.0 && *y == 0.0), "{what} [{i}]: {x:e} vs {y:e}");
+            assert!(
+                x.to_bits() == y.to_bits() || (*x == 0.0 && *y == 0.0),
+                "{what} [{i}]: {x:e} vs {y:e}"
+            );
         }
     }
 
@@ -712,9 +832,42 @@ mod tests {
             ..Effects::default()
         };
         let mut cases = vec![
-            (paper(Structure::Lps, Effects::default()), vec!["mu_k", "mu_s", "m2", "fric_alpha", "sigma1", "d33", "hyst_alpha", "stribeck_velocity"]),
-            (paper(Structure::Dps(3), Effects::default()), vec!["m1", "pe_youngs", "pe_density", "rayleigh_alpha", "normal_force", "stribeck_exponent"]),
-            (paper(Structure::Lps, lags), vec!["kappa", "tau_creep", "tau_sensor", "c_weight", "drift_rate", "m1", "fric_n"]),
+            (
+                paper(Structure::Lps, Effects::default()),
+                vec![
+                    "mu_k",
+                    "mu_s",
+                    "m2",
+                    "fric_alpha",
+                    "sigma1",
+                    "d33",
+                    "hyst_alpha",
+                    "stribeck_velocity",
+                ],
+            ),
+            (
+                paper(Structure::Dps(3), Effects::default()),
+                vec![
+                    "m1",
+                    "pe_youngs",
+                    "pe_density",
+                    "rayleigh_alpha",
+                    "normal_force",
+                    "stribeck_exponent",
+                ],
+            ),
+            (
+                paper(Structure::Lps, lags),
+                vec![
+                    "kappa",
+                    "tau_creep",
+                    "tau_sensor",
+                    "c_weight",
+                    "drift_rate",
+                    "m1",
+                    "fric_n",
+                ],
+            ),
         ];
         let mut derived = paper(Structure::Lps, Effects::default());
         derived.derived_fn = true;
@@ -727,7 +880,10 @@ mod tests {
             let rest = c.model().rest_state();
             let (a, b) = both_passes(c, names, &rest);
             let ((ra, fa), (rb, fb)) = (a.unwrap(), b.unwrap());
-            assert!(ra.iter().any(|x| *x != 0.0), "{names:?}: the pass carried no derivative");
+            assert!(
+                ra.iter().any(|x| *x != 0.0),
+                "{names:?}: the pass carried no derivative"
+            );
             assert_same(&ra, &rb, &format!("readings {names:?}"));
             assert_same(&fa, &fb, &format!("final state {names:?}"));
         }
@@ -754,20 +910,33 @@ mod tests {
         let rest = c.model().rest_state();
         let (a, b) = both_passes(&c, &["mu_k", "m1", "sigma1"], &rest);
         let (ea, eb) = (a.unwrap_err().to_string(), b.unwrap_err().to_string());
-        let at = |e: &str| e.split("from t = ").nth(1).map(|x| x.split(' ').next().unwrap().to_string());
+        let at = |e: &str| {
+            e.split("from t = ")
+                .nth(1)
+                .map(|x| x.split(' ').next().unwrap().to_string())
+        };
         assert!(eb.contains("not finite") && eb.contains("smaller dt"), "{eb}");
         assert_eq!(at(&ea), at(&eb), "the same first time: {ea} | {eb}");
         // a one-name pass (num-dual's scalar dual, the generic driver) stops there too
         let m = c.model();
         let seeds = parse_seeds(&m, &["mu_k".to_string()], false).unwrap();
         let (_, held) = c.readings(&rest);
-        let schedule = Schedule { every: c.every, also_last: true };
-        let one = derivatives(&m, &c.wave, 0.0, c.t_end, &rest, &c.method, &held, schedule, &seeds, false, &NEVER).unwrap();
+        let schedule = Schedule {
+            every: c.every,
+            also_last: true,
+        };
+        let one = derivatives(
+            &m, &c.wave, 0.0, c.t_end, &rest, &c.method, &held, schedule, &seeds, false, &NEVER,
+        )
+        .unwrap();
         let e1 = one.unwrap_err().to_string();
         assert!(e1.contains("not finite"), "{e1}");
         // a pass cancelled from outside is cancelled, not an error
         let cancelled = AtomicBool::new(true);
-        assert!(derivatives(&m, &c.wave, 0.0, c.t_end, &rest, &c.method, &held, schedule, &seeds, false, &cancelled).is_none());
+        assert!(
+            derivatives(&m, &c.wave, 0.0, c.t_end, &rest, &c.method, &held, schedule, &seeds, false, &cancelled)
+                .is_none()
+        );
     }
 
     fn rel_step(c: &Case, name: &str) -> f64 {
@@ -777,10 +946,24 @@ mod tests {
     #[test]
     fn lps_sensitivities_equal_central_differences() {
         let c = paper(Structure::Lps, Effects::default());
-        let names = ["mu_k", "mu_s", "m2", "fric_alpha", "sigma1", "sigma2", "d33", "hyst_alpha", "fric_beta", "stribeck_velocity"];
+        let names = [
+            "mu_k",
+            "mu_s",
+            "m2",
+            "fric_alpha",
+            "sigma1",
+            "sigma2",
+            "d33",
+            "hyst_alpha",
+            "fric_beta",
+            "stribeck_velocity",
+        ];
         // the reading hardly depends on sigma1 over this run: a larger step keeps its
         // difference above the rounding noise
-        let h: Vec<f64> = names.iter().map(|n| rel_step(&c, n) * if *n == "sigma1" { 100.0 } else { 1.0 }).collect();
+        let h: Vec<f64> = names
+            .iter()
+            .map(|n| rel_step(&c, n) * if *n == "sigma1" { 100.0 } else { 1.0 })
+            .collect();
         c.check(&names, &h, 1e-6);
     }
 
@@ -794,7 +977,15 @@ mod tests {
     #[test]
     fn dps_sensitivities_equal_central_differences_including_the_bar() {
         let c = paper(Structure::Dps(4), Effects::default());
-        let names = ["m1", "pe_youngs", "pe_density", "rayleigh_alpha", "rayleigh_beta", "normal_force", "pe_length"];
+        let names = [
+            "m1",
+            "pe_youngs",
+            "pe_density",
+            "rayleigh_alpha",
+            "rayleigh_beta",
+            "normal_force",
+            "pe_length",
+        ];
         let h: Vec<f64> = names.iter().map(|n| rel_step(&c, n)).collect();
         c.check(&names, &h, 1e-6);
     }
@@ -829,11 +1020,32 @@ mod tests {
             drift_rate: 1e-4,
             // the library at small values (its derivatives are what discovery screens with)
             // each large enough (~1-10 mN along the run) for a central difference to resolve it
-            lib_x1: 1e3, lib_v1: 0.1, lib_dx: 1e3, lib_dv: 0.5, lib_sgn: 0.01, lib_abs: 0.5, lib_vv: 200.0,
-            lib_volt: 1e-4, lib_dvolt: 1e-8, lib_t: 0.5, lib_x1sq: 1e9, lib_x1cube: 1e16, lib_sin: 0.01,
-            lib_cos: 0.01, lib_ff: 0.01, lib_ff_sin: 0.02, lib_ff_cos: 0.01, lib_wavelength: 20e-6,
-            libw_x2: 1e4, libw_v2: 0.5, libw_dx: 1e4, libw_dv: 0.5, libw_sgn: 0.01, libw_vv: 100.0,
-            libw_volt: 1e-4, libw_dvolt: 1e-8,
+            lib_x1: 1e3,
+            lib_v1: 0.1,
+            lib_dx: 1e3,
+            lib_dv: 0.5,
+            lib_sgn: 0.01,
+            lib_abs: 0.5,
+            lib_vv: 200.0,
+            lib_volt: 1e-4,
+            lib_dvolt: 1e-8,
+            lib_t: 0.5,
+            lib_x1sq: 1e9,
+            lib_x1cube: 1e16,
+            lib_sin: 0.01,
+            lib_cos: 0.01,
+            lib_ff: 0.01,
+            lib_ff_sin: 0.02,
+            lib_ff_cos: 0.01,
+            lib_wavelength: 20e-6,
+            libw_x2: 1e4,
+            libw_v2: 0.5,
+            libw_dx: 1e4,
+            libw_dv: 0.5,
+            libw_sgn: 0.01,
+            libw_vv: 100.0,
+            libw_volt: 1e-4,
+            libw_dvolt: 1e-8,
         };
         // dt 2e-8: a fifth of the paper case's RK4 stability limit (1e-7 s), and half the CI
         // time of this, the longest unit test (the comparison is within one discretisation)
@@ -852,7 +1064,10 @@ mod tests {
         let c = Case {
             p,
             e: Effects::default(),
-            s: Structure::Rig(RigDrive::Position { stiffness: 2e4, damping: 5.0 }),
+            s: Structure::Rig(RigDrive::Position {
+                stiffness: 2e4,
+                damping: 5.0,
+            }),
             hyst: false,
             wave: PiecewiseLinear::new(vec![0.0, 1.0], vec![0.0, 2e-2]).unwrap(),
             t_end: 0.01,
@@ -876,8 +1091,16 @@ mod tests {
         let names = ["mu_k", "m2", "fric_alpha", "hyst_alpha"];
         let reference = rk4.engine(&names);
         for method in [
-            Method::Dopri5 { rtol: 1e-9, atol: 1e-9, first_step: 1e-9 },
-            Method::Rodas4 { rtol: 1e-8, atol: 1e-8, first_step: 1e-9 },
+            Method::Dopri5 {
+                rtol: 1e-9,
+                atol: 1e-9,
+                first_step: 1e-9,
+            },
+            Method::Rodas4 {
+                rtol: 1e-8,
+                atol: 1e-8,
+                first_step: 1e-9,
+            },
         ] {
             let mut c = rk4.clone();
             c.method = method;
@@ -900,7 +1123,18 @@ mod tests {
     #[test]
     fn more_names_than_one_pass_carries_agree_with_fewer() {
         let c = paper(Structure::Lps, Effects::default());
-        let many = ["mu_k", "mu_s", "m1", "m2", "fric_alpha", "sigma1", "sigma2", "d33", "hyst_alpha", "q0"];
+        let many = [
+            "mu_k",
+            "mu_s",
+            "m1",
+            "m2",
+            "fric_alpha",
+            "sigma1",
+            "sigma2",
+            "d33",
+            "hyst_alpha",
+            "q0",
+        ];
         let d_many = c.engine(&many);
         let d_one = c.engine(&["hyst_alpha"]);
         let n = many.len();
@@ -926,7 +1160,9 @@ mod tests {
         let (up, down) = (shifted(h), shifted(-h));
         let fd: Vec<f64> = up.iter().zip(&down).map(|(a, b)| (a - b) / (2.0 * h)).collect();
         let scale = fd.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-        let worst = (0..fd.len()).map(|t| (d[2 * t] + d[2 * t + 1] - fd[t]).abs()).fold(0.0, f64::max);
+        let worst = (0..fd.len())
+            .map(|t| (d[2 * t] + d[2 * t + 1] - fd[t]).abs())
+            .fold(0.0, f64::max);
         eprintln!("tied mu_s = mu_k: {:.2e} of the scale", worst / scale);
         assert!(scale > 0.0 && worst < 1e-5 * scale, "{worst:e} vs scale {scale:e}");
     }
@@ -934,7 +1170,9 @@ mod tests {
     #[test]
     fn bad_names_are_refused_with_the_reason() {
         let m = paper(Structure::Lps, Effects::default()).model();
-        let err = |names: &[&str]| parse_seeds(&m, &names.iter().map(|s| s.to_string()).collect::<Vec<_>>(), false).unwrap_err();
+        let err = |names: &[&str]| {
+            parse_seeds(&m, &names.iter().map(|s| s.to_string()).collect::<Vec<_>>(), false).unwrap_err()
+        };
         assert!(err(&["wind"]).contains("unknown sensitivity 'wind'"));
         assert!(err(&["mu_k", "mu_k"]).contains("twice"));
         assert!(err(&["tau_amp"]).contains("off"));

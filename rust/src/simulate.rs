@@ -4,15 +4,15 @@
 
 use std::sync::atomic::AtomicBool;
 
-use crate::integrate::stepper::Held;
 use crate::drive::run_tasks;
+use crate::integrate::crawl::CRAWL_PREFIX;
 use crate::integrate::method::Method;
 use crate::integrate::plan::divergence_message;
+use crate::integrate::stepper::Held;
 use crate::integrate::task::{LaneEnd, Observer, SimError, Task};
 use crate::model::Model;
-use crate::integrate::crawl::CRAWL_PREFIX;
-use crate::sensitivity::{derivatives, Derivatives, Schedule, Seed};
 use crate::physics::waveform::PiecewiseLinear;
+use crate::sensitivity::{derivatives, Derivatives, Schedule, Seed};
 
 /// Saved trajectory; each per-time array has one entry per saved time.
 #[derive(Clone, Debug, Default)]
@@ -63,8 +63,7 @@ impl Trajectory {
         self.voltage.push(v_cmd);
         self.reading.push(model.reading(t, y));
         if let Some(a) = l.accounting {
-            self.accounting
-                .extend_from_slice(&y[a..a + crate::model::N_ACCOUNTING]);
+            self.accounting.extend_from_slice(&y[a..a + crate::model::N_ACCOUNTING]);
             self.kinetic.push(model.mech.kinetic(&y[n..2 * n]));
             self.strain.push(model.mech.strain(&y[..n]));
             self.momentum.push(model.mech.momentum(&y[n..2 * n]));
@@ -161,9 +160,7 @@ pub fn simulate_keeping(
     cancel: &AtomicBool,
 ) -> Result<(Trajectory, bool), SimError> {
     if save_every == 0 {
-        return Err(SimError::Input(
-            "parameter 'save_every' must be at least 1".into(),
-        ));
+        return Err(SimError::Input("parameter 'save_every' must be at least 1".into()));
     }
     let task = Task {
         model,
@@ -191,10 +188,10 @@ pub fn simulate_keeping(
     match end {
         LaneEnd::Diverged { t, why, v_last } => {
             let message = match (why, method.fixed_step()) {
-                (None, Some(dt)) => {
-                    divergence_message(model, dt, t, &y, v_last, Some((wave, t_start, t_end)))
+                (None, Some(dt)) => divergence_message(model, dt, t, &y, v_last, Some((wave, t_start, t_end))),
+                (Some(why), _) if why.starts_with(CRAWL_PREFIX) => {
+                    format!("integration stopped at t = {t:.6e} s: {why}")
                 }
-                (Some(why), _) if why.starts_with(CRAWL_PREFIX) => format!("integration stopped at t = {t:.6e} s: {why}"),
                 (why, _) => format!(
                     "integration diverged at t = {t:.6e} s: {}; tighten rtol/atol or use method 'rk4' with a small dt",
                     why.unwrap_or_else(|| "the state is no longer finite".into())
@@ -242,8 +239,23 @@ pub fn simulate_with_derivatives(
     if !(complete && keep) {
         return Ok((traj, complete, None));
     }
-    let schedule = Schedule { every: save_every, also_last: true };
-    match derivatives(model, wave, t_start, t_end, y0, method, &traj.held, schedule, seeds, normal_force_derived, cancel) {
+    let schedule = Schedule {
+        every: save_every,
+        also_last: true,
+    };
+    match derivatives(
+        model,
+        wave,
+        t_start,
+        t_end,
+        y0,
+        method,
+        &traj.held,
+        schedule,
+        seeds,
+        normal_force_derived,
+        cancel,
+    ) {
         None => Ok((traj, false, None)), // cancelled: the trajectory stands
         Some(d) => Ok((traj, true, Some(d?))),
     }
@@ -259,7 +271,15 @@ pub fn simulate_from_rest(
     dt: f64,
     save_every: usize,
 ) -> Result<Trajectory, SimError> {
-    simulate(model, wave, 0.0, t_end, &model.rest_state(), &Method::Rk4 { dt }, save_every)
+    simulate(
+        model,
+        wave,
+        0.0,
+        t_end,
+        &model.rest_state(),
+        &Method::Rk4 { dt },
+        save_every,
+    )
 }
 
 #[cfg(test)]
@@ -350,17 +370,35 @@ mod tests {
     fn an_explicit_run_held_at_its_stability_limit_stops_with_a_message_instead_of_crawling() {
         // it ran for more than a minute without a word; Rodas4 takes 2.5 ms
         let (m, w) = near_frictionless();
-        let dp = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
-        let err = simulate(&m, &w, 0.0, 1e-3, &m.rest_state(), &dp, 100).unwrap_err().to_string();
+        let dp = Method::Dopri5 {
+            rtol: 3e-7,
+            atol: 3e-7,
+            first_step: 1e-8,
+        };
+        let err = simulate(&m, &w, 0.0, 1e-3, &m.rest_state(), &dp, 100)
+            .unwrap_err()
+            .to_string();
         assert!(err.starts_with("integration stopped at t = "), "{err}");
-        assert!(err.contains(crate::integrate::crawl::CRAWL_PREFIX) && err.contains("stability limit") && err.contains("'rodas4'"),
-                "{err}");
+        assert!(
+            err.contains(crate::integrate::crawl::CRAWL_PREFIX)
+                && err.contains("stability limit")
+                && err.contains("'rodas4'"),
+            "{err}"
+        );
         // once its pace projects more than 1e8 (the step shrinks as the contact speeds up: after
         // 0.74 M steps here, a quarter of a second), not after the 2e8 the run would take
-        let so_far: u64 = err.split(" steps so far").next().and_then(|s| s.rsplit(' ').next()).and_then(|s| s.parse().ok())
+        let so_far: u64 = err
+            .split(" steps so far")
+            .next()
+            .and_then(|s| s.rsplit(' ').next())
+            .and_then(|s| s.parse().ok())
             .expect("the message counts the steps");
         assert!(so_far < 2_000_000, "{err}");
-        let ro = Method::Rodas4 { rtol: 1e-6, atol: 1e-6, first_step: 1e-8 };
+        let ro = Method::Rodas4 {
+            rtol: 1e-6,
+            atol: 1e-6,
+            first_step: 1e-8,
+        };
         let r = simulate(&m, &w, 0.0, 1e-3, &m.rest_state(), &ro, 100).expect("Rodas4 runs it");
         assert!(r.final_state.iter().all(|x| x.is_finite()));
     }
@@ -374,41 +412,105 @@ mod tests {
         p.normal_force = p.default_normal_force();
         let m = Model::new(p, Effects::default(), Structure::Lps, true, false).unwrap();
         let w = PiecewiseLinear::triangle(98.0, 0.5e-3, 9.5e-3, 0.0).unwrap();
-        let steps = |method: Method| simulate(&m, &w, 0.0, 10e-3, &m.rest_state(), &method, 1).unwrap().t.len() - 1;
+        let steps = |method: Method| {
+            simulate(&m, &w, 0.0, 10e-3, &m.rest_state(), &method, 1)
+                .unwrap()
+                .t
+                .len()
+                - 1
+        };
         let (tol, h) = (1e-6, 1e-8);
-        let ro = steps(Method::Rodas4 { rtol: tol, atol: tol, first_step: h });
-        let dp = steps(Method::Dopri5 { rtol: tol, atol: tol, first_step: h });
+        let ro = steps(Method::Rodas4 {
+            rtol: tol,
+            atol: tol,
+            first_step: h,
+        });
+        let dp = steps(Method::Dopri5 {
+            rtol: tol,
+            atol: tol,
+            first_step: h,
+        });
         assert!(3 * ro < dp, "rodas4 {ro} steps, dopri5 {dp}");
     }
 
     #[test]
     fn auto_changes_a_stiff_run_to_rodas4_and_keeps_a_plain_one_explicit() {
-        let auto = Method::Auto { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        let auto = Method::Auto {
+            rtol: 3e-7,
+            atol: 3e-7,
+            first_step: 1e-8,
+        };
         let (m, w) = near_frictionless();
-        let (a, _) = simulate_keeping(&m, &w, 0.0, 1e-3, &m.rest_state(), &auto, 1, true, &AtomicBool::new(false)).unwrap();
+        let (a, _) = simulate_keeping(
+            &m,
+            &w,
+            0.0,
+            1e-3,
+            &m.rest_state(),
+            &auto,
+            1,
+            true,
+            &AtomicBool::new(false),
+        )
+        .unwrap();
         let at = *a.held.switches.first().expect("the near-frictionless run switches");
-        assert!(a.held.switches.len() % 2 == 1, "and ends implicit: {:?}", a.held.switches);
+        assert!(
+            a.held.switches.len() % 2 == 1,
+            "and ends implicit: {:?}",
+            a.held.switches
+        );
         // after TRY_IMPLICIT_AFTER steps at the stability limit (measured: 467)
-        assert!(at < 3 * crate::integrate::stiffness::TRY_IMPLICIT_AFTER as u64, "switched after {at} steps");
+        assert!(
+            at < 3 * crate::integrate::stiffness::TRY_IMPLICIT_AFTER as u64,
+            "switched after {at} steps"
+        );
         let steps = a.t.len() - 1;
         assert!(steps < 20_000, "{steps} steps");
-        let tight = Method::Rodas4 { rtol: 1e-9, atol: 1e-9, first_step: 1e-9 };
+        let tight = Method::Rodas4 {
+            rtol: 1e-9,
+            atol: 1e-9,
+            first_step: 1e-9,
+        };
         let r = simulate(&m, &w, 0.0, 1e-3, &m.rest_state(), &tight, 1).unwrap();
-        assert!((a.final_state[0] - r.final_state[0]).abs() < 1e-9, "{} vs {}", a.final_state[0], r.final_state[0]);
+        assert!(
+            (a.final_state[0] - r.final_state[0]).abs() < 1e-9,
+            "{} vs {}",
+            a.final_state[0],
+            r.final_state[0]
+        );
         // the paper case is stiff for moments only: it may take Rodas4 for a stretch and must come
         // back (without the recheck it stayed on Rodas4 and took 6,160 steps, 2.7x the time)
         let (m, w) = paper(Structure::Lps, Effects::default());
-        let (a, _) = simulate_keeping(&m, &w, 0.0, 10e-3, &m.rest_state(), &auto, 1, true, &AtomicBool::new(false)).unwrap();
-        let dp = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        let (a, _) = simulate_keeping(
+            &m,
+            &w,
+            0.0,
+            10e-3,
+            &m.rest_state(),
+            &auto,
+            1,
+            true,
+            &AtomicBool::new(false),
+        )
+        .unwrap();
+        let dp = Method::Dopri5 {
+            rtol: 3e-7,
+            atol: 3e-7,
+            first_step: 1e-8,
+        };
         let d = simulate(&m, &w, 0.0, 10e-3, &m.rest_state(), &dp, 1).unwrap();
         let sw = &a.held.switches;
         assert!(sw.len() % 2 == 0, "ends on Dormand-Prince: {sw:?}");
         // implicit steps, between each switch to Rodas4 and the next back
         let implicit: u64 = sw.chunks(2).map(|p| p[1] - p[0]).sum();
         let (steps, explicit_steps) = ((a.t.len() - 1) as u64, (d.t.len() - 1) as f64);
-        let cost = (steps - implicit) as f64 + crate::integrate::stiffness::implicit_step_cost(m.rest_state().len()) * implicit as f64;
+        let cost = (steps - implicit) as f64
+            + crate::integrate::stiffness::implicit_step_cost(m.rest_state().len()) * implicit as f64;
         eprintln!("paper auto: switches {sw:?}, {steps} steps ({implicit} implicit), dopri5 {explicit_steps}");
-        assert!(cost < 1.2 * explicit_steps, "{cost} Dormand-Prince steps' worth against {explicit_steps}");
+        assert!(
+            cost < 1.2 * explicit_steps,
+            "{cost} Dormand-Prince steps' worth against {explicit_steps}"
+        );
         assert!((a.final_state[0] - d.final_state[0]).abs() < 1e-9);
     }
 

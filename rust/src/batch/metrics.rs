@@ -42,17 +42,59 @@ pub type MetricColumn = (&'static str, &'static str, &'static str, fn(&PointMetr
 /// names, and `sweep.py` takes its metrics' units and long names from here
 /// (`engine.metric_columns()`). The steady-state ones are NaN except for sawtooth trains.
 pub const METRIC_COLUMNS: [MetricColumn; 11] = [
-    ("final_position", "m", "main body displacement x1 at t_end", |m| m.final_position),
-    ("step_per_cycle", "m", "mean main body step per drive cycle, x1(t_end)/cycles", |m| m.step_per_cycle),
+    ("final_position", "m", "main body displacement x1 at t_end", |m| {
+        m.final_position
+    }),
+    (
+        "step_per_cycle",
+        "m",
+        "mean main body step per drive cycle, x1(t_end)/cycles",
+        |m| m.step_per_cycle,
+    ),
     ("peak_velocity", "m/s", "largest |v1|", |m| m.peak_velocity),
     ("peak_friction", "N", "largest |Ff|", |m| m.peak_friction),
-    ("slip_fraction", "1", "share of time the main body slides (|v1| > 0.1 stribeck_velocity)", |m| m.slip_fraction),
-    ("mean_velocity", "m/s", "steady-state mean velocity of the main body, mean step x frequency", |m| m.steady.mean_velocity),
-    ("step_mean", "m", "mean main body step per drive cycle (steady state)", |m| m.steady.step_mean),
-    ("step_std", "m", "standard deviation of the step over the steady-state cycles", |m| m.steady.step_std),
-    ("backslip", "m", "mean back-slip per cycle: travel against the net direction", |m| m.steady.backslip),
-    ("backslip_ratio", "1", "back-slip over the travel along the net direction", |m| m.steady.backslip_ratio),
-    ("direction", "1", "net motion: +1 forward, -1 backward, 0 stalled (|step| < 1e-3 d33 V)", |m| m.steady.direction),
+    (
+        "slip_fraction",
+        "1",
+        "share of time the main body slides (|v1| > 0.1 stribeck_velocity)",
+        |m| m.slip_fraction,
+    ),
+    (
+        "mean_velocity",
+        "m/s",
+        "steady-state mean velocity of the main body, mean step x frequency",
+        |m| m.steady.mean_velocity,
+    ),
+    (
+        "step_mean",
+        "m",
+        "mean main body step per drive cycle (steady state)",
+        |m| m.steady.step_mean,
+    ),
+    (
+        "step_std",
+        "m",
+        "standard deviation of the step over the steady-state cycles",
+        |m| m.steady.step_std,
+    ),
+    (
+        "backslip",
+        "m",
+        "mean back-slip per cycle: travel against the net direction",
+        |m| m.steady.backslip,
+    ),
+    (
+        "backslip_ratio",
+        "1",
+        "back-slip over the travel along the net direction",
+        |m| m.steady.backslip_ratio,
+    ),
+    (
+        "direction",
+        "1",
+        "net motion: +1 forward, -1 backward, 0 stalled (|step| < 1e-3 d33 V)",
+        |m| m.steady.direction,
+    ),
 ];
 
 impl PointMetrics {
@@ -169,11 +211,7 @@ impl<'a> MetricsObserver<'a> {
         acc.observe(y[model.layout.dof], model.friction_force(y), 0.0); // peaks only
         PointMetrics {
             final_position: y[0],
-            step_per_cycle: if cycles > 0 {
-                y[0] / cycles as f64
-            } else {
-                f64::NAN
-            },
+            step_per_cycle: if cycles > 0 { y[0] / cycles as f64 } else { f64::NAN },
             peak_velocity: acc.peak_v,
             peak_friction: acc.peak_f,
             slip_fraction: acc.slip_time / duration,
@@ -198,16 +236,7 @@ impl Observer for MetricsObserver<'_> {
     }
 
     #[inline(always)]
-    fn step(
-        &mut self,
-        i: usize,
-        t: f64,
-        span: f64,
-        y: &[f64],
-        _v: f64,
-        start: Option<(f64, f64)>,
-        _last: bool,
-    ) {
+    fn step(&mut self, i: usize, t: f64, span: f64, y: &[f64], _v: f64, start: Option<(f64, f64)>, _last: bool) {
         let model = self.models[i];
         // the state at the start of each step is held over it
         let ff = match start {

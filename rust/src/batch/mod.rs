@@ -13,8 +13,8 @@ mod runner;
 mod steady;
 
 pub use metrics::{MetricColumn, PointMetrics, METRIC_COLUMNS, SLIP_VELOCITY_FACTOR};
-pub use run::{run_batch, CHUNK, LANES};
 pub use points::{PointTables, WaveFamily};
+pub use run::{run_batch, CHUNK, LANES};
 pub use runner::BatchRunner;
 pub use steady::{Steady, Train, STALL_STEP_FRACTION};
 
@@ -55,7 +55,9 @@ impl BatchConfig {
             return Err("recording readings needs method 'rk4'".into());
         }
         if !self.sensitivities.is_empty() && self.record_every == 0 {
-            return Err("sensitivities are derivatives of the recorded readings: set record_every (and method 'rk4')".into());
+            return Err(
+                "sensitivities are derivatives of the recorded readings: set record_every (and method 'rk4')".into(),
+            );
         }
         Ok(())
     }
@@ -181,8 +183,7 @@ mod tests {
                 PointSpec::new(
                     p,
                     Effects::default(),
-                    PiecewiseLinear::sawtooth(40.0 + 10.0 * i as f64, 1000.0, 2, 0.2e-3, true, 0.0)
-                        .unwrap(),
+                    PiecewiseLinear::sawtooth(40.0 + 10.0 * i as f64, 1000.0, 2, 0.2e-3, true, 0.0).unwrap(),
                     Some(Train::new(1000.0, 2, 0.0)),
                 )
             })
@@ -224,16 +225,11 @@ mod tests {
         let c = cfg(RK4, Structure::Lps);
         let sp = specs(9);
         let run = |threads: usize| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            pool.install(|| {
-                run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap()
-            })
-            .into_iter()
-            .map(|o| o.metrics)
-            .collect::<Vec<_>>()
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap())
+                .into_iter()
+                .map(|o| o.metrics)
+                .collect::<Vec<_>>()
         };
         let bits = |r: Vec<PointMetrics>| -> Vec<[u64; 7]> {
             r.iter()
@@ -303,9 +299,9 @@ mod tests {
         assert!(r.iter().all(|m| m.final_position.is_finite()));
         c.retries = 0;
         let r = metrics(&c);
-        assert!(r.iter().any(|m| m.status == Status::Diverged
-            && m.diverged_at > 0.0
-            && m.final_position.is_nan()));
+        assert!(r
+            .iter()
+            .any(|m| m.status == Status::Diverged && m.diverged_at > 0.0 && m.final_position.is_nan()));
     }
 
     #[test]
@@ -352,20 +348,43 @@ mod tests {
         for (s, o) in sp.iter().zip(&r) {
             let model = Model::new(s.params, s.effects, Structure::Lps, true, false).unwrap();
             let seeds = parse_seeds(&model, &c.sensitivities, s.normal_force_derived).unwrap();
-            let schedule = Schedule { every: 200, also_last: false };
-            let d = derivatives(&model, &s.wave, 0.0, c.t_end, &model.rest_state(), &rk4, &Default::default(), schedule, &seeds, s.normal_force_derived, &AtomicBool::new(false))
-                .unwrap()
-                .unwrap();
+            let schedule = Schedule {
+                every: 200,
+                also_last: false,
+            };
+            let d = derivatives(
+                &model,
+                &s.wave,
+                0.0,
+                c.t_end,
+                &model.rest_state(),
+                &rk4,
+                &Default::default(),
+                schedule,
+                &seeds,
+                s.normal_force_derived,
+                &AtomicBool::new(false),
+            )
+            .unwrap()
+            .unwrap();
             let nt = o.trace.len();
             assert_eq!(o.sensitivities.len(), names.len() * nt);
             for j in 0..names.len() {
                 for t in 0..nt {
-                    assert_eq!(o.sensitivities[j * nt + t], d.readings[t * names.len() + j], "{} at {t}", names[j]);
+                    assert_eq!(
+                        o.sensitivities[j * nt + t],
+                        d.readings[t * names.len() + j],
+                        "{} at {t}",
+                        names[j]
+                    );
                 }
             }
         }
         // the derived normal force makes d/dm2 differ
-        assert_ne!(r[0].sensitivities[nt_of(&r[0]) * 2 - 1], r[2].sensitivities[nt_of(&r[2]) * 2 - 1]);
+        assert_ne!(
+            r[0].sensitivities[nt_of(&r[0]) * 2 - 1],
+            r[2].sensitivities[nt_of(&r[2]) * 2 - 1]
+        );
         assert!(r.iter().all(|o| o.sensitivities.iter().all(|x| x.is_finite())));
         // at RK4's stability limit for the friction state the values chatter but stay bounded;
         // their derivatives do not, and the point says so (its readings stand)
@@ -375,7 +394,11 @@ mod tests {
         coarse.t_end = 2e-3;
         let r = run_batch(&coarse, &sp[2..], &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
         assert_eq!(r[0].metrics.status, Status::Ok);
-        assert!(r[0].reason.contains("stability limit of the friction state"), "{}", r[0].reason);
+        assert!(
+            r[0].reason.contains("stability limit of the friction state"),
+            "{}",
+            r[0].reason
+        );
         // a name that is not there makes the point invalid, with the reason
         c.sensitivities = vec!["tau_amp".into()];
         let r = run_batch(&c, &sp[..1], &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();

@@ -51,12 +51,9 @@ impl WaveFamily {
                 Ok((PiecewiseLinear::triangle(amplitude, rise, fall, delay)?, None))
             }
             WaveFamily::Sawtooth => {
-                let [amplitude, frequency, cycles, rise, forward, delay] =
-                    row.try_into().map_err(|_| "row size")?;
+                let [amplitude, frequency, cycles, rise, forward, delay] = row.try_into().map_err(|_| "row size")?;
                 if !(cycles >= 1.0 && cycles.fract() == 0.0) {
-                    return Err(format!(
-                        "parameter 'cycles' must be a positive integer, got {cycles}"
-                    ));
+                    return Err(format!("parameter 'cycles' must be a positive integer, got {cycles}"));
                 }
                 let c = cycles as usize;
                 let w = PiecewiseLinear::sawtooth(amplitude, frequency, c, rise, forward != 0.0, delay)?;
@@ -64,7 +61,10 @@ impl WaveFamily {
             }
             WaveFamily::Sampled { t, v } => {
                 let scale = row[0];
-                Ok((PiecewiseLinear::new(t.clone(), v.iter().map(|x| x * scale).collect())?, None))
+                Ok((
+                    PiecewiseLinear::new(t.clone(), v.iter().map(|x| x * scale).collect())?,
+                    None,
+                ))
             }
         }
     }
@@ -171,7 +171,10 @@ mod tests {
         assert_eq!(first.train, Some(Train::new(100.0, 2, 0.0)));
         assert_eq!(first.params, Params::paper());
         assert!(pts[1].as_ref().unwrap_err().contains("'m2'"));
-        let short = PointTables { waves: &w[..6], ..tables };
+        let short = PointTables {
+            waves: &w[..6],
+            ..tables
+        };
         assert!(short.len().unwrap_err().contains("one row per point"));
     }
 }

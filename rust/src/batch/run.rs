@@ -5,10 +5,10 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use rayon::prelude::*;
 
-use crate::integrate::stepper::Held;
 use crate::drive::run_tasks;
 use crate::integrate::method::Method;
 use crate::integrate::plan::check_task;
+use crate::integrate::stepper::Held;
 use crate::integrate::task::{LaneEnd, SimError, Task};
 use crate::model::Model;
 use crate::sensitivity::{derivatives, parse_seeds, Schedule};
@@ -39,13 +39,7 @@ struct Ready<'a> {
 }
 
 fn prepare<'a>(cfg: &BatchConfig, index: usize, spec: &'a PointSpec) -> Result<Ready<'a>, String> {
-    let model = Model::new(
-        spec.params,
-        spec.effects,
-        cfg.structure,
-        cfg.piezo_hysteresis,
-        false,
-    )?;
+    let model = Model::new(spec.params, spec.effects, cfg.structure, cfg.piezo_hysteresis, false)?;
     let y0 = spec.y0.clone().unwrap_or_else(|| model.rest_state());
     let (t_start, t_end) = (spec.t_start, spec.t_end(cfg));
     let task = Task {
@@ -56,7 +50,10 @@ fn prepare<'a>(cfg: &BatchConfig, index: usize, spec: &'a PointSpec) -> Result<R
         y0: &y0,
     };
     check_task(&task, &cfg.method).map_err(|e| e.to_string())?;
-    let steps = cfg.method.fixed_step().map_or(0, |dt| ((t_end - t_start) / dt).round() as usize);
+    let steps = cfg
+        .method
+        .fixed_step()
+        .map_or(0, |dt| ((t_end - t_start) / dt).round() as usize);
     Ok(Ready {
         index,
         spec,
@@ -124,7 +121,10 @@ fn run_group(
                         reason: String::new(),
                     })
                 }
-                LaneEnd::Finished { .. } => Err(Failure { t: tasks[i].t_end, why: None }),
+                LaneEnd::Finished { .. } => Err(Failure {
+                    t: tasks[i].t_end,
+                    why: None,
+                }),
                 LaneEnd::Diverged { t, why, .. } => Err(Failure { t, why }),
             })
             .collect(),
@@ -156,7 +156,12 @@ fn retry(cfg: &BatchConfig, ready: &Ready, first: Failure, cancel: &AtomicBool) 
                 Ok(s) => s,
                 Err(_) => break,
             };
-            let r = Ready { steps, y0: ready.y0.clone(), model: ready.model.clone(), ..*ready };
+            let r = Ready {
+                steps,
+                y0: ready.y0.clone(),
+                model: ready.model.clone(),
+                ..*ready
+            };
             match run_group(cfg, &method, record_every, &[&r], cancel)?.pop() {
                 Some(Ok(o)) => {
                     return Some(PointOutput {
@@ -165,8 +170,8 @@ fn retry(cfg: &BatchConfig, ready: &Ready, first: Failure, cancel: &AtomicBool) 
                             ..o.metrics
                         },
                         reason: format!(
-                            "diverged at t = {first_failure:.6e} s with dt = {first_step:e} s; finished at dt = {dt:e} s"
-                        ),
+                        "diverged at t = {first_failure:.6e} s with dt = {first_step:e} s; finished at dt = {dt:e} s"
+                    ),
                         ..o
                     })
                 }
@@ -192,7 +197,12 @@ fn retry(cfg: &BatchConfig, ready: &Ready, first: Failure, cancel: &AtomicBool) 
 /// Add the derivatives of a finished point's recorded readings (at the RK4 step it finished
 /// with, a retry's included) with respect to the batch's sensitivity names; a point whose
 /// names cannot be differentiated becomes invalid with the reason. `None` if cancelled.
-fn add_sensitivities(cfg: &BatchConfig, ready: &Ready, mut out: PointOutput, cancel: &AtomicBool) -> Option<PointOutput> {
+fn add_sensitivities(
+    cfg: &BatchConfig,
+    ready: &Ready,
+    mut out: PointOutput,
+    cancel: &AtomicBool,
+) -> Option<PointOutput> {
     if cfg.sensitivities.is_empty() || !matches!(out.metrics.status, Status::Ok | Status::Retried) {
         return Some(out);
     }
@@ -205,11 +215,26 @@ fn add_sensitivities(cfg: &BatchConfig, ready: &Ready, mut out: PointOutput, can
     };
     // a retry halves the step and doubles the steps between recorded readings
     let every = cfg.record_every * (dt / dt_used).round().max(1.0) as usize;
-    let schedule = Schedule { every, also_last: false };
+    let schedule = Schedule {
+        every,
+        also_last: false,
+    };
     let method = Method::Rk4 { dt: dt_used };
     let (t_start, t_end) = (ready.spec.t_start, ready.spec.t_end(cfg));
     let held = Held::default();
-    let d = derivatives(&ready.model, &ready.spec.wave, t_start, t_end, &ready.y0, &method, &held, schedule, &seeds, ready.spec.normal_force_derived, cancel)?;
+    let d = derivatives(
+        &ready.model,
+        &ready.spec.wave,
+        t_start,
+        t_end,
+        &ready.y0,
+        &method,
+        &held,
+        schedule,
+        &seeds,
+        ready.spec.normal_force_derived,
+        cancel,
+    )?;
     match d {
         Ok(d) => {
             let (n, nt) = (d.names, d.readings.len() / d.names.max(1));

@@ -23,11 +23,7 @@ pub struct BatchRunner {
 
 impl BatchRunner {
     /// Start `points` (each built, or the reason it could not be) on `threads` worker threads.
-    pub fn start(
-        cfg: BatchConfig,
-        points: Vec<Result<PointSpec, String>>,
-        threads: usize,
-    ) -> Result<Self, String> {
+    pub fn start(cfg: BatchConfig, points: Vec<Result<PointSpec, String>>, threads: usize) -> Result<Self, String> {
         cfg.validate()?;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -51,9 +47,7 @@ impl BatchRunner {
                     }
                 }
             }
-            let run = catch_unwind(AssertUnwindSafe(|| {
-                pool.install(|| run_batch(&cfg, &specs, &c2, &d2))
-            }));
+            let run = catch_unwind(AssertUnwindSafe(|| pool.install(|| run_batch(&cfg, &specs, &c2, &d2))));
             let mut results = match run {
                 Ok(r) => r.map_err(|e| e.to_string())?,
                 Err(_) => return Err("internal error in idm-rs batch (please report)".into()),
@@ -92,12 +86,7 @@ impl BatchRunner {
     pub fn wait(&self, timeout: f64) -> bool {
         let deadline = Instant::now() + Duration::from_secs_f64(timeout.clamp(0.0, 1e9));
         loop {
-            let finished = self
-                .handle
-                .lock()
-                .unwrap()
-                .as_ref()
-                .is_none_or(|h| h.is_finished());
+            let finished = self.handle.lock().unwrap().as_ref().is_none_or(|h| h.is_finished());
             if finished {
                 return true;
             }
@@ -110,12 +99,7 @@ impl BatchRunner {
 
     /// Wait for the end and take the outputs (in point order; `NotRun` where cancelled).
     pub fn join(&self) -> Result<Vec<PointOutput>, String> {
-        let handle = self
-            .handle
-            .lock()
-            .unwrap()
-            .take()
-            .ok_or("result already taken")?;
+        let handle = self.handle.lock().unwrap().take().ok_or("result already taken")?;
         handle
             .join()
             .map_err(|_| "internal error in idm-rs batch worker (please report)".to_string())?

@@ -219,7 +219,11 @@ mod tests {
 
     #[test]
     fn staircase_gives_its_step_backslip_and_velocity() {
-        let tr = Train { start: 0.0, period: 1e-3, cycles: 5 };
+        let tr = Train {
+            start: 0.0,
+            period: 1e-3,
+            cycles: 5,
+        };
         let mut s = CycleStats::new(Some(tr), 1, 10e-6);
         staircase(&mut s, 5, 0.0);
         let m = s.finish();
@@ -234,7 +238,11 @@ mod tests {
 
     #[test]
     fn a_run_shorter_than_the_skipped_cycles_has_no_metrics() {
-        let tr = Train { start: 0.0, period: 1e-3, cycles: 5 };
+        let tr = Train {
+            start: 0.0,
+            period: 1e-3,
+            cycles: 5,
+        };
         let mut s = CycleStats::new(Some(tr), 5, 10e-6);
         staircase(&mut s, 5, 0.0);
         assert!(s.finish().step_mean.is_nan());
@@ -243,7 +251,11 @@ mod tests {
 
     #[test]
     fn a_tiny_net_motion_is_a_stall() {
-        let tr = Train { start: 0.0, period: 1e-3, cycles: 3 };
+        let tr = Train {
+            start: 0.0,
+            period: 1e-3,
+            cycles: 3,
+        };
         let mut s = CycleStats::new(Some(tr), 0, 10e-6);
         s.start(0.0, 0.0);
         for k in 1..=3 {

@@ -18,8 +18,25 @@ pub const MAX_DOF: usize = 6;
 /// in the adaptive method's error norm (`Model::state_scales`). The node count and whether
 /// hysteresis is on are compile-time constants of the kernel (`IDM_N`, `IDM_HYST`).
 pub const SCALARS: [&str; 19] = [
-    "KP", "D33", "FC", "FS_FC", "INV_VS", "DELTA", "FRIC_N", "A", "B", "C", "SIGMA1", "SIGMA2", "EPS",
-    "HYST_AP_D33", "HYST_BP", "HYST_CP", "F_CONST", "FH_BOUND", "OMEGA_LPS",
+    "KP",
+    "D33",
+    "FC",
+    "FS_FC",
+    "INV_VS",
+    "DELTA",
+    "FRIC_N",
+    "A",
+    "B",
+    "C",
+    "SIGMA1",
+    "SIGMA2",
+    "EPS",
+    "HYST_AP_D33",
+    "HYST_BP",
+    "HYST_CP",
+    "F_CONST",
+    "FH_BOUND",
+    "OMEGA_LPS",
 ];
 /// Number of scalars before the matrices.
 pub const N_SCALARS: usize = SCALARS.len();
@@ -31,25 +48,58 @@ pub const N_SCALARS: usize = SCALARS.len();
 /// kernel reads it), the effects (none), the waveform families with the fields it evaluates,
 /// the structures and the metrics it computes (`step_per_cycle` is x1 / cycles, on the host).
 pub const PARAMS: [&str; 24] = [
-    "m1", "m2", "pe_area", "pe_youngs", "pe_length", "pe_density", "d33", "rayleigh_alpha", "rayleigh_beta",
-    "hyst_alpha", "hyst_beta", "hyst_gamma", "fric_alpha", "fric_beta", "fric_gamma", "fric_n",
-    "stribeck_velocity", "stribeck_exponent", "mu_k", "mu_s", "sigma1", "sigma2", "load_force", "normal_force",
+    "m1",
+    "m2",
+    "pe_area",
+    "pe_youngs",
+    "pe_length",
+    "pe_density",
+    "d33",
+    "rayleigh_alpha",
+    "rayleigh_beta",
+    "hyst_alpha",
+    "hyst_beta",
+    "hyst_gamma",
+    "fric_alpha",
+    "fric_beta",
+    "fric_gamma",
+    "fric_n",
+    "stribeck_velocity",
+    "stribeck_exponent",
+    "mu_k",
+    "mu_s",
+    "sigma1",
+    "sigma2",
+    "load_force",
+    "normal_force",
 ];
 /// Effects the kernel implements (none: each must be at its no-effect value).
 pub const EFFECTS: [&str; 0] = [];
 /// Waveform families and the fields the kernel evaluates them from.
 pub const WAVES: [(&str, &[&str]); 2] = [
     ("triangle", &["amplitude", "rise", "fall", "delay"]),
-    ("sawtooth", &["amplitude", "frequency", "cycles", "rise", "forward", "delay"]),
+    (
+        "sawtooth",
+        &["amplitude", "frequency", "cycles", "rise", "forward", "delay"],
+    ),
 ];
 /// Metrics the kernel backends return.
-pub const METRICS: [&str; 5] = ["final_position", "step_per_cycle", "peak_velocity", "peak_friction", "slip_fraction"];
+pub const METRICS: [&str; 5] = [
+    "final_position",
+    "step_per_cycle",
+    "peak_velocity",
+    "peak_friction",
+    "slip_fraction",
+];
 /// Structures: the LPS and the DPS with 1 to MAX_DOF - 1 elements.
 pub const STRUCTURES: [&str; 2] = ["lps", "dps"];
 
 /// The offset of scalar `name` in a point's constants (a panic names an undeclared one).
 fn at(name: &str) -> usize {
-    SCALARS.iter().position(|s| *s == name).unwrap_or_else(|| panic!("kernel constant {name} is not declared"))
+    SCALARS
+        .iter()
+        .position(|s| *s == name)
+        .unwrap_or_else(|| panic!("kernel constant {name} is not declared"))
 }
 
 /// The C preprocessor lines that give the kernel its layout: `IDM_MAX_DOF`, `IDM_N_SCALARS` and
@@ -77,10 +127,15 @@ pub const N_CONSTANTS: usize = N_SCALARS + 2 * MAX_DOF * MAX_DOF + 2 * MAX_DOF;
 pub fn kernel_constants(model: &Model) -> Result<Vec<f64>, String> {
     let n = model.layout.dof;
     if n > MAX_DOF {
-        return Err(format!("the GPU kernel holds at most {MAX_DOF} nodes (DPS with {} elements); got {n}", MAX_DOF - 1));
+        return Err(format!(
+            "the GPU kernel holds at most {MAX_DOF} nodes (DPS with {} elements); got {n}",
+            MAX_DOF - 1
+        ));
     }
     if !model.is_plain() || model.effects != crate::physics::effects::Effects::default() {
-        return Err("the GPU kernel runs the paper's model only: switch every effect off (or use the CPU backend)".into());
+        return Err(
+            "the GPU kernel runs the paper's model only: switch every effect off (or use the CPU backend)".into(),
+        );
     }
     if matches!(model.actuator, crate::physics::mechanics::Actuator::Rig(_)) {
         return Err("the GPU kernel runs the IDM, not a rig".into());
@@ -88,7 +143,9 @@ pub fn kernel_constants(model: &Model) -> Result<Vec<f64>, String> {
     let mut c = vec![0.0; N_CONSTANTS];
     c[at("KP")] = model.kp;
     c[at("D33")] = model.d33;
-    let friction = ["FC", "FS_FC", "INV_VS", "DELTA", "FRIC_N", "A", "B", "C", "SIGMA1", "SIGMA2", "EPS"];
+    let friction = [
+        "FC", "FS_FC", "INV_VS", "DELTA", "FRIC_N", "A", "B", "C", "SIGMA1", "SIGMA2", "EPS",
+    ];
     for (name, v) in friction.iter().zip(model.friction.constants()) {
         c[at(name)] = v;
     }
@@ -102,7 +159,10 @@ pub fn kernel_constants(model: &Model) -> Result<Vec<f64>, String> {
     let p = &model.params;
     c[at("OMEGA_LPS")] = (p.kp() * (1.0 / p.m1 + 1.0 / p.m2)).sqrt();
     let (mk, mc) = (N_SCALARS, N_SCALARS + MAX_DOF * MAX_DOF);
-    let (m0, ml) = (N_SCALARS + 2 * MAX_DOF * MAX_DOF, N_SCALARS + 2 * MAX_DOF * MAX_DOF + MAX_DOF);
+    let (m0, ml) = (
+        N_SCALARS + 2 * MAX_DOF * MAX_DOF,
+        N_SCALARS + 2 * MAX_DOF * MAX_DOF + MAX_DOF,
+    );
     for i in 0..n {
         for j in 0..n {
             c[mk + i * MAX_DOF + j] = model.mech.minv_k[i * n + j];
@@ -128,17 +188,31 @@ mod tests {
         // The name after each `IDM_C_` is the identifier that follows (read through `c[...]`
         // or passed to a macro such as IDM_RARE).
         fn ident(s: &str) -> &str {
-            s.split(|ch: char| !(ch.is_ascii_alphanumeric() || ch == '_')).next().unwrap_or("")
+            s.split(|ch: char| !(ch.is_ascii_alphanumeric() || ch == '_'))
+                .next()
+                .unwrap_or("")
         }
         let used: Vec<&str> = src.split("IDM_C_").skip(1).map(ident).collect();
         for u in used {
-            assert!(SCALARS.contains(&u), "the kernel reads IDM_C_{u}, which gpu/kernel.rs does not declare");
+            assert!(
+                SCALARS.contains(&u),
+                "the kernel reads IDM_C_{u}, which gpu/kernel.rs does not declare"
+            );
         }
-        assert!(!src.contains("#define IDM_N_SCALARS"), "the layout comes from kernel_header(), not the source");
+        assert!(
+            !src.contains("#define IDM_N_SCALARS"),
+            "the layout comes from kernel_header(), not the source"
+        );
         let h = kernel_header();
         assert!(h.contains("#define IDM_C_OMEGA_LPS 18") && h.contains(&format!("#define IDM_N_SCALARS {N_SCALARS}")));
-        assert!(h.contains("#define IDM_CRAWL_CHECK_STEPS 4096\n") && h.contains("#define IDM_MAX_ADAPTIVE_STEPS 1e8\n"), "{h}");
-        assert!(src.contains("IDM_MAX_ADAPTIVE_STEPS") && src.contains("IDM_CRAWL_CHECK_STEPS"), "the kernel stops crawling runs");
+        assert!(
+            h.contains("#define IDM_CRAWL_CHECK_STEPS 4096\n") && h.contains("#define IDM_MAX_ADAPTIVE_STEPS 1e8\n"),
+            "{h}"
+        );
+        assert!(
+            src.contains("IDM_MAX_ADAPTIVE_STEPS") && src.contains("IDM_CRAWL_CHECK_STEPS"),
+            "the kernel stops crawling runs"
+        );
     }
 
     /// Every parameter the kernel claims reaches its constants: perturbed alone, it changes
@@ -149,8 +223,14 @@ mod tests {
         use crate::batch::WaveFamily;
         use crate::physics::params::{Params, PARAM_NAMES};
         let config = |p: Params| {
-            Model::new(p, crate::physics::effects::Effects::default(), crate::physics::mechanics::Structure::Dps(4), true, false)
-                .expect("the paper's device builds")
+            Model::new(
+                p,
+                crate::physics::effects::Effects::default(),
+                crate::physics::mechanics::Structure::Dps(4),
+                true,
+                false,
+            )
+            .expect("the paper's device builds")
         };
         let base = Params::paper();
         let c0 = kernel_constants(&config(base)).unwrap();

@@ -64,8 +64,13 @@ mod tests {
     fn a_crawling_run_is_stopped_with_the_projected_count() {
         let n = CRAWL_CHECK_STEPS;
         // 4,096 steps covered 4.096e-9 s of a 1 ms run: 1e9 steps to go
-        let why = CrawlWatch::new(0.0).observe(n, 4.096e-9, 1e-3, "use rodas4").expect("crawling");
-        assert!(why.starts_with(CRAWL_PREFIX) && why.contains("1.0e9") && why.contains("use rodas4"), "{why}");
+        let why = CrawlWatch::new(0.0)
+            .observe(n, 4.096e-9, 1e-3, "use rodas4")
+            .expect("crawling");
+        assert!(
+            why.starts_with(CRAWL_PREFIX) && why.contains("1.0e9") && why.contains("use rodas4"),
+            "{why}"
+        );
         // a paper-case pace (30,000 steps per 10 ms) is not
         assert!(CrawlWatch::new(0.0).observe(n, n as f64 * 3.3e-7, 10e-3, "").is_none());
         // just inside the limit is not; just outside is
@@ -73,8 +78,14 @@ mod tests {
         let window = |factor: f64| n as f64 * t_end / (MAX_ADAPTIVE_STEPS * factor);
         assert!(CrawlWatch::new(0.0).observe(n, window(0.99), t_end, "").is_none());
         assert!(CrawlWatch::new(0.0).observe(n, window(1.01), t_end, "").is_some());
-        assert!(CrawlWatch::new(0.0).observe(n - 1, 1e-20, 1e-3, "").is_none(), "only every CRAWL_CHECK_STEPS");
-        assert!(CrawlWatch::new(0.0).observe(n, 0.0, 1e-3, "").is_some(), "no progress at all");
+        assert!(
+            CrawlWatch::new(0.0).observe(n - 1, 1e-20, 1e-3, "").is_none(),
+            "only every CRAWL_CHECK_STEPS"
+        );
+        assert!(
+            CrawlWatch::new(0.0).observe(n, 0.0, 1e-3, "").is_some(),
+            "no progress at all"
+        );
     }
 
     #[test]
@@ -89,6 +100,9 @@ mod tests {
         }
         // the mean since the start would still be ~1.6e-7 s, a few hundred thousand steps to go
         t += n as f64 * 1e-13;
-        assert!(w.observe(21 * n, t, 30e-3, "").is_some(), "caught in the first window at the new pace");
+        assert!(
+            w.observe(21 * n, t, 30e-3, "").is_some(),
+            "caught in the first window at the new pace"
+        );
     }
 }

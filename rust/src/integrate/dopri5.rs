@@ -3,25 +3,25 @@
 //! segment end (the next input breakpoint or the end of the run) and it lands there exactly,
 //! never stepping across a kink of the input (the method's order would be lost there).
 
-use crate::numbers::scalar::Scalar;
-use crate::integrate::stepper::{AdaptiveOptions, AdaptiveStats, Attempt, Controller, Rhs, State, Stepper, HELD_EXHAUSTED};
-use crate::integrate::stiffness::h_lambda;
 #[cfg(test)]
 use crate::integrate::stepper::Held;
+use crate::integrate::stepper::{
+    AdaptiveOptions, AdaptiveStats, Attempt, Controller, Rhs, State, Stepper, HELD_EXHAUSTED,
+};
+use crate::integrate::stiffness::h_lambda;
+use crate::numbers::scalar::Scalar;
 
 /// Dormand-Prince's control: a 4th-order embedded estimate (q = 5), growth up to 5x.
-pub(crate) const CONTROL: Controller = Controller { exponent: 0.2, max_growth: 5.0 };
+pub(crate) const CONTROL: Controller = Controller {
+    exponent: 0.2,
+    max_growth: 5.0,
+};
 
 pub(crate) const C: [f64; 7] = [0.0, 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0, 1.0, 1.0];
 pub(crate) const A2: [f64; 1] = [1.0 / 5.0];
 pub(crate) const A3: [f64; 2] = [3.0 / 40.0, 9.0 / 40.0];
 pub(crate) const A4: [f64; 3] = [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0];
-pub(crate) const A5: [f64; 4] = [
-    19372.0 / 6561.0,
-    -25360.0 / 2187.0,
-    64448.0 / 6561.0,
-    -212.0 / 729.0,
-];
+pub(crate) const A5: [f64; 4] = [19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0];
 pub(crate) const A6: [f64; 5] = [
     9017.0 / 3168.0,
     -355.0 / 33.0,
@@ -77,9 +77,7 @@ impl<S: State, const L: usize> Dopri5<S, L> {
     /// Buffers shaped like `zero` (all zeros), one set of options per lane.
     pub fn new(opts: [AdaptiveOptions; L], zero: S) -> Self {
         let h = std::array::from_fn(|i| opts[i].h_init.min(opts[i].h_max));
-        let in_norm = std::array::from_fn(|i| {
-            opts[i].scale.iter().filter(|s| s.is_finite()).count().max(1) as f64
-        });
+        let in_norm = std::array::from_fn(|i| opts[i].scale.iter().filter(|s| s.is_finite()).count().max(1) as f64);
         Dopri5 {
             k: std::array::from_fn(|_| std::array::from_fn(|_| zero.clone())),
             tmp: std::array::from_fn(|_| zero.clone()),
@@ -200,9 +198,21 @@ impl<S: State, const L: usize> Stepper<S, L> for Dopri5<S, L> {
             let o = &self.opts[i];
             if err <= 1.0 || !o.held.is_empty() {
                 if self.detect {
-                    let (y6, k6, y7, k7) = (self.tmp[i].as_ref(), self.k[5][i].as_ref(), self.y_new[i].as_ref(), self.k[6][i].as_ref());
-                    let hl = h_lambda(step[i], y7.len(), |c| o.scale[c], |c| y6[c].value(), |c| k6[c].value(),
-                                      |c| y7[c].value(), |c| k7[c].value());
+                    let (y6, k6, y7, k7) = (
+                        self.tmp[i].as_ref(),
+                        self.k[5][i].as_ref(),
+                        self.y_new[i].as_ref(),
+                        self.k[6][i].as_ref(),
+                    );
+                    let hl = h_lambda(
+                        step[i],
+                        y7.len(),
+                        |c| o.scale[c],
+                        |c| y6[c].value(),
+                        |c| k6[c].value(),
+                        |c| y7[c].value(),
+                        |c| k7[c].value(),
+                    );
                     self.h_lambda[i] = hl;
                 }
                 ys[i].as_mut().copy_from_slice(self.y_new[i].as_ref());
@@ -250,7 +260,14 @@ impl<S: State, const L: usize> Dopri5<S, L> {
 
 /// out = y + h sum_j a_j k_j
 #[inline(always)]
-fn combine<T: Scalar, S: AsRef<[T]>, const L: usize>(out: &mut [T], y: &[T], h: f64, a: &[f64], k: &[[S; L]; 7], lane: usize) {
+fn combine<T: Scalar, S: AsRef<[T]>, const L: usize>(
+    out: &mut [T],
+    y: &[T],
+    h: f64,
+    a: &[f64],
+    k: &[[S; L]; 7],
+    lane: usize,
+) {
     for i in 0..out.len() {
         let mut s = T::zero();
         for (j, aj) in a.iter().enumerate() {

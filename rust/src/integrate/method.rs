@@ -12,9 +12,21 @@ pub struct MethodDecl {
 
 /// Every method, the reference first.
 pub const METHODS: &[MethodDecl] = &[
-    MethodDecl { name: "rk4", adaptive: false, meaning: "fixed-step classical Runge-Kutta 4 (the reference)" },
-    MethodDecl { name: "dopri5", adaptive: true, meaning: "Dormand-Prince 5(4), explicit, adaptive" },
-    MethodDecl { name: "rodas4", adaptive: true, meaning: "Rodas4, linearly implicit, L-stable, adaptive" },
+    MethodDecl {
+        name: "rk4",
+        adaptive: false,
+        meaning: "fixed-step classical Runge-Kutta 4 (the reference)",
+    },
+    MethodDecl {
+        name: "dopri5",
+        adaptive: true,
+        meaning: "Dormand-Prince 5(4), explicit, adaptive",
+    },
+    MethodDecl {
+        name: "rodas4",
+        adaptive: true,
+        meaning: "Rodas4, linearly implicit, L-stable, adaptive",
+    },
     MethodDecl {
         name: "auto",
         adaptive: true,
@@ -44,20 +56,15 @@ impl Method {
     pub fn from_name(name: &str, dt: f64, rtol: f64, atol: f64, first_step: f64) -> Result<Self, String> {
         let m = match name {
             "rk4" => Method::Rk4 { dt },
-            "dopri5" => Method::Dopri5 {
-                rtol,
-                atol,
-                first_step,
-            },
-            "rodas4" => Method::Rodas4 {
-                rtol,
-                atol,
-                first_step,
-            },
+            "dopri5" => Method::Dopri5 { rtol, atol, first_step },
+            "rodas4" => Method::Rodas4 { rtol, atol, first_step },
             "auto" => Method::Auto { rtol, atol, first_step },
             other => {
                 let names: Vec<String> = METHODS.iter().map(|d| format!("'{}'", d.name)).collect();
-                return Err(format!("parameter 'method' must be one of {}, got '{other}'", names.join(", ")));
+                return Err(format!(
+                    "parameter 'method' must be one of {}, got '{other}'",
+                    names.join(", ")
+                ));
             }
         };
         m.validate()?;
@@ -95,21 +102,11 @@ impl Method {
                     return Err(format!("parameter 'dt' must be positive and finite, got {dt}"));
                 }
             }
-            Method::Dopri5 {
-                rtol,
-                atol,
-                first_step,
-            }
-            | Method::Rodas4 {
-                rtol,
-                atol,
-                first_step,
-            }
+            Method::Dopri5 { rtol, atol, first_step }
+            | Method::Rodas4 { rtol, atol, first_step }
             | Method::Auto { rtol, atol, first_step } => {
                 if !(rtol > 0.0 && atol > 0.0 && rtol.is_finite() && atol.is_finite()) {
-                    return Err(format!(
-                        "'rtol' and 'atol' must be positive, got {rtol}, {atol}"
-                    ));
+                    return Err(format!("'rtol' and 'atol' must be positive, got {rtol}, {atol}"));
                 }
                 if !(first_step.is_finite() && first_step > 0.0) {
                     return Err(format!(

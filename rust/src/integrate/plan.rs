@@ -13,13 +13,7 @@ pub const RK4_STABLE_OMEGA_DT: f64 = 2.5;
 /// Number of RK4 steps of `dt` from `t_start` to `t_end`, refusing a `dt` that does not divide
 /// them into whole steps or the input's breakpoints, or that the structure's highest mode or a
 /// fast effect lag makes unstable. The message names the parameter and a step that works.
-pub fn plan_steps(
-    model: &Model,
-    wave: &PiecewiseLinear,
-    t_start: f64,
-    t_end: f64,
-    dt: f64,
-) -> Result<usize, SimError> {
+pub fn plan_steps(model: &Model, wave: &PiecewiseLinear, t_start: f64, t_end: f64, dt: f64) -> Result<usize, SimError> {
     if !(dt.is_finite() && dt > 0.0) {
         return Err(SimError::Input(format!(
             "parameter 'dt' must be positive and finite, got {dt}"
@@ -77,9 +71,16 @@ pub fn plan_steps(
             .map(|d| format!(" (dt = {d:e} s fits this input)"))
             .unwrap_or_default();
         let mode = if fastest.im.abs() < 1e-9 * fastest.norm() {
-            format!("an overdamped mode at {:.4e} 1/s, from the stiffness-proportional damping", -fastest.re)
+            format!(
+                "an overdamped mode at {:.4e} 1/s, from the stiffness-proportional damping",
+                -fastest.re
+            )
         } else {
-            format!("{:.4e} rad/s, damping ratio {:.2}", fastest.norm(), -fastest.re / fastest.norm())
+            format!(
+                "{:.4e} rad/s, damping ratio {:.2}",
+                fastest.norm(),
+                -fastest.re / fastest.norm()
+            )
         };
         return Err(SimError::Input(format!(
             "dt = {dt:e} s is unstable for the structure's fastest mode ({mode}); use dt <= {limit:.3e} s{works}, \
@@ -184,9 +185,7 @@ pub fn check_span(t_start: f64, t_end: f64) -> Result<(), SimError> {
 /// Check a run's settings before any work: the span, and for RK4 the step plan.
 pub fn check_task(task: &Task, method: &Method) -> Result<(), SimError> {
     method.validate().map_err(SimError::Input)?;
-    task.model
-        .check_state(task.y0)
-        .map_err(SimError::Input)?;
+    task.model.check_state(task.y0).map_err(SimError::Input)?;
     match *method {
         Method::Rk4 { dt } => plan_steps(task.model, task.wave, task.t_start, task.t_end, dt).map(|_| ()),
         Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => check_span(task.t_start, task.t_end),
@@ -209,10 +208,22 @@ pub fn divergence_message(
     let l = model.layout;
     let stiff = model.friction.sliding_stiffness(v_last);
     let structure = rk4_structure_limit(&model.mech.eigenvalues()).0;
-    let friction = if stiff.is_finite() && stiff > 0.0 { RK4_STABLE_OMEGA_DT / stiff } else { f64::INFINITY };
-    let stable = if structure.min(friction).is_finite() { structure.min(friction) } else { f64::NAN };
+    let friction = if stiff.is_finite() && stiff > 0.0 {
+        RK4_STABLE_OMEGA_DT / stiff
+    } else {
+        f64::INFINITY
+    };
+    let stable = if structure.min(friction).is_finite() {
+        structure.min(friction)
+    } else {
+        f64::NAN
+    };
     // RK4 failed at dt: the hint is below it, and a blown-up estimate is not trusted below dt/64
-    let raw = if stable.is_finite() { stable.clamp(dt / 64.0, dt / 2.0) } else { dt / 4.0 };
+    let raw = if stable.is_finite() {
+        stable.clamp(dt / 64.0, dt / 2.0)
+    } else {
+        dt / 4.0
+    };
     let hint = fit
         .and_then(|(wave, t0, t1)| fitting_step(wave, t0, t1, raw))
         .unwrap_or(raw);
@@ -258,7 +269,10 @@ mod tests {
         let (h, fastest) = rk4_structure_limit(&m.eigenvalues());
         let undamped = RK4_STABLE_OMEGA_DT / m.highest_frequency();
         assert!(h < 0.5 * undamped, "limit {h:e} vs undamped {undamped:e}");
-        assert!(fastest.re < 0.0 && fastest.im.abs() < 1e-6 * fastest.norm(), "{fastest}");
+        assert!(
+            fastest.re < 0.0 && fastest.im.abs() < 1e-6 * fastest.norm(),
+            "{fastest}"
+        );
         // and a coarse bar is still held by its undamped frequency
         let m = Mechanics::new(&p, Structure::Dps(4)).unwrap();
         let (h, _) = rk4_structure_limit(&m.eigenvalues());

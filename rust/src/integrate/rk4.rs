@@ -8,8 +8,8 @@
 //! exp and a division), and interleaving independent lanes fills the idle execution units. Each
 //! lane's arithmetic is exactly that of a one-lane step.
 
-use crate::numbers::scalar::Scalar;
 use crate::integrate::stepper::{Attempt, Rhs, State, Stepper};
+use crate::numbers::scalar::Scalar;
 
 /// RK4's slack on the presliding bound [relative]: it may overshoot by its truncation error.
 pub const BOUND_SLACK: f64 = 1e-6;

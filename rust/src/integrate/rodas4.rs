@@ -6,13 +6,18 @@
 //! ([`Rhs::jacobian`]; the model's is analytic). Like `dopri5` it lands on every input
 //! breakpoint and keeps one step size per lane.
 
-use crate::numbers::scalar::Scalar;
 #[cfg(test)]
 use crate::integrate::stepper::Held;
-use crate::integrate::stepper::{AdaptiveOptions, AdaptiveStats, Attempt, Controller, Rhs, State, Stepper, HELD_EXHAUSTED, OUT_OF_DOMAIN};
+use crate::integrate::stepper::{
+    AdaptiveOptions, AdaptiveStats, Attempt, Controller, Rhs, State, Stepper, HELD_EXHAUSTED, OUT_OF_DOMAIN,
+};
+use crate::numbers::scalar::Scalar;
 
 /// Rodas4's control: a 3rd-order embedded estimate (q = 4), growth up to 6x.
-const CONTROL: Controller = Controller { exponent: 0.25, max_growth: 6.0 };
+const CONTROL: Controller = Controller {
+    exponent: 0.25,
+    max_growth: 6.0,
+};
 
 const GAMMA: f64 = 0.25;
 /// stage times (fractions of the step)
@@ -46,7 +51,11 @@ const CC: [&[f64]; 6] = [
     &[],
     &[-0.5668800000000000e+01],
     &[-0.2430093356833875e+01, -0.2063599157091915e+00],
-    &[-0.1073529058151375e+00, -0.9594562251023355e+01, -0.2047028614809616e+02],
+    &[
+        -0.1073529058151375e+00,
+        -0.9594562251023355e+01,
+        -0.2047028614809616e+02,
+    ],
     &[
         0.7496443313967647e+01,
         -0.1024680431464352e+02,
@@ -100,9 +109,7 @@ impl<S: State, const L: usize, const D: usize> Rodas4<S, L, D> {
             lu: vec![[z; L]; d * d],
             pivot: vec![[0; L]; d],
             h: std::array::from_fn(|i| opts[i].h_init.min(opts[i].h_max)),
-            in_norm: std::array::from_fn(|i| {
-                opts[i].scale.iter().filter(|s| s.is_finite()).count().max(1) as f64
-            }),
+            in_norm: std::array::from_fn(|i| opts[i].scale.iter().filter(|s| s.is_finite()).count().max(1) as f64),
             stats: [AdaptiveStats::default(); L],
             opts,
         }
@@ -179,8 +186,8 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Rodas4<S, L, D>
             self.stats[i].evaluations += 6;
             let err = if ok[i] {
                 let e = self.finish(i, ys[i].as_ref()); // NaN when the state blew up
-                // a state the model rules out (presliding force beyond its bound) is an
-                // overshoot of the linearisation: the relative tolerance would grow with it
+                                                        // a state the model rules out (presliding force beyond its bound) is an
+                                                        // overshoot of the linearisation: the relative tolerance would grow with it
                 if f.admissible(i, self.y_stage[i].as_ref()) {
                     e
                 } else {
@@ -487,7 +494,11 @@ mod tests {
         let ok = lu_factor::<f64, 3, 3>(&mut a, &mut p, 3, &[true; 3]);
         assert_eq!(ok, [true, true, false]);
         assert_ne!(p[0][0], 0);
-        assert_eq!([p[0][1], p[1][1], p[2][1]], [0, 1, 2], "the diagonally dominant lane keeps its rows");
+        assert_eq!(
+            [p[0][1], p[1][1], p[2][1]],
+            [0, 1, 2],
+            "the diagonally dominant lane keeps its rows"
+        );
         let mut b = vec![[5.0, 1.0, 0.0], [3.0, 2.0, 0.0], [6.0, 3.0, 0.0]];
         lu_solve::<f64, 3, 3>(&a, &p, &mut b);
         for i in 0..2 {

@@ -158,7 +158,6 @@ pub struct AdaptiveStats {
     pub evaluations: u64,
 }
 
-
 /// The message of a lane whose held steps ran out before its end.
 pub(crate) const HELD_EXHAUSTED: &str = "the held steps ended before the run did";
 

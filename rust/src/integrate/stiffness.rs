@@ -92,8 +92,15 @@ impl StiffnessTest {
 /// through `get(array, component)` and measured in units of its error scale (components with
 /// an infinite scale are left out, as in the error norm). 0 when the two states coincide.
 #[inline(always)]
-pub fn h_lambda(step: f64, d: usize, scale: impl Fn(usize) -> f64, y6: impl Fn(usize) -> f64, k6: impl Fn(usize) -> f64,
-                y7: impl Fn(usize) -> f64, k7: impl Fn(usize) -> f64) -> f64 {
+pub fn h_lambda(
+    step: f64,
+    d: usize,
+    scale: impl Fn(usize) -> f64,
+    y6: impl Fn(usize) -> f64,
+    k6: impl Fn(usize) -> f64,
+    y7: impl Fn(usize) -> f64,
+    k7: impl Fn(usize) -> f64,
+) -> f64 {
     let (mut num, mut den) = (0.0, 0.0);
     for c in 0..d {
         let s = scale(c);
@@ -130,7 +137,10 @@ mod tests {
         for _ in 0..6 {
             t.observe(1.0, STIFF_STEPS);
         }
-        assert!(!t.observe(3.3, STIFF_STEPS), "six steps below the limit reset the count");
+        assert!(
+            !t.observe(3.3, STIFF_STEPS),
+            "six steps below the limit reset the count"
+        );
     }
 
     #[test]
@@ -141,8 +151,15 @@ mod tests {
         let hl = h_lambda(1e-3, 2, |_| 1.0, |c| y6[c], |c| f(&y6, c), |c| y7[c], |c| f(&y7, c));
         assert!((hl - 1.0).abs() < 1e-9, "{hl}");
         // an infinite scale leaves a component out
-        let hl = h_lambda(1e-3, 2, |c| if c == 1 { f64::INFINITY } else { 1.0 }, |c| y6[c], |c| f(&y6, c), |c| y7[c],
-                          |c| f(&y7, c));
+        let hl = h_lambda(
+            1e-3,
+            2,
+            |c| if c == 1 { f64::INFINITY } else { 1.0 },
+            |c| y6[c],
+            |c| f(&y6, c),
+            |c| y7[c],
+            |c| f(&y7, c),
+        );
         assert_eq!(hl, 0.0);
     }
 }

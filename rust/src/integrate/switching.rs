@@ -15,8 +15,8 @@ use crate::integrate::dopri5::{Dopri5, EXPLICIT_CRAWL_HINT};
 use crate::integrate::rodas4::{Rodas4, IMPLICIT_CRAWL_HINT};
 use crate::integrate::stepper::{AdaptiveOptions, Attempt, Rhs, State, Stepper};
 use crate::integrate::stiffness::{
-    StiffnessTest, implicit_step_cost, switch_gain, STIFF_H_LAMBDA, MAX_RECHECK_BACKOFF, MAX_TRIAL_BACKOFF, PROBATION_STEPS, RECHECK_STEPS, TRY_IMPLICIT_AFTER,
-    TRIAL_FACTOR,
+    implicit_step_cost, switch_gain, StiffnessTest, MAX_RECHECK_BACKOFF, MAX_TRIAL_BACKOFF, PROBATION_STEPS,
+    RECHECK_STEPS, STIFF_H_LAMBDA, TRIAL_FACTOR, TRY_IMPLICIT_AFTER,
 };
 
 /// Tolerance of the implicit part relative to the explicit one: Rodas4 at rtol = atol = 1e-6
@@ -28,15 +28,29 @@ pub const IMPLICIT_TOL_FACTOR: f64 = 1e-6 / 3e-7;
 enum Mode {
     Explicit,
     /// the next attempt is a Rodas4 trial; the explicit step [s] to go back to if it fails
-    Trial { h_explicit: f64 },
+    Trial {
+        h_explicit: f64,
+    },
     /// on Rodas4 since time `since` [s], `steps` accepted steps so far, on probation
-    Probation { h_explicit: f64, since: f64, steps: u32 },
+    Probation {
+        h_explicit: f64,
+        since: f64,
+        steps: u32,
+    },
     /// on Rodas4 for good since time `since` [s], `steps` accepted steps in this window
-    Implicit { since: f64, steps: u32 },
+    Implicit {
+        since: f64,
+        steps: u32,
+    },
     /// Dormand-Prince steps since `since` [s] (`steps` accepted), checking whether they are now
     /// cheaper than Rodas4's mean step `h_implicit` [s] of the window before; `lambda` the
     /// largest |λ| [1/s] Hairer's estimate saw on them
-    Recheck { h_implicit: f64, since: f64, steps: u32, lambda: f64 },
+    Recheck {
+        h_implicit: f64,
+        since: f64,
+        steps: u32,
+        lambda: f64,
+    },
 }
 
 impl Mode {
@@ -173,7 +187,11 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Switching<S, L,
                 }
                 out[i] = match (self.mode[i], r) {
                     (Mode::Trial { h_explicit }, r @ Attempt::Accepted { .. }) => {
-                        self.mode[i] = Mode::Probation { h_explicit, since: t[i], steps: 1 };
+                        self.mode[i] = Mode::Probation {
+                            h_explicit,
+                            since: t[i],
+                            steps: 1,
+                        };
                         self.just_switched[i] = Some(self.explicit.accepted(i));
                         r
                     }
@@ -182,14 +200,28 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Switching<S, L,
                         self.back_to_explicit(i, h_explicit, self.explicit.accepted(i), false);
                         Attempt::Rejected
                     }
-                    (Mode::Probation { h_explicit, since, steps }, r @ Attempt::Accepted { step, last }) => {
+                    (
+                        Mode::Probation {
+                            h_explicit,
+                            since,
+                            steps,
+                        },
+                        r @ Attempt::Accepted { step, last },
+                    ) => {
                         let steps = steps + 1;
-                        self.mode[i] = Mode::Probation { h_explicit, since, steps };
+                        self.mode[i] = Mode::Probation {
+                            h_explicit,
+                            since,
+                            steps,
+                        };
                         if steps >= PROBATION_STEPS && !last {
                             // the mean implicit step against the explicit one it replaced
                             let mean = (t[i] + step - since) / steps as f64;
                             if mean >= switch_gain(ys[i].as_ref().len()) * h_explicit {
-                                self.mode[i] = Mode::Implicit { since: t[i] + step, steps: 0 };
+                                self.mode[i] = Mode::Implicit {
+                                    since: t[i] + step,
+                                    steps: 0,
+                                };
                                 self.kept[i] = 0;
                             } else {
                                 self.back_to_explicit(i, h_explicit, self.implicit.accepted(i), true);
@@ -214,7 +246,12 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Switching<S, L,
                             // has the stiff phase ended? Dormand-Prince from Rodas4's mean step
                             let h_implicit = (t[i] + step - since) / steps as f64;
                             let n = self.implicit.accepted(i);
-                            self.mode[i] = Mode::Recheck { h_implicit, since: t[i] + step, steps: 0, lambda: 0.0 };
+                            self.mode[i] = Mode::Recheck {
+                                h_implicit,
+                                since: t[i] + step,
+                                steps: 0,
+                                lambda: 0.0,
+                            };
                             self.explicit.take_over(i, h_implicit, n);
                             self.just_switched[i] = Some(n);
                         }
@@ -225,25 +262,45 @@ impl<S: State, const L: usize, const D: usize> Stepper<S, L> for Switching<S, L,
             }
         }
         for i in 0..L {
-            if let (true, Mode::Recheck { h_implicit, since, steps, lambda }, Attempt::Accepted { step, last }) =
-                (on_exp[i], self.mode[i], &out[i])
+            if let (
+                true,
+                Mode::Recheck {
+                    h_implicit,
+                    since,
+                    steps,
+                    lambda,
+                },
+                Attempt::Accepted { step, last },
+            ) = (on_exp[i], self.mode[i], &out[i])
             {
                 let steps = steps + 1;
                 let lambda = lambda.max(self.explicit.h_lambda[i] / step);
-                self.mode[i] = Mode::Recheck { h_implicit, since, steps, lambda };
+                self.mode[i] = Mode::Recheck {
+                    h_implicit,
+                    since,
+                    steps,
+                    lambda,
+                };
                 if steps >= PROBATION_STEPS && !*last {
                     let n = self.explicit.accepted(i);
                     // the explicit step: its mean, but no longer than its stability allows (the
                     // first steps past the limit are accepted while the unstable mode grows)
                     let mean = (t[i] + step - since) / steps as f64;
-                    let h_explicit = if lambda > 0.0 { mean.min(STIFF_H_LAMBDA / lambda) } else { mean };
+                    let h_explicit = if lambda > 0.0 {
+                        mean.min(STIFF_H_LAMBDA / lambda)
+                    } else {
+                        mean
+                    };
                     if h_explicit * implicit_step_cost(ys[i].as_ref().len()) >= h_implicit {
                         // the explicit steps are now the cheaper: back for good
                         self.mode[i] = Mode::Explicit;
                         self.test[i] = StiffnessTest::default();
                     } else {
                         // still stiff: Rodas4 again from its own step, the next check later
-                        self.mode[i] = Mode::Implicit { since: t[i] + step, steps: 0 };
+                        self.mode[i] = Mode::Implicit {
+                            since: t[i] + step,
+                            steps: 0,
+                        };
                         self.implicit.take_over(i, h_implicit, n);
                         self.kept[i] = (self.kept[i] + 1).min(MAX_RECHECK_BACKOFF);
                         self.just_switched[i] = Some(n);

@@ -62,16 +62,7 @@ pub trait Observer<T: Scalar = f64> {
     /// state the step started from when the integrator evaluated it (RK4's first stage);
     /// `last` marks the run's final step.
     #[allow(clippy::too_many_arguments)]
-    fn step(
-        &mut self,
-        task: usize,
-        t: f64,
-        span: f64,
-        y: &[T],
-        v_cmd: f64,
-        start: Option<(T, T)>,
-        last: bool,
-    );
+    fn step(&mut self, task: usize, t: f64, span: f64, y: &[T], v_cmd: f64, start: Option<(T, T)>, last: bool);
 
     /// An adaptive method's accepted step [s] for task `task`, exactly as the method took it
     /// (called before [`Observer::step`]; the span there is the difference of two times).
@@ -100,7 +91,13 @@ pub struct Resume {
 
 /// Adaptive options for a task: error scales from the model and the input's peak; `held`
 /// steps to take instead of choosing them (see [`AdaptiveOptions::held`]).
-pub(crate) fn adaptive_options<T: Scalar>(task: &Task<T>, rtol: f64, atol: f64, first_step: f64, held: &Held) -> AdaptiveOptions {
+pub(crate) fn adaptive_options<T: Scalar>(
+    task: &Task<T>,
+    rtol: f64,
+    atol: f64,
+    first_step: f64,
+    held: &Held,
+) -> AdaptiveOptions {
     let v_max = task.wave.peak();
     AdaptiveOptions {
         rtol,

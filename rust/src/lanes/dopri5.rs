@@ -9,12 +9,11 @@ use std::sync::atomic::AtomicBool;
 
 use crate::integrate::crawl::CrawlWatch;
 use crate::integrate::dopri5::{A2, A3, A4, A5, A6, B, C, CONTROL, E, EXPLICIT_CRAWL_HINT};
+use crate::integrate::stepper::{AdaptiveOptions, Attempt, Held};
+use crate::integrate::stiffness::{h_lambda, StiffnessTest, TRY_IMPLICIT_AFTER};
 use crate::integrate::task::{adaptive_options, LaneEnd, Observer, Resume, Task};
 use crate::lanes::{refill_lanes, LaneExp, PlainLanes, Queue};
-use crate::integrate::stiffness::{h_lambda, StiffnessTest, TRY_IMPLICIT_AFTER};
-use crate::integrate::stepper::{AdaptiveOptions, Attempt, Held};
 use crate::physics::waveform::Cursor;
-
 
 /// What one lane is running.
 struct Slot {
@@ -62,7 +61,14 @@ type TaskEnds = Vec<Option<(LaneEnd, Vec<f64>)>>;
 #[allow(clippy::too_many_arguments)]
 // lane loops index several [f64; L] arrays by the same lane/component on purpose
 #[allow(clippy::needless_range_loop)]
-pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize, const EXTRAS: bool, const L: usize>(
+pub fn run_dopri5_lanes<
+    O: Observer,
+    E2: LaneExp,
+    const N: usize,
+    const D: usize,
+    const EXTRAS: bool,
+    const L: usize,
+>(
     tasks: &[Task],
     rtol: f64,
     atol: f64,
@@ -87,27 +93,37 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
     let mut next = 0usize;
     let mut attempts = 0usize;
     loop {
-        let queue = refill_lanes(tasks, &mut next, &mut slots, &mut p, &mut y, observer, &mut attempts, cancel, |i, t| {
-            let task = &tasks[t];
-            let opts = adaptive_options(task, rtol, atol, first_step, &no_hold);
-            for j in 0..D {
-                scale[j][i] = opts.scale[j];
-            }
-            Slot {
-                task: t,
-                t: task.t_start,
-                cursor: Cursor::at(task.wave, task.t_start),
-                h: opts.h_init.min(opts.h_max),
-                in_norm: opts.scale.iter().filter(|s| s.is_finite()).count().max(1) as f64,
-                opts,
-                fresh: true,
-                v_last: task.y0[task.model.layout.dof],
-                steps: 0,
-                min_step: f64::INFINITY,
-                watch: CrawlWatch::new(task.t_start),
-                test: StiffnessTest::default(),
-            }
-        });
+        let queue = refill_lanes(
+            tasks,
+            &mut next,
+            &mut slots,
+            &mut p,
+            &mut y,
+            observer,
+            &mut attempts,
+            cancel,
+            |i, t| {
+                let task = &tasks[t];
+                let opts = adaptive_options(task, rtol, atol, first_step, &no_hold);
+                for j in 0..D {
+                    scale[j][i] = opts.scale[j];
+                }
+                Slot {
+                    task: t,
+                    t: task.t_start,
+                    cursor: Cursor::at(task.wave, task.t_start),
+                    h: opts.h_init.min(opts.h_max),
+                    in_norm: opts.scale.iter().filter(|s| s.is_finite()).count().max(1) as f64,
+                    opts,
+                    fresh: true,
+                    v_last: task.y0[task.model.layout.dof],
+                    steps: 0,
+                    min_step: f64::INFINITY,
+                    watch: CrawlWatch::new(task.t_start),
+                    test: StiffnessTest::default(),
+                }
+            },
+        );
         match queue {
             Queue::Go => {}
             Queue::Done => break,
@@ -195,8 +211,15 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
             let mut stiff = false;
             let attempt = if err <= 1.0 {
                 if auto {
-                    let hl = h_lambda(step[i], D, |c| scale[c][i], |c| tmp[c][i], |c| k[5][c][i], |c| y_new[c][i],
-                                      |c| k[6][c][i]);
+                    let hl = h_lambda(
+                        step[i],
+                        D,
+                        |c| scale[c][i],
+                        |c| tmp[c][i],
+                        |c| k[5][c][i],
+                        |c| y_new[c][i],
+                        |c| k[6][c][i],
+                    );
                     stiff = s.test.observe(hl, TRY_IMPLICIT_AFTER);
                 }
                 for j in 0..D {
@@ -204,7 +227,10 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
                     k[0][j][i] = k[6][j][i]; // first same as last
                 }
                 s.h = CONTROL.after_accept(err, step[i], last[i], s.h, &s.opts);
-                Attempt::Accepted { step: step[i], last: last[i] }
+                Attempt::Accepted {
+                    step: step[i],
+                    last: last[i],
+                }
             } else {
                 let (h, outcome) = CONTROL.after_reject(err, step[i], &s.opts);
                 s.h = h;
@@ -221,7 +247,14 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
                     let done = t_new >= task.t_end;
                     s.t = t_new;
                     if task.model.is_diverged(&lane_state, f64::INFINITY) {
-                        out[s.task] = Some((LaneEnd::Diverged { t: t_new, why: None, v_last: s.v_last }, lane_state.to_vec()));
+                        out[s.task] = Some((
+                            LaneEnd::Diverged {
+                                t: t_new,
+                                why: None,
+                                v_last: s.v_last,
+                            },
+                            lane_state.to_vec(),
+                        ));
                         slots[i] = None;
                         continue;
                     }
@@ -231,7 +264,14 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
                     if !done {
                         // as the scalar path (`drive.rs`): a collapsed step stops the run
                         if let Some(why) = s.watch.observe(s.steps, t_new, task.t_end, EXPLICIT_CRAWL_HINT) {
-                            out[s.task] = Some((LaneEnd::Diverged { t: t_new, why: Some(why), v_last: s.v_last }, lane_state.to_vec()));
+                            out[s.task] = Some((
+                                LaneEnd::Diverged {
+                                    t: t_new,
+                                    why: Some(why),
+                                    v_last: s.v_last,
+                                },
+                                lane_state.to_vec(),
+                            ));
                             slots[i] = None;
                             continue;
                         }
@@ -239,16 +279,40 @@ pub fn run_dopri5_lanes<O: Observer, E2: LaneExp, const N: usize, const D: usize
                     observer.accepted_step(s.task, step);
                     observer.step(s.task, t_new, span, &lane_state, v0[i] + slope[i] * step, None, done);
                     if done {
-                        out[s.task] = Some((LaneEnd::Finished { steps: s.steps, min_step: s.min_step }, lane_state.to_vec()));
+                        out[s.task] = Some((
+                            LaneEnd::Finished {
+                                steps: s.steps,
+                                min_step: s.min_step,
+                            },
+                            lane_state.to_vec(),
+                        ));
                         slots[i] = None;
                     } else if stiff {
-                        let resume = Resume { steps: s.steps, min_step: s.min_step, v_last: s.v_last, h: s.h, watch: s.watch };
-                        handoffs.push(Handoff { task: s.task, t: t_new, y: lane_state.to_vec(), resume });
+                        let resume = Resume {
+                            steps: s.steps,
+                            min_step: s.min_step,
+                            v_last: s.v_last,
+                            h: s.h,
+                            watch: s.watch,
+                        };
+                        handoffs.push(Handoff {
+                            task: s.task,
+                            t: t_new,
+                            y: lane_state.to_vec(),
+                            resume,
+                        });
                         slots[i] = None;
                     }
                 }
                 Attempt::Failed(why) => {
-                    out[s.task] = Some((LaneEnd::Diverged { t: s.t, why: Some(why), v_last: s.v_last }, lane_state.to_vec()));
+                    out[s.task] = Some((
+                        LaneEnd::Diverged {
+                            t: s.t,
+                            why: Some(why),
+                            v_last: s.v_last,
+                        },
+                        lane_state.to_vec(),
+                    ));
                     slots[i] = None;
                 }
                 _ => {}

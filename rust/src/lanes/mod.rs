@@ -17,11 +17,11 @@ pub mod rk4;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::integrate::model_rhs::{LaneInputs, ModelRhs};
-use crate::integrate::task::{Observer, Task};
-pub use crate::numbers::lane_real::{LaneExp, Lanes, LibmExp, PolyExp};
-use crate::numbers::lane_real::Lanewise;
-use crate::model::Model;
 use crate::integrate::stepper::{Rhs, State};
+use crate::integrate::task::{Observer, Task};
+use crate::model::Model;
+use crate::numbers::lane_real::Lanewise;
+pub use crate::numbers::lane_real::{LaneExp, Lanes, LibmExp, PolyExp};
 
 /// `L` plain models of one shape with `N` nodes as one model over lanes.
 #[derive(Clone, Debug)]
@@ -42,7 +42,9 @@ impl<const N: usize, const L: usize, E: LaneExp> PlainLanes<N, L, E> {
         if !models.iter().all(|m| Self::accepts(m) && m.shape() == shape) {
             return None;
         }
-        let mut p = PlainLanes { model: Lanewise::splat(models[0]) };
+        let mut p = PlainLanes {
+            model: Lanewise::splat(models[0]),
+        };
         for (i, m) in models.iter().enumerate().skip(1) {
             p.set(i, m);
         }
@@ -122,11 +124,17 @@ pub struct LanesRhs<'a, E: LaneExp, const N: usize, const D: usize, const L: usi
     _exp: std::marker::PhantomData<E>,
 }
 
-impl<'a, E: LaneExp, const N: usize, const D: usize, const L: usize, const EXTRAS: bool> LanesRhs<'a, E, N, D, L, EXTRAS> {
+impl<'a, E: LaneExp, const N: usize, const D: usize, const L: usize, const EXTRAS: bool>
+    LanesRhs<'a, E, N, D, L, EXTRAS>
+{
     pub fn new(inner: ModelRhs<'a, f64, N, EXTRAS, L>) -> Self {
         // `PlainLanes::rhs` takes the state as plain (no lag states)
         let lanes = PlainLanes::new(&inner.models).filter(|_| !EXTRAS && inner.models.iter().all(|m| m.is_plain()));
-        LanesRhs { inner, lanes, _exp: std::marker::PhantomData }
+        LanesRhs {
+            inner,
+            lanes,
+            _exp: std::marker::PhantomData,
+        }
     }
 
     /// [`LanesRhs::new`] over [`ModelRhs::for_tasks`].
@@ -140,7 +148,9 @@ impl<'a, E: LaneExp, const N: usize, const D: usize, const L: usize, const EXTRA
     }
 }
 
-impl<E: LaneExp, const N: usize, const D: usize, const L: usize, const EXTRAS: bool> Rhs<f64> for LanesRhs<'_, E, N, D, L, EXTRAS> {
+impl<E: LaneExp, const N: usize, const D: usize, const L: usize, const EXTRAS: bool> Rhs<f64>
+    for LanesRhs<'_, E, N, D, L, EXTRAS>
+{
     #[inline(always)]
     fn eval(&mut self, lane: usize, tau: f64, y: &[f64], dy: &mut [f64]) {
         self.inner.eval(lane, tau, y, dy)
@@ -193,7 +203,9 @@ impl<E: LaneExp, const N: usize, const D: usize, const L: usize, const EXTRAS: b
     }
 }
 
-impl<E: LaneExp, const N: usize, const D: usize, const L: usize, const EXTRAS: bool> LaneInputs<f64, L> for LanesRhs<'_, E, N, D, L, EXTRAS> {
+impl<E: LaneExp, const N: usize, const D: usize, const L: usize, const EXTRAS: bool> LaneInputs<f64, L>
+    for LanesRhs<'_, E, N, D, L, EXTRAS>
+{
     #[inline(always)]
     fn set_input(&mut self, i: usize, t0: f64, v0: f64, slope: f64) {
         self.inner.set_input(i, t0, v0, slope)
@@ -375,7 +387,13 @@ mod tests {
         let tasks: Vec<Task> = models
             .iter()
             .zip(&y0)
-            .map(|(m, y)| Task { model: m, wave, t_start: 0.0, t_end, y0: y })
+            .map(|(m, y)| Task {
+                model: m,
+                wave,
+                t_start: 0.0,
+                t_end,
+                y0: y,
+            })
             .collect();
         let cancel = AtomicBool::new(false);
         let ends = if lanes8 {
@@ -389,7 +407,11 @@ mod tests {
     #[test]
     fn vector_lanes_are_bitwise_the_scalar_model_with_and_without_simd() {
         let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
-        for (structure, hysteresis) in [(Structure::Lps, false), (Structure::Lps, true), (Structure::Dps(4), true)] {
+        for (structure, hysteresis) in [
+            (Structure::Lps, false),
+            (Structure::Lps, true),
+            (Structure::Dps(4), true),
+        ] {
             let ms = models_with(structure, hysteresis);
             let n = ms[0].layout.dof;
             let group: [&Model; 8] = std::array::from_fn(|i| &ms[i]);
@@ -399,8 +421,16 @@ mod tests {
             let scalar = run(&ms, &wave, true);
             set_simd_level("avx2");
             let vector = run(&ms, &wave, true);
-            assert_eq!(scalar, reference, "{structure:?}: forced-scalar lanes differ from the model");
-            assert_eq!(vector, reference, "{structure:?}: {} lanes differ from the model", simd_level());
+            assert_eq!(
+                scalar, reference,
+                "{structure:?}: forced-scalar lanes differ from the model"
+            );
+            assert_eq!(
+                vector,
+                reference,
+                "{structure:?}: {} lanes differ from the model",
+                simd_level()
+            );
             let x: Vec<f64> = reference.iter().map(|y| y[0]).collect();
             assert!(x.iter().all(|x| x.abs() > 1e-8), "every device moved: {x:?}");
         }
@@ -410,7 +440,11 @@ mod tests {
     fn dopri5_stages_on_vector_lanes_are_bitwise_the_scalar_model() {
         // per-lane steps: the lanes' stages sit at different offsets within their steps
         let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
-        let method = Method::Dopri5 { rtol: 1e-7, atol: 1e-7, first_step: 1e-8 };
+        let method = Method::Dopri5 {
+            rtol: 1e-7,
+            atol: 1e-7,
+            first_step: 1e-8,
+        };
         for structure in [Structure::Lps, Structure::Dps(4)] {
             let ms = models(structure);
             let reference = run_with(&ms, &wave, false, &method);
@@ -427,7 +461,11 @@ mod tests {
         // per-lane pivots, steps and rejections; the stages' right-hand side as vectors where half
         // the lanes are busy (the eleven devices: one full group of 8, one of 3, lane by lane)
         let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
-        let method = Method::Rodas4 { rtol: 1e-6, atol: 1e-6, first_step: 1e-8 };
+        let method = Method::Rodas4 {
+            rtol: 1e-6,
+            atol: 1e-6,
+            first_step: 1e-8,
+        };
         for structure in [Structure::Lps, Structure::Dps(4)] {
             let ms = models(structure);
             let reference = run_with(&ms, &wave, false, &method);
@@ -456,7 +494,11 @@ mod tests {
         // the eleven devices, and three whose friction state is far stiffer (a presliding
         // stiffness 1,000x the paper's, a near-frictionless contact): those switch to Rodas4
         let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
-        let method = Method::Auto { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        let method = Method::Auto {
+            rtol: 3e-7,
+            atol: 3e-7,
+            first_step: 1e-8,
+        };
         for structure in [Structure::Lps, Structure::Dps(4)] {
             let mut ms = models(structure);
             for (alpha, mu) in [(1e3, 1.0), (3e3, 1.0), (1.0, 1e-5)] {
@@ -470,7 +512,13 @@ mod tests {
             let tasks: Vec<Task> = ms
                 .iter()
                 .zip(&y0)
-                .map(|(m, y)| Task { model: m, wave: &wave, t_start: 0.0, t_end: 2e-3, y0: y })
+                .map(|(m, y)| Task {
+                    model: m,
+                    wave: &wave,
+                    t_start: 0.0,
+                    t_end: 2e-3,
+                    y0: y,
+                })
                 .collect();
             let cancel = AtomicBool::new(false);
             let mut seen = Switches::default();
@@ -480,14 +528,20 @@ mod tests {
                 let at = &seen.0[&i];
                 // after TRY_IMPLICIT_AFTER steps at the stability limit (and the run's first,
                 // non-stiff steps): measured 467-545
-                assert!(at[0] < 3 * crate::integrate::stiffness::TRY_IMPLICIT_AFTER as u64, "{structure:?} task {i}: switches {at:?}");
+                assert!(
+                    at[0] < 3 * crate::integrate::stiffness::TRY_IMPLICIT_AFTER as u64,
+                    "{structure:?} task {i}: switches {at:?}"
+                );
             }
             for level in ["scalar", "avx2"] {
                 set_simd_level(level);
                 let mut lanes = Switches::default();
                 let ends = run_tasks::<_, 8>(&tasks, &method, &mut lanes, &cancel).unwrap();
                 assert_eq!(ends, reference, "{structure:?} {level}");
-                assert_eq!(lanes.0, seen.0, "{structure:?} {level}: the same runs switch at the same step");
+                assert_eq!(
+                    lanes.0, seen.0,
+                    "{structure:?} {level}: the same runs switch at the same step"
+                );
             }
             set_simd_level("avx2");
         }
@@ -497,12 +551,19 @@ mod tests {
     fn a_crawling_lane_stops_as_on_the_scalar_path_and_its_neighbours_finish() {
         // a near-frictionless contact (mu 1e-6) holds Dormand-Prince at its stability limit
         let wave = PiecewiseLinear::triangle(50.0, 0.5e-3, 0.5e-3, 0.0).unwrap();
-        let method = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        let method = Method::Dopri5 {
+            rtol: 3e-7,
+            atol: 3e-7,
+            first_step: 1e-8,
+        };
         let mut ms = models(Structure::Lps);
         let mut p = Params::paper();
         p.mu_k = 1e-6;
         p.mu_s = 1e-6;
-        ms.insert(2, Model::new(p, Effects::default(), Structure::Lps, false, false).unwrap());
+        ms.insert(
+            2,
+            Model::new(p, Effects::default(), Structure::Lps, false, false).unwrap(),
+        );
         let y0: Vec<Vec<f64>> = ms.iter().map(|m| m.rest_state()).collect();
         // the crawling lane runs to 10 ms: its projected count passes the limit within a few
         // checks (at 1 ms it hovered at the limit for 557,056 steps: most of this test's CI time)
@@ -510,7 +571,13 @@ mod tests {
             .iter()
             .zip(&y0)
             .enumerate()
-            .map(|(i, (m, y))| Task { model: m, wave: &wave, t_start: 0.0, t_end: if i == 2 { 1e-2 } else { 1e-3 }, y0: y })
+            .map(|(i, (m, y))| Task {
+                model: m,
+                wave: &wave,
+                t_start: 0.0,
+                t_end: if i == 2 { 1e-2 } else { 1e-3 },
+                y0: y,
+            })
             .collect();
         let cancel = AtomicBool::new(false);
         let reference = run_tasks_one_by_one(&tasks, &method, &Default::default(), &mut Nothing, &cancel).unwrap();
@@ -518,8 +585,17 @@ mod tests {
             match end {
                 LaneEnd::Diverged { why: Some(why), .. } if i == 2 => {
                     assert!(why.starts_with(crate::integrate::crawl::CRAWL_PREFIX), "{why}");
-                    let steps: u64 = why.split(" steps so far").next().and_then(|x| x.rsplit(' ').next()).unwrap().parse().unwrap();
-                    assert!(steps <= 10 * crate::integrate::crawl::CRAWL_CHECK_STEPS, "caught within a few checks: {why}");
+                    let steps: u64 = why
+                        .split(" steps so far")
+                        .next()
+                        .and_then(|x| x.rsplit(' ').next())
+                        .unwrap()
+                        .parse()
+                        .unwrap();
+                    assert!(
+                        steps <= 10 * crate::integrate::crawl::CRAWL_CHECK_STEPS,
+                        "caught within a few checks: {why}"
+                    );
                 }
                 LaneEnd::Finished { .. } if i != 2 => {}
                 other => panic!("task {i}: {other:?}"),
@@ -544,7 +620,10 @@ mod tests {
         let hyst = Model::new(Params::paper(), Effects::default(), Structure::Lps, true, false).unwrap();
         assert!(PlainLanes::<2, 2>::new(&[&plain, &odd]).is_some());
         assert!(PlainLanes::<2, 2>::new(&[&plain, &hyst]).is_none());
-        let e = Effects { tau_sensor: 1e-5, ..Effects::default() }; // a lag: another state layout, on lanes
+        let e = Effects {
+            tau_sensor: 1e-5,
+            ..Effects::default()
+        }; // a lag: another state layout, on lanes
         let lagged = Model::new(Params::paper(), e, Structure::Lps, false, false).unwrap();
         assert!(PlainLanes::<2, 2>::accepts(&lagged));
         assert!(PlainLanes::<2, 2>::new(&[&plain, &lagged]).is_none());
@@ -562,9 +641,20 @@ mod tests {
         // RK4 and auto (Dormand-Prince, whose stiff lanes hand over to Rodas4); every lag on
         // the LPS, the sensor's on the DPS4 (1 ms: the unoptimised CI build runs it)
         let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 1.0e-3, 0.0).unwrap();
-        let methods = [Method::Rk4 { dt: 5e-8 }, Method::Auto { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 }];
-        let cases = [(Structure::Lps, "tau_amp"), (Structure::Lps, "tau_creep"), (Structure::Lps, "tau_sensor"),
-                     (Structure::Dps(4), "tau_sensor")];
+        let methods = [
+            Method::Rk4 { dt: 5e-8 },
+            Method::Auto {
+                rtol: 3e-7,
+                atol: 3e-7,
+                first_step: 1e-8,
+            },
+        ];
+        let cases = [
+            (Structure::Lps, "tau_amp"),
+            (Structure::Lps, "tau_creep"),
+            (Structure::Lps, "tau_sensor"),
+            (Structure::Dps(4), "tau_sensor"),
+        ];
         for (structure, lag) in cases {
             let ms: Vec<Model> = models(structure)
                 .into_iter()
@@ -585,10 +675,19 @@ mod tests {
             assert!(PlainLanes::<2, 8>::new(&group).is_some() || structure != Structure::Lps);
             for method in &methods {
                 let reference = run_for(&ms, &wave, false, method, 1e-3);
-                assert!(reference.iter().all(|y| y.len() == ms[0].layout.dim && y[0].abs() > 1e-8), "{lag}: moved");
+                assert!(
+                    reference
+                        .iter()
+                        .all(|y| y.len() == ms[0].layout.dim && y[0].abs() > 1e-8),
+                    "{lag}: moved"
+                );
                 for level in ["scalar", "avx2"] {
                     set_simd_level(level);
-                    assert_eq!(run_for(&ms, &wave, true, method, 1e-3), reference, "{structure:?} {lag} {method:?} {level}");
+                    assert_eq!(
+                        run_for(&ms, &wave, true, method, 1e-3),
+                        reference,
+                        "{structure:?} {lag} {method:?} {level}"
+                    );
                 }
                 set_simd_level("avx2");
             }
@@ -622,6 +721,9 @@ mod tests {
         }
         set_simd_level("avx2");
         let plain = run(&models(Structure::Lps), &wave, false);
-        assert!(reference.iter().zip(&plain).all(|(a, b)| a[0] != b[0]), "the library forces act");
+        assert!(
+            reference.iter().zip(&plain).all(|(a, b)| a[0] != b[0]),
+            "the library forces act"
+        );
     }
 }

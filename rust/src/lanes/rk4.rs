@@ -11,9 +11,9 @@
 
 use std::sync::atomic::AtomicBool;
 
+use crate::integrate::rk4::BOUND_SLACK;
 use crate::integrate::task::{LaneEnd, Observer, Task};
 use crate::lanes::{refill_lanes, LaneExp, PlainLanes, Queue};
-use crate::integrate::rk4::BOUND_SLACK;
 use crate::physics::waveform::Cursor;
 
 /// What one lane is running.
@@ -52,25 +52,41 @@ pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, co
     let mut y = [[0.0; L]; D];
     let mut slots: [Option<Slot>; L] = [None; L];
     let mut next = 0usize;
-    let (mut k1, mut k2, mut k3, mut k4, mut tmp) = ([[0.0; L]; D], [[0.0; L]; D], [[0.0; L]; D], [[0.0; L]; D], [[0.0; L]; D]);
+    let (mut k1, mut k2, mut k3, mut k4, mut tmp) = (
+        [[0.0; L]; D],
+        [[0.0; L]; D],
+        [[0.0; L]; D],
+        [[0.0; L]; D],
+        [[0.0; L]; D],
+    );
     let (h2, h6) = (0.5 * dt, dt / 6.0);
     let mut lane_state = [0.0; D];
     let mut attempts = 0usize;
     loop {
         // refill idle lanes from the queue
-        let queue = refill_lanes(tasks, &mut next, &mut slots, &mut p, &mut y, observer, &mut attempts, cancel, |_, t| {
-            let task = &tasks[t];
-            let k0 = (task.t_start / dt).round() as usize;
-            Slot {
-                task: t,
-                k: k0,
-                k_end: k0 + ((task.t_end - task.t_start) / dt).round() as usize,
-                cursor: Cursor::at(task.wave, task.t_start),
-                bound: task.model.presliding_bound() * (1.0 + BOUND_SLACK) + 1e-12,
-                v_last: task.y0[task.model.layout.dof],
-                steps: 0,
-            }
-        });
+        let queue = refill_lanes(
+            tasks,
+            &mut next,
+            &mut slots,
+            &mut p,
+            &mut y,
+            observer,
+            &mut attempts,
+            cancel,
+            |_, t| {
+                let task = &tasks[t];
+                let k0 = (task.t_start / dt).round() as usize;
+                Slot {
+                    task: t,
+                    k: k0,
+                    k_end: k0 + ((task.t_end - task.t_start) / dt).round() as usize,
+                    cursor: Cursor::at(task.wave, task.t_start),
+                    bound: task.model.presliding_bound() * (1.0 + BOUND_SLACK) + 1e-12,
+                    v_last: task.y0[task.model.layout.dof],
+                    steps: 0,
+                }
+            },
+        );
         match queue {
             Queue::Go => {}
             Queue::Done => break,
@@ -140,16 +156,37 @@ pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, co
             let model = task.model;
             let dof = model.layout.dof;
             if model.is_diverged(&lane_state, s.bound) {
-                out[s.task] = Some((LaneEnd::Diverged { t: t_new, why: None, v_last: s.v_last }, lane_state.to_vec()));
+                out[s.task] = Some((
+                    LaneEnd::Diverged {
+                        t: t_new,
+                        why: None,
+                        v_last: s.v_last,
+                    },
+                    lane_state.to_vec(),
+                ));
                 slots[i] = None;
                 continue;
             }
             s.v_last = lane_state[dof];
             s.steps += 1;
             let done = s.k == s.k_end;
-            observer.step(s.task, t_new, dt, &lane_state, v0[i] + slope[i] * dt, Some((ff[i], gdot[i])), done);
+            observer.step(
+                s.task,
+                t_new,
+                dt,
+                &lane_state,
+                v0[i] + slope[i] * dt,
+                Some((ff[i], gdot[i])),
+                done,
+            );
             if done {
-                out[s.task] = Some((LaneEnd::Finished { steps: s.steps, min_step: dt }, lane_state.to_vec()));
+                out[s.task] = Some((
+                    LaneEnd::Finished {
+                        steps: s.steps,
+                        min_step: dt,
+                    },
+                    lane_state.to_vec(),
+                ));
                 slots[i] = None;
             }
         }

@@ -7,10 +7,10 @@
 
 use num_dual::Dual64;
 
-use crate::physics::effects::{LagInput, AMPLIFIER, CREEP, LAGS};
-use crate::physics::actuation::Actuation;
 use crate::model::Model;
 use crate::numbers::scalar::{Scalar, Seedable};
+use crate::physics::actuation::Actuation;
+use crate::physics::effects::{LagInput, AMPLIFIER, CREEP, LAGS};
 
 impl<T: Scalar> Model<T> {
     /// Fill `jac` (dim x dim, row-major) with df/dy and `dfdt` (dim) with df/dt at time `t` [s],
@@ -98,8 +98,16 @@ impl<T: Scalar> Model<T> {
         if self.library.0 || self.library.1 {
             let st = self.library_states(t, q, v, v_pe, dv_pe, ff);
             let zero = (T::zero(), [T::zero(); 8]);
-            let (fm, dm) = if self.library.0 { self.effect_values.library_force_main(&st) } else { zero };
-            let (fw, dw) = if self.library.1 { self.effect_values.library_force_weight(&st) } else { zero };
+            let (fm, dm) = if self.library.0 {
+                self.effect_values.library_force_main(&st)
+            } else {
+                zero
+            };
+            let (fw, dw) = if self.library.1 {
+                self.effect_values.library_force_weight(&st)
+            } else {
+                zero
+            };
             extra_f = (extra_f.0 + fm, extra_f.1 + fw);
             // [x1, v1, x2, v2, volt, dvolt, ff, t] -> state components and df/dt
             for (c, k) in [(0, 0), (n, 1), (n - 1, 2), (last, 3)] {
@@ -262,10 +270,10 @@ impl Model<Dual64> {
 
 #[cfg(test)]
 mod tests {
+    use crate::model::Model;
     use crate::physics::effects::{Effects, EFFECT_PARAMS};
     use crate::physics::external_force::{Body, ExternalForce};
     use crate::physics::mechanics::Structure;
-    use crate::model::Model;
     use crate::physics::params::Params;
     use crate::physics::rig::RigDrive;
 
@@ -351,11 +359,32 @@ mod tests {
         }
         // every library term on at once, on the main body and on the weight
         let library = Effects {
-            lib_x1: 3e3, lib_v1: 0.2, lib_dx: -1e3, lib_dv: 0.1, lib_sgn: 0.05, lib_abs: 0.3, lib_vv: 20.0,
-            lib_volt: 1e-3, lib_dvolt: 2e-7, lib_t: 5.0, lib_x1sq: 1e8, lib_x1cube: 1e13, lib_sin: 0.02,
-            lib_cos: -0.01, lib_ff: 0.03, lib_ff_sin: 0.05, lib_ff_cos: 0.02, lib_wavelength: 12e-6,
-            libw_x2: 2e3, libw_v2: 0.1, libw_dx: 500.0, libw_dv: 0.05, libw_sgn: 0.01, libw_vv: 5.0,
-            libw_volt: 1e-3, libw_dvolt: 1e-7,
+            lib_x1: 3e3,
+            lib_v1: 0.2,
+            lib_dx: -1e3,
+            lib_dv: 0.1,
+            lib_sgn: 0.05,
+            lib_abs: 0.3,
+            lib_vv: 20.0,
+            lib_volt: 1e-3,
+            lib_dvolt: 2e-7,
+            lib_t: 5.0,
+            lib_x1sq: 1e8,
+            lib_x1cube: 1e13,
+            lib_sin: 0.02,
+            lib_cos: -0.01,
+            lib_ff: 0.03,
+            lib_ff_sin: 0.05,
+            lib_ff_cos: 0.02,
+            lib_wavelength: 12e-6,
+            libw_x2: 2e3,
+            libw_v2: 0.1,
+            libw_dx: 500.0,
+            libw_dv: 0.05,
+            libw_sgn: 0.01,
+            libw_vv: 5.0,
+            libw_volt: 1e-3,
+            libw_dvolt: 1e-7,
             ..Effects::default()
         };
         let mut odd = p;
@@ -368,22 +397,65 @@ mod tests {
             (odd, all, Structure::Dps(3), true, true),
             (
                 p,
-                Effects { k_ground: 1e3, eps: 0.05, tau_sensor: 1e-4, ..Effects::default() },
-                Structure::Rig(RigDrive::Position { stiffness: 5e4, damping: 2.0 }),
+                Effects {
+                    k_ground: 1e3,
+                    eps: 0.05,
+                    tau_sensor: 1e-4,
+                    ..Effects::default()
+                },
+                Structure::Rig(RigDrive::Position {
+                    stiffness: 5e4,
+                    damping: 2.0,
+                }),
                 false,
                 true,
             ),
             (
                 p,
-                Effects { eps: 0.05, ..Effects::default() },
-                Structure::Rig(RigDrive::ClosedLoop { kp: 160.0, kv: 240.0, gain: 35.0, limit: 1e3 }),
+                Effects {
+                    eps: 0.05,
+                    ..Effects::default()
+                },
+                Structure::Rig(RigDrive::ClosedLoop {
+                    kp: 160.0,
+                    kv: 240.0,
+                    gain: 35.0,
+                    limit: 1e3,
+                }),
                 false,
                 true,
             ),
-            (p, Effects { eps: 0.05, ..Effects::default() }, Structure::Rig(RigDrive::Force), false, true),
+            (
+                p,
+                Effects {
+                    eps: 0.05,
+                    ..Effects::default()
+                },
+                Structure::Rig(RigDrive::Force),
+                false,
+                true,
+            ),
             (p, library, Structure::Lps, true, true),
-            (p, Effects { tau_amp: 2e-5, ..library }, Structure::Dps(3), true, true),
-            (p, Effects { lib_wavelength: 0.0, ..library }, Structure::Lps, false, false),
+            (
+                p,
+                Effects {
+                    tau_amp: 2e-5,
+                    ..library
+                },
+                Structure::Dps(3),
+                true,
+                true,
+            ),
+            (
+                p,
+                Effects {
+                    lib_wavelength: 0.0,
+                    ..library
+                },
+                Structure::Lps,
+                false,
+                false,
+            ),
         ] {
             let mut m = Model::new(params, effects, structure, hyst, acc).unwrap();
             if effects.library_on().0 {

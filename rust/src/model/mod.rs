@@ -5,19 +5,19 @@ pub mod jacobian;
 
 use nalgebra::ComplexField;
 
+use crate::numbers::lane_real::Lanewise;
+use crate::numbers::real::Real;
+use crate::numbers::scalar::Scalar;
+use crate::physics::actuation::Actuation;
 use crate::physics::effects::{
     first_order_rate, ground_spring_force, weight_drag, Effects, LagInput, LagScale, LibraryStates, AMPLIFIER, CREEP,
     LAGS, N_LAGS, SENSOR,
 };
 use crate::physics::external_force::{Body, ExternalForce};
 use crate::physics::friction::Leuven;
-use crate::physics::actuation::Actuation;
 use crate::physics::mechanics::{Actuator, Mechanics, Structure};
 use crate::physics::params::Params;
 use crate::physics::piezo::{piezo_force, PiezoHysteresis};
-use crate::numbers::lane_real::Lanewise;
-use crate::numbers::real::Real;
-use crate::numbers::scalar::Scalar;
 
 /// Dispatch on the state size: `$fixed!(N, D, EXTRAS)` for a state of a common node count N
 /// that the fixed-size paths hold (see [`Model::lane_lags`]: `$lags` is `Some(k)` with k lag
@@ -230,7 +230,15 @@ impl Model {
         piezo_hysteresis: bool,
         accounting: bool,
     ) -> Result<Self, String> {
-        Model::build(params, effects, structure, piezo_hysteresis, accounting, |_, x| x, false)
+        Model::build(
+            params,
+            effects,
+            structure,
+            piezo_hysteresis,
+            accounting,
+            |_, x| x,
+            false,
+        )
     }
 }
 
@@ -263,8 +271,7 @@ impl<T: Scalar + ComplexField> Model<T> {
         let total_mass = actuator.supported_mass(&p);
         Ok(Model {
             friction: Leuven::new(&p, p.normal_force * e.normal_scale(), e.eps),
-            hysteresis: piezo_hysteresis
-                .then(|| PiezoHysteresis::new(p.hyst_alpha, p.hyst_beta, p.hyst_gamma, p.d33)),
+            hysteresis: piezo_hysteresis.then(|| PiezoHysteresis::new(p.hyst_alpha, p.hyst_beta, p.hyst_gamma, p.d33)),
             actuator,
             kp: p.kp(),
             d33: p.d33,
@@ -301,8 +308,16 @@ impl<T: Real> Model<T> {
     #[inline(never)]
     fn library_forces(&self, t: T::Value, q: &[T], v: &[T], volt: T, dvolt: T, ff: T) -> (T, T) {
         let s = self.library_states(t, q, v, volt, dvolt, ff);
-        let main = if self.library.0 { self.effect_values.library_force_main(&s).0 } else { T::zero() };
-        let weight = if self.library.1 { self.effect_values.library_force_weight(&s).0 } else { T::zero() };
+        let main = if self.library.0 {
+            self.effect_values.library_force_main(&s).0
+        } else {
+            T::zero()
+        };
+        let weight = if self.library.1 {
+            self.effect_values.library_force_weight(&s).0
+        } else {
+            T::zero()
+        };
         (main, weight)
     }
 
@@ -324,10 +339,7 @@ impl<T: Real> Model<T> {
     /// Bound on |Fh| [N] (MODEL.md invariant), with the effective normal force and asymmetry.
     pub fn presliding_bound(&self) -> f64 {
         let p = &self.params;
-        let fs = p.mu_s.max(p.mu_k)
-            * p.normal_force
-            * self.effects.normal_scale()
-            * (1.0 + self.effects.eps.abs());
+        let fs = p.mu_s.max(p.mu_k) * p.normal_force * self.effects.normal_scale() * (1.0 + self.effects.eps.abs());
         fs.min(p.fric_alpha / (p.fric_beta + p.fric_gamma))
     }
 
@@ -514,7 +526,13 @@ impl<T: Real> Model<T> {
             dy[i] = v[i];
         }
         let (f_main, f_last) = self.actuator.forces(fp, v_pe, dv_pe, q[0], v[0]);
-        self.mech.accelerations(q, v, (f_main + f_ext_main) - ff, f_ext_weight + f_last, &mut dy[n..2 * n]);
+        self.mech.accelerations(
+            q,
+            v,
+            (f_main + f_ext_main) - ff,
+            f_ext_weight + f_last,
+            &mut dy[n..2 * n],
+        );
 
         if EXTRAS {
             if let Some(a) = l.accounting {
@@ -523,13 +541,8 @@ impl<T: Real> Model<T> {
                 dy[a + 2] = self.mech.dissipation(v);
                 dy[a + 3] = f_ext_main * v[0] + f_ext_weight * v[n - 1];
                 dy[a + 4] = ff;
-                dy[a + 5] = self.values.rayleigh_alpha
-                    * self
-                        .pe_mass_sums
-                        .iter()
-                        .zip(v)
-                        .map(|(m, vi)| *m * *vi)
-                        .sum::<T>();
+                dy[a + 5] =
+                    self.values.rayleigh_alpha * self.pe_mass_sums.iter().zip(v).map(|(m, vi)| *m * *vi).sum::<T>();
                 dy[a + 6] = f_ext_main + f_ext_weight;
             }
         }
@@ -539,7 +552,6 @@ impl<T: Real> Model<T> {
 
 /// What needs the value as one `f64` (a scalar, a dual number or a tangent; not lanes).
 impl<T: Real<Value = f64>> Model<T> {
-
     /// The divergence criterion: the state is no longer finite where it matters, or |Fh| left
     /// its bound [N] (which a correct solution never does; see MODEL.md's invariants).
     #[inline(always)]

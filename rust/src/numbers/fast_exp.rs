@@ -81,7 +81,15 @@ mod tests {
             worst = worst.max(ulps(exp_poly(xi), xi.exp()));
             x += 0.0137;
         }
-        for xi in [-1e-300, 0.0, 1e-300, -0.5 * std::f64::consts::LN_2, 0.5 * std::f64::consts::LN_2, -1.0, 1.0] {
+        for xi in [
+            -1e-300,
+            0.0,
+            1e-300,
+            -0.5 * std::f64::consts::LN_2,
+            0.5 * std::f64::consts::LN_2,
+            -1.0,
+            1.0,
+        ] {
             worst = worst.max(ulps(exp_poly(xi), xi.exp()));
         }
         assert!(worst <= 2, "worst error {worst} ulp");

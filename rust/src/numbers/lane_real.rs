@@ -287,7 +287,11 @@ impl<const L: usize, E: LaneExp> Real for Lanes<L, E> {
         Lanes::new(o)
     }
     #[inline(always)]
-    fn choose_n<const K: usize>(m: LaneMask<L>, a: impl FnOnce() -> [Self; K], b: impl FnOnce() -> [Self; K]) -> [Self; K] {
+    fn choose_n<const K: usize>(
+        m: LaneMask<L>,
+        a: impl FnOnce() -> [Self; K],
+        b: impl FnOnce() -> [Self; K],
+    ) -> [Self; K] {
         if m.all() {
             a()
         } else if !m.any() {
@@ -427,7 +431,11 @@ mod tests {
     #[test]
     fn interpolation_is_per_lane() {
         let times = [0.0, 1.0, 2.0];
-        let values = [L4::new([0.0, 0.0, 1.0, 5.0]), L4::new([2.0, 4.0, 1.0, 5.0]), L4::new([2.0, 0.0, 3.0, 5.0])];
+        let values = [
+            L4::new([0.0, 0.0, 1.0, 5.0]),
+            L4::new([2.0, 4.0, 1.0, 5.0]),
+            L4::new([2.0, 0.0, 3.0, 5.0]),
+        ];
         let (v, s) = L4::interpolate(&values, &times, L4::new([0.5, 1.5, -1.0, 9.0]));
         assert_eq!(v.0, [1.0, 2.0, 1.0, 5.0]);
         assert_eq!(s.0, [2.0, -4.0, 0.0, 0.0]);

@@ -112,7 +112,11 @@ pub trait Real:
     /// a third of the lane step in the Stribeck closure).
     fn select(m: Self::Mask, a: Self, b: Self) -> Self;
     /// [`Real::choose`] for `K` numbers decided together.
-    fn choose_n<const K: usize>(m: Self::Mask, a: impl FnOnce() -> [Self; K], b: impl FnOnce() -> [Self; K]) -> [Self; K];
+    fn choose_n<const K: usize>(
+        m: Self::Mask,
+        a: impl FnOnce() -> [Self; K],
+        b: impl FnOnce() -> [Self; K],
+    ) -> [Self; K];
 
     /// Linear interpolation through samples `values` at `times` (increasing) at time `t` [s],
     /// held outside them: (value, slope per second; 0 outside). Per lane for lanes.
@@ -121,7 +125,9 @@ pub trait Real:
 
 /// The piecewise-linear interpolation of one lane (see [`Real::interpolate`]).
 #[inline]
-pub(crate) fn interpolate_one<T: Copy + Add<Output = T> + Sub<Output = T> + Mul<f64, Output = T> + Div<f64, Output = T>>(
+pub(crate) fn interpolate_one<
+    T: Copy + Add<Output = T> + Sub<Output = T> + Mul<f64, Output = T> + Div<f64, Output = T>,
+>(
     values: &[T],
     times: &[f64],
     t: f64,
@@ -180,7 +186,11 @@ macro_rules! one_lane_branches {
             }
         }
         #[inline(always)]
-        fn choose_n<const M: usize>(m: bool, a: impl FnOnce() -> [Self; M], b: impl FnOnce() -> [Self; M]) -> [Self; M] {
+        fn choose_n<const M: usize>(
+            m: bool,
+            a: impl FnOnce() -> [Self; M],
+            b: impl FnOnce() -> [Self; M],
+        ) -> [Self; M] {
             if m {
                 a()
             } else {

@@ -133,7 +133,10 @@ impl<const K: usize> Mul for Tangent<K> {
         for k in 0..K {
             eps[k] = self.eps[k] * o.re + o.eps[k] * self.re;
         }
-        Tangent { re: self.re * o.re, eps }
+        Tangent {
+            re: self.re * o.re,
+            eps,
+        }
     }
 }
 
@@ -315,7 +318,10 @@ mod tests {
         for k in 0..3 {
             // a derivative num-dual holds as "none" may be a -0.0 here
             assert!(t.eps[k] == from_dual.eps[k], "derivative {k}: {t:?} vs {d:?}");
-            assert!(t.eps[k] == 0.0 || t.eps[k].to_bits() == from_dual.eps[k].to_bits(), "{t:?} vs {d:?}");
+            assert!(
+                t.eps[k] == 0.0 || t.eps[k].to_bits() == from_dual.eps[k].to_bits(),
+                "{t:?} vs {d:?}"
+            );
         }
     }
 
@@ -348,7 +354,10 @@ mod tests {
                     same(Real::powf(pos, n), DualNum::powf(&dpos, n));
                 }
                 same(Real::pow(pos, tb), crate::numbers::scalar::Scalar::pow(dpos, db));
-                same(Real::pow(pos, Tangent::constant(1.8)), crate::numbers::scalar::Scalar::pow(dpos, D::from(1.8)));
+                same(
+                    Real::pow(pos, Tangent::constant(1.8)),
+                    crate::numbers::scalar::Scalar::pow(dpos, D::from(1.8)),
+                );
             }
         }
     }

@@ -13,11 +13,7 @@ pub enum Domain {
     /// v >= 0
     NonNegative,
     /// lower < v < upper; `text` writes the interval in messages, e.g. "(-pi/2, pi/2)"
-    Open {
-        lower: f64,
-        upper: f64,
-        text: &'static str,
-    },
+    Open { lower: f64, upper: f64, text: &'static str },
 }
 
 impl Domain {
@@ -162,11 +158,7 @@ pub fn check_domains(what: &str, decls: &[ParamDecl], values: &[f64]) -> Result<
     for pass in passes {
         for (d, &v) in decls.iter().zip(values) {
             if pass(&d.domain) && !d.domain.contains(v) {
-                return Err(format!(
-                    "{what} '{}' must {}, got {v}",
-                    d.name,
-                    d.domain.rule()
-                ));
+                return Err(format!("{what} '{}' must {}, got {v}", d.name, d.domain.rule()));
             }
         }
     }

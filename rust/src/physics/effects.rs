@@ -5,10 +5,10 @@
 //! switch on parts of the paper's own model; they are declared here too so the catalogue has
 //! one source, but need no field.)
 
-use crate::physics::declare::{check_domains, Domain, EffectDecl, EffectKind, ParamDecl, Part};
-use crate::physics::params::{table1, GRAVITY};
 use crate::numbers::real::Real;
 use crate::numbers::scalar::Scalar;
+use crate::physics::declare::{check_domains, Domain, EffectDecl, EffectKind, ParamDecl, Part};
+use crate::physics::params::{table1, GRAVITY};
 
 /// Declares the catalogue once. `other` effects change the structure or Table 1 values and
 /// list their parameters as [`ParamDecl`]s; each parameter of a `terms` effect becomes a field
@@ -285,12 +285,9 @@ effects! {
 
 impl Effects {
     pub fn set(&mut self, name: &str, value: f64) -> Result<(), String> {
-        let slot = self.slot(name).ok_or_else(|| {
-            format!(
-                "unknown effect parameter '{name}'; known: {}",
-                EFFECT_NAMES.join(", ")
-            )
-        })?;
+        let slot = self
+            .slot(name)
+            .ok_or_else(|| format!("unknown effect parameter '{name}'; known: {}", EFFECT_NAMES.join(", ")))?;
         *slot = value;
         Ok(())
     }
@@ -320,13 +317,11 @@ impl Effects {
         Ok(())
     }
 
-
     /// Every lag's time-constant parameter and its value [s] (0: off): a lag much faster than
     /// a fixed step makes its state stiff.
     pub fn lags(&self) -> [(&'static str, f64); N_LAGS] {
         std::array::from_fn(|k| (LAGS[k].tau, self.value_of(LAGS[k].tau).unwrap_or(0.0)))
     }
-
 }
 
 impl<T: Scalar> Effects<T> {
@@ -371,12 +366,32 @@ impl<T: Scalar> Effects<T> {
     /// wavelength alone switches nothing on).
     pub fn library_on(&self) -> (bool, bool) {
         let main = [
-            self.lib_x1, self.lib_v1, self.lib_dx, self.lib_dv, self.lib_sgn, self.lib_abs, self.lib_vv,
-            self.lib_volt, self.lib_dvolt, self.lib_t, self.lib_x1sq, self.lib_x1cube, self.lib_sin, self.lib_cos,
-            self.lib_ff, self.lib_ff_sin, self.lib_ff_cos,
+            self.lib_x1,
+            self.lib_v1,
+            self.lib_dx,
+            self.lib_dv,
+            self.lib_sgn,
+            self.lib_abs,
+            self.lib_vv,
+            self.lib_volt,
+            self.lib_dvolt,
+            self.lib_t,
+            self.lib_x1sq,
+            self.lib_x1cube,
+            self.lib_sin,
+            self.lib_cos,
+            self.lib_ff,
+            self.lib_ff_sin,
+            self.lib_ff_cos,
         ];
         let weight = [
-            self.libw_x2, self.libw_v2, self.libw_dx, self.libw_dv, self.libw_sgn, self.libw_vv, self.libw_volt,
+            self.libw_x2,
+            self.libw_v2,
+            self.libw_dx,
+            self.libw_dv,
+            self.libw_sgn,
+            self.libw_vv,
+            self.libw_volt,
             self.libw_dvolt,
         ];
         let on = |c: &[T]| c.iter().any(|x| !x.is_exactly(0.0));
@@ -423,10 +438,26 @@ impl<T: Real> Effects<T> {
             + self.lib_x1cube * x1 * x1 * x1
             + per
             + s.ff * modf;
-        let d_x1 = self.lib_x1 + self.lib_dx + self.lib_x1sq * x1 * 2.0 + self.lib_x1cube * x1 * x1 * 3.0 + dper + s.ff * dmod;
-        let d_v1 = self.lib_v1 + self.lib_dv + self.lib_sgn * (T::one() - th * th) / s.vs + self.lib_abs * sg
+        let d_x1 =
+            self.lib_x1 + self.lib_dx + self.lib_x1sq * x1 * 2.0 + self.lib_x1cube * x1 * x1 * 3.0 + dper + s.ff * dmod;
+        let d_v1 = self.lib_v1
+            + self.lib_dv
+            + self.lib_sgn * (T::one() - th * th) / s.vs
+            + self.lib_abs * sg
             + self.lib_vv * av * 2.0;
-        (f, [d_x1, d_v1, -self.lib_dx, -self.lib_dv, self.lib_volt, self.lib_dvolt, modf, self.lib_t])
+        (
+            f,
+            [
+                d_x1,
+                d_v1,
+                -self.lib_dx,
+                -self.lib_dv,
+                self.lib_volt,
+                self.lib_dvolt,
+                modf,
+                self.lib_t,
+            ],
+        )
     }
 
     /// The library force on the weight [N] (`library_force_weight`'s term) and its partials as
@@ -446,7 +477,19 @@ impl<T: Real> Effects<T> {
             + self.libw_volt * s.volt
             + self.libw_dvolt * s.dvolt;
         let d_v2 = self.libw_v2 + self.libw_dv + self.libw_sgn * (T::one() - th * th) / s.vs + self.libw_vv * av * 2.0;
-        (f, [-self.libw_dx, -self.libw_dv, self.libw_x2 + self.libw_dx, d_v2, self.libw_volt, self.libw_dvolt, z, z])
+        (
+            f,
+            [
+                -self.libw_dx,
+                -self.libw_dv,
+                self.libw_x2 + self.libw_dx,
+                d_v2,
+                self.libw_volt,
+                self.libw_dvolt,
+                z,
+                z,
+            ],
+        )
     }
 }
 
@@ -541,12 +584,8 @@ mod tests {
         assert!(Effects::from_pairs(&[("tau_amp", -1.0)])
             .unwrap_err()
             .contains("'tau_amp'"));
-        assert!(Effects::from_pairs(&[("eps", 1.5)])
-            .unwrap_err()
-            .contains("'eps'"));
-        assert!(Effects::from_pairs(&[("wind", 1.0)])
-            .unwrap_err()
-            .contains("'wind'"));
+        assert!(Effects::from_pairs(&[("eps", 1.5)]).unwrap_err().contains("'eps'"));
+        assert!(Effects::from_pairs(&[("wind", 1.0)]).unwrap_err().contains("'wind'"));
     }
 
     #[test]
@@ -577,16 +616,8 @@ mod tests {
     fn catalogue_ids_are_unique_and_only_terms_have_fields() {
         for (i, x) in EFFECTS.iter().enumerate() {
             assert!(EFFECTS[..i].iter().all(|y| y.id != x.id), "{}", x.id);
-            let fields = x
-                .params
-                .iter()
-                .filter(|p| EFFECT_NAMES.contains(&p.name))
-                .count();
-            let expect = if x.kind == EffectKind::Term {
-                x.params.len()
-            } else {
-                0
-            };
+            let fields = x.params.iter().filter(|p| EFFECT_NAMES.contains(&p.name)).count();
+            let expect = if x.kind == EffectKind::Term { x.params.len() } else { 0 };
             assert_eq!(fields, expect, "{}", x.id);
             assert!(!x.term.is_empty() && !x.physics.is_empty(), "{}", x.id);
         }

@@ -23,7 +23,9 @@ impl Body {
         match name {
             "main" => Ok(Body::Main),
             "weight" => Ok(Body::Weight),
-            _ => Err(format!("external force body '{name}': use 'main' (the main body) or 'weight'")),
+            _ => Err(format!(
+                "external force body '{name}': use 'main' (the main body) or 'weight'"
+            )),
         }
     }
 }
@@ -70,7 +72,11 @@ impl ExternalForce {
 
 impl<S, T: Lanewise<S>> Lanewise<ExternalForce<S>> for ExternalForce<T> {
     fn splat(x: &ExternalForce<S>) -> Self {
-        ExternalForce { body: x.body, knots: x.knots.clone(), values: Lanewise::splat(&x.values) }
+        ExternalForce {
+            body: x.body,
+            knots: x.knots.clone(),
+            values: Lanewise::splat(&x.values),
+        }
     }
     fn set_lane(&mut self, i: usize, x: &ExternalForce<S>) {
         // one body and one set of knot times in every lane (the lane gate's shape)
@@ -113,8 +119,12 @@ mod tests {
 
     #[test]
     fn bad_samples_are_refused_by_name() {
-        assert!(ExternalForce::new(Body::Main, vec![0.0], vec![1.0]).unwrap_err().contains("two samples"));
-        assert!(ExternalForce::new(Body::Main, vec![0.0, 1.0], vec![1.0, f64::NAN]).unwrap_err().contains("external force"));
+        assert!(ExternalForce::new(Body::Main, vec![0.0], vec![1.0])
+            .unwrap_err()
+            .contains("two samples"));
+        assert!(ExternalForce::new(Body::Main, vec![0.0, 1.0], vec![1.0, f64::NAN])
+            .unwrap_err()
+            .contains("external force"));
         assert!(Body::from_name("base").unwrap_err().contains("'main'"));
     }
 }

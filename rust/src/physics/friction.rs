@@ -1,9 +1,9 @@
 //! Leuven friction on the main body (MODEL.md eqs. 6-9): a Stribeck curve S(v) for sliding and a
 //! Bouc-Wen presliding force Fh driven by the asperity deformation g.
 
-use crate::physics::params::Params;
 use crate::numbers::lane_real::Lanewise;
 use crate::numbers::real::{Mask, Real};
+use crate::physics::params::Params;
 
 /// Leuven friction constants, precomputed once per run (`T` = f64, or a dual number when
 /// derivatives with respect to them are asked for).
@@ -56,7 +56,11 @@ impl<T: Real> Leuven<T> {
     pub fn stribeck(&self, v: T) -> T {
         // no Stribeck peak (mu_s = mu_k): skip the exp (lanes: when no lane has a peak). Branches
         // here are plain `if`s and selects, not closures (see `Real::select`).
-        let s = if self.no_peak.all() { self.fc } else { T::select(self.no_peak, self.fc, self.stribeck_curve(v)) };
+        let s = if self.no_peak.all() {
+            self.fc
+        } else {
+            T::select(self.no_peak, self.fc, self.stribeck_curve(v))
+        };
         if self.symmetric.all() {
             s
         } else {
@@ -70,7 +74,11 @@ impl<T: Real> Leuven<T> {
         let x = v.abs() * self.inv_vs;
         // (|v|/vs)^2 as a product: powf would be the most expensive call in the step
         let square = x * x;
-        let e = if self.delta_is_two.all() { square } else { T::select(self.delta_is_two, square, x.pow(self.delta)) };
+        let e = if self.delta_is_two.all() {
+            square
+        } else {
+            T::select(self.delta_is_two, square, x.pow(self.delta))
+        };
         self.fc + self.fs_minus_fc * (-e).exp()
     }
 
@@ -83,7 +91,11 @@ impl<T: Real> Leuven<T> {
         let gdot = if self.n_is_one.all() {
             linear
         } else {
-            T::select(self.n_is_one, linear, v - v.abs() * fh.sign0() * ratio.abs().pow(self.n))
+            T::select(
+                self.n_is_one,
+                linear,
+                v - v.abs() * fh.sign0() * ratio.abs().pow(self.n),
+            )
         };
         let fhdot = self.a * gdot - self.b * gdot.abs() * fh - self.c * gdot * fh.abs();
         (gdot, fhdot)

@@ -3,14 +3,14 @@
 //! node n the weight. Built once per run with nalgebra; the integrator then only needs the
 //! precomputed products M^-1 K, M^-1 C and the two columns of M^-1 that the forces load.
 
+use crate::numbers::lane_real::Lanewise;
+use crate::numbers::real::Real;
+use crate::numbers::scalar::Scalar;
 use crate::physics::actuation::Actuation;
 use crate::physics::effects::Effects;
 use crate::physics::params::Params;
 use crate::physics::piezo::PiezoElement;
 use crate::physics::rig::RigDrive;
-use crate::numbers::lane_real::Lanewise;
-use crate::numbers::real::Real;
-use crate::numbers::scalar::Scalar;
 use nalgebra::{ComplexField, DMatrix};
 
 /// The mechanisms' actuations, one arm each (the registration of a mechanism).
@@ -96,7 +96,11 @@ impl Structure {
     /// The structure named `model` (one of [`STRUCTURES`]): "lps", "dps" with `n_elements` (at
     /// least 1), or "rig" with the drive `rig` builds (called only then); the message names what
     /// is wrong.
-    pub fn from_name(model: &str, n_elements: usize, rig: impl FnOnce() -> Result<RigDrive, String>) -> Result<Self, String> {
+    pub fn from_name(
+        model: &str,
+        n_elements: usize,
+        rig: impl FnOnce() -> Result<RigDrive, String>,
+    ) -> Result<Self, String> {
         match model {
             "lps" => Ok(Structure::Lps),
             "dps" if n_elements >= 1 => Ok(Structure::Dps(n_elements)),
@@ -104,7 +108,10 @@ impl Structure {
             "rig" => Ok(Structure::Rig(rig()?)),
             other => {
                 let names: Vec<String> = STRUCTURES.iter().map(|s| format!("'{}'", s.name)).collect();
-                Err(format!("parameter 'model' must be one of {}, got '{other}'", names.join(", ")))
+                Err(format!(
+                    "parameter 'model' must be one of {}, got '{other}'",
+                    names.join(", ")
+                ))
             }
         }
     }
@@ -116,7 +123,10 @@ impl Structure {
             Structure::Dps(_) => "dps",
             Structure::Rig(_) => "rig",
         };
-        STRUCTURES.iter().find(|s| s.name == name).expect("every structure is declared")
+        STRUCTURES
+            .iter()
+            .find(|s| s.name == name)
+            .expect("every structure is declared")
     }
 
     /// The actuation of this structure.
@@ -246,9 +256,7 @@ impl<T: Scalar + ComplexField> Mechanics<T> {
 
     /// The PE's momentum weights: column sums of Mp (1'Mp v is its momentum [kg m/s]).
     pub fn pe_mass_column_sums(&self) -> Vec<T> {
-        (0..self.dof)
-            .map(|j| self.pe_mass_matrix.column(j).sum())
-            .collect()
+        (0..self.dof).map(|j| self.pe_mass_matrix.column(j).sum()).collect()
     }
 }
 
@@ -268,14 +276,7 @@ impl<T: Real> Mechanics<T> {
     }
 
     #[inline(always)]
-    fn accelerations_fixed<const N: usize>(
-        &self,
-        q: &[T],
-        v: &[T],
-        f_main: T,
-        f_weight: T,
-        acc: &mut [T],
-    ) {
+    fn accelerations_fixed<const N: usize>(&self, q: &[T], v: &[T], f_main: T, f_weight: T, acc: &mut [T]) {
         let q: &[T; N] = q.try_into().unwrap();
         let v: &[T; N] = v.try_into().unwrap();
         let acc: &mut [T; N] = acc.try_into().unwrap();
@@ -356,11 +357,7 @@ impl Mechanics {
             .unwrap_or_else(|| DMatrix::zeros(self.dof, self.dof));
         let a = &linv * &self.stiffness * linv.transpose();
         let sym = (&a + a.transpose()) * 0.5;
-        let w2 = sym
-            .symmetric_eigenvalues()
-            .iter()
-            .copied()
-            .fold(0.0f64, f64::max);
+        let w2 = sym.symmetric_eigenvalues().iter().copied().fold(0.0f64, f64::max);
         w2.max(0.0).sqrt()
     }
 
@@ -390,12 +387,9 @@ impl Mechanics {
         0.5 * quad(&self.stiffness, q)
     }
 
-
     /// 1'M v [kg m/s].
     pub fn momentum(&self, v: &[f64]) -> f64 {
-        (0..self.dof)
-            .map(|j| self.mass.column(j).sum() * v[j])
-            .sum()
+        (0..self.dof).map(|j| self.mass.column(j).sum() * v[j]).sum()
     }
 }
 
@@ -438,7 +432,10 @@ mod tests {
         let mut p = Params::paper();
         p.pe_density = 0.0;
         let err = Mechanics::new(&p, Structure::Dps(4)).unwrap_err();
-        assert!(err.contains("'pe_density'") && err.contains("'lps'") && err.contains("n_elements = 1"), "{err}");
+        assert!(
+            err.contains("'pe_density'") && err.contains("'lps'") && err.contains("n_elements = 1"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -462,6 +459,9 @@ mod tests {
             assert_eq!(d.idm, !matches!(s, Structure::Rig(_)), "{}", d.name);
         }
         let err = Structure::from_name("fem", 4, drive).unwrap_err();
-        assert!(STRUCTURES.iter().all(|d| err.contains(&format!("'{}'", d.name))), "{err}");
+        assert!(
+            STRUCTURES.iter().all(|d| err.contains(&format!("'{}'", d.name))),
+            "{err}"
+        );
     }
 }

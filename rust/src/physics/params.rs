@@ -3,8 +3,8 @@
 //! All values are SI. `Params::paper()` is Table 1; `normal_force` defaults to the weight of the
 //! whole device, (m1 + m2 + mPE) g, because the weight and the PE hang on the main body.
 
-use crate::physics::declare::{check_domains, same_name, Domain, ParamDecl};
 use crate::numbers::scalar::Scalar;
+use crate::physics::declare::{check_domains, same_name, Domain, ParamDecl};
 
 /// Standard gravity used for the default normal force [m/s^2].
 pub const GRAVITY: f64 = 9.81;
@@ -153,10 +153,7 @@ impl Params {
     }
 
     pub fn get(&self, name: &str) -> Option<f64> {
-        self.fields()
-            .into_iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, v)| v)
+        self.fields().into_iter().find(|(n, _)| *n == name).map(|(_, v)| v)
     }
 
     fn fields(&self) -> [(&'static str, f64); N_PARAMS] {
@@ -166,12 +163,9 @@ impl Params {
 
     /// Set one parameter by name; unknown names are refused.
     pub fn set(&mut self, name: &str, value: f64) -> Result<(), String> {
-        let slot = self.slot(name).ok_or_else(|| {
-            format!(
-                "unknown parameter '{name}'; known: {}",
-                PARAM_NAMES.join(", ")
-            )
-        })?;
+        let slot = self
+            .slot(name)
+            .ok_or_else(|| format!("unknown parameter '{name}'; known: {}", PARAM_NAMES.join(", ")))?;
         *slot = value;
         Ok(())
     }
@@ -220,15 +214,9 @@ mod tests {
 
     #[test]
     fn unknown_and_bad_values_are_named() {
-        assert!(Params::from_pairs(&[("mass", 1.0)])
-            .unwrap_err()
-            .contains("'mass'"));
-        assert!(Params::from_pairs(&[("m1", -1.0)])
-            .unwrap_err()
-            .contains("'m1'"));
-        assert!(Params::from_pairs(&[("d33", f64::NAN)])
-            .unwrap_err()
-            .contains("'d33'"));
+        assert!(Params::from_pairs(&[("mass", 1.0)]).unwrap_err().contains("'mass'"));
+        assert!(Params::from_pairs(&[("m1", -1.0)]).unwrap_err().contains("'m1'"));
+        assert!(Params::from_pairs(&[("d33", f64::NAN)]).unwrap_err().contains("'d33'"));
     }
 
     #[test]
@@ -247,12 +235,7 @@ mod tests {
             assert_eq!(TABLE1.iter().filter(|e| e.name == d.name).count(), 1);
             assert!(!d.unit.is_empty() && !d.symbol.is_empty(), "{}", d.name);
             if d.name != "normal_force" {
-                assert_eq!(
-                    p.get(d.name).unwrap().to_bits(),
-                    d.value.to_bits(),
-                    "{}",
-                    d.name
-                );
+                assert_eq!(p.get(d.name).unwrap().to_bits(), d.value.to_bits(), "{}", d.name);
             }
         }
         assert!(table1("normal_force").value.is_nan());

@@ -42,7 +42,11 @@ impl<T: Real> PiezoHysteresis<T> {
 
 impl<S, T: Lanewise<S>> Lanewise<PiezoHysteresis<S>> for PiezoHysteresis<T> {
     fn splat(h: &PiezoHysteresis<S>) -> Self {
-        PiezoHysteresis { ap_d33: Lanewise::splat(&h.ap_d33), bp: Lanewise::splat(&h.bp), cp: Lanewise::splat(&h.cp) }
+        PiezoHysteresis {
+            ap_d33: Lanewise::splat(&h.ap_d33),
+            bp: Lanewise::splat(&h.bp),
+            cp: Lanewise::splat(&h.cp),
+        }
     }
     fn set_lane(&mut self, i: usize, h: &PiezoHysteresis<S>) {
         self.ap_d33.set_lane(i, &h.ap_d33);
@@ -119,10 +123,7 @@ mod tests {
             h
         };
         let (slow, fast) = (integrate(1e3), integrate(1e6));
-        assert!(
-            (slow - fast).abs() < 1e-12 * slow.abs().max(1e-9),
-            "{slow} {fast}"
-        );
+        assert!((slow - fast).abs() < 1e-12 * slow.abs().max(1e-9), "{slow} {fast}");
         assert!(slow > 0.0 && slow < 0.4297 * 1.24e-7 * 80.0);
     }
 

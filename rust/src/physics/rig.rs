@@ -8,11 +8,11 @@
 
 use nalgebra::DMatrix;
 
+use crate::numbers::real::Real;
+use crate::numbers::scalar::Scalar;
 use crate::physics::declare::{EffectKind, Part};
 use crate::physics::effects::{Effects, EFFECTS};
 use crate::physics::params::Params;
-use crate::numbers::real::Real;
-use crate::numbers::scalar::Scalar;
 
 /// How the input drives the body.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -32,13 +32,30 @@ impl RigDrive {
     /// The drive named `name`, validated: "position" (a spring [N/m] and a damper [N s/m] to the
     /// moving end), "force" (the input is the force), or "closed_loop" (position gain [1/s],
     /// velocity gain [V s/m], actuator constant [N/V], saturation [V]; `limit` 0: none).
-    pub fn from_name(name: &str, stiffness: f64, damping: f64, kp: f64, kv: f64, gain: f64, limit: f64) -> Result<Self, String> {
+    pub fn from_name(
+        name: &str,
+        stiffness: f64,
+        damping: f64,
+        kp: f64,
+        kv: f64,
+        gain: f64,
+        limit: f64,
+    ) -> Result<Self, String> {
         let drive = match name {
             "position" => RigDrive::Position { stiffness, damping },
             "force" => RigDrive::Force,
             // 0: no saturation (the Python stub's literal default)
-            "closed_loop" => RigDrive::ClosedLoop { kp, kv, gain, limit: if limit == 0.0 { f64::INFINITY } else { limit } },
-            other => return Err(format!("parameter 'rig_drive' must be 'position', 'force' or 'closed_loop', got '{other}'")),
+            "closed_loop" => RigDrive::ClosedLoop {
+                kp,
+                kv,
+                gain,
+                limit: if limit == 0.0 { f64::INFINITY } else { limit },
+            },
+            other => {
+                return Err(format!(
+                    "parameter 'rig_drive' must be 'position', 'force' or 'closed_loop', got '{other}'"
+                ))
+            }
         };
         drive.validate()?;
         Ok(drive)
@@ -60,7 +77,9 @@ impl RigDrive {
         }
         if let RigDrive::ClosedLoop { limit, .. } = *self {
             if !(limit > 0.0) {
-                return Err(format!("parameter 'rig_limit' must be positive (inf for none), got {limit}"));
+                return Err(format!(
+                    "parameter 'rig_limit' must be positive (inf for none), got {limit}"
+                ));
             }
         }
         Ok(())
@@ -180,10 +199,10 @@ impl crate::physics::actuation::Actuation for RigDrive {
 mod tests {
     use super::*;
     use crate::integrate::method::Method;
-    use crate::physics::mechanics::Structure;
     use crate::model::Model;
-    use crate::simulate::simulate;
+    use crate::physics::mechanics::Structure;
     use crate::physics::waveform::PiecewiseLinear;
+    use crate::simulate::simulate;
 
     fn rig_params() -> Params {
         let mut p = Params::paper();
@@ -221,7 +240,10 @@ mod tests {
         let x_slip = r.nodes[slip];
         let spring = k * (speed * t_slip - x_slip);
         assert!(x_slip.abs() < 1e-3 * fs / k, "x at breakaway {x_slip}");
-        assert!((spring / fs - 1.0).abs() < 0.02, "spring force at breakaway {spring} vs Fs {fs}");
+        assert!(
+            (spring / fs - 1.0).abs() < 0.02,
+            "spring force at breakaway {spring} vs Fs {fs}"
+        );
         assert!(m.friction_force(&r.final_state).abs() <= m.presliding_bound() * (1.0 + 1e-6));
     }
 
@@ -269,22 +291,49 @@ mod tests {
         // force balances the friction, kv kp gain (u - x) = Ff, so the body lags the reference by
         // about Ff / (gain kv kp), the static error of a P-P loop
         let (kp, kv, gain) = (160.0, 240.0, 35.0);
-        let drive = RigDrive::ClosedLoop { kp, kv, gain, limit: 10.0 };
+        let drive = RigDrive::ClosedLoop {
+            kp,
+            kv,
+            gain,
+            limit: 10.0,
+        };
         let wave = PiecewiseLinear::new(vec![0.0, 0.05, 1.0], vec![0.0, 1e-3, 1e-3]).unwrap();
         let m = Model::new(rig_params(), Effects::default(), Structure::Rig(drive), false, false).unwrap();
-        let method = Method::Rodas4 { rtol: 1e-8, atol: 1e-8, first_step: 1e-6 };
+        let method = Method::Rodas4 {
+            rtol: 1e-8,
+            atol: 1e-8,
+            first_step: 1e-6,
+        };
         let r = simulate(&m, &wave, 0.0, 0.3, &m.rest_state(), &method, 1).unwrap();
         let x = r.final_state[0];
         let ff = m.friction_force(&r.final_state);
         // the lag is the static error itself (to 2 %), not merely small
         let static_error = ff / (gain * kv * kp);
-        assert!(static_error.abs() > 1e-7, "a static error worth checking: {static_error}");
-        assert!(((1e-3 - x) - static_error).abs() < 0.02 * static_error.abs(), "lag {} vs {static_error}", 1e-3 - x);
+        assert!(
+            static_error.abs() > 1e-7,
+            "a static error worth checking: {static_error}"
+        );
+        assert!(
+            ((1e-3 - x) - static_error).abs() < 0.02 * static_error.abs(),
+            "lag {} vs {static_error}",
+            1e-3 - x
+        );
         let loop_force = gain * kv * kp * (1e-3 - x) - gain * kv * r.final_state[m.layout.dof];
-        assert!((loop_force - ff).abs() < 1e-3 * ff.abs().max(1e-3), "{loop_force} vs {ff}");
+        assert!(
+            (loop_force - ff).abs() < 1e-3 * ff.abs().max(1e-3),
+            "{loop_force} vs {ff}"
+        );
         // and saturates: a far reference drives at most gain * limit
         assert_eq!(drive.drive_force(1.0, 0.0, 0.0, 0.0), gain * 10.0);
-        assert!(RigDrive::ClosedLoop { kp, kv, gain, limit: 0.0 }.validate().unwrap_err().contains("'rig_limit'"));
+        assert!(RigDrive::ClosedLoop {
+            kp,
+            kv,
+            gain,
+            limit: 0.0
+        }
+        .validate()
+        .unwrap_err()
+        .contains("'rig_limit'"));
     }
 
     #[test]
@@ -292,16 +341,49 @@ mod tests {
         let none = || -> Result<RigDrive, String> { unreachable!("only a rig builds its drive") };
         assert_eq!(Structure::from_name("lps", 0, none), Ok(Structure::Lps));
         assert_eq!(Structure::from_name("dps", 3, none), Ok(Structure::Dps(3)));
-        assert!(Structure::from_name("dps", 0, none).unwrap_err().contains("'n_elements' must be at least 1"));
-        assert!(Structure::from_name("fem", 4, none).unwrap_err().contains("'model' must be one of 'lps', 'dps', 'rig', got 'fem'"));
+        assert!(Structure::from_name("dps", 0, none)
+            .unwrap_err()
+            .contains("'n_elements' must be at least 1"));
+        assert!(Structure::from_name("fem", 4, none)
+            .unwrap_err()
+            .contains("'model' must be one of 'lps', 'dps', 'rig', got 'fem'"));
         let rig = |name: &str, limit: f64| RigDrive::from_name(name, 5e4, 2.0, 160.0, 240.0, 35.0, limit);
-        assert_eq!(rig("position", 0.0), Ok(RigDrive::Position { stiffness: 5e4, damping: 2.0 }));
+        assert_eq!(
+            rig("position", 0.0),
+            Ok(RigDrive::Position {
+                stiffness: 5e4,
+                damping: 2.0
+            })
+        );
         assert_eq!(rig("force", 0.0), Ok(RigDrive::Force));
-        assert_eq!(rig("closed_loop", 0.0), Ok(RigDrive::ClosedLoop { kp: 160.0, kv: 240.0, gain: 35.0, limit: f64::INFINITY }));
-        assert_eq!(rig("closed_loop", 10.0), Ok(RigDrive::ClosedLoop { kp: 160.0, kv: 240.0, gain: 35.0, limit: 10.0 }));
-        assert!(rig("servo", 0.0).unwrap_err().contains("'rig_drive' must be 'position', 'force' or 'closed_loop', got 'servo'"));
-        assert!(RigDrive::from_name("position", -1.0, 0.0, 0.0, 0.0, 0.0, 0.0).unwrap_err().contains("'rig_stiffness'"));
-        assert_eq!(Structure::from_name("rig", 0, || rig("force", 0.0)), Ok(Structure::Rig(RigDrive::Force)));
+        assert_eq!(
+            rig("closed_loop", 0.0),
+            Ok(RigDrive::ClosedLoop {
+                kp: 160.0,
+                kv: 240.0,
+                gain: 35.0,
+                limit: f64::INFINITY
+            })
+        );
+        assert_eq!(
+            rig("closed_loop", 10.0),
+            Ok(RigDrive::ClosedLoop {
+                kp: 160.0,
+                kv: 240.0,
+                gain: 35.0,
+                limit: 10.0
+            })
+        );
+        assert!(rig("servo", 0.0)
+            .unwrap_err()
+            .contains("'rig_drive' must be 'position', 'force' or 'closed_loop', got 'servo'"));
+        assert!(RigDrive::from_name("position", -1.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            .unwrap_err()
+            .contains("'rig_stiffness'"));
+        assert_eq!(
+            Structure::from_name("rig", 0, || rig("force", 0.0)),
+            Ok(Structure::Rig(RigDrive::Force))
+        );
     }
 
     #[test]

@@ -12,11 +12,7 @@ pub struct PiecewiseLinear {
 impl PiecewiseLinear {
     pub fn new(t: Vec<f64>, v: Vec<f64>) -> Result<Self, String> {
         if t.len() != v.len() {
-            return Err(format!(
-                "waveform: {} times but {} voltages",
-                t.len(),
-                v.len()
-            ));
+            return Err(format!("waveform: {} times but {} voltages", t.len(), v.len()));
         }
         if t.is_empty() {
             return Err("waveform: needs at least one sample".into());
@@ -154,14 +150,10 @@ impl PiecewiseLinear {
 impl PiecewiseLinear {
     /// The first breakpoint inside (0, `t_end`) that is not a whole number of steps `dt` [s].
     pub fn misaligned(&self, dt: f64, t_end: f64) -> Option<f64> {
-        self.t
-            .iter()
-            .copied()
-            .filter(|&ti| ti > 0.0 && ti < t_end)
-            .find(|&ti| {
-                let r = ti / dt;
-                (r - r.round()).abs() > 1e-6
-            })
+        self.t.iter().copied().filter(|&ti| ti > 0.0 && ti < t_end).find(|&ti| {
+            let r = ti / dt;
+            (r - r.round()).abs() > 1e-6
+        })
     }
 }
 
@@ -176,9 +168,7 @@ pub struct Cursor {
 impl Cursor {
     /// A cursor placed at time `t` [s].
     pub fn at(wave: &PiecewiseLinear, t: f64) -> Self {
-        Cursor {
-            seg: wave.segment(t),
-        }
+        Cursor { seg: wave.segment(t) }
     }
 
     /// The segment index the cursor is on.

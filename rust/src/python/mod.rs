@@ -22,15 +22,15 @@ use crate::batch::{BatchConfig, BatchRunner, PointMetrics, PointTables, WaveFami
 use crate::integrate::method::Method;
 use crate::integrate::plan::check_task;
 use crate::integrate::task::{SimError, Task};
+use crate::model::{Model, N_ACCOUNTING};
 use crate::physics::effects::{Effects, EFFECT_NAMES};
 use crate::physics::external_force::{Body, ExternalForce};
 use crate::physics::mechanics::Structure;
-use crate::model::{Model, N_ACCOUNTING};
 use crate::physics::params::{Params, PARAM_NAMES};
 use crate::physics::rig::RigDrive;
+use crate::physics::waveform::PiecewiseLinear;
 use crate::sensitivity::parse_seeds;
 use crate::simulate::simulate_with_derivatives;
-use crate::physics::waveform::PiecewiseLinear;
 
 create_exception!(
     _core,
@@ -63,9 +63,7 @@ fn detached<T: Send, F: FnOnce() -> T + Send>(py: Python<'_>, f: F) -> PyResult<
             .cloned()
             .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
             .unwrap_or_else(|| "unknown panic".into());
-        PyRuntimeError::new_err(format!(
-            "internal error in idm-rs core (please report): {what}"
-        ))
+        PyRuntimeError::new_err(format!("internal error in idm-rs core (please report): {what}"))
     })
 }
 
@@ -184,8 +182,15 @@ run_config! {
 impl RunConfig {
     fn structure(&self) -> PyResult<Structure> {
         Structure::from_name(&self.model, self.n_elements, || {
-            RigDrive::from_name(&self.rig_drive, self.rig_stiffness, self.rig_damping, self.rig_kp, self.rig_kv,
-                                self.rig_gain, self.rig_limit)
+            RigDrive::from_name(
+                &self.rig_drive,
+                self.rig_stiffness,
+                self.rig_damping,
+                self.rig_kp,
+                self.rig_kv,
+                self.rig_gain,
+                self.rig_limit,
+            )
         })
         .map_err(value_error)
     }
@@ -226,10 +231,7 @@ impl RunConfig {
 #[pyfunction]
 fn resolve_params(params: HashMap<String, f64>) -> PyResult<HashMap<String, f64>> {
     let p = parse_params(&params)?;
-    Ok(PARAM_NAMES
-        .iter()
-        .map(|n| (n.to_string(), p.get(n).unwrap()))
-        .collect())
+    Ok(PARAM_NAMES.iter().map(|n| (n.to_string(), p.get(n).unwrap())).collect())
 }
 
 /// The batch's metric columns: (name, unit, long name), in result order.
@@ -298,13 +300,20 @@ fn kernel_constants<'py>(
         let m = config.model(p, Effects::default(), false)?;
         out.extend(crate::gpu::kernel::kernel_constants(&m).map_err(|e| value_error(format!("point {r}: {e}")))?);
     }
-    Ok(out.into_pyarray(py).reshape([rows, crate::gpu::kernel::N_CONSTANTS])?.into_any())
+    Ok(out
+        .into_pyarray(py)
+        .reshape([rows, crate::gpu::kernel::N_CONSTANTS])?
+        .into_any())
 }
 
 /// Number of constants per point of the GPU kernel (its layout is `rust/src/gpu/kernel.rs`).
 #[pyfunction]
 fn kernel_constant_count() -> (usize, usize, usize) {
-    (crate::gpu::kernel::N_CONSTANTS, crate::gpu::kernel::N_SCALARS, crate::gpu::kernel::MAX_DOF)
+    (
+        crate::gpu::kernel::N_CONSTANTS,
+        crate::gpu::kernel::N_SCALARS,
+        crate::gpu::kernel::MAX_DOF,
+    )
 }
 
 /// What the GPU kernel implements (`rust/src/gpu/kernel.rs`): the Table 1 parameters, effects,
@@ -387,9 +396,11 @@ fn check_run(
     initial_state: Option<PyReadonlyArray1<'_, f64>>,
     external_force: Option<ExternalForceArg<'_>>,
 ) -> PyResult<()> {
-    let m = with_external(config.model(parse_params(&params)?, parse_effects(&effects)?, false)?, external_force)?;
-    let wave = PiecewiseLinear::new(slice1(&wave_t).into_owned(), slice1(&wave_v).into_owned())
-        .map_err(value_error)?;
+    let m = with_external(
+        config.model(parse_params(&params)?, parse_effects(&effects)?, false)?,
+        external_force,
+    )?;
+    let wave = PiecewiseLinear::new(slice1(&wave_t).into_owned(), slice1(&wave_v).into_owned()).map_err(value_error)?;
     let y0 = initial_state.as_ref().map(slice1);
     let rest = m.rest_state();
     let task = Task {
@@ -423,13 +434,15 @@ fn simulate<'py>(
     sensitivities: Option<Vec<String>>,
     external_force: Option<ExternalForceArg<'_>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let m = with_external(config.model(parse_params(&params)?, parse_effects(&effects)?, energy)?, external_force)?;
+    let m = with_external(
+        config.model(parse_params(&params)?, parse_effects(&effects)?, energy)?,
+        external_force,
+    )?;
     let names = sensitivities.unwrap_or_default();
     let normal_force_derived = !params.contains_key("normal_force");
     let seeds = parse_seeds(&m, &names, normal_force_derived).map_err(value_error)?;
     let method = config.method()?;
-    let wave = PiecewiseLinear::new(slice1(&wave_t).into_owned(), slice1(&wave_v).into_owned())
-        .map_err(value_error)?;
+    let wave = PiecewiseLinear::new(slice1(&wave_t).into_owned(), slice1(&wave_v).into_owned()).map_err(value_error)?;
     let y0: Vec<f64> = match &initial_state {
         Some(a) => slice1(a).into_owned(),
         None => m.rest_state(),
@@ -440,8 +453,18 @@ fn simulate<'py>(
     let (traj, complete, derived) = std::thread::scope(|scope| -> PyResult<_> {
         let worker = scope.spawn(|| {
             catch_unwind(AssertUnwindSafe(|| {
-                simulate_with_derivatives(&m, &wave, t_start, t_end, &y0, &method, save_every, &seeds,
-                                          normal_force_derived, &cancel)
+                simulate_with_derivatives(
+                    &m,
+                    &wave,
+                    t_start,
+                    t_end,
+                    &y0,
+                    &method,
+                    save_every,
+                    &seeds,
+                    normal_force_derived,
+                    &cancel,
+                )
             }))
         });
         while !py.detach(|| {
@@ -487,7 +510,10 @@ fn simulate<'py>(
         d.set_item("sensitivity_names", names)?;
         d.set_item("sensitivities", arr2(s.readings, n)?)?;
         let dim = s.final_state.len() / n.max(1);
-        d.set_item("final_state_sensitivities", s.final_state.into_pyarray(py).reshape([dim, n])?)?;
+        d.set_item(
+            "final_state_sensitivities",
+            s.final_state.into_pyarray(py).reshape([dim, n])?,
+        )?;
     }
     if energy {
         d.set_item("accounting", arr2(traj.accounting, N_ACCOUNTING)?)?;
@@ -533,9 +559,13 @@ impl BatchRun {
     /// with `traces` (a list of arrays) when readings were recorded and `final_states` (a list
     /// of arrays, empty where a point did not finish) when asked for.
     fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let outputs = py
-            .detach(|| self.runner.join())
-            .map_err(|e| if e.contains("already taken") { PyRuntimeError::new_err(e) } else { value_error(e) })?;
+        let outputs = py.detach(|| self.runner.join()).map_err(|e| {
+            if e.contains("already taken") {
+                PyRuntimeError::new_err(e)
+            } else {
+                value_error(e)
+            }
+        })?;
         let d = PyDict::new(py);
         if outputs.iter().any(|o| !o.trace.is_empty()) {
             let traces = PyList::empty(py);
@@ -677,9 +707,9 @@ mod declarations {
     use pyo3::prelude::*;
     use pyo3::types::PyDict;
 
+    use crate::integrate::method::METHODS;
     use crate::physics::declare::ParamDecl;
     use crate::physics::effects::EFFECTS;
-    use crate::integrate::method::METHODS;
     use crate::physics::mechanics::STRUCTURES;
     use crate::physics::params::{GRAVITY, TABLE1};
 
