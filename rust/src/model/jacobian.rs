@@ -336,6 +336,7 @@ mod tests {
             .collect()
     }
 
+    // Long: every catalogue effect on at once and each state's partials compared, one table
     #[test]
     fn analytic_jacobian_equals_the_one_derived_from_the_right_hand_side() {
         let p = Params::paper();

@@ -413,6 +413,31 @@ fn check_run(
     check_task(&task, &config.method()?).map_err(|e| value_error(e.to_string()))
 }
 
+/// `work` run on a worker thread while this one looks for Ctrl-C (Python's signal handlers run
+/// only here) and sets `cancel` on it, so the run stops and keeps what it saved so far; a panic
+/// in `work` becomes a Python RuntimeError, never a crash.
+fn watching_for_ctrl_c<T: Send>(py: Python<'_>, cancel: &AtomicBool, work: impl FnOnce() -> T + Send) -> PyResult<T> {
+    std::thread::scope(|scope| -> PyResult<T> {
+        let worker = scope.spawn(|| catch_unwind(AssertUnwindSafe(work)));
+        while !py.detach(|| {
+            let deadline = Instant::now() + Duration::from_millis(50);
+            while !worker.is_finished() && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            worker.is_finished()
+        }) {
+            if py.check_signals().is_err() {
+                cancel.store(true, Ordering::Relaxed);
+            }
+        }
+        worker
+            .join()
+            .ok()
+            .and_then(|r| r.ok())
+            .ok_or_else(|| PyRuntimeError::new_err("internal error in idm-rs core (please report)"))
+    })
+}
+
 /// Simulate one run; returns a dict of numpy arrays (see `idm_rs.simulate`). With
 /// `sensitivities` (names), also `sensitivities` (saved times x names): d reading / d name,
 /// and `final_state_sensitivities` (state components x names).
@@ -447,42 +472,20 @@ fn simulate<'py>(
         Some(a) => slice1(a).into_owned(),
         None => m.rest_state(),
     };
-    // the run goes on a worker thread; this one looks for Ctrl-C (Python's signal handlers run
-    // only here) and asks the run to stop, keeping the trajectory saved so far
     let cancel = AtomicBool::new(false);
-    let (traj, complete, derived) = std::thread::scope(|scope| -> PyResult<_> {
-        let worker = scope.spawn(|| {
-            catch_unwind(AssertUnwindSafe(|| {
-                simulate_with_derivatives(
-                    &m,
-                    &wave,
-                    t_start,
-                    t_end,
-                    &y0,
-                    &method,
-                    save_every,
-                    &seeds,
-                    normal_force_derived,
-                    &cancel,
-                )
-            }))
-        });
-        while !py.detach(|| {
-            let deadline = Instant::now() + Duration::from_millis(50);
-            while !worker.is_finished() && Instant::now() < deadline {
-                std::thread::sleep(Duration::from_millis(2));
-            }
-            worker.is_finished()
-        }) {
-            if py.check_signals().is_err() {
-                cancel.store(true, Ordering::Relaxed);
-            }
-        }
-        worker
-            .join()
-            .ok()
-            .and_then(|r| r.ok())
-            .ok_or_else(|| PyRuntimeError::new_err("internal error in idm-rs core (please report)"))
+    let (traj, complete, derived) = watching_for_ctrl_c(py, &cancel, || {
+        simulate_with_derivatives(
+            &m,
+            &wave,
+            t_start,
+            t_end,
+            &y0,
+            &method,
+            save_every,
+            &seeds,
+            normal_force_derived,
+            &cancel,
+        )
     })?
     .map_err(|e| sim_error(py, e))?;
 
