@@ -6,17 +6,17 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use idm_rs::integrate::stepper::AdaptiveOptions;
 use idm_rs::integrate::method::Method;
 use idm_rs::integrate::model_rhs::ModelRhs;
+use idm_rs::integrate::rodas4::Rodas4;
+use idm_rs::integrate::stepper::AdaptiveOptions;
+use idm_rs::integrate::stepper::{Rhs, Stepper};
+use idm_rs::model::Model;
 use idm_rs::physics::effects::Effects;
 use idm_rs::physics::mechanics::Structure;
-use idm_rs::model::Model;
 use idm_rs::physics::params::Params;
-use idm_rs::integrate::rodas4::Rodas4;
-use idm_rs::simulate::simulate;
-use idm_rs::integrate::stepper::{Rhs, Stepper};
 use idm_rs::physics::waveform::PiecewiseLinear;
+use idm_rs::simulate::simulate;
 use num_dual::Dual64;
 
 /// The model's right-hand side with the derived Jacobian in place of the analytic one.
@@ -34,7 +34,8 @@ impl Rhs for Derived<'_> {
     }
     fn jacobian(&mut self, _lane: usize, tau: f64, y: &[f64], jac: &mut [f64], dfdt: &mut [f64]) {
         let (v0, s) = (self.inner.v0[0], self.inner.slope[0]);
-        self.dual.derived_jacobian(self.inner.t0[0] + tau, v0 + s * tau, s, y, jac, dfdt);
+        self.dual
+            .derived_jacobian(self.inner.t0[0] + tau, v0 + s * tau, s, y, jac, dfdt);
     }
 }
 
@@ -63,8 +64,12 @@ fn main() {
         let (v, dv) = (wave.value(0.3e-3), 80.0 / 0.5e-3);
         let dual = m.dual();
         let (mut jac, mut ft) = (vec![0.0; d * d], vec![0.0; d]);
-        let analytic = ns_per(200_000, || m.jacobian(0.3e-3, black_box(v), dv, black_box(&y), &mut jac, &mut ft));
-        let derived = ns_per(20_000, || dual.derived_jacobian(0.3e-3, black_box(v), dv, black_box(&y), &mut jac, &mut ft));
+        let analytic = ns_per(200_000, || {
+            m.jacobian(0.3e-3, black_box(v), dv, black_box(&y), &mut jac, &mut ft)
+        });
+        let derived = ns_per(20_000, || {
+            dual.derived_jacobian(0.3e-3, black_box(v), dv, black_box(&y), &mut jac, &mut ft)
+        });
 
         let opts = AdaptiveOptions {
             rtol: 1e-6,
@@ -75,11 +80,21 @@ fn main() {
             h_max: 1.0,
             held: Default::default(),
         };
-        let rhs = || ModelRhs::<f64, 0, true, 1> { models: [&m], t0: [0.3e-3], v0: [v], slope: [dv], at_start: [(0.0, 0.0)], bound: [m.presliding_bound() * 2.0] };
+        let rhs = || ModelRhs::<f64, 0, true, 1> {
+            models: [&m],
+            t0: [0.3e-3],
+            v0: [v],
+            slope: [dv],
+            at_start: [(0.0, 0.0)],
+            bound: [m.presliding_bound() * 2.0],
+        };
         let attempt = |derive: bool| {
             let mut st: Rodas4<Vec<f64>, 1, 0> = Rodas4::new([opts.clone()], vec![0.0; d]);
             let mut plain = rhs();
-            let mut with = Derived { inner: rhs(), dual: &dual };
+            let mut with = Derived {
+                inner: rhs(),
+                dual: &dual,
+            };
             ns_per(20_000, || {
                 let mut ys = [y.clone()];
                 if derive {

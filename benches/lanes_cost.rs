@@ -8,10 +8,10 @@ use std::time::Instant;
 use idm_rs::drive::run_tasks_exp;
 use idm_rs::integrate::method::Method;
 use idm_rs::integrate::task::{Observer, Task};
-use idm_rs::physics::effects::Effects;
 use idm_rs::lanes::{set_simd_level, LaneExp, LibmExp, PolyExp};
-use idm_rs::physics::mechanics::Structure;
 use idm_rs::model::Model;
+use idm_rs::physics::effects::Effects;
+use idm_rs::physics::mechanics::Structure;
 use idm_rs::physics::params::Params;
 use idm_rs::physics::waveform::PiecewiseLinear;
 
@@ -37,12 +37,21 @@ fn time<E: LaneExp, const L: usize>(tasks: &[Task], method: &Method) -> (f64, Ve
 /// The right-hand side alone: 8 lanes of the scalar model one by one vs the vector lanes.
 fn rhs_only(models: &[Model]) {
     use idm_rs::integrate::model_rhs::{LaneInputs, ModelRhs};
-    use idm_rs::lanes::LanesRhs;
     use idm_rs::integrate::stepper::Rhs;
+    use idm_rs::lanes::LanesRhs;
     const D: usize = 7;
     let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap();
     let y0 = models[0].rest_state();
-    let tasks: Vec<Task> = models[..8].iter().map(|m| Task { model: m, wave: &wave, t_start: 0.0, t_end: 1e-3, y0: &y0 }).collect();
+    let tasks: Vec<Task> = models[..8]
+        .iter()
+        .map(|m| Task {
+            model: m,
+            wave: &wave,
+            t_start: 0.0,
+            t_end: 1e-3,
+            y0: &y0,
+        })
+        .collect();
     let mut ys = [[0.0; D]; 8];
     for (i, y) in ys.iter_mut().enumerate() {
         y[0] = 1e-9 * i as f64;
@@ -52,7 +61,13 @@ fn rhs_only(models: &[Model]) {
     let mut dys = [[0.0; D]; 8];
     let active = [true; 8];
     let n = 2_000_000;
-    struct Op<'r, 'a> { r: &'r mut LanesRhs<'a, PolyExp, 2, 7, 8>, ys: &'r mut [[f64; D]; 8], dys: &'r mut [[f64; D]; 8], n: usize, vector: bool }
+    struct Op<'r, 'a> {
+        r: &'r mut LanesRhs<'a, PolyExp, 2, 7, 8>,
+        ys: &'r mut [[f64; D]; 8],
+        dys: &'r mut [[f64; D]; 8],
+        n: usize,
+        vector: bool,
+    }
     impl pulp::WithSimd for Op<'_, '_> {
         type Output = f64;
         #[inline(always)]
@@ -73,11 +88,17 @@ fn rhs_only(models: &[Model]) {
         }
     }
     let mut r = LanesRhs::<PolyExp, 2, 7, 8>::new(ModelRhs::for_tasks(&tasks, 0.0));
-    for i in 0..8 { r.set_input(i, 0.0, 10.0, 1e5); }
+    for i in 0..8 {
+        r.set_input(i, 0.0, 10.0, 1e5);
+    }
     let _ = active;
     {
         use idm_rs::lanes::PlainLanes;
-        struct Soa<'r> { p: &'r PlainLanes<2, 8, PolyExp>, y: [[f64; 8]; D], n: usize }
+        struct Soa<'r> {
+            p: &'r PlainLanes<2, 8, PolyExp>,
+            y: [[f64; 8]; D],
+            n: usize,
+        }
         impl pulp::WithSimd for Soa<'_> {
             type Output = (f64, f64);
             #[inline(always)]
@@ -99,11 +120,24 @@ fn rhs_only(models: &[Model]) {
         let p = PlainLanes::<2, 8, PolyExp>::new(&group).unwrap();
         let y: [[f64; 8]; D] = std::array::from_fn(|j| std::array::from_fn(|i| ys[i][j]));
         let (t, _) = pulp::Arch::new().dispatch(Soa { p: &p, y, n });
-        println!("  rhs only, {:26} {:6.2} ns per lane-evaluation", "SoA vector lanes (poly)", t / (8 * n) as f64 * 1e9);
+        println!(
+            "  rhs only, {:26} {:6.2} ns per lane-evaluation",
+            "SoA vector lanes (poly)",
+            t / (8 * n) as f64 * 1e9
+        );
     }
     for (label, vector) in [("scalar model x 8", false), ("vector lanes (poly exp)", true)] {
-        let t = pulp::Arch::new().dispatch(Op { r: &mut r, ys: &mut ys, dys: &mut dys, n, vector });
-        println!("  rhs only, {label:26} {:6.2} ns per lane-evaluation", t / (8 * n) as f64 * 1e9);
+        let t = pulp::Arch::new().dispatch(Op {
+            r: &mut r,
+            ys: &mut ys,
+            dys: &mut dys,
+            n,
+            vector,
+        });
+        println!(
+            "  rhs only, {label:26} {:6.2} ns per lane-evaluation",
+            t / (8 * n) as f64 * 1e9
+        );
     }
 }
 
@@ -123,7 +157,13 @@ fn main() {
         let tasks: Vec<Task> = models
             .iter()
             .zip(&y0)
-            .map(|(m, y)| Task { model: m, wave: &wave, t_start: 0.0, t_end: 2e-3, y0: y })
+            .map(|(m, y)| Task {
+                model: m,
+                wave: &wave,
+                t_start: 0.0,
+                t_end: 2e-3,
+                y0: y,
+            })
             .collect();
         let steps = 64.0 * 2e-3 / 5e-8;
         if std::env::var("LANES_PROFILE").is_ok() {
@@ -161,7 +201,11 @@ fn main() {
         let err = xr.iter().zip(&xp).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         println!("  poly exp: max |dx1| against libm exp {err:.1e} m");
         // dopri5 (per-lane steps; stages through the vector right-hand side, lane-major state)
-        let adaptive = Method::Dopri5 { rtol: 3e-7, atol: 3e-7, first_step: 1e-8 };
+        let adaptive = Method::Dopri5 {
+            rtol: 3e-7,
+            atol: 3e-7,
+            first_step: 1e-8,
+        };
         set_simd_level("scalar");
         let (base_d, xd) = time::<LibmExp, 8>(&tasks, &adaptive);
         for level in ["avx2", "avx512"] {
@@ -169,8 +213,12 @@ fn main() {
             let (t, x) = time::<LibmExp, 8>(&tasks, &adaptive);
             assert_eq!(x, xd);
             let (tp, _) = time::<PolyExp, 8>(&tasks, &adaptive);
-            println!("  dopri5 3e-7, 8 lanes: {level} libm exp {:5.2}x, poly exp {:5.2}x against scalar code ({:.1} ms)",
-                     base_d / t, base_d / tp, base_d * 1e3);
+            println!(
+                "  dopri5 3e-7, 8 lanes: {level} libm exp {:5.2}x, poly exp {:5.2}x against scalar code ({:.1} ms)",
+                base_d / t,
+                base_d / tp,
+                base_d * 1e3
+            );
         }
         set_simd_level("avx2");
     }

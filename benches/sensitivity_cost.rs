@@ -6,13 +6,13 @@ use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use idm_rs::integrate::method::Method;
+use idm_rs::model::Model;
 use idm_rs::physics::effects::Effects;
 use idm_rs::physics::mechanics::Structure;
-use idm_rs::model::Model;
 use idm_rs::physics::params::Params;
+use idm_rs::physics::waveform::PiecewiseLinear;
 use idm_rs::sensitivity::{derivatives, parse_seeds, Schedule};
 use idm_rs::simulate::simulate;
-use idm_rs::physics::waveform::PiecewiseLinear;
 
 fn best<F: FnMut()>(mut f: F) -> f64 {
     (0..5)
@@ -25,7 +25,16 @@ fn best<F: FnMut()>(mut f: F) -> f64 {
 }
 
 fn main() {
-    let names = ["mu_k", "m2", "fric_alpha", "sigma1", "mu_s", "d33", "hyst_alpha", "sigma2"];
+    let names = [
+        "mu_k",
+        "m2",
+        "fric_alpha",
+        "sigma1",
+        "mu_s",
+        "d33",
+        "hyst_alpha",
+        "sigma2",
+    ];
     let wave = PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap();
     let method = Method::Rk4 { dt: 1e-8 };
     let never = AtomicBool::new(false);
@@ -40,11 +49,26 @@ fn main() {
         for n in [1, 2, 4, 8] {
             let asked: Vec<String> = names[..n].iter().map(|s| s.to_string()).collect();
             let seeds = parse_seeds(&m, &asked, false).unwrap();
-            let schedule = Schedule { every: 100, also_last: true };
+            let schedule = Schedule {
+                every: 100,
+                also_last: true,
+            };
             let pass = best(|| {
-                derivatives(&m, &wave, 0.0, 2e-3, &y0, &method, &Default::default(), schedule, &seeds, false, &never)
-                    .unwrap()
-                    .unwrap();
+                derivatives(
+                    &m,
+                    &wave,
+                    0.0,
+                    2e-3,
+                    &y0,
+                    &method,
+                    &Default::default(),
+                    schedule,
+                    &seeds,
+                    false,
+                    &never,
+                )
+                .unwrap()
+                .unwrap();
             });
             println!(
                 "| {label} | {:.1} | {n} | {:.1} | {:.2} | {:.2} |",

@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterable, Optional, Sequence, Union
+from typing import TYPE_CHECKING, Any, Iterable, Optional, Sequence, Union, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -354,7 +354,7 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
         raise interrupted(f"characterize interrupted: kept {partial.attrs['kept']} (as far as it ran; NaN where "
                           "not), no stall force (the Dataset is the exception's .partial, attrs['complete'] = 0)",
                           partial=partial) from None
-    ds = xr.Dataset()
+    ds: "xarray.Dataset" = xr.Dataset()
     for name in STEADY_METRICS:
         ds[name] = vmap[name]
     for name in ("step_mean", "step_std", "backslip", "backslip_ratio", "direction"):
@@ -383,7 +383,7 @@ def _kept(sweep: Any, params: Params, train: Sawtooth, grid: dict[str, Any], don
     """``sweep(params, train, grid, **common)``; on Ctrl-C its finished points go into
     ``done[key]`` before the interrupt travels on."""
     try:
-        return sweep(params, train, grid, **common)
+        return cast("xarray.Dataset", sweep(params, train, grid, **common))
     except KeyboardInterrupt as stop:
         if partial_result(stop) is not None:
             done[key] = partial_result(stop)

@@ -15,7 +15,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, Optional, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Literal, Optional, Sequence, cast
 
 import numpy as np
 
@@ -61,7 +61,7 @@ def _positive_float(text: str) -> float:
     return v
 
 
-def _int_at_least(low: int, words: str):
+def _int_at_least(low: int, words: str) -> Callable[[str], int]:
     """An argparse type: an integer >= ``low`` (``words`` says what that means in the error)."""
     def parse(text: str) -> int:
         try:
@@ -239,7 +239,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _add_diagnose_parser(sub: "argparse._SubParsersAction") -> None:
+def _add_diagnose_parser(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
     dp = sub.add_parser(
         "diagnose",
         help="diagnose a recorded case: locate the mismatch, name the missing physics, refit",
@@ -456,7 +456,7 @@ def _snap(t: float, dt: float) -> float:
     """``t`` rounded to a whole number of steps when it is within 1e-9 of one."""
     from .sweep import snap_to_steps
 
-    return snap_to_steps(t, dt)
+    return cast(float, snap_to_steps(t, dt))  # a number in, a number out
 
 
 def write_csv(result: SimulationResult, path: Path) -> None:
@@ -742,7 +742,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     if a.scheduler:
         from dask.distributed import Client
 
-        client = Client(a.scheduler)
+        client = Client(a.scheduler)  # type: ignore[no-untyped-call, unused-ignore]
     try:
         ds = _kept_on_interrupt(
             sweep, params, waveform, grid, t_end=t_end, dt=a.dt, model=a.model,
@@ -753,7 +753,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
         )
     finally:
         if client is not None:
-            client.close()
+            client.close()  # type: ignore[no-untyped-call, unused-ignore]
     print(sweep_summary(ds, a.metric))
     if store is not None:
         print(f"wrote {store} (Zarr, written block by block)")

@@ -188,7 +188,8 @@ def sweep_title(ds: "xarray.Dataset", metric: str) -> str:
     details = (f"{model}, {how}, {span}, "
                f"{_waveform_title(str(a.get('waveform')), [str(d) for d in ds[metric].dims])}"
                + (f"; effects: {', '.join(on)}" if on else ""))
-    return ds[metric].attrs.get("long_name", metric) + "\n" + textwrap.fill(details, 95)
+    name: str = ds[metric].attrs.get("long_name", metric)
+    return name + "\n" + textwrap.fill(details, 95)
 
 
 def _waveform_title(text: str, swept: Sequence[str]) -> str:

@@ -20,9 +20,10 @@ from typing import Any, Callable, NamedTuple, Optional
 
 import numpy as np
 
+from .declarations import Model
 from .methods import MethodName
 from .params import Params
-from .simulation import DivergenceError, Model, SimulationResult, simulate
+from .simulation import DivergenceError, SimulationResult, simulate
 from .waveforms import Triangle, Waveform
 
 # --- the paper's reported values (Section 3, Fig. 6a) -------------------------------------------

@@ -22,7 +22,7 @@ import math
 import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Iterator, Literal, Mapping, Optional, Sequence, Union
+from typing import Any, Iterator, Literal, Mapping, Optional, Sequence, Union, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -202,7 +202,7 @@ class Recording:
     experiments: list[Experiment]
     sample_rate_Hz: float
     resolution_m: float
-    meta: dict = field(repr=False, default_factory=dict)  #: meta.json as read
+    meta: dict[str, Any] = field(repr=False, default_factory=dict)  #: meta.json as read
     #: how the sensor reads, as the diagnosis learned it (its noise colour, nuisance columns and
     #: channel delay: ``diagnosis.measurement.Measurement``); None (as loaded): white noise
     measurement: Any = field(repr=False, default=None)
@@ -276,7 +276,7 @@ def _number(obj: Mapping[str, Any], key: str, meta: Path, where: str, *, positiv
     return v
 
 
-def _read_meta(case: Path) -> dict:
+def _read_meta(case: Path) -> dict[str, Any]:
     meta = case / META
     if not case.is_dir():
         raise RecordingError(case, "not a directory (a case is a directory with meta.json and CSV files)")
@@ -349,13 +349,13 @@ _EXPERIMENT_KEYS = ("file", "waveform", "amplitude_V", "frequency_Hz", "directio
 ORIENTATIONS = ("normal", "reversed")
 
 
-def _parse_orientation(e: dict, where: str, meta: Path) -> str:
+def _parse_orientation(e: dict[str, Any], where: str, meta: Path) -> str:
     """An experiment's optional ``orientation`` ("normal" when absent)."""
     value = e.get("orientation", "normal")
     if value not in ORIENTATIONS:
         raise RecordingError(meta, f"must be \"normal\" or \"reversed\" (the rig turned end for end on the bench), "
                              f"got {value!r}", column=f"{where}.orientation")
-    return value
+    return cast(str, value)  # one of ORIENTATIONS
 
 
 def _parse_experiment_meta(e: Any, i: int, meta: Path) -> dict[str, Any]:
@@ -404,7 +404,7 @@ def _parse_experiment_meta(e: Any, i: int, meta: Path) -> dict[str, Any]:
     return out
 
 
-def _parse_sampled_meta(e: dict, i: int, meta: Path) -> dict[str, Any]:
+def _parse_sampled_meta(e: dict[str, Any], i: int, meta: Path) -> dict[str, Any]:
     """A sampled drive: the CSV's voltage column is the input. Keys: ``file``, ``waveform``
     and, optionally, ``rest_s`` (how long the device rests before the drive starts [s];
     default: until the voltage first leaves 0). The amplitude and the record's duration come

@@ -218,7 +218,8 @@ class SimulationResult:
 
         from .engine import __version__
 
-        def var(data: NDArray[np.float64], units: str, long_name: str, dims: tuple[str, ...] = ("time",)):
+        def var(data: NDArray[np.float64], units: str, long_name: str, dims: tuple[str, ...] = ("time",)
+                ) -> "xarray.Variable":
             return xr.Variable(dims, data, {"units": units, "long_name": long_name})
 
         ds = xr.Dataset(

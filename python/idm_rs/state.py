@@ -3,7 +3,7 @@ from (continue a run, or restart it mid-record)."""
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Optional, Sequence
+from typing import Any, Mapping, Optional, Sequence, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -76,13 +76,13 @@ class State(np.ndarray):
     @property
     def nodes(self) -> NDArray[np.float64]:
         """Nodal displacements [m]."""
-        return np.asarray(self)[: self.n_nodes].copy()
+        return cast("NDArray[np.float64]", np.asarray(self)[: self.n_nodes].copy())
 
     @property
     def velocities(self) -> NDArray[np.float64]:
         """Nodal velocities [m/s]."""
         n = self.n_nodes
-        return np.asarray(self)[n : 2 * n].copy()
+        return cast("NDArray[np.float64]", np.asarray(self)[n : 2 * n].copy())
 
     def to_dict(self) -> dict[str, float]:
         """Component name -> value (SI)."""

@@ -911,7 +911,7 @@ def _run_dask(plan: _Plan, out: dict[str, NDArray[Any]], client: Any, block: int
         fut = client.submit(run_block, plan, start, stop, 1, pure=False)
         futures[fut] = (start, stop)
     try:
-        for fut in as_completed(futures):
+        for fut in as_completed(futures):  # type: ignore[no-untyped-call, unused-ignore]
             start, stop = futures[fut]
             _store(out, fut.result(), start, stop)
             if bar is not None:

@@ -103,7 +103,7 @@ def run_to_store(plan: Any, run: Any, path: Path, bar: Any,
     group = zarr.open_group(str(path), mode="r+")
     group.attrs.update({"complete": int(complete), "points_finished": finished,
                         "wall_time_s": time.perf_counter() - t0})
-    store = xr.open_zarr(path, consolidated=False, chunks=None)
+    store: "xarray.Dataset" = xr.open_zarr(path, consolidated=False, chunks=None)
     if not complete:
         raise interrupted(f"sweep interrupted: {finished} of {plan.size} points written to {str(path)!r}; the rest "
                           "have status 0 (attrs['complete'] = 0; the store is the exception's .partial)",
@@ -123,7 +123,8 @@ def _layout(plan: Any, slab: "xarray.Dataset", chunks: tuple[int, ...]) -> "xarr
     data_vars = {}
     for name, var in slab.data_vars.items():
         fill = "" if var.dtype == TEXT else (0 if var.dtype.kind in "ui" else np.nan)
-        data_vars[name] = (var.dims, da.full(shape, fill, dtype=var.dtype, chunks=shape), var.attrs)
+        lazy = da.full(shape, fill, dtype=var.dtype, chunks=shape)  # type: ignore[no-untyped-call, unused-ignore]
+        data_vars[name] = (var.dims, lazy, var.attrs)
     coords = {name: (name, vals, slab[name].attrs) for name, vals in zip(plan.names, plan.values)}
     ds = xr.Dataset(data_vars, coords=coords, attrs=dict(slab.attrs))
     for name in ds.data_vars:

@@ -21,12 +21,12 @@ from typing import Any, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from .declarations import structure
+from .declarations import Model, structure
 from .effects import Effects, oriented
 from .params import Params
 from .recording import FORMAT_ID, HEADER, META, ORIENTATIONS
 from .sensor_noise import SensorNoise
-from .simulation import Model, simulate
+from .simulation import simulate
 from .waveforms import Sampled, Sawtooth, voltage_at
 
 __all__ = ["DEFAULT_EXPERIMENTS", "make_case"]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field
-from typing import Literal, Mapping, Union
+from typing import Literal, Mapping, Union, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -245,4 +245,4 @@ Waveform = Union[Triangle, Sawtooth, Sampled]
 def voltage_at(waveform: Waveform, t: ArrayLike) -> NDArray[np.float64]:
     """V(t) [V] of any waveform, evaluated with numpy (for plots and checks)."""
     bt, bv = waveform.breakpoints()
-    return np.interp(np.asarray(t, dtype=float), bt, bv)
+    return cast("NDArray[np.float64]", np.interp(np.asarray(t, dtype=float), bt, bv))

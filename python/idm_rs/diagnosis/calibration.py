@@ -10,7 +10,7 @@ convergence evidence the verdict and the report use."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -104,7 +104,7 @@ def search(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, 
 def _spread_points(m: int, d: int, rng: np.random.Generator) -> NDArray[np.float64]:
     from scipy.stats import qmc
 
-    return qmc.LatinHypercube(d, seed=rng).random(m)
+    return cast("NDArray[np.float64]", qmc.LatinHypercube(d, seed=rng).random(m))
 
 
 def scan_starts(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *,

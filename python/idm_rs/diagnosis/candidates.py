@@ -11,15 +11,16 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ..batch import Structure
 from ..declarations import GRAVITY
 from .calibration import calibrate as global_calibration
 from .calibration import search
-from .case_model import ModelSpec, Structure
+from .case_model import ModelSpec
 from .catalogue import CATALOGUE, Effect, EffectParam
 from .fitting import FitResult, FreeParam, Objective, apply, fit, set_effect
 from .identifiability import assess
 from .multistart import Start, agree, multistart
-from .noise import NoiseEstimate, whiteness_z
+from .noise import NoiseEstimate
 from .problem import CalibratedNull, Nominal, Problem, Refit, calibration_params
 from .results import Candidate
 from .rules import by_rank, is_eligible
@@ -39,6 +40,7 @@ from .thresholds import (
     WIDE_GENERATIONS,
     WIDE_POPULATION,
 )
+from .whiteness import whiteness_z
 
 
 def nominal_model(pb: Problem) -> Nominal:

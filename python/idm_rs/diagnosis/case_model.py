@@ -6,7 +6,7 @@ from __future__ import annotations
 import copy
 import os
 from dataclasses import dataclass
-from typing import Mapping, Optional, Sequence
+from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -98,7 +98,8 @@ class CaseSimulator:
         return self._run(specs, cycles, retries, list(names), experiments)
 
     def _run(self, specs: Sequence[ModelSpec], cycles: Optional[int], retries: int, names: list[str],
-             experiments: Optional[Sequence[int]] = None):
+             experiments: Optional[Sequence[int]] = None
+             ) -> tuple[list[list[NDArray[np.float64]]], list[list[NDArray[np.float64]]], list[list[str]]]:
         n = len(self.recording.experiments)
         out: list[list[NDArray[np.float64]]] = [[np.zeros(0)] * n for _ in specs]
         sens: list[list[NDArray[np.float64]]] = [[np.zeros((len(names), 0))] * n for _ in specs]
@@ -143,8 +144,9 @@ class CaseSimulator:
                     self._store(res, traces, k * len(idx) + a, horizons[j][1], i, j, out, sens, why, names)
         return out, sens, why
 
-    def _store(self, res: dict, traces: list, point: int, samples: int, i: int, j: int, out: list, sens: list,
-               why: list, names: list[str]) -> None:
+    def _store(self, res: dict[str, Any], traces: Sequence[NDArray[np.float64]], point: int, samples: int, i: int,
+               j: int, out: list[list[NDArray[np.float64]]], sens: list[list[NDArray[np.float64]]],
+               why: list[list[str]], names: list[str]) -> None:
         """Point `point` of a batch result as spec i's experiment j (NaN where it did not run)."""
         tr = np.asarray(traces[point])
         if tr.size != samples:  # diverged or invalid point
@@ -163,13 +165,14 @@ class CaseSimulator:
                     sens[i][j][flip] *= -1.0
 
     @staticmethod
-    def _sawtooth_slot(row: list, j: int) -> None:
+    def _sawtooth_slot(row: list[Any], j: int) -> None:
         while len(row) <= j:
             row.append(None)
 
-    def _predict_sampled(self, j: int, structure: Structure, idx: list[int], prows: list, erows: dict,
-                         horizon: tuple[float, int], retries: int, out: list[list], sens: list[list],
-                         why: list[list], names: list[str]) -> None:
+    def _predict_sampled(self, j: int, structure: Structure, idx: list[int], prows: list[list[float]],
+                         erows: dict[bool, list[list[float]]], horizon: tuple[float, int], retries: int,
+                         out: list[list[NDArray[np.float64]]], sens: list[list[NDArray[np.float64]]],
+                         why: list[list[str]], names: list[str]) -> None:
         """Experiment j (a sampled drive) for the specs `idx`: one batch with its samples."""
         e = self.recording.experiments[j]
         tables = Tables(np.asarray(prows), np.asarray(erows[self._reversed[j]]), "sampled", np.ones((len(idx), 1)),

@@ -12,10 +12,10 @@ declaring it in Rust (with its term in the engine) and giving its parameters a l
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Callable, Mapping, Optional
+from typing import Any, Callable, Mapping, Optional
 
+from ..batch import Structure
 from ..declarations import EFFECT_PARAMS, EFFECTS, TABLE1, EffectDecl, EffectKind, ParamDecl
-from .case_model import Structure
 from .fitting import FreeParam, Setter, set_effect, set_param
 
 #: a fitted effect's parameters as reported: (fitted values, their 1-sigma) of every free
@@ -41,7 +41,7 @@ class FitSetting:
     kink: bool = False
 
 
-def _stribeck_setter(params: dict, effects: dict, excess: float) -> None:
+def _stribeck_setter(params: dict[str, Any], effects: dict[str, float], excess: float) -> None:
     # mu_s = mu_k (1 + excess): keeps mu_s >= mu_k whatever mu_k the fit is at
     params["mu_s"] = params["mu_k"] * (1.0 + excess)
 
@@ -64,7 +64,7 @@ FIT: dict[str, FitSetting] = {
 }
 
 
-def _always(s: Structure, p: Mapping) -> bool:
+def _always(s: Structure, p: Mapping[str, Any]) -> bool:
     return True
 
 
@@ -91,7 +91,7 @@ class Placement:
     it, the structure with it in place, and how its fitted parameters are reported (None: under
     their own names)."""
 
-    applies: Callable[[Structure, Mapping], bool] = _always
+    applies: Callable[[Structure, Mapping[str, Any]], bool] = _always
     structure: Callable[[Structure], Structure] = _unchanged
     reported: Optional[Reported] = None
 
@@ -141,7 +141,7 @@ class Effect:
     description: str  #: the declared physics in one line
     params: tuple[EffectParam, ...]
     #: whether the nominal model can lack it (e.g. `pe_mass` only for an LPS nominal)
-    applies: Callable[[Structure, Mapping], bool] = _always
+    applies: Callable[[Structure, Mapping[str, Any]], bool] = _always
     #: the structure with the effect in place
     structure: Callable[[Structure], Structure] = _unchanged
     term: str = ""  #: the declared term it adds to the nominal equations

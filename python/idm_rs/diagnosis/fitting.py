@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Callable, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,17 +19,18 @@ from .measurement import Measurement, Profile
 from .segments import segment_starts
 from .thresholds import BLOWN_UP, CHAIN_STEP, FIT_HORIZONS, FTOL_CHI2, START_INSIDE
 
-Setter = Callable[[dict, dict, float], None]
+#: sets a free parameter's value in a model's (parameters, effects) as they are being built
+Setter = Callable[[dict[str, Any], dict[str, float], float], None]
 
 
 def set_param(name: str) -> Setter:
-    def setter(params: dict, effects: dict, value: float) -> None:
+    def setter(params: dict[str, Any], effects: dict[str, float], value: float) -> None:
         params[name] = value
     return setter
 
 
 def set_effect(name: str) -> Setter:
-    def setter(params: dict, effects: dict, value: float) -> None:
+    def setter(params: dict[str, Any], effects: dict[str, float], value: float) -> None:
         effects[name] = value
     return setter
 
@@ -131,7 +132,8 @@ def engine_chain(base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float
 
 def difference_columns(obj: "Objective", base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64],
                        experiments: Sequence[int], step: float = 1e-3, with_base: bool = False,
-                       preds: Optional[Sequence[NDArray[np.float64]]] = None):
+                       preds: Optional[Sequence[NDArray[np.float64]]] = None
+                       ) -> tuple[Sequence[NDArray[np.float64]], dict[int, NDArray[np.float64]]]:
     """Forward-difference d(prediction)/du (free x samples) of `experiments` only, where the
     engine's derivative could not be used: one batch call with every stepped model (and the
     base model when `with_base`; else `preds` is the base). Returns (base predictions, columns),
@@ -239,7 +241,7 @@ class Objective:
             for a, b in zip(bounds[:-1], bounds[1:]):
                 c[:, a:b] = s[:, a:b] - s[:, a:b].mean(axis=1, keepdims=True)
             blocks.append(c)
-        return -np.concatenate(blocks, axis=1).T / self.sigma
+        return cast("NDArray[np.float64]", -np.concatenate(blocks, axis=1).T / self.sigma)
 
     def jacobian(self, base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64],
                  fd_step: float = 1e-3, unbounded: Optional[set[int]] = None

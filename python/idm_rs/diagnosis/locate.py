@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,7 +34,7 @@ class Location:
     z: float
     systematic: bool
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in self.__dict__.items()}
 
 
@@ -87,7 +87,7 @@ def locate(rec: Recording, residuals: Sequence[NDArray[np.float64]], sigma: floa
             sl = slice(s, min(s + n_per, r.size))
             windows.append((e, "window", float(e.t[sl][0]), float(e.t[sl][-1]), r[sl]))
 
-    def build(group):
+    def build(group: list[tuple[Experiment, str, float, float, NDArray[np.float64]]]) -> list[Location]:
         judged = [(g, *_judge(g[4], sigma)) for g in group]
         total = sum(max(x, 0.0) for _, x, _ in judged) or 1.0
         out = []

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Sequence
+from typing import Sequence, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -53,14 +53,14 @@ class Whitener:
         p = self.order
         a = np.asarray(a, dtype=float)
         if p == 0:
-            return a.copy()
+            return cast("NDArray[np.float64]", a.copy())
         out = lfilter(np.r_[1.0, -np.asarray(self.partial[p])], [1.0], a, axis=-1) * self.scale[p]
         n = a.shape[-1]
         for t in range(min(p, n)):
             c = np.asarray(self.partial[t])
             prev = a[..., t - 1::-1][..., :t] if t else a[..., :0]
             out[..., t] = (a[..., t] - (prev @ c if t else 0.0)) * self.scale[t]
-        return out
+        return cast("NDArray[np.float64]", out)
 
 
 @dataclass(frozen=True)
@@ -103,7 +103,7 @@ def shift(a: NDArray[np.float64], lag: float) -> NDArray[np.float64]:
     i0 = np.minimum(np.floor(x).astype(int), max(n - 2, 0))
     w = x - i0
     i1 = np.minimum(i0 + 1, n - 1)
-    return a[..., i0] * (1.0 - w) + a[..., i1] * w
+    return cast("NDArray[np.float64]", a[..., i0] * (1.0 - w) + a[..., i1] * w)
 
 
 class Profile:
@@ -137,4 +137,4 @@ class Profile:
     def columns(self, s: NDArray[np.float64]) -> NDArray[np.float64]:
         """The same for rows `s` (derivatives of the prediction, rows x samples)."""
         w = self.m.whiten(s)
-        return w - (w @ self.Q) @ self.Q.T
+        return cast("NDArray[np.float64]", w - (w @ self.Q) @ self.Q.T)

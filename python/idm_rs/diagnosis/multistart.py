@@ -14,8 +14,8 @@ import numpy as np
 
 from .case_model import ModelSpec
 from .fitting import FitResult, FreeParam, Objective, apply, fit_progressive
-from .noise import whiteness_z
 from .thresholds import AGREE_CHI2, NOISE_CHI2_Z, NOISE_WHITENESS_Z, PROMISING
+from .whiteness import whiteness_z
 
 
 @dataclass(frozen=True)

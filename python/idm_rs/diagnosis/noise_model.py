@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Callable, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,7 +60,7 @@ class NoiseModel:
     def coloured(self) -> bool:
         return self.order > 0
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"summary": self.describe(), "sigma_m": self.sigma, "ar_order": self.order, "lag1": self.lag1,
                 "acf": list(self.rho), "lines": [{"frequency_Hz": f, "amplitude_m": a} for f, a in self.lines],
                 "resolution_m": self.resolution, "outliers": self.outliers,

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional, Union
+from typing import TYPE_CHECKING, Callable, Optional, Union, cast
 
 import numpy as np
 
@@ -16,7 +16,10 @@ from .thresholds import BIC_THRESHOLD, NOISE_RATIO_OK
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
+    from numpy.typing import NDArray
 
+    from .discovery.library import Trajectory
+    from .fitting import FitResult
     from .results import Candidate, Diagnosis
 
 DPI = 120
@@ -77,12 +80,12 @@ SMOOTH_CYCLE_SHARE = 1.0 / 25.0
 def _moving_mean(r: np.ndarray, w: int) -> np.ndarray:
     """Centred moving mean over `w` samples (shorter windows at the ends)."""
     if w <= 1 or r.size < w:
-        return r.copy()
+        return cast("np.ndarray", r.copy())
     c = np.cumsum(np.insert(r, 0, 0.0))
     half = w // 2
     lo = np.clip(np.arange(r.size) - half, 0, r.size)
     hi = np.clip(np.arange(r.size) - half + w, 0, r.size)
-    return (c[hi] - c[lo]) / (hi - lo)
+    return cast("np.ndarray", (c[hi] - c[lo]) / (hi - lo))
 
 
 def report_residuals(d: Diagnosis, j: int) -> tuple[np.ndarray, np.ndarray]:
@@ -98,7 +101,7 @@ def report_residuals(d: Diagnosis, j: int) -> tuple[np.ndarray, np.ndarray]:
     return cal, ref
 
 
-def _discovered_refit(d: Diagnosis):
+def _discovered_refit(d: Diagnosis) -> Optional[FitResult]:
     """The refit of a discovered term (verdict "discovered"), else None."""
     f = getattr(d, "discovery", None)
     return f.refit if d.verdict.endswith("discovered") and f is not None and f.refit is not None else None
@@ -274,7 +277,7 @@ def plot_rms_story(d: Diagnosis, directory: Path) -> Path:
     labels = ["nominal\n(meta.json)"]
     values = [d.rms_before]
     colours = [C_NOMINAL]
-    hatches: list = [None]
+    hatches: list[Optional[str]] = [None]
     if math.isfinite(d.rms_calibrated):  # an interrupted run may stop before the calibration
         labels.append("calibrated\nnominal")
         values.append(d.rms_calibrated)
@@ -374,7 +377,7 @@ def plot_diagnosis(d: Diagnosis, directory: Union[str, Path]) -> list[Path]:
 
 
 #: each library variable along a trajectory, and its display scale and unit
-_VARIABLES = {
+_VARIABLES: dict[str, tuple[Callable[[Trajectory], NDArray[np.float64]], float, str]] = {
     "x1": (lambda tr: tr.x1, 1e6, "µm"), "v1": (lambda tr: tr.v1, 1e3, "mm/s"),
     "x2": (lambda tr: tr.x2, 1e6, "µm"), "v2": (lambda tr: tr.v2, 1e3, "mm/s"),
     "x1 - x2": (lambda tr: tr.x1 - tr.x2, 1e6, "µm"), "x2 - x1": (lambda tr: tr.x2 - tr.x1, 1e6, "µm"),

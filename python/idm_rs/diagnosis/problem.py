@@ -11,9 +11,10 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from ..batch import Structure
 from ..recording import Recording
 from .calibration import Calibration
-from .case_model import CaseSimulator, ModelSpec, Structure
+from .case_model import CaseSimulator, ModelSpec
 from .fitting import FitResult, FreeParam, Objective, fit, set_param
 from .noise import NoiseEstimate
 from .results import Candidate
@@ -34,14 +35,14 @@ def heldout_index(rec: Recording) -> int:
     return max(pool, key=lambda i: rec.experiments[i].n_samples)
 
 
-def set_tied_friction(params: dict, effects: dict, value: float) -> None:
+def set_tied_friction(params: dict[str, Any], effects: dict[str, float], value: float) -> None:
     # a nominal without a Stribeck peak (mu_s <= mu_k) keeps none as its level is calibrated:
     # mu_s follows mu_k, exactly as the stribeck candidate's model at "no effect"
     params["mu_k"] = value
     params["mu_s"] = value
 
 
-def calibration_params(p: dict) -> list[FreeParam]:
+def calibration_params(p: dict[str, Any]) -> list[FreeParam]:
     """The calibrated subset as free parameters within CALIBRATION_RANGE of the nominal values;
     mu_k carries mu_s along when the nominal has no Stribeck peak."""
     lo, hi = CALIBRATION_RANGE

@@ -20,7 +20,7 @@ from ..recording import Recording
 from .case_model import ModelSpec
 from .fitting import Objective, apply, fit
 from .measurement import Measurement, Whitener
-from .noise import NoiseEstimate, whiteness_z
+from .noise import NoiseEstimate
 from .noise_model import (
     Learned,
     Residuals,
@@ -43,6 +43,7 @@ from .thresholds import (
     REPEAT_Z,
     SEPARATION,
 )
+from .whiteness import whiteness_z
 
 
 def remeasured(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate

@@ -15,7 +15,7 @@ from .thresholds import AT_BOUND_SHARE, BIC_THRESHOLD, CALIBRATION_RANGE
 if TYPE_CHECKING:
     from typing_extensions import TypeGuard  # typing.TypeGuard from Python 3.10
 
-    from .results import Candidate, Diagnosis, ThirdSearch
+    from .results import Alternative, Candidate, Diagnosis, ThirdSearch
 
 #: experiment x phase locations listed in the report
 TOP_LOCATIONS = 6
@@ -150,7 +150,7 @@ def refit_parameter_rows(d: Diagnosis) -> list[list[str]]:
     return rows + calibrated_rows(d, cand.calibrated, cand.calibrated_std)
 
 
-def calibrated_rows(d: Diagnosis, values: dict, std: dict) -> list[list[str]]:
+def calibrated_rows(d: Diagnosis, values: dict[str, float], std: dict[str, float]) -> list[list[str]]:
     """(parameter, meta.json, value ±1σ, change against meta.json [at bound]) of calibrated
     nominal parameters: the calibrated null's or a refit's."""
     meta = d.recording.nominal.params.to_dict(resolved=False)
@@ -198,7 +198,8 @@ def _evidence(delta_bic: float) -> str:
     return "weak"
 
 
-def _one_effect_summary(d: Diagnosis, best: Candidate, alts: list, ratio: Callable[[float], float]) -> list[str]:
+def _one_effect_summary(d: Diagnosis, best: Candidate, alts: list[Alternative], ratio: Callable[[float], float]
+                        ) -> list[str]:
     """The plain words of a verdict naming one effect (`best`)."""
     lines: list[str] = []
     params = format_params(best)
@@ -239,7 +240,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
     """What was found, how sure, what to do — for a reader who does not speak statistics; the
     numbers behind each sentence follow in the report."""
     sigma = d.noise.sigma
-    ratio = lambda x: x / sigma if sigma > 0 else math.nan  # noqa: E731
+    ratio: Callable[[float], float] = lambda x: x / sigma if sigma > 0 else math.nan  # noqa: E731
     best = d.verdict_candidate
     sec = getattr(d, "second", None)
     p_meta = d.recording.nominal.params.to_dict(resolved=False)
@@ -345,7 +346,7 @@ def _instead_lines(d: Diagnosis, third: "ThirdSearch", best: "Candidate") -> lis
     """The plain words for two effects named instead of a triple (`third.instead`: one of the
     first pair stood in for the third, its look-alike); `best` is the two's fit."""
     sigma = d.noise.sigma
-    ratio = lambda x: x / sigma if sigma > 0 else math.nan  # noqa: E731
+    ratio: Callable[[float], float] = lambda x: x / sigma if sigma > 0 else math.nan  # noqa: E731
     instead = third.instead
     assert instead is not None  # the caller's condition
     dropped = next(e for e in third.pair if e not in instead)

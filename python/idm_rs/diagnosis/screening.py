@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -59,7 +59,7 @@ def probes(eff: Effect) -> list[tuple[float, ...]]:
 
 
 def _project(Q: NDArray[np.float64], X: NDArray[np.float64]) -> NDArray[np.float64]:
-    return X - Q @ (Q.T @ X)
+    return cast("NDArray[np.float64]", X - Q @ (Q.T @ X))
 
 
 def screen(obj: Objective, null: FitResult, null_at: list[FreeParam], effects: Sequence[Effect], sigma: float,
@@ -106,7 +106,8 @@ def screen(obj: Objective, null: FitResult, null_at: list[FreeParam], effects: S
     return out
 
 
-def _columns(obj: Objective, base: ModelSpec, eff: Effect, progress: Optional[Callable[..., Any]]):
+def _columns(obj: Objective, base: ModelSpec, eff: Effect, progress: Optional[Callable[..., Any]]
+             ) -> list[tuple[tuple[float, ...], list[FreeParam], NDArray[np.float64], NDArray[np.float64]]]:
     """(probe, its free parameters, residual vector, exact columns of the effect's parameters) at
     every probe of `eff`: one batch call with sensitivities for all of them."""
     from .fitting import apply, difference_columns, engine_chain, usable_derivative

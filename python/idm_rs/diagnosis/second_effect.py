@@ -13,7 +13,6 @@ from .candidates import fit_candidates, make_candidate, polish_leaders, wide_sea
 from .case_model import ModelSpec
 from .catalogue import CATALOGUE, Effect
 from .fitting import FitResult, FreeParam, fit
-from .noise import whiteness_z
 from .pair_twins import judge_set
 from .problem import CalibratedNull, HeldOut, Problem, Refit
 from .results import SecondSearch
@@ -27,6 +26,7 @@ from .thresholds import (
     POLISH_NFEV,
     SECOND_TOP,
 )
+from .whiteness import whiteness_z
 
 
 def partial_leader(pb: Problem, refits: list[Refit]) -> Optional[Refit]:

@@ -16,7 +16,7 @@ import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -241,7 +241,7 @@ def run_cpu(batch: KernelBatch) -> dict[str, NDArray[Any]]:
     """The kernel compiled for the CPU (one point after another): the reference the tests hold
     the GPU source to."""
     dll = _cpu_library(batch.spec)
-    ptr = lambda a, t: a.ctypes.data_as(ctypes.POINTER(t))  # noqa: E731
+    ptr: Callable[[NDArray[Any], Any], Any] = lambda a, t: a.ctypes.data_as(ctypes.POINTER(t))  # noqa: E731
     data = np.ascontiguousarray(batch.data)
     common = (ptr(batch.consts, ctypes.c_double), ptr(batch.rows, ctypes.c_int), ptr(data, ctypes.c_double),
               ptr(batch.off, ctypes.c_longlong), ptr(batch.step, ctypes.c_longlong))

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,7 +62,7 @@ def emps_regression(data: RigData) -> Regression:
         raise ValueError(f"{data.name}: no measured force")
     qf, dq, ddq = low_pass_derivatives(data.response, data.t, EMPS_FILTER_HZ, EMPS_FILTER_ORDER)
     sl = slice(EMPS_BORDER, -EMPS_BORDER)
-    dec = lambda a: decimate(a, EMPS_DECIMATE)  # noqa: E731
+    dec: Callable[[NDArray[np.float64]], NDArray[np.float64]] = lambda a: decimate(a, EMPS_DECIMATE)  # noqa: E731
     cols = [ddq[sl], dq[sl], np.sign(dq[sl]), np.ones_like(dq[sl])]
     X = np.column_stack([dec(c) for c in cols])
     y = dec(data.force[sl])

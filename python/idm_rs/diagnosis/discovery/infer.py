@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -104,7 +104,7 @@ def _second_differences(k: int) -> NDArray[np.float64]:
     return d
 
 
-def _given(params: dict) -> dict[str, float]:
+def _given(params: dict[str, Optional[float]]) -> dict[str, float]:
     return {n: float(v) for n, v in params.items() if v is not None}
 
 
@@ -203,7 +203,8 @@ class _ForceFit:
                 # the parameters' derivatives blew up in a fast slip (as the fits' do at their
                 # step): forward differences of runs, as the fits take them
                 def reading(uu: NDArray[np.float64]) -> NDArray[np.float64]:
-                    return run_with_force(rec, j, apply(self.spec, free, uu), body, knots[j], vals[j])[0]["reading"]
+                    run = run_with_force(rec, j, apply(self.spec, free, uu), body, knots[j], vals[j])[0]
+                    return cast("NDArray[np.float64]", run["reading"])
 
                 dpar = _parameter_differences(reading, uu, out["reading"])
             out["parameters"] = dpar
@@ -385,7 +386,7 @@ def _blown_up(d: NDArray[np.float64], reading: NDArray[np.float64], functions: N
     scale = BLOWN_UP * (float(np.ptp(reading)) + 1e-6) * np.max(np.abs(functions), axis=0)
     with np.errstate(invalid="ignore", over="ignore"):
         size = np.max(np.abs(d), axis=1) if d.size else np.zeros(d.shape[0])
-    return ~np.all(np.isfinite(d), axis=1) | ~(size <= scale)
+    return cast("NDArray[np.bool_]", ~np.all(np.isfinite(d), axis=1) | ~(size <= scale))
 
 
 def direct_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main", *,

@@ -167,7 +167,8 @@ def find_terms(force: InferredForce, max_terms: int = MAX_TERMS, project: bool =
     periodic = [t for t in library if t.periodic]
     tried: list[tuple[str, float]] = []
 
-    def evaluate(terms: list[Term], wavelength: float):
+    def evaluate(terms: list[Term], wavelength: float) -> tuple[list[float], int, list[NDArray[np.float64]],
+                                                                list[NDArray[np.float64]], list[NDArray[np.int64]]]:
         X, y = _design(force, terms, wavelength, project)
         errs, supports = _cv_path(X, y, max_terms, noisy=force.target is not None)
         k = _choose(errs)
