@@ -12,6 +12,7 @@
 
 pub mod batch;
 pub mod drive;
+pub mod error;
 pub mod gpu;
 pub mod integrate;
 pub mod lanes;

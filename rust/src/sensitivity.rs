@@ -16,6 +16,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use num_dual::{Dual64, DualSVec64};
 
 use crate::drive::run_tasks_one_by_one;
+use crate::error::InputError;
 use crate::integrate::method::Method;
 use crate::integrate::stepper::Held;
 use crate::integrate::task::{LaneEnd, Observer, SimError, Task};
@@ -47,12 +48,12 @@ pub enum Seed {
 }
 
 /// The knot `k` a name `f_ext[k]` asks for, if it is one.
-fn force_knot(name: &str) -> Option<Result<usize, String>> {
+fn force_knot(name: &str) -> Option<Result<usize, InputError>> {
     let inner = name.strip_prefix("f_ext[")?.strip_suffix(']')?;
     Some(
         inner
             .parse::<usize>()
-            .map_err(|_| format!("sensitivity '{name}': the knot must be a whole number, as f_ext[12]")),
+            .map_err(|_| crate::input!("sensitivity '{name}': the knot must be a whole number, as f_ext[12]")),
     )
 }
 
@@ -66,12 +67,12 @@ impl Seed {
 /// `v0`, `fh`), refused with the reason when one cannot be differentiated: unknown, repeated,
 /// the normal force while it is derived from the masses, or a lag time constant of an effect
 /// that is off (the model has no state for it).
-pub fn parse_seeds(model: &Model, names: &[String], normal_force_derived: bool) -> Result<Vec<Seed>, String> {
+pub fn parse_seeds(model: &Model, names: &[String], normal_force_derived: bool) -> Result<Vec<Seed>, InputError> {
     let components = model.layout.components();
     let mut seeds = Vec::with_capacity(names.len());
     for (i, name) in names.iter().enumerate() {
         if names[..i].contains(name) {
-            return Err(format!("sensitivity '{name}' is asked for twice"));
+            return Err(crate::input!("sensitivity '{name}' is asked for twice"));
         }
         let seed = if let Some(n) = PARAM_NAMES.iter().find(|n| **n == name.as_str()) {
             if *n == "normal_force" && normal_force_derived {
@@ -88,7 +89,7 @@ pub fn parse_seeds(model: &Model, names: &[String], normal_force_derived: bool) 
             let owner = EFFECTS.iter().find(|x| x.params.iter().any(|p| p.name == *n));
             let lag = owner.and_then(|x| LAGS.iter().find(|l| l.effect == x.id));
             if lag.is_some_and(|l| model.effects.value_of(l.tau) == Some(0.0)) {
-                return Err(format!(
+                return Err(crate::input!(
                     "sensitivity '{n}': its effect is off (a time constant of 0 removes the effect's state); \
                      give the time constant a positive value to take a derivative"
                 ));
@@ -100,18 +101,18 @@ pub fn parse_seeds(model: &Model, names: &[String], normal_force_derived: bool) 
             let k = k?;
             let knots = model.external.as_ref().map_or(0, |x| x.len());
             if k >= knots {
-                return Err(if knots == 0 {
+                return Err(InputError(if knots == 0 {
                     format!("sensitivity '{name}': the run has no external force; give one to take derivatives with respect to its samples")
                 } else {
                     format!(
                         "sensitivity '{name}': the external force has {knots} samples (f_ext[0] .. f_ext[{}])",
                         knots - 1
                     )
-                });
+                }));
             }
             Seed::ForceKnot(k)
         } else {
-            return Err(format!(
+            return Err(crate::input!(
                 "unknown sensitivity '{name}': name a Table 1 parameter ({}), an effect parameter ({}), a \
                  component of the initial state ({}) or a sample of the external force (f_ext[k])",
                 PARAM_NAMES.join(", "),
@@ -261,7 +262,7 @@ impl Pass<'_> {
             lift,
             self.normal_force_derived,
         )
-        .map_err(SimError::Input)?;
+        .map_err(SimError::from)?;
         dual.external = m.external.as_ref().map(|x| {
             x.lift(|k, v| match seeds.iter().position(|s| *s == Seed::ForceKnot(k)) {
                 Some(j) => D::seed(v, j),

@@ -18,6 +18,7 @@ pub use run::{run_batch, CHUNK, LANES};
 pub use runner::BatchRunner;
 pub use steady::{Steady, Train, STALL_STEP_FRACTION};
 
+use crate::error::InputError;
 use crate::integrate::method::Method;
 use crate::physics::effects::Effects;
 use crate::physics::mechanics::Structure;
@@ -49,7 +50,7 @@ pub struct BatchConfig {
 impl BatchConfig {
     /// Refuse a method with bad settings, or recorded readings with an adaptive method (they are
     /// taken every so many fixed steps).
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InputError> {
         self.method.validate()?;
         if !self.method.is_fixed() && self.record_every > 0 {
             return Err("recording readings needs method 'rk4'".into());

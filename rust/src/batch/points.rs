@@ -8,6 +8,7 @@ use crate::physics::params::{Params, PARAM_NAMES};
 use crate::physics::waveform::PiecewiseLinear;
 
 use super::{PointSpec, Train};
+use crate::error::InputError;
 
 /// The input of every point of a batch: one family, its fields per point.
 #[derive(Clone, Debug, PartialEq)]
@@ -22,13 +23,13 @@ pub enum WaveFamily {
 
 impl WaveFamily {
     /// Parse a family name; `sampled` needs the shared samples.
-    pub fn new(kind: &str, sampled: Option<(Vec<f64>, Vec<f64>)>) -> Result<Self, String> {
+    pub fn new(kind: &str, sampled: Option<(Vec<f64>, Vec<f64>)>) -> Result<Self, InputError> {
         match (kind, sampled) {
             ("triangle", _) => Ok(WaveFamily::Triangle),
             ("sawtooth", _) => Ok(WaveFamily::Sawtooth),
             ("sampled", Some((t, v))) => Ok(WaveFamily::Sampled { t, v }),
             ("sampled", None) => Err("a sampled waveform needs its samples (t, V)".into()),
-            (other, _) => Err(format!(
+            (other, _) => Err(crate::input!(
                 "waveform kind must be 'triangle', 'sawtooth' or 'sampled', got '{other}'"
             )),
         }
@@ -44,7 +45,7 @@ impl WaveFamily {
     }
 
     /// The point's input and its drive cycles (a sawtooth train's).
-    pub fn build(&self, row: &[f64]) -> Result<(PiecewiseLinear, Option<Train>), String> {
+    pub fn build(&self, row: &[f64]) -> Result<(PiecewiseLinear, Option<Train>), InputError> {
         match self {
             WaveFamily::Triangle => {
                 let [amplitude, rise, fall, delay] = row.try_into().map_err(|_| "row size")?;
@@ -53,7 +54,9 @@ impl WaveFamily {
             WaveFamily::Sawtooth => {
                 let [amplitude, frequency, cycles, rise, forward, delay] = row.try_into().map_err(|_| "row size")?;
                 if !(cycles >= 1.0 && cycles.fract() == 0.0) {
-                    return Err(format!("parameter 'cycles' must be a positive integer, got {cycles}"));
+                    return Err(crate::input!(
+                        "parameter 'cycles' must be a positive integer, got {cycles}"
+                    ));
                 }
                 let c = cycles as usize;
                 let w = PiecewiseLinear::sawtooth(amplitude, frequency, c, rise, forward != 0.0, delay)?;
@@ -84,7 +87,7 @@ pub struct PointTables<'a> {
 
 impl PointTables<'_> {
     /// Number of points, after checking that every table has one row per point.
-    pub fn len(&self) -> Result<usize, String> {
+    pub fn len(&self) -> Result<usize, InputError> {
         let (np, ne, nw) = (PARAM_NAMES.len(), EFFECT_NAMES.len(), self.family.fields().len());
         let n = self.params.len() / np;
         let rows_ok = self.params.len() == n * np
@@ -94,7 +97,7 @@ impl PointTables<'_> {
             && self.t_starts.is_none_or(|t| t.len() == n)
             && self.states.is_none_or(|(s, d)| s.len() == n * d);
         if !rows_ok {
-            return Err(format!(
+            return Err(crate::input!(
                 "batch tables must have one row per point ({n}): parameters ({n}, {np}), effects ({n}, {ne}), \
                  waveform fields ({n}, {nw}: {}), and one t_end / t_start / state row per point when given",
                 self.family.fields().join(", ")
@@ -108,7 +111,7 @@ impl PointTables<'_> {
     }
 
     /// Point `i`, or why its row is not a valid point.
-    pub fn point(&self, i: usize) -> Result<PointSpec, String> {
+    pub fn point(&self, i: usize) -> Result<PointSpec, InputError> {
         let (np, ne, nw) = (PARAM_NAMES.len(), EFFECT_NAMES.len(), self.family.fields().len());
         let pairs: Vec<(&str, f64)> = PARAM_NAMES
             .iter()
@@ -133,7 +136,7 @@ impl PointTables<'_> {
     }
 
     /// Every point (or the reason it is invalid), in order.
-    pub fn points(&self) -> Result<Vec<Result<PointSpec, String>>, String> {
+    pub fn points(&self) -> Result<Vec<Result<PointSpec, InputError>>, String> {
         let n = self.len()?;
         Ok((0..n).map(|i| self.point(i)).collect())
     }

@@ -208,7 +208,7 @@ fn add_sensitivities(
     }
     let seeds = match parse_seeds(&ready.model, &cfg.sensitivities, ready.spec.normal_force_derived) {
         Ok(s) => s,
-        Err(why) => return Some(PointOutput::invalid(why)),
+        Err(why) => return Some(PointOutput::invalid(why.into())),
     };
     let (Some(dt), dt_used) = (cfg.method.fixed_step(), out.metrics.dt_used) else {
         return Some(out); // refused by BatchConfig::validate
@@ -326,7 +326,7 @@ pub fn run_batch(
     cancel: &AtomicBool,
     done: &AtomicUsize,
 ) -> Result<Vec<PointOutput>, SimError> {
-    cfg.validate().map_err(SimError::Input)?;
+    cfg.validate().map_err(SimError::from)?;
     Ok(specs
         .par_chunks(chunk_size(specs.len(), rayon::current_num_threads()))
         .flat_map_iter(|chunk| run_chunk(cfg, chunk, cancel, done))

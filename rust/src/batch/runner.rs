@@ -10,8 +10,9 @@ use std::time::{Duration, Instant};
 
 use super::run::run_batch;
 use super::{BatchConfig, PointOutput, PointSpec, Status};
+use crate::error::InputError;
 
-type Outcome = Result<Vec<PointOutput>, String>;
+type Outcome = Result<Vec<PointOutput>, InputError>;
 
 /// A running batch.
 pub struct BatchRunner {
@@ -23,7 +24,11 @@ pub struct BatchRunner {
 
 impl BatchRunner {
     /// Start `points` (each built, or the reason it could not be) on `threads` worker threads.
-    pub fn start(cfg: BatchConfig, points: Vec<Result<PointSpec, String>>, threads: usize) -> Result<Self, String> {
+    pub fn start(
+        cfg: BatchConfig,
+        points: Vec<Result<PointSpec, InputError>>,
+        threads: usize,
+    ) -> Result<Self, InputError> {
         cfg.validate()?;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -56,7 +61,7 @@ impl BatchRunner {
                 .into_iter()
                 .map(|s| match s {
                     Ok(k) => std::mem::replace(&mut results[k], PointOutput::with_status(Status::NotRun)),
-                    Err(why) => PointOutput::invalid(why),
+                    Err(why) => PointOutput::invalid(why.into()),
                 })
                 .collect())
         });
@@ -98,7 +103,7 @@ impl BatchRunner {
     }
 
     /// Wait for the end and take the outputs (in point order; `NotRun` where cancelled).
-    pub fn join(&self) -> Result<Vec<PointOutput>, String> {
+    pub fn join(&self) -> Result<Vec<PointOutput>, InputError> {
         let handle = self.handle.lock().unwrap().take().ok_or("result already taken")?;
         handle
             .join()

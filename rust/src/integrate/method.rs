@@ -1,6 +1,8 @@
 //! Which integrator a run uses, with its settings, validated; and the methods declared once
 //! ([`METHODS`]), the list the binding and the Python package read.
 
+use crate::error::InputError;
+
 /// An integration method as a user names it: its name, whether it chooses its own steps
 /// (`rtol`, `atol`) rather than taking `dt`, and what it is.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -53,7 +55,7 @@ pub enum Method {
 
 impl Method {
     /// The method called `name` (one of [`METHODS`]) with these settings, validated.
-    pub fn from_name(name: &str, dt: f64, rtol: f64, atol: f64, first_step: f64) -> Result<Self, String> {
+    pub fn from_name(name: &str, dt: f64, rtol: f64, atol: f64, first_step: f64) -> Result<Self, InputError> {
         let m = match name {
             "rk4" => Method::Rk4 { dt },
             "dopri5" => Method::Dopri5 { rtol, atol, first_step },
@@ -61,7 +63,7 @@ impl Method {
             "auto" => Method::Auto { rtol, atol, first_step },
             other => {
                 let names: Vec<String> = METHODS.iter().map(|d| format!("'{}'", d.name)).collect();
-                return Err(format!(
+                return Err(crate::input!(
                     "parameter 'method' must be one of {}, got '{other}'",
                     names.join(", ")
                 ));
@@ -95,21 +97,21 @@ impl Method {
     }
 
     /// Refuse tolerances or steps that are not positive and finite.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InputError> {
         match *self {
             Method::Rk4 { dt } => {
                 if !(dt.is_finite() && dt > 0.0) {
-                    return Err(format!("parameter 'dt' must be positive and finite, got {dt}"));
+                    return Err(crate::input!("parameter 'dt' must be positive and finite, got {dt}"));
                 }
             }
             Method::Dopri5 { rtol, atol, first_step }
             | Method::Rodas4 { rtol, atol, first_step }
             | Method::Auto { rtol, atol, first_step } => {
                 if !(rtol > 0.0 && atol > 0.0 && rtol.is_finite() && atol.is_finite()) {
-                    return Err(format!("'rtol' and 'atol' must be positive, got {rtol}, {atol}"));
+                    return Err(crate::input!("'rtol' and 'atol' must be positive, got {rtol}, {atol}"));
                 }
                 if !(first_step.is_finite() && first_step > 0.0) {
-                    return Err(format!(
+                    return Err(crate::input!(
                         "parameter 'first_step' must be positive and finite, got {first_step}"
                     ));
                 }

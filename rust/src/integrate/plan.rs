@@ -184,8 +184,8 @@ pub fn check_span(t_start: f64, t_end: f64) -> Result<(), SimError> {
 
 /// Check a run's settings before any work: the span, and for RK4 the step plan.
 pub fn check_task(task: &Task, method: &Method) -> Result<(), SimError> {
-    method.validate().map_err(SimError::Input)?;
-    task.model.check_state(task.y0).map_err(SimError::Input)?;
+    method.validate().map_err(SimError::from)?;
+    task.model.check_state(task.y0).map_err(SimError::from)?;
     match *method {
         Method::Rk4 { dt } => plan_steps(task.model, task.wave, task.t_start, task.t_end, dt).map(|_| ()),
         Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => check_span(task.t_start, task.t_end),

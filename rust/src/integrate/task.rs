@@ -14,20 +14,19 @@ pub(crate) const CANCEL_CHECK_ATTEMPTS: usize = 1 << 14;
 const ADAPTIVE_H_MIN: f64 = 1e-14;
 
 /// Why a run stopped without a result.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SimError {
     /// Bad input (parameters, step size, waveform, initial state); the message names what.
+    #[error("{0}")]
     Input(String),
     /// The state left its physical bounds or became non-finite at time `t` [s].
+    #[error("{message}")]
     Diverged { t: f64, message: String },
 }
 
-impl std::fmt::Display for SimError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            SimError::Input(m) => write!(f, "{m}"),
-            SimError::Diverged { message, .. } => write!(f, "{message}"),
-        }
+impl From<crate::error::InputError> for SimError {
+    fn from(e: crate::error::InputError) -> Self {
+        SimError::Input(e.0)
     }
 }
 

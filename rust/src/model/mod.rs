@@ -5,6 +5,7 @@ pub mod jacobian;
 
 use nalgebra::ComplexField;
 
+use crate::error::InputError;
 use crate::numbers::lane_real::Lanewise;
 use crate::numbers::real::Real;
 use crate::numbers::scalar::Scalar;
@@ -229,7 +230,7 @@ impl Model {
         structure: Structure,
         piezo_hysteresis: bool,
         accounting: bool,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, InputError> {
         Model::build(
             params,
             effects,
@@ -255,7 +256,7 @@ impl<T: Scalar + ComplexField> Model<T> {
         accounting: bool,
         lift: impl Fn(&str, f64) -> T,
         derived_normal_force: bool,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, InputError> {
         params.validate()?;
         effects.validate()?;
         let mut p = params.lift(&lift);
@@ -294,7 +295,7 @@ impl<T: Scalar + ComplexField> Model<T> {
 impl<T: Real> Model<T> {
     /// This model with a sampled external force on one of its bodies (see `physics/external_force.rs`).
     /// A rig has one body: only `Body::Main` there.
-    pub fn with_external_force(mut self, force: ExternalForce<T>) -> Result<Self, String> {
+    pub fn with_external_force(mut self, force: ExternalForce<T>) -> Result<Self, InputError> {
         if force.body == Body::Weight && self.layout.dof < 2 {
             return Err("external force on the weight: this mechanism has one body; use body 'main'".into());
         }
@@ -350,10 +351,10 @@ impl<T: Real> Model<T> {
 
     /// Refuse an initial state of the wrong size, not finite, or with |Fh| beyond its bound (the
     /// friction law cannot start there); the message names the component.
-    pub fn check_state(&self, y: &[f64]) -> Result<(), String> {
+    pub fn check_state(&self, y: &[f64]) -> Result<(), InputError> {
         let names = self.layout.components();
         if y.len() != names.len() {
-            return Err(format!(
+            return Err(crate::input!(
                 "initial state has {} components but this model has {} ({})",
                 y.len(),
                 names.len(),
@@ -361,14 +362,15 @@ impl<T: Real> Model<T> {
             ));
         }
         if let Some(i) = y.iter().position(|x| !x.is_finite()) {
-            return Err(format!(
+            return Err(crate::input!(
                 "initial state component '{}' must be finite, got {}",
-                names[i].0, y[i]
+                names[i].0,
+                y[i]
             ));
         }
         let fh = y[self.layout.fh];
         if fh.abs() > self.presliding_bound() * (1.0 + 1e-6) + 1e-12 {
-            return Err(format!(
+            return Err(crate::input!(
                 "initial state component 'fh' = {fh:e} N exceeds the presliding bound {:e} N",
                 self.presliding_bound()
             ));

@@ -1,6 +1,7 @@
 //! How the input acts on the bodies, the one question that tells the mechanisms apart once their
 //! matrices are built (`physics/mechanics.rs` builds them and registers each mechanism's actuation).
 
+use crate::error::InputError;
 use crate::numbers::real::Real;
 use crate::numbers::scalar::Scalar;
 use crate::physics::effects::Effects;
@@ -12,7 +13,7 @@ use crate::physics::params::Params;
 /// its Jacobian ask only these questions; [`Actuator`](crate::physics::mechanics::Actuator) registers the implementations.
 pub trait Actuation {
     /// Refuse effects and switches the mechanism does not have (the message names them).
-    fn check(&self, effects: &Effects, piezo_hysteresis: bool) -> Result<(), String>;
+    fn check(&self, effects: &Effects, piezo_hysteresis: bool) -> Result<(), InputError>;
     /// The mass resting on the guide [kg] (for the incline's pull along it).
     fn supported_mass<T: Scalar>(&self, p: &Params<T>) -> T;
     /// Forces [N] on the main body and on the last node, given the piezo force `fp` [N], the

@@ -3,6 +3,8 @@
 //! `physics/effects.rs` the effect catalogue in these terms; validation, name lookup and the Python
 //! side (units in sweeps, the diagnosis catalogue, the report) all read those tables.
 
+use crate::error::InputError;
+
 /// Where a value is physically meaningful. Every value must also be finite.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Domain {
@@ -143,11 +145,11 @@ pub struct EffectDecl {
 /// each kind of domain in turn (positive, non-negative, open interval), so a value set with
 /// several errors is named as the hand-written checks named it. `what` starts the message:
 /// "parameter" or "effect parameter".
-pub fn check_domains(what: &str, decls: &[ParamDecl], values: &[f64]) -> Result<(), String> {
+pub fn check_domains(what: &str, decls: &[ParamDecl], values: &[f64]) -> Result<(), InputError> {
     debug_assert_eq!(decls.len(), values.len());
     for (d, &v) in decls.iter().zip(values) {
         if !v.is_finite() {
-            return Err(format!("{what} '{}' must be finite, got {v}", d.name));
+            return Err(crate::input!("{what} '{}' must be finite, got {v}", d.name));
         }
     }
     let passes: [fn(&Domain) -> bool; 3] = [
@@ -158,7 +160,7 @@ pub fn check_domains(what: &str, decls: &[ParamDecl], values: &[f64]) -> Result<
     for pass in passes {
         for (d, &v) in decls.iter().zip(values) {
             if pass(&d.domain) && !d.domain.contains(v) {
-                return Err(format!("{what} '{}' must {}, got {v}", d.name, d.domain.rule()));
+                return Err(crate::input!("{what} '{}' must {}, got {v}", d.name, d.domain.rule()));
             }
         }
     }
@@ -212,7 +214,7 @@ mod tests {
     fn domains_name_the_value_and_the_rule() {
         assert!(check_domains("x", &DECLS, &[0.5, 0.0]).is_ok());
         assert_eq!(
-            check_domains("x", &DECLS, &[1.0, 0.0]).unwrap_err(),
+            check_domains("x", &DECLS, &[1.0, 0.0]).unwrap_err().0,
             "x 'a' must lie in (-1, 1), got 1"
         );
         // non-negative is checked before open intervals, whatever the order of declaration

@@ -5,6 +5,7 @@
 //! switch on parts of the paper's own model; they are declared here too so the catalogue has
 //! one source, but need no field.)
 
+use crate::error::InputError;
 use crate::numbers::real::Real;
 use crate::numbers::scalar::Scalar;
 use crate::physics::declare::{check_domains, Domain, EffectDecl, EffectKind, ParamDecl, Part};
@@ -284,7 +285,7 @@ effects! {
 }
 
 impl Effects {
-    pub fn set(&mut self, name: &str, value: f64) -> Result<(), String> {
+    pub fn set(&mut self, name: &str, value: f64) -> Result<(), InputError> {
         let slot = self
             .slot(name)
             .ok_or_else(|| format!("unknown effect parameter '{name}'; known: {}", EFFECT_NAMES.join(", ")))?;
@@ -298,7 +299,7 @@ impl Effects {
         Some(self.values()[i])
     }
 
-    pub fn from_pairs(pairs: &[(&str, f64)]) -> Result<Self, String> {
+    pub fn from_pairs(pairs: &[(&str, f64)]) -> Result<Self, InputError> {
         let mut e = Effects::default();
         for (n, v) in pairs {
             e.set(n, *v)?;
@@ -308,7 +309,7 @@ impl Effects {
     }
 
     /// Every value finite and in its declared domain; the error names the parameter.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InputError> {
         check_domains("effect parameter", &EFFECT_PARAMS, &self.values())?;
         // a relation between two parameters: a creep amplitude needs a time to creep over
         if self.kappa != 0.0 && self.tau_creep == 0.0 {

@@ -5,6 +5,7 @@
 //! like parameters (`sensitivity::Seed::ForceKnot`): the derivative of a run with respect to
 //! the force at each knot, which is what infers an unknown force from a recording.
 
+use crate::error::InputError;
 use crate::numbers::lane_real::Lanewise;
 use crate::numbers::real::Real;
 use crate::physics::waveform::PiecewiseLinear;
@@ -19,11 +20,11 @@ pub enum Body {
 }
 
 impl Body {
-    pub fn from_name(name: &str) -> Result<Self, String> {
+    pub fn from_name(name: &str) -> Result<Self, InputError> {
         match name {
             "main" => Ok(Body::Main),
             "weight" => Ok(Body::Weight),
-            _ => Err(format!(
+            _ => Err(crate::input!(
                 "external force body '{name}': use 'main' (the main body) or 'weight'"
             )),
         }
@@ -43,9 +44,12 @@ pub struct ExternalForce<T = f64> {
 impl ExternalForce {
     /// The force on `body` through samples `(t [s], f [N])`: at least two, times increasing,
     /// every value finite (the message names the sample that is not).
-    pub fn new(body: Body, t: Vec<f64>, f: Vec<f64>) -> Result<Self, String> {
+    pub fn new(body: Body, t: Vec<f64>, f: Vec<f64>) -> Result<Self, InputError> {
         if t.len() < 2 {
-            return Err(format!("external force: give at least two samples, got {}", t.len()));
+            return Err(crate::input!(
+                "external force: give at least two samples, got {}",
+                t.len()
+            ));
         }
         let knots = PiecewiseLinear::new(t, f.clone()).map_err(|e| format!("external force: {e}"))?;
         Ok(ExternalForce { body, knots, values: f })

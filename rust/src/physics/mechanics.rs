@@ -3,6 +3,7 @@
 //! node n the weight. Built once per run with nalgebra; the integrator then only needs the
 //! precomputed products M^-1 K, M^-1 C and the two columns of M^-1 that the forces load.
 
+use crate::error::InputError;
 use crate::numbers::lane_real::Lanewise;
 use crate::numbers::real::Real;
 use crate::numbers::scalar::Scalar;
@@ -30,7 +31,7 @@ macro_rules! each_actuator {
 }
 
 impl Actuation for Actuator {
-    fn check(&self, effects: &Effects, piezo_hysteresis: bool) -> Result<(), String> {
+    fn check(&self, effects: &Effects, piezo_hysteresis: bool) -> Result<(), InputError> {
         each_actuator!(self, a => a.check(effects, piezo_hysteresis))
     }
     fn supported_mass<T: Scalar>(&self, p: &Params<T>) -> T {
@@ -99,16 +100,18 @@ impl Structure {
     pub fn from_name(
         model: &str,
         n_elements: usize,
-        rig: impl FnOnce() -> Result<RigDrive, String>,
-    ) -> Result<Self, String> {
+        rig: impl FnOnce() -> Result<RigDrive, InputError>,
+    ) -> Result<Self, InputError> {
         match model {
             "lps" => Ok(Structure::Lps),
             "dps" if n_elements >= 1 => Ok(Structure::Dps(n_elements)),
-            "dps" => Err(format!("parameter 'n_elements' must be at least 1, got {n_elements}")),
+            "dps" => Err(crate::input!(
+                "parameter 'n_elements' must be at least 1, got {n_elements}"
+            )),
             "rig" => Ok(Structure::Rig(rig()?)),
             other => {
                 let names: Vec<String> = STRUCTURES.iter().map(|s| format!("'{}'", s.name)).collect();
-                Err(format!(
+                Err(crate::input!(
                     "parameter 'model' must be one of {}, got '{other}'",
                     names.join(", ")
                 ))
@@ -190,7 +193,7 @@ fn assemble_bar<T: Scalar + ComplexField>(p: &Params<T>, n_elements: usize) -> (
 }
 
 impl<T: Scalar + ComplexField> Mechanics<T> {
-    pub fn new(p: &Params<T>, structure: Structure) -> Result<Self, String> {
+    pub fn new(p: &Params<T>, structure: Structure) -> Result<Self, InputError> {
         match structure {
             Structure::Lps => {
                 // eq. 19: cp = beta_c kp, no PE mass, no mass-proportional damping
@@ -207,7 +210,7 @@ impl<T: Scalar + ComplexField> Mechanics<T> {
                 }
                 if n > 1 && p.pe_density.value() == 0.0 {
                     // the bar's inner nodes would carry no mass: M is singular
-                    return Err(format!(
+                    return Err(crate::input!(
                         "parameter 'pe_density' = 0 (a massless PE) leaves the {} inner nodes of the \
                          {n}-element FEM bar without mass; use model 'lps' or n_elements = 1 for a \
                          massless PE, or give pe_density > 0",
@@ -234,7 +237,7 @@ impl<T: Scalar + ComplexField> Mechanics<T> {
         damping: DMatrix<T>,
         stiffness: DMatrix<T>,
         pe_mass_matrix: DMatrix<T>,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, InputError> {
         let dof = mass.nrows();
         let minv = mass
             .clone()

@@ -3,6 +3,7 @@
 //! All values are SI. `Params::paper()` is Table 1; `normal_force` defaults to the weight of the
 //! whole device, (m1 + m2 + mPE) g, because the weight and the PE hang on the main body.
 
+use crate::error::InputError;
 use crate::numbers::scalar::Scalar;
 use crate::physics::declare::{check_domains, same_name, Domain, ParamDecl};
 
@@ -162,7 +163,7 @@ impl Params {
     }
 
     /// Set one parameter by name; unknown names are refused.
-    pub fn set(&mut self, name: &str, value: f64) -> Result<(), String> {
+    pub fn set(&mut self, name: &str, value: f64) -> Result<(), InputError> {
         let slot = self
             .slot(name)
             .ok_or_else(|| format!("unknown parameter '{name}'; known: {}", PARAM_NAMES.join(", ")))?;
@@ -171,7 +172,7 @@ impl Params {
     }
 
     /// Table 1 overridden by `pairs`; `normal_force` is derived unless given. Validated.
-    pub fn from_pairs(pairs: &[(&str, f64)]) -> Result<Self, String> {
+    pub fn from_pairs(pairs: &[(&str, f64)]) -> Result<Self, InputError> {
         let mut p = Params::paper();
         let mut explicit_fn = false;
         for (name, value) in pairs {
@@ -186,11 +187,11 @@ impl Params {
     }
 
     /// Every value finite and in its declared domain; the error names the parameter.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InputError> {
         check_domains("parameter", &TABLE1, &self.values())?;
         // a relation, not a bound of one value: the presliding force a/(b+c) must be bounded
         if self.fric_beta + self.fric_gamma <= 0.0 {
-            return Err(format!(
+            return Err(crate::input!(
                 "parameters 'fric_beta' + 'fric_gamma' must be positive (bounded presliding force), got {}",
                 self.fric_beta + self.fric_gamma
             ));

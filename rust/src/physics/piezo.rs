@@ -1,5 +1,6 @@
 //! Piezo element force with Bouc-Wen hysteresis (MODEL.md eqs. 14, 15).
 
+use crate::error::InputError;
 use crate::numbers::lane_real::Lanewise;
 use crate::numbers::real::Real;
 use crate::numbers::scalar::Scalar;
@@ -68,7 +69,7 @@ impl PiezoHysteresis {
 pub struct PiezoElement;
 
 impl crate::physics::actuation::Actuation for PiezoElement {
-    fn check(&self, _effects: &crate::physics::effects::Effects, _piezo_hysteresis: bool) -> Result<(), String> {
+    fn check(&self, _effects: &crate::physics::effects::Effects, _piezo_hysteresis: bool) -> Result<(), InputError> {
         Ok(())
     }
 

@@ -8,6 +8,7 @@
 
 use nalgebra::DMatrix;
 
+use crate::error::InputError;
 use crate::numbers::real::Real;
 use crate::numbers::scalar::Scalar;
 use crate::physics::declare::{EffectKind, Part};
@@ -40,7 +41,7 @@ impl RigDrive {
         kv: f64,
         gain: f64,
         limit: f64,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, InputError> {
         let drive = match name {
             "position" => RigDrive::Position { stiffness, damping },
             "force" => RigDrive::Force,
@@ -52,7 +53,7 @@ impl RigDrive {
                 limit: if limit == 0.0 { f64::INFINITY } else { limit },
             },
             other => {
-                return Err(format!(
+                return Err(crate::input!(
                     "parameter 'rig_drive' must be 'position', 'force' or 'closed_loop', got '{other}'"
                 ))
             }
@@ -64,7 +65,7 @@ impl RigDrive {
     /// Refuse a spring or damper that is negative or not finite (the message names it).
     // true for NaN as well: a NaN limit is refused like a non-positive one
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InputError> {
         let non_negative: &[(&str, f64)] = match self {
             RigDrive::Position { stiffness, damping } => &[("rig_stiffness", *stiffness), ("rig_damping", *damping)],
             RigDrive::ClosedLoop { kp, kv, gain, .. } => &[("rig_kp", *kp), ("rig_kv", *kv), ("rig_gain", *gain)],
@@ -72,12 +73,14 @@ impl RigDrive {
         };
         for &(name, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("parameter '{name}' must be finite and non-negative, got {v}"));
+                return Err(crate::input!(
+                    "parameter '{name}' must be finite and non-negative, got {v}"
+                ));
             }
         }
         if let RigDrive::ClosedLoop { limit, .. } = *self {
             if !(limit > 0.0) {
-                return Err(format!(
+                return Err(crate::input!(
                     "parameter 'rig_limit' must be positive (inf for none), got {limit}"
                 ));
             }
@@ -140,7 +143,7 @@ impl RigDrive {
 
     /// Refuse the piezo switch, and every effect that is on and acts on a part the rig does not
     /// have ([`RigDrive::PARTS`], from each effect's declaration): the message names the first.
-    fn refuse_piezo_effects(e: &Effects, piezo_hysteresis: bool) -> Result<(), String> {
+    fn refuse_piezo_effects(e: &Effects, piezo_hysteresis: bool) -> Result<(), InputError> {
         if piezo_hysteresis {
             return Err("the rig has no piezo element: use piezo_hysteresis=False".into());
         }
@@ -149,7 +152,7 @@ impl RigDrive {
                 continue;
             };
             if let Some(on) = decl.params.iter().find(|q| e.get(q.name).is_some_and(|v| v != 0.0)) {
-                return Err(format!(
+                return Err(crate::input!(
                     "effect parameter '{}' ({}) acts on the {}, which the rig does not have; set it to 0",
                     on.name,
                     decl.id,
@@ -162,7 +165,7 @@ impl RigDrive {
 }
 
 impl crate::physics::actuation::Actuation for RigDrive {
-    fn check(&self, effects: &Effects, piezo_hysteresis: bool) -> Result<(), String> {
+    fn check(&self, effects: &Effects, piezo_hysteresis: bool) -> Result<(), InputError> {
         RigDrive::refuse_piezo_effects(effects, piezo_hysteresis)
     }
 
@@ -338,7 +341,7 @@ mod tests {
 
     #[test]
     fn structures_and_drives_are_parsed_by_name_and_refused_by_name() {
-        let none = || -> Result<RigDrive, String> { unreachable!("only a rig builds its drive") };
+        let none = || -> Result<RigDrive, InputError> { unreachable!("only a rig builds its drive") };
         assert_eq!(Structure::from_name("lps", 0, none), Ok(Structure::Lps));
         assert_eq!(Structure::from_name("dps", 3, none), Ok(Structure::Dps(3)));
         assert!(Structure::from_name("dps", 0, none)

@@ -2,6 +2,8 @@
 //! [`PiecewiseLinear`], carries them all; `triangle` and `sawtooth` build its breakpoints.
 //! Before the first breakpoint the first value holds, after the last the last value holds.
 
+use crate::error::InputError;
+
 /// A piecewise-linear voltage V(t) through breakpoints (t [s], V [V]), t strictly increasing.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PiecewiseLinear {
@@ -10,18 +12,18 @@ pub struct PiecewiseLinear {
 }
 
 impl PiecewiseLinear {
-    pub fn new(t: Vec<f64>, v: Vec<f64>) -> Result<Self, String> {
+    pub fn new(t: Vec<f64>, v: Vec<f64>) -> Result<Self, InputError> {
         if t.len() != v.len() {
-            return Err(format!("waveform: {} times but {} voltages", t.len(), v.len()));
+            return Err(crate::input!("waveform: {} times but {} voltages", t.len(), v.len()));
         }
         if t.is_empty() {
             return Err("waveform: needs at least one sample".into());
         }
         if let Some(i) = t.iter().chain(v.iter()).position(|x| !x.is_finite()) {
-            return Err(format!("waveform: sample {} is not finite", i % t.len()));
+            return Err(crate::input!("waveform: sample {} is not finite", i % t.len()));
         }
         if let Some(i) = t.windows(2).position(|w| w[1] <= w[0]) {
-            return Err(format!(
+            return Err(crate::input!(
                 "waveform: times must increase strictly (t[{}] = {} >= t[{}] = {})",
                 i,
                 t[i],
@@ -34,7 +36,7 @@ impl PiecewiseLinear {
 
     /// 0 V until `delay`, linear to `amplitude` at delay + rise, linear to 0 at
     /// delay + rise + fall, then 0 V.
-    pub fn triangle(amplitude: f64, rise: f64, fall: f64, delay: f64) -> Result<Self, String> {
+    pub fn triangle(amplitude: f64, rise: f64, fall: f64, delay: f64) -> Result<Self, InputError> {
         positive("rise", rise)?;
         positive("fall", fall)?;
         non_negative("delay", delay)?;
@@ -59,7 +61,7 @@ impl PiecewiseLinear {
         rise: f64,
         forward: bool,
         delay: f64,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, InputError> {
         positive("frequency", frequency)?;
         positive("rise", rise)?;
         non_negative("delay", delay)?;
@@ -69,7 +71,7 @@ impl PiecewiseLinear {
         }
         let period = 1.0 / frequency;
         if rise >= period {
-            return Err(format!(
+            return Err(crate::input!(
                 "parameter 'rise' ({rise} s) must be shorter than the period ({period} s)"
             ));
         }
@@ -130,7 +132,7 @@ impl PiecewiseLinear {
     /// Breakpoints inside (0, t_end) must fall on step boundaries so that a step never straddles
     /// a kink (RK4 would lose its order). Refuses a `dt` that does not divide them and says
     /// which breakpoint and a `dt` that would.
-    pub fn check_alignment(&self, dt: f64, t_end: f64) -> Result<(), String> {
+    pub fn check_alignment(&self, dt: f64, t_end: f64) -> Result<(), InputError> {
         let misaligned = |step: f64| self.misaligned(step, t_end);
         if let Some(ti) = misaligned(dt) {
             let hint = (2..=1000)
@@ -138,7 +140,7 @@ impl PiecewiseLinear {
                 .find(|&d| misaligned(d).is_none())
                 .map(|d| format!("dt = {d:e} s divides every breakpoint"))
                 .unwrap_or_else(|| "choose a dt that divides every breakpoint time".into());
-            return Err(format!(
+            return Err(crate::input!(
                 "dt = {dt:e} s does not divide the waveform breakpoint at t = {ti:e} s \
                  (breakpoints must fall on step boundaries); {hint}"
             ));
@@ -217,29 +219,29 @@ impl Cursor {
     }
 }
 
-fn finite(name: &str, x: f64) -> Result<(), String> {
+fn finite(name: &str, x: f64) -> Result<(), InputError> {
     if x.is_finite() {
         Ok(())
     } else {
-        Err(format!("parameter '{name}' must be finite, got {x}"))
+        Err(crate::input!("parameter '{name}' must be finite, got {x}"))
     }
 }
 
-fn positive(name: &str, x: f64) -> Result<(), String> {
+fn positive(name: &str, x: f64) -> Result<(), InputError> {
     finite(name, x)?;
     if x > 0.0 {
         Ok(())
     } else {
-        Err(format!("parameter '{name}' must be positive, got {x}"))
+        Err(crate::input!("parameter '{name}' must be positive, got {x}"))
     }
 }
 
-fn non_negative(name: &str, x: f64) -> Result<(), String> {
+fn non_negative(name: &str, x: f64) -> Result<(), InputError> {
     finite(name, x)?;
     if x >= 0.0 {
         Ok(())
     } else {
-        Err(format!("parameter '{name}' must be non-negative, got {x}"))
+        Err(crate::input!("parameter '{name}' must be non-negative, got {x}"))
     }
 }
 

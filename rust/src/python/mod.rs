@@ -564,7 +564,7 @@ impl BatchRun {
     fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let outputs = py.detach(|| self.runner.join()).map_err(|e| {
             if e.contains("already taken") {
-                PyRuntimeError::new_err(e)
+                PyRuntimeError::new_err(String::from(e))
             } else {
                 value_error(e)
             }
