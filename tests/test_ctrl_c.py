@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,3 +96,34 @@ def test_the_sweep_command_exits_130_and_writes_the_finished_points(tmp_path):
         status = ds["status"].values
         assert ds.attrs["complete"] == 0
         assert 0 < (status == 1).sum() < status.size and set(status.tolist()) <= {0, 1}
+
+
+def test_ctrl_c_outside_the_engine_call_of_a_piece_keeps_what_finished(monkeypatch):
+    """A simulate run with a progress bar runs in pieces; Ctrl-C landing in the Python around a
+    piece's engine call (no trajectory on the stop) gave an IndexError on the first piece (seen
+    on a loaded machine); it must be a KeyboardInterrupt whose partial is the pieces finished."""
+    import idm_rs
+    from idm_rs import simulation
+
+    real = simulation.engine.simulate
+    calls = []
+
+    def stopping(*a, **k):
+        calls.append(1)
+        if len(calls) == stop_at:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(simulation.engine, "simulate", stopping)
+    wave = idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=1e-5)
+    for stop_at, finished in ((1, False), (3, True)):
+        calls.clear()
+        with pytest.raises(KeyboardInterrupt) as e:
+            idm_rs.simulate(idm_rs.Params(), wave, t_end=2e-3, dt=1e-8, save_every=100, progress=True)
+        partial = idm_rs.partial_result(e.value)
+        if not finished:
+            assert partial is None
+        else:
+            # the two pieces before the stop, joined: saved every 1e-6 s from 0 to their end
+            assert partial is not None and partial.t[0] == 0.0 and partial.t.size > 2
+            assert np.all(np.diff(partial.t) > 0)

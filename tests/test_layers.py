@@ -22,7 +22,7 @@ PYTHON = ROOT / "python" / "idm_rs"
 #: the Rust layers, lowest first (a folder, or a file directly under rust/src); a file may use
 #: files of its own layer and of the layers before it
 RUST_LAYERS: tuple[tuple[str, ...], ...] = (
-    ("numbers",), ("physics",), ("model",), ("integrate",), ("lanes",), ("drive",),
+    ("error",), ("numbers",), ("physics",), ("model",), ("integrate",), ("lanes",), ("drive",),
     ("sensitivity",), ("simulate",), ("batch",), ("gpu",), ("python",),
 )
 

@@ -295,8 +295,11 @@ def _in_pieces(common: dict[str, Any], t_start: Optional[float], t_end: float, d
             try:
                 r = simulate(t_start=start, t_end=end, initial_state=state, **common)
             except KeyboardInterrupt as stop:
-                done = _joined(pieces + ([partial_result(stop)] if partial_result(stop) is not None else []))
-                raise interrupted(str(stop), partial=done if pieces else partial_result(stop)) from None
+                # Ctrl-C can land in the Python around a piece's engine call too, where the stop
+                # carries no trajectory: what finished is then the pieces before it (or nothing)
+                last = partial_result(stop)
+                done = pieces + ([last] if last is not None else [])
+                raise interrupted(str(stop), partial=_joined(done) if done else None) from None
             pieces.append(r)
             bar.update(int(round((end - start) / dt)))
             state, start = r.final_state, end
