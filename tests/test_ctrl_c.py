@@ -107,17 +107,19 @@ def test_ctrl_c_outside_the_engine_call_of_a_piece_keeps_what_finished(monkeypat
 
     real = simulation.engine.simulate
     calls = []
+    stop = {"at": 0}  # the engine call (1-based) that Ctrl-C lands beside
 
     def stopping(*a, **k):
         calls.append(1)
-        if len(calls) == stop_at:
+        if len(calls) == stop["at"]:
             raise KeyboardInterrupt
         return real(*a, **k)
 
     monkeypatch.setattr(simulation.engine, "simulate", stopping)
     wave = idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=1e-5)
-    for stop_at, finished in ((1, False), (3, True)):
+    for at, finished in ((1, False), (3, True)):
         calls.clear()
+        stop["at"] = at
         with pytest.raises(KeyboardInterrupt) as e:
             idm_rs.simulate(idm_rs.Params(), wave, t_end=2e-3, dt=1e-8, save_every=100, progress=True)
         partial = idm_rs.partial_result(e.value)
