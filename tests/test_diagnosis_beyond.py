@@ -585,3 +585,71 @@ def test_the_plain_words_for_two_effects_named_instead_of_a_triple():
     lines = report._instead_lines(d, third, best)
     assert "two effects the nominal model lacks — amplifier_lowpass and friction differs by direction" in lines[0]
     assert "0.98 × their noise" in lines[0] and "through incline" in lines[0] and "1.10 × noise" in lines[1]
+
+
+@pytest.mark.parametrize("swap_names", [True, False])
+def test_a_triple_round_that_names_nothing_is_rerun_with_a_members_look_alike_in_its_place(monkeypatch, swap_names):
+    """bench_effect_sets device 11 (friction asymmetry + thermal drift + Stribeck peak on the DPS
+    4): drift led, the incline (the asymmetry's look-alike) beside it, and the third round from
+    that pair named nothing — drift + incline and drift + asymmetry fit the pair alike, but only
+    the asymmetry fits beside the Stribeck peak. The round is run again from the pair with the
+    look-alike in the member's place (held-out check against the better pair), and that round's
+    answer is the verdict; where it names nothing either, both reasons are kept."""
+    from types import SimpleNamespace
+
+    import idm_rs.diagnosis.third_effect as third_effect
+    from idm_rs.diagnosis.case_model import ModelSpec, Structure
+    from idm_rs.diagnosis.catalogue import CATALOGUE
+    from idm_rs.diagnosis.fitting import FreeParam, set_effect, set_param
+    from idm_rs.diagnosis.results import ThirdSearch
+
+    sigma = 1.5e-9
+    by = {e.id: e for e in CATALOGUE}
+    rounds = []
+
+    def third_round(pb, cal, names, base, free, pair_heldout_rms, heldout, first_twins):
+        rounds.append((names, pair_heldout_rms, {f.name for f in free}))
+        named = swap_names and "friction_asymmetry" in names
+        return ThirdSearch(pair=names, pair_heldout_rms=pair_heldout_rms, named=named,
+                           reason="three effects" if named else f"nothing beside {names[1]}")
+
+    looked = []
+
+    def look_alikes(pb, without, at, member, others, also):
+        looked.append((member, others, {f.name for f in at}))
+        return [(SimpleNamespace(effect=by["friction_asymmetry"]), 0.97)] if member == "incline" else []
+
+    def in_place(pb, without, at, s):
+        start = list(at) + [FreeParam(p.name, 0.01, -0.5, 0.5, 1e-3, set_effect(p.name)) for p in s.effect.params]
+        return SimpleNamespace(rms=1.2 * sigma, values={f.name: f.x0 for f in start}), "swapped-base", start
+
+    monkeypatch.setattr(third_effect, "third_round", third_round)
+    monkeypatch.setattr(third_effect, "look_alikes", look_alikes)
+    monkeypatch.setattr(third_effect, "in_place", in_place)
+    monkeypatch.setattr(third_effect, "fit", lambda obj, base, start, max_nfev, progress: SimpleNamespace(
+        values={f.name: f.x0 for f in start}))
+    calibrated = [FreeParam("m1", 0.4, 0.2, 0.6, 0.01, set_param("m1"))]
+    drift, incline = by["thermal_drift"].params[0].name, by["incline"].params[0].name
+    free = calibrated + [FreeParam(p, 1e-3, -1.0, 1.0, 1e-4, set_effect(p)) for p in (drift, incline)]
+    spec = ModelSpec(Structure("dps", 4, False), {"m1": 0.4}, {})
+    cal = SimpleNamespace(fit=SimpleNamespace(spec=spec), free=calibrated)
+    pb = SimpleNamespace(obj=None, tick=None, sigma=sigma)
+    second = SimpleNamespace(first=SimpleNamespace(effect="thermal_drift"), pair=SimpleNamespace(effect="incline"),
+                             base=spec, free=free, heldout_rms=3.0e-9)
+    heldout = SimpleNamespace(rms=lambda base, at: 2.5e-9)
+    out = third_effect.search_third_effect(pb, cal, second, heldout, [("incline", "friction_asymmetry", 0.99)])
+    # each member's look-alikes sought where the other stands alone
+    assert [(m, o) for m, o, _ in looked] == [("thermal_drift", {"incline"}), ("incline", {"thermal_drift"})]
+    assert looked[1][2] == {"m1", drift}
+    assert rounds[0][:2] == (("thermal_drift", "incline"), 3.0e-9)
+    assert rounds[1][:2] == (("thermal_drift", "friction_asymmetry"), 2.5e-9)
+    assert rounds[1][2] == {"m1", drift, by["friction_asymmetry"].params[0].name}
+    if swap_names:
+        assert out.named and out.pair == ("thermal_drift", "friction_asymmetry")
+        assert out.swapped == ("incline", "friction_asymmetry") and out.first_path == "nothing beside incline"
+        assert out.reason.startswith("friction_asymmetry in place of incline, its look-alike (|cos| = 0.970")
+        assert out.to_dict()["swapped"] == ["incline", "friction_asymmetry"]
+    else:
+        assert not out.named and out.pair == ("thermal_drift", "incline") and out.swapped is None
+        assert out.reason == ("nothing beside incline; with friction_asymmetry in place of incline: "
+                              "nothing beside friction_asymmetry")

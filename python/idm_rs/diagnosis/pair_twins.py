@@ -18,7 +18,7 @@ from .case_model import ModelSpec
 from .catalogue import CATALOGUE
 from .fitting import FitResult, FreeParam, fit
 from .problem import Problem
-from .screening import screen
+from .screening import Screened, screen
 from .thresholds import NOISE_RATIO_OK, SEPARATION, TWIN_CHECK_COS, TWIN_NFEV
 
 
@@ -53,14 +53,13 @@ class Twin:
                 "chi2_pair": self.chi2_pair, "rms": self.rms, "stands": self.stands}
 
 
-def twins_in_place(pb: Problem, without: FitResult, at: list[FreeParam], member: str, others: set[str],
-                   chi2_pair: float, also: set[str]) -> Optional[list[Twin]]:
-    """The look-alikes of `member`, one effect of a named set whose fit has chi^2 `chi2_pair`:
-    at the model with the `others` alone (`without`, its free parameters `at`), every effect not
-    in the set screened beside `member`; each whose projected signature is within TWIN_CHECK_COS
-    of `member`'s, or is in `also` (the first round's twins of it), refitted there in its place
-    (from its screened step, TWIN_NFEV evaluations). None where `member` has no signature there
-    (nothing judged)."""
+def look_alikes(pb: Problem, without: FitResult, at: list[FreeParam], member: str, others: set[str],
+                also: set[str]) -> Optional[list[tuple[Screened, float]]]:
+    """The look-alikes of `member` where the `others` stand: at the model with them alone
+    (`without`, its free parameters `at`), every effect not among them screened beside `member`;
+    those whose projected signature is within TWIN_CHECK_COS of `member`'s, or that are in `also`
+    (the first round's twins of it), with their |cos|, nearest first. None where `member` has
+    no signature there."""
     import numpy as np
 
     structure, params = without.spec.structure, without.spec.params
@@ -69,23 +68,48 @@ def twins_in_place(pb: Problem, without: FitResult, at: list[FreeParam], member:
     own = screened.get(member)
     if own is None or own.direction is None:
         return None
-    out: list[Twin] = []
+    out: list[tuple[Screened, float]] = []
     for eid, s in screened.items():
         if eid == member or s.direction is None:
             continue
         cos = abs(float(np.dot(own.direction, s.direction)))
-        if cos < TWIN_CHECK_COS and eid not in also:
-            continue
-        eff = s.effect
-        base = ModelSpec(eff.structure(structure), dict(params), dict(without.spec.effects))
-        start = list(at) + [ep.free(v) for ep, v in zip(eff.params, s.estimate)]
-        r = fit(pb.obj, base, start, max_nfev=TWIN_NFEV, progress=pb.tick)
-        out.append(Twin(member, eid, cos, r.chi2, chi2_pair, r.rms, pb.sigma))
+        if cos >= TWIN_CHECK_COS or eid in also:
+            out.append((s, cos))
+    return sorted(out, key=lambda sc: -sc[1])
+
+
+def twins_in_place(pb: Problem, without: FitResult, at: list[FreeParam], member: str, others: set[str],
+                   chi2_pair: float, also: set[str]) -> Optional[list[Twin]]:
+    """The look-alikes of `member`, one effect of a named set whose fit has chi^2 `chi2_pair`
+    (:func:`look_alikes` at the model with the `others` alone), each refitted there in its place
+    (:func:`in_place`). None where `member` has no signature there (nothing judged)."""
+    found = look_alikes(pb, without, at, member, others, also)
+    if found is None:
+        return None
+    out: list[Twin] = []
+    for s, cos in found:
+        r, _, _ = in_place(pb, without, at, s)
+        out.append(Twin(member, s.effect.id, cos, r.chi2, chi2_pair, r.rms, pb.sigma))
     return out
 
 
+def first_round_twins(member: str, first_round: list[tuple[str, str, float]]) -> set[str]:
+    """The effects the first round found near-parallel to `member`."""
+    return {b if a == member else a for a, b, _ in first_round if member in (a, b)}
+
+
+def in_place(pb: Problem, without: FitResult, at: list[FreeParam], s: Screened
+             ) -> tuple[FitResult, ModelSpec, list[FreeParam]]:
+    """The effect screened as `s` added to the model `without` (its free parameters `at`) and
+    refitted from its screened step (TWIN_NFEV evaluations): (the fit, its model, its start)."""
+    eff = s.effect
+    base = ModelSpec(eff.structure(without.spec.structure), dict(without.spec.params), dict(without.spec.effects))
+    start = list(at) + [ep.free(v) for ep, v in zip(eff.params, s.estimate)]
+    return fit(pb.obj, base, start, max_nfev=TWIN_NFEV, progress=pb.tick), base, start
+
+
 def judge_set(pb: Problem, placed: list[tuple[str, set[str], FitResult, list[FreeParam]]], chi2_set: float,
-              first_round_twins: list[tuple[str, str, float]]) -> tuple[list[Twin], list[str], str]:
+              first_twins: list[tuple[str, str, float]]) -> tuple[list[Twin], list[str], str]:
     """Every effect of a named set judged against its look-alikes in its place: `placed` holds,
     per member, (member, the set's other effects, the fit of the model with those others alone,
     its free parameters at it); `chi2_set` the named set's chi^2. Returns (the twins refitted, the
@@ -93,8 +117,7 @@ def judge_set(pb: Problem, placed: list[tuple[str, set[str], FitResult, list[Fre
     twins: list[Twin] = []
     judged: list[str] = []
     for member, others, fit_, at in placed:
-        also = {b if a == member else a for a, b, _ in first_round_twins if member in (a, b)}
-        found = twins_in_place(pb, fit_, at, member, others, chi2_set, also)
+        found = twins_in_place(pb, fit_, at, member, others, chi2_set, first_round_twins(member, first_twins))
         if found is not None:
             twins += found
             judged.append(member)

@@ -579,6 +579,10 @@ def _discovery_and_second_lines(d: Diagnosis, sigma: float) -> list[str]:
     third = getattr(d, "third", None)
     if third is not None:
         lines += ["", f"A third effect, searched from the model with {third.pair[0]} and {third.pair[1]}"]
+        if getattr(third, "swapped", None):
+            member, twin = third.swapped
+            lines.append(f"  ({twin} in place of its look-alike {member}: from the pair as found the round named "
+                         f"nothing — {third.first_path})")
         rows = [[c.effect, format_params(c), _ratio(c.rms_after, sigma),
                  f"{c.delta_bic:.1f}" if c.delta_bic >= 0 else "not supported", c.fit_label] for c in third.ranking]
         if rows:

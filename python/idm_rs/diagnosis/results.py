@@ -216,9 +216,15 @@ class ThirdSearch:
     #: and the effects so judged (the triple's, or the two's named instead)
     twins: list[Any] = field(default_factory=list)
     twins_judged: list[str] = field(default_factory=list)
+    #: (the pair's member, its look-alike in its place) where this round ran from the pair with
+    #: the look-alike because the round from the pair as found named nothing; that round's
+    #: reason in `first_path`
+    swapped: Optional[tuple[str, str]] = None
+    first_path: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return {"pair": list(self.pair), "third": self.third.effect if self.third else None, "named": self.named,
+                "swapped": list(self.swapped) if self.swapped else None, "first_path": self.first_path,
                 "instead": list(self.instead) if self.instead else None, "instead_rms": self.instead_rms,
                 "reason": self.reason, "heldout_rms": self.heldout_rms, "pair_heldout_rms": self.pair_heldout_rms,
                 "delta_bic_without": self.over_without, "triple": self.third.to_dict() if self.third else None,

@@ -201,6 +201,9 @@ DEGENERATE_COS = 0.95
 #: another are refitted in each other's place to learn whether the data tell them apart (below
 #: DEGENERATE_COS too: a twin at 0.949 there may still leave noise in its place, or not)
 TWIN_CHECK_COS = 0.9
+#: a third round that named nothing is run again with each of the pair's members replaced by
+#: at most this many of its look-alikes (the nearest first): each costs a third round
+RETRIED_TWINS = 1
 #: least-squares evaluations of a pair refitted with a twin in place of one of its effects
 TWIN_NFEV = 25
 #: leading candidates whose nominal parameters seed a refit of the null model
