@@ -547,3 +547,35 @@ def test_a_library_derivative_that_blew_up_is_seen_through_the_knots(monkeypatch
     cols = infer._LibraryView(pb, None, [np.zeros(3)], None, 1)._columns(0, terms, 0.0)
     assert np.array_equal(cols[:, [0, 2]], exact[:, [0, 2]])
     assert np.all(cols[:, [1, 3]] == 7.0)
+
+
+def test_the_library_columns_are_the_engines_library_force_one_term_at_a_time():
+    """The columns discovery regresses on come from the engine's own library force (each term's
+    coefficient at 1), so what is regressed on and what is then simulated cannot differ: the
+    package's term tables name exactly the engine's terms, a simulated library force equals the
+    columns weighted by its coefficients, and a few columns are their closed forms."""
+    from idm_rs import engine
+    from idm_rs.diagnosis.discovery import WEIGHT_TERMS, library_columns
+
+    main, weight = engine.library_terms()
+    assert sorted(t.param for t in MAIN_TERMS) == sorted(main)
+    assert sorted(t.param for t in WEIGHT_TERMS) == sorted(weight)
+    rng = np.random.default_rng(7)
+    n = 50
+    tr = Trajectory(t=np.linspace(0, 1e-3, n), x1=rng.normal(0, 5e-6, n), v1=rng.normal(0, 1e-2, n),
+                    x2=rng.normal(0, 5e-6, n), v2=rng.normal(0, 1e-2, n), ff=rng.normal(0, 1.0, n),
+                    volt=rng.uniform(0, 100, n), dvolt=rng.normal(0, 1e5, n), vs=1e-3)
+    wl = 20e-6
+    cols = library_columns(tr, MAIN_TERMS, wl)
+    by = {t.param: cols[:, j] for j, t in enumerate(MAIN_TERMS)}
+    np.testing.assert_allclose(by["lib_x1cube"], tr.x1**3, rtol=1e-15)
+    np.testing.assert_allclose(by["lib_sgn"], np.tanh(tr.v1 / tr.vs), rtol=1e-15)
+    np.testing.assert_allclose(by["lib_ff_cos"], tr.ff * np.cos(2 * np.pi / wl * tr.x1), rtol=1e-14, atol=1e-300)
+    np.testing.assert_array_equal(by["lib_dv"], tr.v1 - tr.v2)
+    # the periodic terms are off at wavelength 0
+    assert not np.any(library_columns(tr, MAIN_TERMS, 0.0)[:, [t.periodic for t in MAIN_TERMS]])
+    wcols = library_columns(tr, WEIGHT_TERMS, wl)
+    np.testing.assert_array_equal(wcols[:, [t.param for t in WEIGHT_TERMS].index("libw_dx")], tr.x2 - tr.x1)
+    with pytest.raises(ValueError, match="'lib_wavelength' is not a library term"):
+        engine.library_columns(tr.x1, tr.v1, tr.x2, tr.v2, tr.volt, tr.dvolt, tr.ff, tr.t, 1e-3, wl,
+                               ["lib_wavelength"])

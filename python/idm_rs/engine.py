@@ -30,6 +30,10 @@ kernel_constants = _core.kernel_constants
 kernel_constant_count = _core.kernel_constant_count
 kernel_header = _core.kernel_header
 kernel_accepts = _core.kernel_accepts
+# the engine's own forms: the library's terms along a run, a waveform family's breakpoints
+library_columns = _core.library_columns
+library_terms = _core.library_terms
+wave_breakpoints = _core.wave_breakpoints
 #: the vector lanes' instruction set ("scalar", "avx2", "avx512"): results are bitwise the same
 simd_level = _core.simd_level
 set_simd_level = _core.set_simd_level
@@ -57,6 +61,8 @@ __all__ = [
     "kernel_constant_count",
     "kernel_header",
     "kernel_accepts",
+    "library_columns",
+    "library_terms",
     "param_declarations",
     "param_names",
     "method_declarations",
@@ -66,5 +72,6 @@ __all__ = [
     "start_batch",
     "state_components",
     "structure_declarations",
+    "wave_breakpoints",
     "wave_fields",
 ]

@@ -439,9 +439,10 @@ def sweep(
     if backend not in ("cpu", "cuda", "kernel-cpu"):
         raise ValueError(f"parameter 'backend' must be 'cpu', 'cuda' or 'kernel-cpu', got {backend!r}")
     if backend != "cpu":
-        if method == "rodas4":
-            raise ValueError(f"backend={backend!r} runs RK4 and Dormand-Prince ('rk4', 'dopri5', 'auto'); "
-                             "rodas4 runs on backend='cpu'")
+        on_kernel = engine.kernel_accepts()["methods"]
+        if method not in on_kernel:
+            raise ValueError(f"backend={backend!r} runs the methods {', '.join(map(repr, on_kernel))}; "
+                             f"{method} runs on backend='cpu'")
         if client is not None:
             raise ValueError(f"backend={backend!r} runs on this machine's device; drop 'client'")
     names, values = _check_grid(grid, waveform)

@@ -11,6 +11,8 @@ from typing import Literal, Mapping, Union, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import engine
+
 
 def _check(name: str, value: float, *, positive: bool = False, non_negative: bool = False) -> float:
     value = float(value)
@@ -30,6 +32,12 @@ def _check(name: str, value: float, *, positive: bool = False, non_negative: boo
 #: steady state can last longer (at 500 Hz the step still shrinks after 8 cycles), which
 #: ``step_std`` shows: run more cycles or skip more where it is large.
 STARTUP_CYCLES: int = 2
+
+
+def _engine_breakpoints(kind: str, fields: Mapping[str, float]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A family's breakpoints from the engine (rust/src/physics/waveform.rs), its fields in the
+    engine's order: the package does not derive them again."""
+    return engine.wave_breakpoints(kind, [float(fields[f]) for f in engine.wave_fields(kind)])
 
 
 @dataclass(frozen=True)
@@ -65,10 +73,8 @@ class Triangle:
         _check("delay", self.delay, non_negative=True)
 
     def breakpoints(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        t = [0.0] + ([self.delay] if self.delay > 0 else [])
-        t += [self.delay + self.rise, self.delay + self.rise + self.fall]
-        v = [0.0] * (len(t) - 2) + [self.amplitude, 0.0]
-        return np.asarray(t), np.asarray(v, dtype=float)
+        """(t [s], V [V]) of the corners, as the engine builds the input."""
+        return _engine_breakpoints(self.batch_kind, self.batch_fields())
 
     @property
     def duration(self) -> float:
@@ -161,13 +167,8 @@ class Sawtooth:
                         "forward" if f["forward"] else "backward", f["delay"])
 
     def breakpoints(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        peak = self.rise if self.direction == "forward" else self.period - self.rise
-        t = [0.0] + ([self.delay] if self.delay > 0 else [])
-        v = [0.0] * len(t)
-        for k in range(self.cycles):
-            t += [self.delay + k * self.period + peak, self.delay + (k + 1) * self.period]
-            v += [self.amplitude, 0.0]
-        return np.asarray(t), np.asarray(v, dtype=float)
+        """(t [s], V [V]) of the corners, as the engine builds the input."""
+        return _engine_breakpoints(self.batch_kind, self.batch_fields())
 
 
 @dataclass(frozen=True, eq=False)

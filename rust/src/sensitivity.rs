@@ -19,6 +19,7 @@ use crate::drive::run_tasks_one_by_one;
 use crate::error::InputError;
 use crate::integrate::method::Method;
 use crate::integrate::stepper::Held;
+use crate::integrate::tableau::{rk4_factor, rk4_sum, RK4_NODES};
 use crate::integrate::task::{LaneEnd, Observer, SimError, Task};
 use crate::model::Model;
 use crate::numbers::lane_real::Lanewise;
@@ -201,9 +202,12 @@ pub fn derivatives(
             };
             let pass = match group.len() {
                 1 => run.go::<Dual64>(cancel),
-                _ => match method.fixed_step() {
-                    Some(dt) => run.go_tangent::<MAX_PER_PASS>(dt, cancel),
-                    None => run.go::<DualSVec64<MAX_PER_PASS>>(cancel),
+                // each fixed-step method names its tangent pass (a new one must add its own)
+                _ => match *method {
+                    Method::Rk4 { dt } => run.go_tangent::<MAX_PER_PASS>(dt, cancel),
+                    Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => {
+                        run.go::<DualSVec64<MAX_PER_PASS>>(cancel)
+                    }
                 },
             }?;
             let (readings, fin) = match pass {
@@ -438,7 +442,8 @@ fn rk4_pass<const K: usize>(
         vec![zero; n],
         vec![zero; n],
     );
-    let (h2, h6) = (0.5 * dt, dt / 6.0);
+    let [c1, c2, c3, c4] = RK4_NODES.map(|c| c * dt);
+    let factor = rk4_factor(dt);
     let mut k = (t_start / dt).round() as usize;
     let k_end = k + ((t_end - t_start) / dt).round() as usize;
     let mut cursor = Cursor::at(wave, t_start);
@@ -455,15 +460,15 @@ fn rk4_pass<const K: usize>(
         cursor.advance(wave, probe);
         let (v0, s) = cursor.input(wave, t0, probe);
         // plain calls, not a closure: code left out of line runs as baseline (see `Real::select`)
-        stage_rate(model, t0, v0, s, 0.0, &y, &mut k1);
-        axpy(&mut tmp, &y, h2, &k1);
-        stage_rate(model, t0, v0, s, h2, &tmp, &mut k2);
-        axpy(&mut tmp, &y, h2, &k2);
-        stage_rate(model, t0, v0, s, h2, &tmp, &mut k3);
-        axpy(&mut tmp, &y, dt, &k3);
-        stage_rate(model, t0, v0, s, dt, &tmp, &mut k4);
+        stage_rate(model, t0, v0, s, c1, &y, &mut k1);
+        axpy(&mut tmp, &y, c2, &k1);
+        stage_rate(model, t0, v0, s, c2, &tmp, &mut k2);
+        axpy(&mut tmp, &y, c3, &k2);
+        stage_rate(model, t0, v0, s, c3, &tmp, &mut k3);
+        axpy(&mut tmp, &y, c4, &k3);
+        stage_rate(model, t0, v0, s, c4, &tmp, &mut k4);
         for j in 0..n {
-            y[j] += (k1[j] + (k2[j] + k3[j]) * 2.0 + k4[j]) * h6;
+            y[j] += rk4_sum(k1[j], k2[j], k3[j], k4[j]) * factor;
         }
         k += 1;
         let t_new = k as f64 * dt;

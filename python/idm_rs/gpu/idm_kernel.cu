@@ -353,7 +353,8 @@ IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, do
             v0 = cu.va + s * (t0 - cu.ta);
         }
 #endif
-        double h2 = 0.5 * dt;
+        /* the tableau of rust/src/integrate/tableau.rs (its #defines generated: gpu/kernel.rs) */
+        double h2 = IDM_RK4_C2 * dt, h3 = IDM_RK4_C3 * dt, h4 = IDM_RK4_C4 * dt;
         double ff = idm_rhs(c, &fr, m, v0, s, y, k);
         /* the state at the step's start is held over the step (metrics.rs) */
         if (fabs(y[n]) > IDM_MT(IDM_MT_PEAK_V)) IDM_MT(IDM_MT_PEAK_V) = fabs(y[n]);
@@ -363,13 +364,13 @@ IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, do
         for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + h2 * k[i]; acc[i] = k[i]; }
         idm_rhs(c, &fr, m, v0 + s * h2, s, tmp, k);
         IDM_UNROLL
-        for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + h2 * k[i]; acc[i] = acc[i] + 2.0 * k[i]; }
-        idm_rhs(c, &fr, m, v0 + s * h2, s, tmp, k);
+        for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + h3 * k[i]; acc[i] = acc[i] + IDM_RK4_MIDDLE_WEIGHT * k[i]; }
+        idm_rhs(c, &fr, m, v0 + s * h3, s, tmp, k);
         IDM_UNROLL
-        for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + dt * k[i]; acc[i] = acc[i] + 2.0 * k[i]; }
-        idm_rhs(c, &fr, m, v0 + s * dt, s, tmp, k);
+        for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + h4 * k[i]; acc[i] = acc[i] + IDM_RK4_MIDDLE_WEIGHT * k[i]; }
+        idm_rhs(c, &fr, m, v0 + s * h4, s, tmp, k);
         IDM_UNROLL
-        for (int i = 0; i < IDM_DIM; i++) y[i] += dt / 6.0 * (acc[i] + k[i]);
+        for (int i = 0; i < IDM_DIM; i++) y[i] += dt / IDM_RK4_DENOMINATOR * (acc[i] + k[i]);
         if (!(fabs(y[2 * n + 1]) <= IDM_MT(IDM_MT_BOUND)) || !isfinite(y[n]) || !isfinite(y[0])) {
             status = 3.0;
             div_at = (double)(kk + 1) * dt;
@@ -398,14 +399,13 @@ IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, do
  * IDM_MAX_ADAPTIVE_STEPS it stops, status 3 at that time), else 0. */
 IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc, double t_end, double rtol,
                              double atol, double first_step, double *out, long long points) {
-    const double C2 = 1.0 / 5.0, C3 = 3.0 / 10.0, C4 = 4.0 / 5.0, C5 = 8.0 / 9.0;
-    const double A21 = 1.0 / 5.0, A31 = 3.0 / 40.0, A32 = 9.0 / 40.0, A41 = 44.0 / 45.0, A42 = -56.0 / 15.0,
-                 A43 = 32.0 / 9.0, A51 = 19372.0 / 6561.0, A52 = -25360.0 / 2187.0, A53 = 64448.0 / 6561.0,
-                 A54 = -212.0 / 729.0, A61 = 9017.0 / 3168.0, A62 = -355.0 / 33.0, A63 = 46732.0 / 5247.0,
-                 A64 = 49.0 / 176.0, A65 = -5103.0 / 18656.0;
-    const double B1 = 35.0 / 384.0, B3 = 500.0 / 1113.0, B4 = 125.0 / 192.0, B5 = -2187.0 / 6784.0, B6 = 11.0 / 84.0;
-    const double E1 = 71.0 / 57600.0, E3 = -71.0 / 16695.0, E4 = 71.0 / 1920.0, E5 = -17253.0 / 339200.0,
-                 E6 = 22.0 / 525.0, E7 = -1.0 / 40.0;
+    /* the tableau of rust/src/integrate/tableau.rs (its #defines generated: gpu/kernel.rs) */
+    const double C2 = IDM_DP5_C2, C3 = IDM_DP5_C3, C4 = IDM_DP5_C4, C5 = IDM_DP5_C5;
+    const double A21 = IDM_DP5_A21, A31 = IDM_DP5_A31, A32 = IDM_DP5_A32, A41 = IDM_DP5_A41, A42 = IDM_DP5_A42,
+                 A43 = IDM_DP5_A43, A51 = IDM_DP5_A51, A52 = IDM_DP5_A52, A53 = IDM_DP5_A53, A54 = IDM_DP5_A54,
+                 A61 = IDM_DP5_A61, A62 = IDM_DP5_A62, A63 = IDM_DP5_A63, A64 = IDM_DP5_A64, A65 = IDM_DP5_A65;
+    const double B1 = IDM_DP5_B1, B3 = IDM_DP5_B3, B4 = IDM_DP5_B4, B5 = IDM_DP5_B5, B6 = IDM_DP5_B6;
+    const double E1 = IDM_DP5_E1, E3 = IDM_DP5_E3, E4 = IDM_DP5_E4, E5 = IDM_DP5_E5, E6 = IDM_DP5_E6, E7 = IDM_DP5_E7;
     const int n = IDM_N;
     /* the state, the next state, a stage's input and output, the first and last stages in
      * registers; the middle stages k2..k6 too with IDM_SHARED_STAGES 0, else in shared memory

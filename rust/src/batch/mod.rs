@@ -409,6 +409,55 @@ mod tests {
         assert!(c.validate().unwrap_err().contains("record_every"));
     }
 
+    #[test]
+    fn every_fixed_step_method_keeps_itself_through_retries_and_derivative_passes() {
+        use crate::integrate::method::METHODS;
+        use crate::sensitivity::{derivatives, parse_seeds, Schedule};
+        // a point that diverges at the step asked is retried at half of it with the method asked
+        // (readings, final state and derivatives equal a run of that method at that step), and
+        // each method is asked by its declaration, so a new fixed-step method is covered here
+        for decl in METHODS.iter().filter(|d| !d.adaptive) {
+            let asked = Method::from_name(decl.name, 4e-7, 1e-6, 1e-6, 1e-9).unwrap();
+            let mut c = cfg(asked, Structure::Lps);
+            c.record_every = 10;
+            c.sensitivities = vec!["mu_k".into()];
+            let sp = specs(3);
+            let r = run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+            let mut retried = 0;
+            for (s, o) in sp.iter().zip(&r).filter(|(_, o)| o.metrics.status == Status::Retried) {
+                retried += 1;
+                let used = asked.with_step(o.metrics.dt_used).unwrap();
+                assert_eq!(used.fixed_step(), Some(o.metrics.dt_used), "{}", decl.name);
+                assert!(o.metrics.dt_used < 4e-7);
+                let every = c.record_every * (4e-7 / o.metrics.dt_used).round() as usize;
+                let model = Model::new(s.params, s.effects, Structure::Lps, true, false).unwrap();
+                let t = crate::simulate::simulate(&model, &s.wave, 0.0, c.t_end, &model.rest_state(), &used, every)
+                    .unwrap();
+                assert_eq!(o.trace, t.reading, "{}", decl.name);
+                assert_eq!(o.metrics.final_position, t.final_state[0], "{}", decl.name);
+                let seeds = parse_seeds(&model, &c.sensitivities, false).unwrap();
+                let schedule = Schedule {
+                    every,
+                    also_last: false,
+                };
+                let held = Default::default();
+                let never = AtomicBool::new(false);
+                let (t_end, y0) = (c.t_end, model.rest_state());
+                match derivatives(
+                    &model, &s.wave, 0.0, t_end, &y0, &used, &held, schedule, &seeds, false, &never,
+                ) {
+                    Some(Ok(d)) => {
+                        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(bits(&o.sensitivities), bits(&d.readings), "{}", decl.name);
+                    }
+                    Some(Err(e)) => assert!(o.reason.ends_with(&format!("sensitivities: {e}")), "{}", o.reason),
+                    None => unreachable!("not cancelled"),
+                }
+            }
+            assert!(retried > 0, "{}: no point was retried", decl.name);
+        }
+    }
+
     fn nt_of(o: &PointOutput) -> usize {
         o.trace.len()
     }

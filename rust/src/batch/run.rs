@@ -145,7 +145,8 @@ fn retry(cfg: &BatchConfig, ready: &Ready, first: Failure, cancel: &AtomicBool) 
             dt /= 2.0;
             dt_tried = dt;
             record_every *= 2;
-            method = Method::Rk4 { dt };
+            // the method asked, at the smaller step
+            method = cfg.method.with_step(dt).expect("a fixed-step method");
             let steps = match crate::integrate::plan::plan_steps(
                 &ready.model,
                 &ready.spec.wave,
@@ -219,7 +220,10 @@ fn add_sensitivities(
         every,
         also_last: false,
     };
-    let method = Method::Rk4 { dt: dt_used };
+    // the method asked, at the step the run used (a retry's)
+    let Some(method) = cfg.method.with_step(dt_used) else {
+        return Some(out);
+    };
     let (t_start, t_end) = (ready.spec.t_start, ready.spec.t_end(cfg));
     let held = Held::default();
     let d = derivatives(

@@ -17,37 +17,9 @@ pub(crate) const CONTROL: Controller = Controller {
     max_growth: 5.0,
 };
 
-pub(crate) const C: [f64; 7] = [0.0, 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0, 1.0, 1.0];
-pub(crate) const A2: [f64; 1] = [1.0 / 5.0];
-pub(crate) const A3: [f64; 2] = [3.0 / 40.0, 9.0 / 40.0];
-pub(crate) const A4: [f64; 3] = [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0];
-pub(crate) const A5: [f64; 4] = [19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0];
-pub(crate) const A6: [f64; 5] = [
-    9017.0 / 3168.0,
-    -355.0 / 33.0,
-    46732.0 / 5247.0,
-    49.0 / 176.0,
-    -5103.0 / 18656.0,
-];
-/// fifth-order weights (also the last stage's coefficients: first same as last)
-pub(crate) const B: [f64; 6] = [
-    35.0 / 384.0,
-    0.0,
-    500.0 / 1113.0,
-    125.0 / 192.0,
-    -2187.0 / 6784.0,
-    11.0 / 84.0,
-];
-/// difference between the fifth- and fourth-order weights
-pub(crate) const E: [f64; 7] = [
-    71.0 / 57600.0,
-    0.0,
-    -71.0 / 16695.0,
-    71.0 / 1920.0,
-    -17253.0 / 339200.0,
-    22.0 / 525.0,
-    -1.0 / 40.0,
-];
+use crate::integrate::tableau::{
+    DP5_A2 as A2, DP5_A3 as A3, DP5_A4 as A4, DP5_A5 as A5, DP5_A6 as A6, DP5_B as B, DP5_C as C, DP5_E as E,
+};
 
 /// What a crawling explicit run is told (`integrate/crawl.rs`).
 pub(crate) const EXPLICIT_CRAWL_HINT: &str =

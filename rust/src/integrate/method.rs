@@ -4,12 +4,15 @@
 use crate::error::InputError;
 
 /// An integration method as a user names it: its name, whether it chooses its own steps
-/// (`rtol`, `atol`) rather than taking `dt`, and what it is.
+/// (`rtol`, `atol`) rather than taking `dt`, what it is, and whether the GPU kernel has it (the
+/// kernel backends admit only these: `kernel_accepts`; `auto` runs there as Dormand-Prince, a
+/// point that turns stiff rerun on the CPU).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MethodDecl {
     pub name: &'static str,
     pub adaptive: bool,
     pub meaning: &'static str,
+    pub kernel: bool,
 }
 
 /// Every method, the reference first.
@@ -18,21 +21,25 @@ pub const METHODS: &[MethodDecl] = &[
         name: "rk4",
         adaptive: false,
         meaning: "fixed-step classical Runge-Kutta 4 (the reference)",
+        kernel: true,
     },
     MethodDecl {
         name: "dopri5",
         adaptive: true,
         meaning: "Dormand-Prince 5(4), explicit, adaptive",
+        kernel: true,
     },
     MethodDecl {
         name: "rodas4",
         adaptive: true,
         meaning: "Rodas4, linearly implicit, L-stable, adaptive",
+        kernel: false,
     },
     MethodDecl {
         name: "auto",
         adaptive: true,
         meaning: "Dormand-Prince, switching a run that turns stiff to Rodas4 and back",
+        kernel: true,
     },
 ];
 
@@ -77,6 +84,15 @@ impl Method {
     pub fn fixed_step(&self) -> Option<f64> {
         match *self {
             Method::Rk4 { dt } => Some(dt),
+            Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => None,
+        }
+    }
+
+    /// The same fixed-step method with step `dt` [s] (a retry's halved step, a derivative
+    /// pass at the step a retry used); `None` for an adaptive method, which has no step to set.
+    pub fn with_step(&self, dt: f64) -> Option<Method> {
+        match *self {
+            Method::Rk4 { .. } => Some(Method::Rk4 { dt }),
             Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => None,
         }
     }

@@ -2,7 +2,8 @@
 //! observer, how it ends), the method choice ([`method`]), step planning and divergence
 //! messages ([`plan`]), the model as a right-hand side ([`model_rhs`]), the stepper interface
 //! ([`stepper`]) and the steppers: fixed-step RK4, Dormand-Prince 5(4), Rodas4 and `auto`
-//! ([`switching`], with [`stiffness`] and [`crawl`] watching an adaptive run).
+//! ([`switching`], with [`stiffness`] and [`crawl`] watching an adaptive run); each explicit
+//! method's coefficients once ([`tableau`]).
 
 pub mod crawl;
 pub mod dopri5;
@@ -14,4 +15,5 @@ pub mod rodas4;
 pub mod stepper;
 pub mod stiffness;
 pub mod switching;
+pub mod tableau;
 pub mod task;

@@ -9,6 +9,7 @@
 //! lane's arithmetic is exactly that of a one-lane step.
 
 use crate::integrate::stepper::{Attempt, Rhs, State, Stepper};
+use crate::integrate::tableau::{rk4_factor, rk4_sum, RK4_NODES};
 use crate::numbers::scalar::Scalar;
 
 /// RK4's slack on the presliding bound [relative]: it may overshoot by its truncation error.
@@ -43,15 +44,15 @@ impl<S: State, const L: usize> Rk4<S, L> {
     /// Advance every lane `i` with `active[i]` by one step `dt`.
     #[inline(always)]
     pub fn step_lanes<F: Rhs<S::Elem>>(&mut self, f: &mut F, dt: f64, ys: &mut [S; L], active: &[bool; L]) {
-        let h2 = 0.5 * dt;
-        f.eval_lanes(&[0.0; L], ys, &mut self.k1, active);
-        self.stage(ys, h2, Stage::K1, active);
-        f.eval_lanes(&[h2; L], &self.tmp, &mut self.k2, active);
-        self.stage(ys, h2, Stage::K2, active);
-        f.eval_lanes(&[h2; L], &self.tmp, &mut self.k3, active);
-        self.stage(ys, dt, Stage::K3, active);
-        f.eval_lanes(&[dt; L], &self.tmp, &mut self.k4, active);
-        let h6 = dt / 6.0;
+        let [c1, c2, c3, c4] = RK4_NODES.map(|c| c * dt);
+        f.eval_lanes(&[c1; L], ys, &mut self.k1, active);
+        self.stage(ys, c2, Stage::K1, active);
+        f.eval_lanes(&[c2; L], &self.tmp, &mut self.k2, active);
+        self.stage(ys, c3, Stage::K2, active);
+        f.eval_lanes(&[c3; L], &self.tmp, &mut self.k3, active);
+        self.stage(ys, c4, Stage::K3, active);
+        f.eval_lanes(&[c4; L], &self.tmp, &mut self.k4, active);
+        let factor = rk4_factor(dt);
         for i in 0..L {
             if active[i] {
                 let (y, k1, k2, k3, k4) = (
@@ -62,7 +63,7 @@ impl<S: State, const L: usize> Rk4<S, L> {
                     self.k4[i].as_ref(),
                 );
                 for j in 0..y.len() {
-                    y[j] += (k1[j] + (k2[j] + k3[j]) * 2.0 + k4[j]) * h6;
+                    y[j] += rk4_sum(k1[j], k2[j], k3[j], k4[j]) * factor;
                 }
             }
         }

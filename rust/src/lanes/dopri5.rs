@@ -8,9 +8,12 @@
 use std::sync::atomic::AtomicBool;
 
 use crate::integrate::crawl::CrawlWatch;
-use crate::integrate::dopri5::{A2, A3, A4, A5, A6, B, C, CONTROL, E, EXPLICIT_CRAWL_HINT};
+use crate::integrate::dopri5::{CONTROL, EXPLICIT_CRAWL_HINT};
 use crate::integrate::stepper::{AdaptiveOptions, Attempt, Held};
 use crate::integrate::stiffness::{h_lambda, StiffnessTest, TRY_IMPLICIT_AFTER};
+use crate::integrate::tableau::{
+    DP5_A2 as A2, DP5_A3 as A3, DP5_A4 as A4, DP5_A5 as A5, DP5_A6 as A6, DP5_B as B, DP5_C as C, DP5_E as E,
+};
 use crate::integrate::task::{adaptive_options, LaneEnd, Observer, Resume, Task};
 use crate::lanes::{refill_lanes, LaneExp, PlainLanes, Queue};
 use crate::physics::waveform::Cursor;

@@ -12,6 +12,7 @@
 use std::sync::atomic::AtomicBool;
 
 use crate::integrate::rk4::BOUND_SLACK;
+use crate::integrate::tableau::{rk4_factor, rk4_sum, RK4_NODES};
 use crate::integrate::task::{LaneEnd, Observer, Task};
 use crate::lanes::{refill_lanes, LaneExp, PlainLanes, Queue};
 use crate::physics::waveform::Cursor;
@@ -59,7 +60,8 @@ pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, co
         [[0.0; L]; D],
         [[0.0; L]; D],
     );
-    let (h2, h6) = (0.5 * dt, dt / 6.0);
+    let [c1, c2, c3, c4] = RK4_NODES.map(|c| c * dt);
+    let factor = rk4_factor(dt);
     let mut lane_state = [0.0; D];
     let mut attempts = 0usize;
     loop {
@@ -122,7 +124,7 @@ pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, co
         // the four stages through one call site, so the right-hand side is inlined once
         let (mut ff, mut gdot) = ([0.0; L], [0.0; L]);
         for st in 0..4 {
-            let tau = [0.0, h2, h2, dt][st];
+            let tau = [c1, c2, c3, c4][st];
             let (src, dst) = match st {
                 0 => (&y, &mut k1),
                 1 => (&tmp, &mut k2),
@@ -133,16 +135,16 @@ pub fn run_rk4_lanes<O: Observer, E: LaneExp, const N: usize, const D: usize, co
             match st {
                 0 => {
                     (ff, gdot) = out;
-                    stage(&mut tmp, &y, h2, &k1);
+                    stage(&mut tmp, &y, c2, &k1);
                 }
-                1 => stage(&mut tmp, &y, h2, &k2),
-                2 => stage(&mut tmp, &y, dt, &k3),
+                1 => stage(&mut tmp, &y, c3, &k2),
+                2 => stage(&mut tmp, &y, c4, &k3),
                 _ => {}
             }
         }
         for j in 0..D {
             for i in 0..L {
-                y[j][i] += (k1[j][i] + (k2[j][i] + k3[j][i]) * 2.0 + k4[j][i]) * h6;
+                y[j][i] += rk4_sum(k1[j][i], k2[j][i], k3[j][i], k4[j][i]) * factor;
             }
         }
         for i in 0..L {

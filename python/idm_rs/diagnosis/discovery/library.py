@@ -1,10 +1,9 @@
 """The library discovery regresses on: candidate force terms on the main body and on the weight
-(each mirrored by the engine's ``library_force`` / ``library_force_weight`` effect,
-rust/src/physics/effects.rs), and their columns along a simulated trajectory."""
+(the engine's ``library_force`` / ``library_force_weight`` coefficients, with how the report
+prints them), and their columns along a simulated trajectory (computed by the engine)."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -72,20 +71,16 @@ class Trajectory:
 
 
 def library_columns(tr: Trajectory, terms: Sequence[Term], wavelength: float) -> NDArray[np.float64]:
-    """Each term's function along the trajectory (samples x terms), as the engine computes it
-    (``physics/effects.rs``: sgn smoothed as tanh(v/v_s); the periodic terms at `wavelength`)."""
-    k = 2.0 * math.pi / wavelength if wavelength > 0 else 0.0
-    s, c = np.sin(k * tr.x1), np.cos(k * tr.x1)
-    f = {
-        "lib_x1": tr.x1, "lib_v1": tr.v1, "lib_dx": tr.x1 - tr.x2, "lib_dv": tr.v1 - tr.v2,
-        "lib_sgn": np.tanh(tr.v1 / tr.vs), "lib_abs": np.abs(tr.v1), "lib_vv": tr.v1 * np.abs(tr.v1),
-        "lib_volt": tr.volt, "lib_dvolt": tr.dvolt, "lib_t": tr.t, "lib_x1sq": tr.x1**2, "lib_x1cube": tr.x1**3,
-        "lib_ff": tr.ff, "lib_sin": s, "lib_cos": c, "lib_ff_sin": tr.ff * s, "lib_ff_cos": tr.ff * c,
-        "libw_x2": tr.x2, "libw_v2": tr.v2, "libw_dx": tr.x2 - tr.x1, "libw_dv": tr.v2 - tr.v1,
-        "libw_sgn": np.tanh(tr.v2 / tr.vs), "libw_vv": tr.v2 * np.abs(tr.v2), "libw_volt": tr.volt,
-        "libw_dvolt": tr.dvolt,
-    }
-    return np.stack([f[t.param] for t in terms], axis=1)
+    """Each term's function along the trajectory (samples x terms), computed by the engine's own
+    library force with that term's coefficient at 1 (rust/src/physics/library_columns.rs: sgn
+    smoothed as tanh(v/v_s); the periodic terms at `wavelength` [m])."""
+    from ... import engine
+
+    def f64(a: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.ascontiguousarray(a, dtype=np.float64)
+
+    return engine.library_columns(f64(tr.x1), f64(tr.v1), f64(tr.x2), f64(tr.v2), f64(tr.volt), f64(tr.dvolt),
+                                  f64(tr.ff), f64(tr.t), float(tr.vs), float(wavelength), [t.param for t in terms])
 
 
 #: each periodic term's partner in quadrature (the same kind of force a quarter period on)
