@@ -100,6 +100,8 @@ def effects_case(directory: Path, effects: list[str], device: str, rng: np.rando
         pe, eff, model_e, _ = _true_device(e, m, device)
         if e == "stribeck":
             p = p.replace(mu_s=pe.mu_s)
+        if e == "piezo_hysteresis":
+            p = p.replace(hyst_alpha=pe.hyst_alpha)
         fields.update({k: v for k, v in dataclasses.asdict(eff).items() if v != getattr(idm_rs.Effects(), k)})
         mags[e], sizes[e] = m, size
         model = model_e
@@ -107,7 +109,8 @@ def effects_case(directory: Path, effects: list[str], device: str, rng: np.rando
     nominal = _nominal_of(list(effects), p, true0, given)
     make_case(directory, nominal_params=nominal.replace(normal_force=p_true.normal_force), true_params=p_true,
               model=nominal_model, n_elements=4, piezo_hysteresis=False, true_model=model,
-              effects=idm_rs.Effects(**fields), experiments=EXPERIMENTS, noise_rms=noise, seed=seed, dt=2e-8)
+              true_piezo_hysteresis="piezo_hysteresis" in effects, effects=idm_rs.Effects(**fields),
+              experiments=EXPERIMENTS, noise_rms=noise, seed=seed, dt=2e-8)
     return {"misset": misset, "magnitude": mags, "size_after_refit": sizes, "noise_rms": noise,
             "truth": "+".join(effects)}
 
