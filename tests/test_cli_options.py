@@ -171,8 +171,8 @@ def test_dask_blocks_follow_block_size_and_run_one_thread_each(monkeypatch):
     import importlib
     import warnings
 
-    sweep_module = importlib.import_module("idm_rs.sweep")
-    monkeypatch.setattr(sweep_module, "DASK_MIN_BLOCK", 2)  # so that a small sweep makes several tasks
+    backends = importlib.import_module("idm_rs.sweep_backends")
+    monkeypatch.setattr(backends, "DASK_MIN_BLOCK", 2)  # so that a small sweep makes several tasks
     grid = {"voltage": np.linspace(40.0, 120.0, 8)}
     kw = dict(t_end=5e-4, dt=5e-8, model="lps", progress=False)
     local = idm_rs.sweep(P, idm_rs.Triangle(), grid, **kw)

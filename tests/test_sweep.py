@@ -183,14 +183,14 @@ def test_interrupted_sweep_keeps_finished_points(monkeypatch):
     grid = {"mass_ratio": np.linspace(0.5, 1.5, 32), "voltage": np.linspace(60.0, 100.0, 32)}
     kw = dict(t_end=20e-3, dt=2e-8, model="lps", progress=False)
     runs = []
-    module = importlib.import_module("idm_rs.sweep")  # the package's `sweep` is the function
-    start = module._start
+    module = importlib.import_module("idm_rs.sweep_backends")
+    start = module.start_block
 
     def recording_start(*args):
         runs.append(start(*args))
         return runs[-1]
 
-    monkeypatch.setattr(module, "_start", recording_start)
+    monkeypatch.setattr(module, "start_block", recording_start)
     interrupter = interrupt_main_when(lambda: bool(runs) and runs[0].progress() > 0)
     with pytest.raises(KeyboardInterrupt, match="points finished") as stop:  # a script stops there
         idm_rs.sweep(P, WAVE, grid, threads=2, block_size=64, **kw)

@@ -45,7 +45,9 @@ def test_a_store_written_block_by_block_holds_what_memory_holds(tmp_path):
 
 
 def test_an_interrupted_store_keeps_the_slabs_it_wrote(tmp_path, monkeypatch):
-    real, calls = sweep_module._run_local, []
+    from idm_rs.sweep_backends import LocalEngine
+
+    real, calls = LocalEngine.run, []
 
     def stop_on_the_second(*args, **kw):
         calls.append(1)
@@ -53,7 +55,7 @@ def test_an_interrupted_store_keeps_the_slabs_it_wrote(tmp_path, monkeypatch):
             raise KeyboardInterrupt
         return real(*args, **kw)
 
-    monkeypatch.setattr(sweep_module, "_run_local", stop_on_the_second)
+    monkeypatch.setattr(LocalEngine, "run", stop_on_the_second)
     with pytest.raises(KeyboardInterrupt, match="6 of 15 points written") as stop:
         idm_rs.sweep(idm_rs.Params(), idm_rs.Triangle(), GRID, model="lps", method="auto", progress=False,
                      out=tmp_path / "s.zarr", block_size=6)

@@ -20,7 +20,8 @@ from .params import Params
 from .recording import Recording, RecordingError, load_case
 from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate
 from .state import State
-from .sweep import METRICS, sweep
+from .sweep import sweep
+from .sweep_plan import METRICS
 from .waveforms import Sampled, Sawtooth, Triangle, Waveform
 
 __all__ = [

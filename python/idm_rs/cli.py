@@ -29,7 +29,7 @@ from .interrupted import partial_result
 from .methods import METHODS
 from .params import Params
 from .simulation import DivergenceError, SimulationResult, simulate
-from .sweep import METRICS, STEADY_METRICS
+from .sweep_plan import METRICS, STEADY_METRICS
 from .units import si
 from .waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
 
@@ -454,7 +454,7 @@ def effects_from_overrides(items: Sequence[str]) -> Effects:
 
 def _snap(t: float, dt: float) -> float:
     """``t`` rounded to a whole number of steps when it is within 1e-9 of one."""
-    from .sweep import snap_to_steps
+    from .sweep_plan import snap_to_steps
 
     return cast(float, snap_to_steps(t, dt))  # a number in, a number out
 

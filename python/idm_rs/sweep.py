@@ -20,148 +20,26 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import engine, methods, options
-from .batch import Structure, Tables, param_row
-from .batch import start as start_batch
 from .declarations import EFFECT_PARAMS, GRAVITY, Model, structure
 from .effects import Effects
 from .interrupted import interrupted
 from .methods import MethodName
 from .params import PARAM_INFO, Params
+from .sweep_backends import backend_for
+from .sweep_plan import (
+    DERIVED_AXES,
+    METRICS,
+    OUTPUTS,
+    STATUS_MEANINGS,
+    STEADY_METRICS,
+    WAVE_FIELDS,
+    SweepPlan,
+    durations,
+)
 from .waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
 
 if TYPE_CHECKING:
     import xarray
-
-#: metric name -> (units, long name), declared once in the engine (``batch/metrics.rs``); the
-#: steady state of a sawtooth train is over the cycles after `skip_cycles` (NaN for other inputs)
-METRICS: dict[str, tuple[str, str]] = {name: (unit, long) for name, unit, long in engine.metric_columns()}
-
-#: the steady-state metrics of a sawtooth train (the CPU backend computes them; NaN for other inputs)
-STEADY_METRICS: tuple[str, ...] = ("mean_velocity", "step_mean", "step_std", "backslip", "backslip_ratio",
-                                   "direction")
-
-#: derived axes: name -> (units, long name)
-DERIVED_AXES: dict[str, tuple[str, str]] = {
-    "mass_ratio": ("1", "weight-to-main-body mass ratio m2/m1 (m1 fixed)"),
-    "pe_mass_ratio": ("1", "PE-to-main-body mass ratio mPE/m1 (through pe_density)"),
-    "stiffness": ("N/m", "PE stiffness kp = Ep Ap / l (through pe_youngs)"),
-    "voltage": ("V", "drive amplitude"),
-}
-
-WAVE_FIELDS: dict[str, tuple[str, str]] = {
-    "amplitude": ("V", "drive amplitude"),
-    "rise": ("s", "rise (edge) time"),
-    "fall": ("s", "fall time (triangle)"),
-    "frequency": ("Hz", "drive frequency (sawtooth)"),
-    "cycles": ("1", "number of drive cycles (sawtooth)"),
-    "delay": ("s", "delay before the wave"),
-}
-
-STATUS_MEANINGS = "not_run ok ok_at_smaller_dt diverged invalid"
-
-#: smallest number of points per Dask task (the scheduler's overhead is ~1 ms per task)
-DASK_MIN_BLOCK = 10_000
-
-
-@dataclass(frozen=True)
-class _Plan:
-    """Everything needed to run any block of the grid (picklable for Dask)."""
-
-    params: Params
-    waveform: Waveform
-    effects: Effects
-    names: tuple[str, ...]
-    values: tuple[NDArray[np.float64], ...]
-    t_end: float
-    dt: float
-    model: Model
-    n_elements: int
-    piezo_hysteresis: bool
-    method: str
-    rtol: float
-    atol: float
-    retries: int
-    first_step: float
-    skip_cycles: int = STARTUP_CYCLES
-    #: each point runs to its own waveform's end (``t_end`` is then the longest of them)
-    own_t_end: bool = False
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        return tuple(len(v) for v in self.values)
-
-    @property
-    def size(self) -> int:
-        return int(np.prod(self.shape, dtype=np.int64))
-
-    @property
-    def structure(self) -> Structure:
-        return Structure(self.model, self.n_elements, self.piezo_hysteresis)
-
-    def tables(self, start: int, stop: int) -> Tables:
-        """The engine's tables of flat points [start, stop)."""
-        return self.tables_at(np.arange(start, stop))
-
-    def tables_at(self, flat: NDArray[np.int64]) -> Tables:
-        """The engine's tables of the flat points `flat`."""
-        n = flat.size
-        idx = np.unravel_index(flat, self.shape)
-        pnames = engine.param_names()
-        pm = np.tile(param_row(self.params), (n, 1))  # NaN normal_force: derived per point
-        enames = engine.effect_names()
-        em = np.tile([getattr(self.effects, e) for e in enames], (n, 1)).astype(float)
-        wnames = engine.wave_fields(self.waveform.batch_kind)
-        base = self.waveform.batch_fields()
-        wm = np.tile([base[c] for c in wnames], (n, 1)).astype(float)
-        for axis, (name, vals) in enumerate(zip(self.names, self.values)):
-            v = vals[idx[axis]]
-            if name in pnames:
-                pm[:, pnames.index(name)] = v
-            elif name in enames:
-                em[:, enames.index(name)] = v
-            elif name in ("voltage", "amplitude"):
-                wm[:, wnames.index("amplitude")] = v
-            elif name in WAVE_FIELDS:
-                wm[:, wnames.index(name)] = v
-        # derived axes, applied after the plain ones so they see the swept m1, Ap, l
-        col = {name: j for j, name in enumerate(pnames)}
-        for axis, (name, vals) in enumerate(zip(self.names, self.values)):
-            v = vals[idx[axis]]
-            if name == "mass_ratio":
-                pm[:, col["m2"]] = v * pm[:, col["m1"]]
-            elif name == "pe_mass_ratio":
-                pm[:, col["pe_density"]] = v * pm[:, col["m1"]] / (pm[:, col["pe_area"]] * pm[:, col["pe_length"]])
-            elif name == "stiffness":
-                pm[:, col["pe_youngs"]] = v * pm[:, col["pe_length"]] / pm[:, col["pe_area"]]
-        sampled = (self.waveform.t, self.waveform.voltage) if isinstance(self.waveform, Sampled) else None
-        t_ends = None
-        if self.own_t_end:
-            t_ends = _durations(self.waveform, {c: wm[:, j] for j, c in enumerate(wnames)})
-            if not methods.is_adaptive(self.method):
-                t_ends = snap_to_steps(t_ends, self.dt)
-        return Tables(pm, em, self.waveform.batch_kind, wm, sampled, t_ends)
-
-
-def snap_to_steps(t: Any, dt: float) -> Any:
-    """``t`` [s] (a number or an array) rounded to a whole number of steps ``dt`` where it is
-    within 1e-9 (relative, or absolute below 1 s) of one; elsewhere unchanged."""
-    t = np.asarray(t, dtype=float)
-    k = np.round(t / dt)
-    out = np.where(np.abs(k * dt - t) <= 1e-9 * np.maximum(1.0, np.abs(t)), k * dt, t)
-    return float(out) if out.ndim == 0 else out
-
-
-def _durations(waveform: Waveform, fields: Mapping[str, Any]) -> NDArray[np.float64]:
-    """The end of each point's waveform [s] from its batch fields (arrays or scalars)."""
-    if isinstance(waveform, Sawtooth):
-        d = (np.asarray(fields["delay"], float)
-             + np.asarray(fields["cycles"], float) / np.asarray(fields["frequency"], float))
-    elif isinstance(waveform, Triangle):
-        d = np.asarray(fields["delay"], float) + np.asarray(fields["rise"], float) + np.asarray(fields["fall"], float)
-    else:
-        d = np.asarray(waveform.duration, float)
-    return np.atleast_1d(d).astype(float)
-
 
 def _train_span(waveform: Waveform, names: Sequence[str], values: Sequence[NDArray[np.float64]]
                 ) -> tuple[float, float, dict[str, float]]:
@@ -179,7 +57,7 @@ def _train_span(waveform: Waveform, names: Sequence[str], values: Sequence[NDArr
         shorter = float(v.max()) if field == "frequency" else float(v.min())
         hi[field], lo[field] = longer, shorter
         where[name] = longer
-    return float(_durations(waveform, lo)[0]), float(_durations(waveform, hi)[0]), where
+    return float(durations(waveform, lo)[0]), float(durations(waveform, hi)[0]), where
 
 
 def _axis_info(name: str) -> tuple[str, str]:
@@ -229,29 +107,6 @@ def _check_grid(grid: Mapping[str, ArrayLike],
     if "voltage" in names and "amplitude" in names:
         raise ValueError("sweep axes 'voltage' and 'amplitude' are the same; keep one")
     return tuple(names), tuple(values)
-
-
-def _start(plan: _Plan, start: int, stop: int, threads: int) -> Any:
-    return start_batch(plan.tables(start, stop), plan.structure, t_end=plan.t_end, method=plan.method, dt=plan.dt,
-                       rtol=plan.rtol, atol=plan.atol, first_step=plan.first_step, retries=plan.retries,
-                       threads=threads, skip_cycles=plan.skip_cycles)
-
-
-def run_block(plan: _Plan, start: int, stop: int, threads: int = 1) -> dict[str, NDArray[Any]]:
-    """Run flat points [start, stop) of a plan to completion; the unit of work of a Dask task.
-    ``threads`` caps the rayon threads so that Dask workers do not oversubscribe their cores."""
-    run = _start(plan, start, stop, threads)
-    run.wait(1e9)
-    return dict(run.result())
-
-
-_OUTPUTS: dict[str, Any] = {
-    **{m: np.float64 for m in METRICS},
-    "status": np.uint8,
-    "diverged_at": np.float64,
-    "dt_used": np.float64,
-    "steps": np.uint64,
-}
 
 
 def sweep(
@@ -414,7 +269,9 @@ def sweep(
     if not isinstance(params, Params):
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
     kernel = backend in ("cuda", "kernel-cpu")
-    admitted = _kernel_metrics() if kernel else list(METRICS)
+    if kernel:
+        from .gpu.kernel_sweep import check_kernel_admits, kernel_metrics
+    admitted = kernel_metrics() if kernel else list(METRICS)
     if metrics is not None:
         metrics = list(metrics)
         unknown = [m for m in metrics if m not in METRICS]
@@ -473,10 +330,10 @@ def sweep(
                              "its cycles would be cut short and its steady state and step per cycle silently wrong. "
                              f"Give t_end >= {longest:g} s, or leave t_end out so that each point runs to the end "
                              "of its own train")
-    plan = _Plan(params, waveform, effects, names, values, float(t_end), float(dt), model, int(n_elements),
-                 bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries), first, skips, own)
+    plan = SweepPlan(params, waveform, effects, names, values, float(t_end), float(dt), model, int(n_elements),
+                     bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries), first, skips, own)
     if kernel:
-        _check_kernel_admits(plan, backend)
+        check_kernel_admits(plan, backend)
         if own:
             raise ValueError(f"backend={backend!r} runs every point to one t_end, and this grid's waveforms end "
                              f"between {shortest:g} and {longest:g} s: give t_end={longest:g} (the shorter ones then "
@@ -554,22 +411,17 @@ class _Run:
     backend: str
 
 
-def _run_in_memory(plan: _Plan, run: _Run, bar: Any) -> tuple["xarray.Dataset", bool]:
+def _run_in_memory(plan: SweepPlan, run: _Run, bar: Any) -> tuple["xarray.Dataset", bool]:
     """Every point of ``plan`` into one Dataset in memory; (the Dataset, whether it finished)."""
     import xarray as xr
 
     n = plan.size
-    out = {k: np.full(n, np.nan if t is np.float64 else 0, dtype=t) for k, t in _OUTPUTS.items()}
+    out = {k: np.full(n, np.nan if t is np.float64 else 0, dtype=t) for k, t in OUTPUTS.items()}
     out["reason"] = np.full(n, "not run", dtype=object)
     t0 = time.perf_counter()
     complete = True
     try:
-        if run.backend != "cpu":
-            complete = _run_kernel(plan, out, run.threads, run.block_size, bar, run.backend)
-        elif run.client is not None:
-            complete = _run_dask(plan, out, run.client, max(run.block_size, DASK_MIN_BLOCK), bar)
-        else:
-            complete = _run_local(plan, out, run.threads, run.block_size, bar)
+        complete = backend_for(run.backend, run.threads, run.block_size, run.client).run(plan, out, bar)
     except KeyboardInterrupt:  # between blocks or before the first: nothing finished is lost
         complete = False
     wall = time.perf_counter() - t0
@@ -605,7 +457,7 @@ def _run_in_memory(plan: _Plan, run: _Run, bar: Any) -> tuple["xarray.Dataset", 
 
 #: bytes of results per point in memory: every metric column and the bookkeeping columns, plus
 #: the reason's reference (the strings themselves are shared: one "not run", one "")
-BYTES_PER_POINT: int = sum(np.dtype(t).itemsize for t in _OUTPUTS.values()) + np.dtype(object).itemsize
+BYTES_PER_POINT: int = sum(np.dtype(t).itemsize for t in OUTPUTS.values()) + np.dtype(object).itemsize
 
 #: the share of the memory available now that a sweep's results may take
 MEMORY_SHARE: float = 0.8
@@ -639,7 +491,7 @@ def _check_memory(points: int, out_hint: bool) -> None:
                          "CLI --out sweep.zarr), which keeps one block in memory" if out_hint else ""))
 
 
-def _run_to_store(plan: _Plan, run: _Run, path: Path, progress: Union[bool, str]) -> "xarray.Dataset":
+def _run_to_store(plan: SweepPlan, run: _Run, path: Path, progress: Union[bool, str]) -> "xarray.Dataset":
     """The grid slab by slab into the Zarr store at ``path`` (:mod:`.sweep_store`); returns the
     store opened lazily. Ctrl-C keeps the slabs written (the rest ``status`` 0)."""
     from .sweep_store import chunk_shape, run_to_store
@@ -662,48 +514,7 @@ def _run_to_store(plan: _Plan, run: _Run, path: Path, progress: Union[bool, str]
             bar.close()
 
 
-#: what a derived axis sets (the gate refuses a derived axis as it refuses the parameter)
-_DERIVED_SETS = {"mass_ratio": "m2", "pe_mass_ratio": "pe_density", "stiffness": "pe_youngs"}
-
-
-def _kernel_metrics() -> list[str]:
-    """The metrics the kernel backends return (``engine.kernel_accepts()``), in METRICS order."""
-    return [m for m in METRICS if m in engine.kernel_accepts()["metrics"]]
-
-
-def _check_kernel_admits(plan: _Plan, backend: str) -> None:
-    """Refuse by default: a kernel backend runs a sweep only when the structure, the waveform
-    family and its fields, and every Table 1 parameter and effect that is swept or differs from
-    its default are among what the kernel implements (``engine.kernel_accepts()``, declared in
-    rust/src/gpu/kernel.rs beside the packing); anything else is refused by name."""
-    acc = engine.kernel_accepts()
-    fix = "(use backend='cpu')"
-    nodes = 2 if plan.model == "lps" else plan.n_elements + 1
-    if plan.model not in acc["structures"] or nodes > acc["max_dof"]:
-        raise ValueError(f"backend={backend!r} runs the LPS and the DPS with up to {acc['max_dof'] - 1} elements; "
-                         f"got model={plan.model!r}, n_elements={plan.n_elements} {fix}")
-    kind = plan.waveform.batch_kind
-    if kind not in acc["waves"]:
-        raise ValueError(f"backend={backend!r} runs {' and '.join(k.capitalize() for k in acc['waves'])} inputs, "
-                         f"not a {type(plan.waveform).__name__} waveform {fix}")
-    missing = [f for f in engine.wave_fields(kind) if f not in acc["waves"][kind]]
-    if missing:
-        raise ValueError(f"backend={backend!r} does not evaluate the {kind} field(s) {missing} {fix}")
-    swept = set(plan.names) | {_DERIVED_SETS[n] for n in plan.names if n in _DERIVED_SETS}
-    given, default = param_row(plan.params), param_row(Params())
-    for name, v, d in zip(engine.param_names(), given, default):
-        differs = not (v == d or (math.isnan(v) and math.isnan(d)))
-        if name not in acc["params"] and (name in swept or differs):
-            raise ValueError(f"backend={backend!r} does not implement parameter '{name}' "
-                             f"({'swept' if name in swept else 'set'}) {fix}")
-    no_effect = Effects()
-    for name in engine.effect_names():
-        if name not in acc["effects"] and (name in swept or getattr(plan.effects, name) != getattr(no_effect, name)):
-            raise ValueError(f"backend={backend!r} runs the paper's model only; effect parameter '{name}' is "
-                             f"{'swept' if name in swept else 'on'} {fix}")
-
-
-def _validate_axes(plan: _Plan) -> None:
+def _validate_axes(plan: SweepPlan) -> None:
     """Fail fast, with the core's message, on a setting every point shares (step, duration,
     model) or an axis value that is invalid on its own: the points where one axis takes each of
     its values and the others their first are checked before any work. (A point invalid only
@@ -737,188 +548,3 @@ def _progress_bar(total: int, show: Union[bool, str]) -> Any:
     from tqdm.auto import tqdm
 
     return tqdm(total=total, unit="pt", desc=show if isinstance(show, str) else "idm-rs sweep", smoothing=0.0)
-
-
-def _run_local(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_size: int, bar: Any) -> bool:
-    n = plan.size
-    run = None
-    start = stop = 0
-    try:
-        for start in range(0, n, block_size):
-            stop = min(n, start + block_size)
-            run = _start(plan, start, stop, threads)
-            seen = 0
-            while not run.wait(0.1):
-                if bar is not None:
-                    p = run.progress()
-                    bar.update(p - seen)
-                    seen = p
-            res = run.result()
-            run = None
-            if bar is not None:
-                bar.update(stop - start - seen)
-            _store(out, res, start, stop)
-    except KeyboardInterrupt:
-        # Ctrl-C anywhere: stop the workers, keep every finished point
-        if run is not None:
-            run.cancel()
-            try:
-                _store(out, run.result(), start, stop)
-            except RuntimeError:
-                pass  # the block's result was already taken
-        return False
-    return True
-
-
-def _kernel_block(plan: _Plan, start: int, stop: int) -> tuple[NDArray[np.float64], NDArray[np.intp], dict[str, Any],
-                                                                 NDArray[np.bool_]]:
-    """Flat points [start, stop) for the kernel, with no loop per point: the parameter rows of
-    the distinct points of the parameter axes (the engine's tables), each point's row, the
-    wave's batch fields (a swept field per point, the others once), and the points whose wave
-    is invalid only in combination (a sawtooth edge not shorter than its period)."""
-    shape = plan.shape
-    idx = np.unravel_index(np.arange(start, stop), shape)
-    wave_axes = [a for a, n in enumerate(plan.names) if n in WAVE_FIELDS or n == "voltage"]
-    param_axes = [a for a in range(len(shape)) if a not in wave_axes]
-    if param_axes:
-        sub = tuple(shape[a] for a in param_axes)
-        key = np.ravel_multi_index([idx[a] for a in param_axes], sub)
-        uniq, rows = np.unique(key, return_inverse=True)
-        full = [np.zeros(uniq.size, dtype=np.intp)] * len(shape)
-        for a, i in zip(param_axes, np.unravel_index(uniq, sub)):
-            full[a] = i
-        reps = np.ravel_multi_index(full, shape)
-    else:
-        reps, rows = np.zeros(1, dtype=np.intp), np.zeros(stop - start, dtype=np.intp)
-    params = plan.tables_at(reps).params
-    fields: dict[str, Any] = dict(plan.waveform.batch_fields())
-    for a in wave_axes:
-        name = "amplitude" if plan.names[a] == "voltage" else plan.names[a]
-        fields[name] = plan.values[a][idx[a]]
-    invalid = np.zeros(stop - start, dtype=bool)
-    if plan.waveform.batch_kind == "sawtooth":
-        period = 1.0 / np.asarray(fields["frequency"], dtype=float)
-        invalid = np.broadcast_to(np.asarray(fields["rise"]) >= period, invalid.shape).copy()
-        if invalid.any():  # such a point is not run: give it a valid edge, its result is discarded
-            fields["rise"] = np.where(invalid, 0.5 * period, fields["rise"])
-    return params, rows, fields, invalid
-
-
-def _run_kernel(plan: _Plan, out: dict[str, NDArray[Any]], threads: int, block_size: int, bar: Any,
-                backend: str) -> bool:
-    """The GPU kernel (or its CPU build) block by block, streamed: while the GPU runs a block
-    the host packs the next and stores the last. RK4: diverged points are retried on the CPU
-    engine at dt/2, dt/4 (``plan.retries``). Adaptive: the kernel runs Dormand-Prince at the
-    plan's tolerances; a point that diverged or whose step collapsed there is rerun on the CPU
-    engine with the plan's own method (``"auto"`` changes a stiff point to Rodas4 there) when
-    ``plan.retries`` > 0. Ctrl-C keeps the finished blocks."""
-    from .gpu import Spec, launch_cuda, pack, run_cpu, wave_columns
-    from .gpu.backend import Finished, Launched
-
-    adaptive = methods.is_adaptive(plan.method)
-    config = plan.structure.config(method="rk4", dt=plan.dt)  # the constants do not depend on the method
-    spec = Spec(2 if plan.model == "lps" else plan.n_elements + 1, plan.piezo_hysteresis)
-    kind = plan.waveform.batch_kind
-    n = plan.size
-    pending = None
-    try:
-        for start in range(0, n, block_size):
-            stop = min(n, start + block_size)
-            params, rows, fields, invalid = _kernel_block(plan, start, stop)
-            how: dict[str, Any] = (dict(method="dopri5", rtol=plan.rtol, atol=plan.atol, first_step=plan.first_step)
-                                   if adaptive else {})
-            batch = pack(config, spec, params, rows, wave_columns(kind, fields), plan.t_end, plan.dt, **how)
-            handle: Union[Launched, Finished] = launch_cuda(batch) if backend == "cuda" else Finished(run_cpu(batch))
-            previous, pending = pending, (handle, start, stop, invalid)
-            if previous is not None:
-                _finish_kernel_block(plan, out, *previous, threads, bar)
-        previous, pending = pending, None
-        if previous is not None:
-            _finish_kernel_block(plan, out, *previous, threads, bar)
-    except KeyboardInterrupt:
-        if pending is not None and pending[0].done():  # a block the device had finished is kept
-            try:
-                _finish_kernel_block(plan, out, *pending, threads, bar)
-            except KeyboardInterrupt:
-                pass
-        return False
-    return True
-
-
-def _finish_kernel_block(plan: _Plan, out: dict[str, NDArray[Any]], handle: Any, start: int, stop: int,
-                         invalid: NDArray[np.bool_], threads: int, bar: Any) -> None:
-    """Wait for a block, write its outputs straight into the sweep's columns, rerun its failed
-    points on the CPU engine."""
-    res = handle.result()
-    adaptive = methods.is_adaptive(plan.method)
-    sl = slice(start, stop)
-    for k in ("final_position", "peak_velocity", "peak_friction", "slip_fraction", "status", "diverged_at"):
-        out[k][sl] = res[k]
-    ok = res["status"] == 1
-    out["reason"][sl] = ""
-    failed = np.flatnonzero(~ok) + start  # reasons are set point by point only where one is due
-    if adaptive:
-        out["dt_used"][sl] = np.where(ok, res["dt_used"], np.nan)
-        out["steps"][sl] = np.where(ok, res["steps"], 0)
-        crawled = res["crawled"][failed - start]
-        out["reason"][failed[crawled]] = ("the step collapsed on the kernel (Dormand-Prince held at its stability "
-                                          "limit; method='rodas4' or 'auto' on backend='cpu' runs it)")
-        out["reason"][failed[~crawled]] = "diverged on the kernel"
-    else:
-        out["dt_used"][sl] = np.where(ok, plan.dt, np.nan)
-        out["steps"][sl] = np.where(ok, int(round(plan.t_end / plan.dt)), 0)
-        out["reason"][failed] = "diverged on the GPU kernel"
-    cycles = getattr(plan.waveform, "cycles", None)
-    if cycles is not None and "cycles" not in plan.names:
-        out["step_per_cycle"][sl] = res["final_position"] / cycles
-    if invalid.any():
-        bad = np.flatnonzero(invalid) + start
-        for k in ("final_position", "peak_velocity", "peak_friction", "slip_fraction", "step_per_cycle",
-                  "diverged_at", "dt_used"):
-            out[k][bad] = np.nan
-        out["status"][bad] = 4
-        out["steps"][bad] = 0
-        out["reason"][bad] = "invalid: the sawtooth's rise is not shorter than its period"
-        ok = ok & ~invalid
-    bad = np.flatnonzero(~ok & ~invalid) + start
-    if bad.size and plan.retries > 0:
-        handle = start_batch(plan.tables_at(bad), plan.structure, t_end=plan.t_end, method=plan.method,
-                             dt=plan.dt, rtol=plan.rtol, atol=plan.atol, first_step=plan.first_step,
-                             retries=plan.retries, threads=threads, skip_cycles=plan.skip_cycles)
-        handle.wait(1e9)
-        again = handle.result()
-        for k in out:
-            out[k][bad] = again["reasons"] if k == "reason" else again[k]
-        if adaptive:  # rerun on the CPU: say so where it finished
-            fine = again["status"] == 1
-            out["reason"][bad[fine]] = "failed on the kernel; finished on the CPU engine"
-    if bar is not None:
-        bar.update(stop - start)
-
-
-def _store(out: dict[str, NDArray[Any]], res: Mapping[str, Any], start: int, stop: int) -> None:
-    for k in out:
-        out[k][start:stop] = res["reasons"] if k == "reason" else res[k]
-
-
-def _run_dask(plan: _Plan, out: dict[str, NDArray[Any]], client: Any, block: int, bar: Any) -> bool:
-    from dask.distributed import as_completed
-
-    n = plan.size
-    # one task per block; each worker thread runs one block with one rayon thread
-    futures = {}
-    for start in range(0, n, block):
-        stop = min(n, start + block)
-        fut = client.submit(run_block, plan, start, stop, 1, pure=False)
-        futures[fut] = (start, stop)
-    try:
-        for fut in as_completed(futures):  # type: ignore[no-untyped-call, unused-ignore]
-            start, stop = futures[fut]
-            _store(out, fut.result(), start, stop)
-            if bar is not None:
-                bar.update(stop - start)
-    except KeyboardInterrupt:
-        for fut in futures:
-            fut.cancel()
-        return False
-    return True
