@@ -43,8 +43,8 @@ def _rust_modules() -> dict[str, Path]:
         parts = list(rel.parts)
         if parts[-1] == "mod":
             parts = parts[:-1]
-        if parts in (["lib"], ["paper_case_tests"]):
-            continue
+        if parts in (["lib"], ["paper_case_tests"]) or parts[-1] == "tests" or parts[-1].endswith("_tests"):
+            continue  # a test module in its own file (`#[cfg(test)] mod tests;`) may use any layer
         out["::".join(parts)] = path
     return out
 

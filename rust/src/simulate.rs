@@ -1,4 +1,4 @@
-//! One run, saved: the driver (`drive.rs`) with a [`Trajectory`] as its observer. From rest or
+//! One run, saved: the driver (`drive/`) with a [`Trajectory`] as its observer. From rest or
 //! from any state, by RK4 or an adaptive method; the final state comes back so a run can be
 //! continued or restarted mid-record.
 
@@ -44,7 +44,7 @@ pub struct Trajectory {
     /// the state at t_end
     pub final_state: Vec<f64>,
     /// an adaptive run's accepted steps and the states they reached (empty for RK4): held by
-    /// a run that carries derivatives along this one (`sensitivity.rs`)
+    /// a run that carries derivatives along this one (`sensitivity/`)
     pub held: Held,
 }
 

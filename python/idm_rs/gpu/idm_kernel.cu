@@ -338,7 +338,7 @@ IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, do
 #endif
     for (long long kk = 0; kk < steps; kk++) {
         double t0 = (double)kk * dt, v0;
-        /* the segment holding the step's middle; breakpoints fall on step boundaries (drive.rs) */
+        /* the segment holding the step's middle; breakpoints fall on step boundaries (drive/) */
 #if IDM_LEAN
         if (idm_cursor_walk(&w, &cu, t0 + 0.5 * dt)) s = cu.seg + 1 >= w.nb ? 0.0 : (cu.vb - cu.va) / (cu.tb - cu.ta);
         v0 = cu.seg + 1 >= w.nb ? cu.va : cu.va + s * (t0 - cu.ta);
@@ -391,7 +391,7 @@ IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, do
 }
 
 /* Dormand-Prince 5(4) with first-same-as-last stages (integrate/dopri5.rs), landing on every breakpoint
- * and on t_end (drive.rs), error norm in the model's natural units (model/mod.rs: state_scales:
+ * and on t_end (drive/), error norm in the model's natural units (model/mod.rs: state_scales:
  * positions and h by the free stroke d33 V_max, velocities by stroke x the LPS frequency, Fh by
  * Fs; g left out). Outputs as idm_rk4_point, then 6 accepted steps, 7 smallest step [s], 8 = 1
  * where the run stopped because its step collapsed (integrate/crawl.rs: every IDM_CRAWL_CHECK_STEPS

@@ -1,7 +1,7 @@
 //! The batch engine behind sweeps and fits: many independent points (parameters, effects,
 //! input, span, initial state), each reduced to a few metrics inside the loop (`metrics.rs`) —
 //! no trajectory is stored, so memory is O(points x metrics). Points run in parallel with rayon
-//! (`run.rs`), grouped into lanes of the one driver (`drive.rs`); a background thread with
+//! (`run.rs`), grouped into lanes of the one driver (`drive/`); a background thread with
 //! progress and cancellation runs a whole batch (`runner.rs`). Every point's arithmetic is
 //! exactly that of `simulate` for the same settings, so results do not depend on thread count,
 //! chunking or lane grouping.
@@ -43,7 +43,7 @@ pub struct BatchConfig {
     /// start-up cycles of a sawtooth train left out of the steady-state metrics
     pub skip_cycles: usize,
     /// names whose derivatives of the recorded readings each point returns (Table 1 and
-    /// effect parameters, initial-state components; see `sensitivity.rs`); empty for none
+    /// effect parameters, initial-state components; see `sensitivity/`); empty for none
     pub sensitivities: Vec<String>,
 }
 

@@ -1,4 +1,4 @@
-//! What every integrator offers the driver (`drive.rs`): one right-hand-side signature and one
+//! What every integrator offers the driver (`drive/`): one right-hand-side signature and one
 //! "attempt a step on every lane" call. An integrator knows nothing of the physics or of the
 //! input waveform; the driver sets each lane's input for the step before the attempt.
 //!

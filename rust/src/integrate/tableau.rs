@@ -1,6 +1,6 @@
 //! Each explicit method's coefficients, written once and read by every driver of it: the scalar
 //! and lane steppers (`integrate/rk4.rs`, `integrate/dopri5.rs`), the vector lanes
-//! (`lanes/rk4.rs`, `lanes/dopri5.rs`), the derivative pass (`sensitivity.rs`) and the GPU
+//! (`lanes/rk4.rs`, `lanes/dopri5.rs`), the derivative pass (`sensitivity/`) and the GPU
 //! kernel, whose `#define`s are generated from these constants (`gpu/kernel.rs`).
 //!
 //! RK4's update is a function, not a weight vector: the CPU drivers' results are bitwise equal

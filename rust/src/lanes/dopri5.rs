@@ -1,7 +1,7 @@
 //! Dormand-Prince 5(4) over `L` plain models at once, the state stored component by component
 //! (`y[j][i]`), each lane with its own step size, segment end and accept/reject decision
 //! (masked updates), and lanes refilled from the queue as their tasks finish or fail. Per lane
-//! the arithmetic is that of `integrate/dopri5.rs` driven by `drive.rs` operation for operation (the
+//! the arithmetic is that of `integrate/dopri5.rs` driven by `drive/` operation for operation (the
 //! stages, the error norm, the controller, first-same-as-last, landing on the input's
 //! breakpoints), so results are bitwise those of the scalar path (tested in `lanes/mod.rs`).
 
@@ -132,7 +132,7 @@ pub fn run_dopri5_lanes<
             Queue::Done => break,
             Queue::Cancelled => return None,
         }
-        // each lane's input, segment end and step (drive.rs, then Dopri5::attempt)
+        // each lane's input, segment end and step (drive/, then Dopri5::attempt)
         let (mut t0, mut v0, mut slope, mut step) = ([0.0; L], [0.0; L], [0.0; L], [0.0; L]);
         let (mut end, mut last, mut fresh) = ([0.0; L], [false; L], [false; L]);
         for i in 0..L {
@@ -265,7 +265,7 @@ pub fn run_dopri5_lanes<
                     s.steps += 1;
                     s.min_step = s.min_step.min(span);
                     if !done {
-                        // as the scalar path (`drive.rs`): a collapsed step stops the run
+                        // as the scalar path (`drive/`): a collapsed step stops the run
                         if let Some(why) = s.watch.observe(s.steps, t_new, task.t_end, EXPLICIT_CRAWL_HINT) {
                             out[s.task] = Some((
                                 LaneEnd::Diverged {

@@ -1,7 +1,7 @@
 //! `L` independent `f64` lanes as one [`Real`]: the number type on which the physics runs many
 //! points at once. Every operation is a loop over the lanes that the compiler turns into vector
 //! instructions of the width the processor has (the lane drivers run under `pulp`'s runtime
-//! dispatch, `drive.rs`); each lane's arithmetic is the scalar `f64` operation, so a lane's
+//! dispatch, `drive/`); each lane's arithmetic is the scalar `f64` operation, so a lane's
 //! result is bitwise the scalar model's (no fused multiply-add: Rust does not contract). The one
 //! choice is `exp`: the C library's per lane ([`LibmExp`], bitwise) or a vectorised polynomial
 //! ([`PolyExp`], within 2 ulp; `numbers/fast_exp.rs`), fixed by the type parameter `E`.

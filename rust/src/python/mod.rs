@@ -32,8 +32,10 @@ use crate::physics::waveform::PiecewiseLinear;
 use crate::sensitivity::parse_seeds;
 use crate::simulate::simulate_with_derivatives;
 
+mod batch;
 mod declarations;
 mod forms;
+mod kernel;
 
 create_exception!(
     _core,
@@ -279,78 +281,6 @@ fn wave_fields(kind: &str) -> PyResult<Vec<&'static str>> {
     Ok(fam.fields().to_vec())
 }
 
-/// The GPU kernel's constants of every point: `params` (P, len(param_names())) in
-/// `param_names()` order, NaN normal_force = derived; returns (P, kernel_constant_count()).
-/// Refuses (naming the row) a point the kernel cannot run.
-#[pyfunction]
-fn kernel_constants<'py>(
-    py: Python<'py>,
-    config: &RunConfig,
-    params: PyReadonlyArray2<'_, f64>,
-) -> PyResult<Bound<'py, PyAny>> {
-    let rows = params.shape()[0];
-    let table = slice2(&params);
-    let np = PARAM_NAMES.len();
-    let mut out = Vec::with_capacity(rows * crate::gpu::kernel::N_CONSTANTS);
-    for r in 0..rows {
-        let pairs: Vec<(&str, f64)> = PARAM_NAMES
-            .iter()
-            .copied()
-            .zip(table[r * np..(r + 1) * np].iter().copied())
-            .filter(|(name, v)| !(*name == "normal_force" && v.is_nan()))
-            .collect();
-        let p = Params::from_pairs(&pairs).map_err(|e| value_error(format!("point {r}: {e}")))?;
-        let m = config.model(p, Effects::default(), false)?;
-        out.extend(crate::gpu::kernel::kernel_constants(&m).map_err(|e| value_error(format!("point {r}: {e}")))?);
-    }
-    Ok(out
-        .into_pyarray(py)
-        .reshape([rows, crate::gpu::kernel::N_CONSTANTS])?
-        .into_any())
-}
-
-/// Number of constants per point of the GPU kernel (its layout is `rust/src/gpu/kernel.rs`).
-#[pyfunction]
-fn kernel_constant_count() -> (usize, usize, usize) {
-    (
-        crate::gpu::kernel::N_CONSTANTS,
-        crate::gpu::kernel::N_SCALARS,
-        crate::gpu::kernel::MAX_DOF,
-    )
-}
-
-/// What the GPU kernel implements (`rust/src/gpu/kernel.rs`): the Table 1 parameters, effects,
-/// waveform families (with their fields), structures, metrics and methods (`METHODS`' `kernel`)
-/// it admits, and its largest node count; the kernel backends refuse everything else by name.
-#[pyfunction]
-fn kernel_accepts(py: Python<'_>) -> PyResult<Bound<'_, pyo3::types::PyDict>> {
-    let d = pyo3::types::PyDict::new(py);
-    d.set_item("params", crate::gpu::kernel::PARAMS.to_vec())?;
-    d.set_item("effects", crate::gpu::kernel::EFFECTS.to_vec())?;
-    let waves = pyo3::types::PyDict::new(py);
-    for (kind, fields) in crate::gpu::kernel::WAVES {
-        waves.set_item(kind, fields.to_vec())?;
-    }
-    d.set_item("waves", waves)?;
-    d.set_item("structures", crate::gpu::kernel::STRUCTURES.to_vec())?;
-    d.set_item("metrics", crate::gpu::kernel::METRICS.to_vec())?;
-    d.set_item("max_dof", crate::gpu::kernel::MAX_DOF)?;
-    let methods: Vec<&str> = crate::integrate::method::METHODS
-        .iter()
-        .filter(|m| m.kernel)
-        .map(|m| m.name)
-        .collect();
-    d.set_item("methods", methods)?;
-    Ok(d)
-}
-
-/// The C `#define`s of the kernel's constants' layout (`rust/src/gpu/kernel.rs`), to put in front
-/// of the kernel source when it is compiled.
-#[pyfunction]
-fn kernel_header() -> String {
-    crate::gpu::kernel::kernel_header()
-}
-
 /// Highest structural natural frequency [rad/s] of the model.
 #[pyfunction]
 fn highest_frequency(params: HashMap<String, f64>, config: &RunConfig) -> PyResult<f64> {
@@ -536,158 +466,9 @@ fn simulate<'py>(
     Ok(d)
 }
 
-/// A batch running on a background thread (see `batch::runner`).
-#[pyclass(module = "idm_rs._core")]
-struct BatchRun {
-    runner: BatchRunner,
-    final_states: bool,
-    /// names whose derivatives each point returns
-    sensitivities: Vec<String>,
-}
-
-#[pymethods]
-impl BatchRun {
-    /// Points finished so far.
-    fn progress(&self) -> usize {
-        self.runner.progress()
-    }
-
-    #[getter]
-    fn total(&self) -> usize {
-        self.runner.total()
-    }
-
-    /// Ask the workers to stop; points already finished are kept.
-    fn cancel(&self) {
-        self.runner.cancel();
-    }
-
-    /// Wait up to `timeout` seconds (GIL released); True when the batch has finished.
-    fn wait(&self, py: Python<'_>, timeout: f64) -> bool {
-        py.detach(|| self.runner.wait(timeout))
-    }
-
-    /// Join and return the metrics as a dict of arrays (NaN / status 0 for points not run),
-    /// with `traces` (a list of arrays) when readings were recorded and `final_states` (a list
-    /// of arrays, empty where a point did not finish) when asked for.
-    fn result<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let outputs = py.detach(|| self.runner.join()).map_err(|e| {
-            if e.contains("already taken") {
-                PyRuntimeError::new_err(String::from(e))
-            } else {
-                value_error(e)
-            }
-        })?;
-        let d = PyDict::new(py);
-        if outputs.iter().any(|o| !o.trace.is_empty()) {
-            let traces = PyList::empty(py);
-            for o in &outputs {
-                traces.append(PyArray1::from_slice(py, &o.trace))?;
-            }
-            d.set_item("traces", traces)?;
-        }
-        if self.final_states {
-            // one array per point (its layout's size; empty where the point did not finish)
-            let states = PyList::empty(py);
-            for o in &outputs {
-                states.append(PyArray1::from_slice(py, &o.final_state))?;
-            }
-            d.set_item("final_states", states)?;
-        }
-        if !self.sensitivities.is_empty() {
-            // one (names x samples) array per point; empty where the point did not finish
-            let n = self.sensitivities.len();
-            let sens = PyList::empty(py);
-            for o in &outputs {
-                let samples = o.sensitivities.len() / n;
-                sens.append(PyArray1::from_slice(py, &o.sensitivities).reshape([n, samples])?)?;
-            }
-            d.set_item("sensitivities", sens)?;
-            d.set_item("sensitivity_names", self.sensitivities.clone())?;
-        }
-        let reasons = PyList::empty(py);
-        for o in &outputs {
-            reasons.append(&o.reason)?;
-        }
-        d.set_item("reasons", reasons)?;
-        let metrics: Vec<PointMetrics> = outputs.into_iter().map(|o| o.metrics).collect();
-        let col = |f: fn(&PointMetrics) -> f64| metrics.iter().map(f).collect::<Vec<f64>>();
-        for (name, _, _, value) in METRIC_COLUMNS {
-            d.set_item(name, col(value).into_pyarray(py))?;
-        }
-        d.set_item("diverged_at", col(|m| m.diverged_at).into_pyarray(py))?;
-        d.set_item("dt_used", col(|m| m.dt_used).into_pyarray(py))?;
-        let steps: Vec<u64> = metrics.iter().map(|m| m.steps).collect();
-        d.set_item("steps", steps.into_pyarray(py))?;
-        let status: Vec<u8> = metrics.iter().map(|m| m.status as u8).collect();
-        d.set_item("status", status.into_pyarray(py))?;
-        Ok(d)
-    }
-}
-
-/// Start a batch. One row per point: `params` (P, 24) in `param_names()` order (NaN
-/// normal_force = derived), `effects` (P, 9) in `effect_names()` order, `wave_fields` (P, k) in
-/// `wave_fields(wave_kind)` order; optional per-point `t_ends`, `t_starts` [s] and
-/// `initial_states` (P, state size).
-#[pyfunction]
-#[pyo3(signature = (config, t_end, params, effects, wave_kind, wave_fields, sampled=None, t_ends=None, t_starts=None, initial_states=None, sensitivities=None))]
-#[allow(clippy::too_many_arguments)]
-fn start_batch(
-    py: Python<'_>,
-    config: &RunConfig,
-    t_end: f64,
-    params: PyReadonlyArray2<'_, f64>,
-    effects: PyReadonlyArray2<'_, f64>,
-    wave_kind: &str,
-    wave_fields: PyReadonlyArray2<'_, f64>,
-    sampled: Option<(PyReadonlyArray1<'_, f64>, PyReadonlyArray1<'_, f64>)>,
-    t_ends: Option<PyReadonlyArray1<'_, f64>>,
-    t_starts: Option<PyReadonlyArray1<'_, f64>>,
-    initial_states: Option<PyReadonlyArray2<'_, f64>>,
-    sensitivities: Option<Vec<String>>,
-) -> PyResult<BatchRun> {
-    let samples = sampled
-        .as_ref()
-        .map(|(t, v)| (slice1(t).into_owned(), slice1(v).into_owned()));
-    let family = WaveFamily::new(wave_kind, samples).map_err(value_error)?;
-    let cfg = BatchConfig {
-        structure: config.structure()?,
-        piezo_hysteresis: config.piezo_hysteresis,
-        t_end,
-        method: config.method()?,
-        retries: config.retries,
-        record_every: config.record_every,
-        final_states: config.final_states,
-        skip_cycles: config.skip_cycles,
-        sensitivities: sensitivities.unwrap_or_default(),
-    };
-    let (p, e, w) = (slice2(&params), slice2(&effects), slice2(&wave_fields));
-    let (te, ts) = (t_ends.as_ref().map(slice1), t_starts.as_ref().map(slice1));
-    let st = initial_states.as_ref().map(|a| (slice2(a), a.shape()[1]));
-    let tables = PointTables {
-        params: &p,
-        effects: &e,
-        waves: &w,
-        family: &family,
-        t_ends: te.as_deref(),
-        t_starts: ts.as_deref(),
-        states: st.as_ref().map(|(s, d)| (&s[..], *d)),
-    };
-    let points = detached(py, || tables.points())?.map_err(value_error)?;
-    let cfg_names = cfg.sensitivities.clone();
-    let runner = BatchRunner::start(cfg, points, config.threads).map_err(value_error)?;
-    Ok(BatchRun {
-        runner,
-        final_states: config.final_states,
-        sensitivities: cfg_names,
-    })
-}
-
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<BatchRun>()?;
     m.add_class::<RunConfig>()?;
-    m.add_function(wrap_pyfunction!(start_batch, m)?)?;
     m.add_function(wrap_pyfunction!(wave_fields, m)?)?;
     m.add_function(wrap_pyfunction!(simd_level, m)?)?;
     m.add_function(wrap_pyfunction!(set_simd_level, m)?)?;
@@ -701,12 +482,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(effect_names, m)?)?;
     m.add_function(wrap_pyfunction!(highest_frequency, m)?)?;
     m.add_function(wrap_pyfunction!(rk4_step_limit, m)?)?;
-    m.add_function(wrap_pyfunction!(kernel_constants, m)?)?;
-    m.add_function(wrap_pyfunction!(kernel_constant_count, m)?)?;
-    m.add_function(wrap_pyfunction!(kernel_header, m)?)?;
-    m.add_function(wrap_pyfunction!(kernel_accepts, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     declarations::register(m)?;
     forms::register(m)?;
+    kernel::register(m)?;
+    batch::register(m)?;
     Ok(())
 }
