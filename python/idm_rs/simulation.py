@@ -6,7 +6,7 @@ import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Optional, Sequence, Union
+from typing import TYPE_CHECKING, Any, Mapping, Optional, Sequence, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -320,6 +320,36 @@ def _joined(pieces: list[SimulationResult]) -> SimulationResult:
     return dataclasses.replace(last, **joined)
 
 
+def _start_time(t_start: Optional[float], initial_state: Optional[ArrayLike], waveform: Waveform) -> float:
+    """The run's start [s]: as given, else the initial state's own time (a :class:`State`), else
+    0. A start after 0 from rest with the drive already on warns (a voltage step)."""
+    if t_start is None:
+        return initial_state.t if isinstance(initial_state, State) else 0.0
+    if initial_state is None and t_start > 0 and float(np.interp(t_start, *waveform.breakpoints())) != 0.0:
+        v0 = float(np.interp(t_start, *waveform.breakpoints()))
+        warnings.warn(f"t_start = {t_start:g} s without an initial_state: the run starts from rest with the drive "
+                      f"already at {v0:.4g} V (a voltage step); pass initial_state=<a result's final_state> to "
+                      "continue a run", UserWarning, stacklevel=3)
+    return t_start
+
+
+def _warn_if_long(t_start: float, t_end: float, step: float) -> None:
+    """Say so when an RK4 run of [t_start, t_end] [s] at `step` [s] will take minutes."""
+    n = (t_end - t_start) / step
+    if n > LONG_RUN_STEPS:
+        warnings.warn(f"{n:.2g} RK4 steps (t_end = {t_end:g} s at dt = {step:g} s) take minutes or more (or use "
+                      "method='auto'); Ctrl-C stops the run and raises KeyboardInterrupt, whose .partial keeps the "
+                      "trajectory so far", RuntimeWarning, stacklevel=3)
+
+
+def _energy_budget(out: Mapping[str, Any]) -> EnergyBudget:
+    """The energy and momentum budgets of an engine run's output (``energy=True``)."""
+    acc = out["accounting"]
+    return EnergyBudget(kinetic=out["kinetic"], strain=out["strain"], input_work=acc[:, 0], friction_work=acc[:, 1],
+                        damping_work=acc[:, 2], external_work=acc[:, 3], momentum=out["momentum"],
+                        friction_impulse=acc[:, 4], rayleigh_impulse=acc[:, 5], external_impulse=acc[:, 6])
+
+
 def simulate(
     params: Params,
     waveform: Waveform,
@@ -485,21 +515,12 @@ def simulate(
     structure = Structure.of(model, int(n_elements), bool(piezo_hysteresis))
     config = structure.config(
         method=method, dt=step, rtol=float(rtol), atol=float(atol), first_step=step)
-    if t_start is None:
-        t_start = initial_state.t if isinstance(initial_state, State) else 0.0
-    elif initial_state is None and t_start > 0 and float(np.interp(t_start, *waveform.breakpoints())) != 0.0:
-        v0 = float(np.interp(t_start, *waveform.breakpoints()))
-        warnings.warn(f"t_start = {t_start:g} s without an initial_state: the run starts from rest with the drive "
-                      f"already at {v0:.4g} V (a voltage step); pass initial_state=<a result's final_state> to "
-                      "continue a run", UserWarning, stacklevel=2)
+    t_start = _start_time(t_start, initial_state, waveform)
     names = sensitivity_names(sensitivities)
     bt, bv = waveform.breakpoints()
     y0 = None if initial_state is None else np.ascontiguousarray(initial_state, dtype=float).ravel()
-    if not adaptive and (t_end - t_start) / step > LONG_RUN_STEPS:
-        n = (t_end - t_start) / step
-        warnings.warn(f"{n:.2g} RK4 steps (t_end = {t_end:g} s at dt = {step:g} s) take minutes or more (or use "
-                      "method='auto'); Ctrl-C stops the run and raises KeyboardInterrupt, whose .partial keeps the "
-                      "trajectory so far", RuntimeWarning, stacklevel=2)
+    if not adaptive:
+        _warn_if_long(t_start, t_end, step)
     out = engine.simulate(
         params._given(),
         effects.active(),
@@ -515,21 +536,7 @@ def simulate(
         None if external_force is None else external_force.engine_arg(),
     )
     complete = bool(out["complete"])
-    budget = None
-    if energy:
-        acc = out["accounting"]
-        budget = EnergyBudget(
-            kinetic=out["kinetic"],
-            strain=out["strain"],
-            input_work=acc[:, 0],
-            friction_work=acc[:, 1],
-            damping_work=acc[:, 2],
-            external_work=acc[:, 3],
-            momentum=out["momentum"],
-            friction_impulse=acc[:, 4],
-            rayleigh_impulse=acc[:, 5],
-            external_impulse=acc[:, 6],
-        )
+    budget = _energy_budget(out) if energy else None
     result = SimulationResult(
         t=out["t"],
         nodes=out["nodes"],

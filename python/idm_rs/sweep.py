@@ -263,27 +263,10 @@ def sweep(
     >>> ds["mean_velocity"].sizes["voltage"]
     5
     """
-
-    from .engine import __version__
-
     if not isinstance(params, Params):
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
     kernel = backend in ("cuda", "kernel-cpu")
-    if kernel:
-        from .gpu.kernel_sweep import check_kernel_admits, kernel_metrics
-    admitted = kernel_metrics() if kernel else list(METRICS)
-    if metrics is not None:
-        metrics = list(metrics)
-        unknown = [m for m in metrics if m not in METRICS]
-        if unknown:
-            raise ValueError(f"unknown metric(s) {unknown}; known: {list(METRICS)}")
-        refused = [m for m in metrics if m not in admitted]
-        if refused:
-            kind = "steady-state " if all(m in STEADY_METRICS for m in refused) else ""
-            raise ValueError(f"backend={backend!r} does not compute the {kind}metric(s) {refused} "
-                             "(use backend='cpu')")
-    not_computed = [m for m in METRICS if m not in admitted] if metrics is None else []
-    metrics = [m for m in METRICS if m not in not_computed] if metrics is None else metrics
+    metrics, not_computed = _metrics_kept(metrics, backend)
     structure(model)  # an IDM structure, else a ValueError naming the choices
     asked = methods.check(method)
     options.tolerances_for(method, rtol, atol)
@@ -293,15 +276,7 @@ def sweep(
         first_step = dt  # the adaptive methods' first step was once given as dt: still honoured
     if dt is None or adaptive:
         dt = 1e-8
-    if backend not in ("cpu", "cuda", "kernel-cpu"):
-        raise ValueError(f"parameter 'backend' must be 'cpu', 'cuda' or 'kernel-cpu', got {backend!r}")
-    if backend != "cpu":
-        on_kernel = engine.kernel_accepts()["methods"]
-        if method not in on_kernel:
-            raise ValueError(f"backend={backend!r} runs the methods {', '.join(map(repr, on_kernel))}; "
-                             f"{method} runs on backend='cpu'")
-        if client is not None:
-            raise ValueError(f"backend={backend!r} runs on this machine's device; drop 'client'")
+    _check_backend(backend, method, client)
     names, values = _check_grid(grid, waveform)
     effects = effects or Effects()
     first = float(first_step) if first_step is not None else 1e-8
@@ -313,6 +288,82 @@ def sweep(
     block_size = options.count("block_size", block_size)
     threads = options.threads(threads)
     n_elements = options.elements(model, n_elements)
+    t_end, own, given, (shortest, longest) = _t_end_rule(t_end, waveform, names, values, method, dt)
+    plan = SweepPlan(params, waveform, effects, names, values, float(t_end), float(dt), model, int(n_elements),
+                     bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries), first, skips, own)
+    if kernel:
+        from .gpu.kernel_sweep import check_kernel_admits
+
+        check_kernel_admits(plan, backend)
+        if own:
+            raise ValueError(f"backend={backend!r} runs every point to one t_end, and this grid's waveforms end "
+                             f"between {shortest:g} and {longest:g} s: give t_end={longest:g} (the shorter ones then "
+                             "rest until it) or use backend='cpu', which runs each point to its own end")
+    if out is None:
+        _check_memory(plan.size, out_hint=True)
+    _validate_axes(plan)
+
+    threads = int(threads or os.cpu_count() or 1)
+    attrs = _attrs(plan, asked, given, (shortest, longest), threads, client, backend, not_computed)
+    run = _Run(metrics, attrs, threads, block_size, client, backend)
+    if out is not None:
+        return _run_to_store(plan, run, Path(out), progress)
+    bar = None
+    try:
+        bar = _progress_bar(plan.size, progress)
+        ds, complete = _run_in_memory(plan, run, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    if not complete:
+        raise interrupted(f"sweep interrupted: {ds.attrs['points_finished']} of {plan.size} points finished; the "
+                          "rest are NaN (attrs['complete'] = 0; the Dataset is the exception's .partial)", partial=ds)
+    return ds
+
+
+def _metrics_kept(metrics: Optional[Sequence[str]], backend: str) -> tuple[list[str], list[str]]:
+    """(the metrics kept, those the backend does not compute): unknown names and names the
+    backend does not compute are refused by name."""
+    if backend in ("cuda", "kernel-cpu"):
+        from .gpu.kernel_sweep import kernel_metrics
+
+        admitted = kernel_metrics()
+    else:
+        admitted = list(METRICS)
+    if metrics is None:
+        not_computed = [m for m in METRICS if m not in admitted]
+        return [m for m in METRICS if m not in not_computed], not_computed
+    metrics = list(metrics)
+    unknown = [m for m in metrics if m not in METRICS]
+    if unknown:
+        raise ValueError(f"unknown metric(s) {unknown}; known: {list(METRICS)}")
+    refused = [m for m in metrics if m not in admitted]
+    if refused:
+        kind = "steady-state " if all(m in STEADY_METRICS for m in refused) else ""
+        raise ValueError(f"backend={backend!r} does not compute the {kind}metric(s) {refused} (use backend='cpu')")
+    return metrics, []
+
+
+def _check_backend(backend: str, method: str, client: Any) -> None:
+    """Refuse a backend that is not one, a method the kernel backends do not run, a cluster with a
+    device backend."""
+    if backend not in ("cpu", "cuda", "kernel-cpu"):
+        raise ValueError(f"parameter 'backend' must be 'cpu', 'cuda' or 'kernel-cpu', got {backend!r}")
+    if backend != "cpu":
+        on_kernel = engine.kernel_accepts()["methods"]
+        if method not in on_kernel:
+            raise ValueError(f"backend={backend!r} runs the methods {', '.join(map(repr, on_kernel))}; "
+                             f"{method} runs on backend='cpu'")
+        if client is not None:
+            raise ValueError(f"backend={backend!r} runs on this machine's device; drop 'client'")
+
+
+def _t_end_rule(t_end: Optional[float], waveform: Waveform, names: Sequence[str],
+               values: Sequence[NDArray[np.float64]], method: str, dt: float
+               ) -> tuple[float, bool, bool, tuple[float, float]]:
+    """(the run's end [s], whether each point runs to its own waveform's end, whether t_end was
+    given, (shortest, longest) waveform end [s]). A given t_end that cuts a sawtooth train short
+    is refused, naming the point whose train is the longest."""
     shortest, longest, where = _train_span(waveform, names, values)
     given = t_end is not None
     if t_end is None:
@@ -330,19 +381,21 @@ def sweep(
                              "its cycles would be cut short and its steady state and step per cycle silently wrong. "
                              f"Give t_end >= {longest:g} s, or leave t_end out so that each point runs to the end "
                              "of its own train")
-    plan = SweepPlan(params, waveform, effects, names, values, float(t_end), float(dt), model, int(n_elements),
-                     bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries), first, skips, own)
-    if kernel:
-        check_kernel_admits(plan, backend)
-        if own:
-            raise ValueError(f"backend={backend!r} runs every point to one t_end, and this grid's waveforms end "
-                             f"between {shortest:g} and {longest:g} s: give t_end={longest:g} (the shorter ones then "
-                             "rest until it) or use backend='cpu', which runs each point to its own end")
-    if out is None:
-        _check_memory(plan.size, out_hint=True)
-    _validate_axes(plan)
+    return float(t_end), own, given, (shortest, longest)
 
-    threads = int(threads or os.cpu_count() or 1)
+
+def _attrs(plan: SweepPlan, asked: str, given: bool, span: tuple[float, float], threads: int, client: Any,
+           backend: str, not_computed: list[str]) -> dict[str, Any]:
+    """The Dataset's fixed attributes: how the sweep was run (`asked`: the method as the user
+    named it; `span`: the shortest and longest waveform end [s])."""
+    from .engine import __version__
+
+    params, effects, waveform, piezo_hysteresis = plan.params, plan.effects, plan.waveform, plan.piezo_hysteresis
+    model, n_elements, method, dt, first, t_end = (plan.model, plan.n_elements, plan.method, plan.dt,
+                                                   plan.first_step, plan.t_end)
+    rtol, atol, retries, skips, own = plan.rtol, plan.atol, plan.retries, plan.skip_cycles, plan.own_t_end
+    adaptive = methods.is_adaptive(method)
+    shortest, longest = span
     attrs: dict[str, Any] = {
         "idm_rs_version": __version__,
         "model": model,
@@ -370,20 +423,7 @@ def sweep(
         attrs[f"param_{name}"] = value
     for name, value in effects.active().items():
         attrs[f"effect_{name}"] = value
-    run = _Run(metrics, attrs, threads, block_size, client, backend)
-    if out is not None:
-        return _run_to_store(plan, run, Path(out), progress)
-    bar = None
-    try:
-        bar = _progress_bar(plan.size, progress)
-        ds, complete = _run_in_memory(plan, run, bar)
-    finally:
-        if bar is not None:
-            bar.close()
-    if not complete:
-        raise interrupted(f"sweep interrupted: {ds.attrs['points_finished']} of {plan.size} points finished; the "
-                          "rest are NaN (attrs['complete'] = 0; the Dataset is the exception's .partial)", partial=ds)
-    return ds
+    return attrs
 
 
 def _fewest_cycles(waveform: Waveform, names: Sequence[str], values: Sequence[NDArray[np.float64]]) -> Optional[int]:
