@@ -87,6 +87,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"idm-rs {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
+    _add_reproduce_parser(sub)
+    _add_simulate_parser(sub)
+    _add_characterize_parser(sub)
+    _add_rig_fit_parser(sub)
+    _add_sweep_parser(sub)
+    _add_diagnose_parser(sub)
+    return parser
+
+
+def _add_reproduce_parser(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
     rp = sub.add_parser(
         "reproduce",
         help="run the paper case, print the comparison table, write Figs. 6a-7d",
@@ -106,6 +116,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="threads of the Fig. 7 summary sweeps (default: all cores)")
     rp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
+
+def _add_simulate_parser(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
     sp = sub.add_parser(
         "simulate",
         help="simulate one case and save its trajectory",
@@ -128,6 +140,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--no-progress", action="store_true",
                     help="no progress bar (an RK4 run of more than 10^7 steps shows one)")
 
+
+def _add_characterize_parser(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
     ch = sub.add_parser(
         "characterize",
         help="the actuator's characteristic curves: velocity vs frequency, step and back-slip vs voltage, "
@@ -170,6 +184,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="worker threads (default: all cores)")
     ch.add_argument("--no-progress", action="store_true", help="no progress bars")
 
+
+def _add_rig_fit_parser(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
     rf = sub.add_parser(
         "rig-fit",
         help="identify a friction rig from a measured data file (EMPS, spring-slider, frame)",
@@ -187,6 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
     rf.add_argument("--plots", default=None, metavar="DIR", help="write figures into DIR")
     rf.add_argument("--no-simulation", action="store_true", help="identify only (skip the closed-loop simulations)")
 
+
+def _add_sweep_parser(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
     sw = sub.add_parser(
         "sweep",
         help="sweep a grid of parameter values, save the metrics (netCDF) and a heat map",
@@ -235,8 +253,6 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--metric", choices=(*METRICS, "dt_used", "steps"), default="final_position",
                     help="what --plot shows (default: final_position)")
     sw.add_argument("--no-progress", action="store_true", help="no progress bar")
-    _add_diagnose_parser(sub)
-    return parser
 
 
 def _add_diagnose_parser(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
