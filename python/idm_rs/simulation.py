@@ -320,6 +320,16 @@ def _joined(pieces: list[SimulationResult]) -> SimulationResult:
     return dataclasses.replace(last, **joined)
 
 
+def _check_types(params: object, waveform: object, external_force: object) -> None:
+    """A TypeError naming the argument that is not of its idm_rs type."""
+    if not isinstance(params, Params):
+        raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
+    if external_force is not None and not isinstance(external_force, ExternalForce):
+        raise TypeError(f"external_force must be idm_rs.ExternalForce, got {type(external_force).__name__}")
+    if not isinstance(waveform, (Triangle, Sawtooth, Sampled)):
+        raise TypeError(f"waveform must be an idm_rs waveform (Triangle, Sawtooth or Sampled), got {waveform!r}")
+
+
 def _start_time(t_start: Optional[float], initial_state: Optional[ArrayLike], waveform: Waveform) -> float:
     """The run's start [s]: as given, else the initial state's own time (a :class:`State`), else
     0. A start after 0 from rest with the drive already on warns (a voltage step)."""
@@ -488,12 +498,7 @@ def simulate(
     >>> round(r.final_position * 1e6, 2)   # x1(10 ms) [µm]
     1.68
     """
-    if not isinstance(params, Params):
-        raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
-    if external_force is not None and not isinstance(external_force, ExternalForce):
-        raise TypeError(f"external_force must be idm_rs.ExternalForce, got {type(external_force).__name__}")
-    if not isinstance(waveform, (Triangle, Sawtooth, Sampled)):
-        raise TypeError(f"waveform must be an idm_rs waveform (Triangle, Sawtooth or Sampled), got {waveform!r}")
+    _check_types(params, waveform, external_force)
     t_end = options.time("t_end", t_end)
     effects = effects or Effects()
     n_elements = options.elements(model, n_elements)

@@ -194,64 +194,10 @@ def make_case(
                                                       true_piezo_hysteresis, acting, offs[i], sensor, resolution,
                                                       rng, dt, save_every, sample_rate_Hz), **placed))
             continue
-        rest = float(e.get("rest_s", rest_s))
-        edge = float(e.get("edge_s", edge_s))
-        wave = Sawtooth(
-            amplitude=float(e["amplitude_V"]),
-            frequency=float(e["frequency_Hz"]),
-            cycles=int(e["cycles"]),
-            rise=edge,
-            direction=e["direction"],
-            delay=rest,
-        )
-        # a late displacement channel: the motion it reads began delay_s after the voltage
-        felt = wave if sensor.delay_s == 0 else dataclasses.replace(wave, delay=rest + _on_grid(sensor.delay_s, dt))
-        n = int(round(wave.duration * sample_rate_Hz)) + 1
-        t = np.arange(n) / sample_rate_Hz
-        if abs(t[-1] - wave.duration) > 1e-9 / sample_rate_Hz:
-            raise ValueError(
-                f"experiments[{i}]: the duration rest_s + cycles/frequency_Hz = {wave.duration:g} s is not a "
-                f"multiple of the sample step {1 / sample_rate_Hz:g} s"
-            )
-        sim = simulate(
-            true_params,
-            felt,
-            t_end=t[-1],
-            dt=dt,
-            model=true_model,
-            n_elements=true_n_elements,
-            save_every=save_every,
-            piezo_hysteresis=true_piezo_hysteresis,
-            effects=acting,
-        )
-        if sim.t.shape != t.shape or np.max(np.abs(sim.t - t)) > 1e-3 / sample_rate_Hz:
-            raise RuntimeError(f"experiments[{i}]: simulation saved {sim.t.size} times, expected {n}")
-        x = sim.reading + offs[i] + _noise(sensor, t, rng, 1.0 / sample_rate_Hz)
-        if resolution > 0:
-            x = np.round(x / resolution) * resolution
-        v = voltage_at(wave, t)
-        name = e.get("file") or experiment_file_name(i + 1, wave.direction, wave.amplitude, wave.frequency)
-        np.savetxt(
-            out / name,
-            np.column_stack([t, v, x]),
-            fmt="%.10g",
-            delimiter=",",
-            header=",".join(HEADER),
-            comments="",
-        )
-        meta_exps.append(
-            {
-                "file": name,
-                "waveform": "sawtooth",
-                "amplitude_V": _fmt_number(wave.amplitude),
-                "frequency_Hz": _fmt_number(wave.frequency),
-                "direction": wave.direction,
-                "cycles": wave.cycles,
-                "rest_s": rest,
-                "edge_s": edge,
-                **placed,
-            }
-        )
+        meta_exps.append(dict(_sawtooth_experiment(out, i, e, true_params, true_model, true_n_elements,
+                                                   true_piezo_hysteresis, acting, offs[i], sensor, resolution,
+                                                   rng, dt, save_every, sample_rate_Hz, rest_s, edge_s),
+                              **placed))
 
     nominal: dict[str, Any] = {"model": model}
     if model == "dps":
@@ -284,6 +230,61 @@ def _noise(sensor: SensorNoise, t: np.ndarray, rng: np.random.Generator, step: f
     if plain:
         return rng.normal(0.0, sensor.rms, size=t.size) if sensor.rms > 0 else np.zeros(t.size)
     return sensor.random(t.size, step, rng) + sensor.artefacts(t, rng)
+
+
+def _sawtooth_experiment(out: Path, i: int, e: Mapping[str, Any], params: Params, model: Model, n_elements: int,
+                         hysteresis: bool, effects: Optional[Effects], offset: float, sensor: SensorNoise,
+                         resolution: float, rng: np.random.Generator, dt: float, save_every: int,
+                         sample_rate_Hz: float, rest_s: float, edge_s: float) -> dict[str, Any]:
+    """One sawtooth experiment simulated and written (its file, and its entry of meta.json)."""
+    rest = float(e.get("rest_s", rest_s))
+    edge = float(e.get("edge_s", edge_s))
+    wave = Sawtooth(
+        amplitude=float(e["amplitude_V"]),
+        frequency=float(e["frequency_Hz"]),
+        cycles=int(e["cycles"]),
+        rise=edge,
+        direction=e["direction"],
+        delay=rest,
+    )
+    # a late displacement channel: the motion it reads began delay_s after the voltage
+    felt = wave if sensor.delay_s == 0 else dataclasses.replace(wave, delay=rest + _on_grid(sensor.delay_s, dt))
+    n = int(round(wave.duration * sample_rate_Hz)) + 1
+    t = np.arange(n) / sample_rate_Hz
+    if abs(t[-1] - wave.duration) > 1e-9 / sample_rate_Hz:
+        raise ValueError(
+            f"experiments[{i}]: the duration rest_s + cycles/frequency_Hz = {wave.duration:g} s is not a "
+            f"multiple of the sample step {1 / sample_rate_Hz:g} s"
+        )
+    sim = simulate(
+        params,
+        felt,
+        t_end=t[-1],
+        dt=dt,
+        model=model,
+        n_elements=n_elements,
+        save_every=save_every,
+        piezo_hysteresis=hysteresis,
+        effects=effects,
+    )
+    if sim.t.shape != t.shape or np.max(np.abs(sim.t - t)) > 1e-3 / sample_rate_Hz:
+        raise RuntimeError(f"experiments[{i}]: simulation saved {sim.t.size} times, expected {n}")
+    x = sim.reading + offset + _noise(sensor, t, rng, 1.0 / sample_rate_Hz)
+    if resolution > 0:
+        x = np.round(x / resolution) * resolution
+    v = voltage_at(wave, t)
+    name = e.get("file") or experiment_file_name(i + 1, wave.direction, wave.amplitude, wave.frequency)
+    np.savetxt(
+        out / name,
+        np.column_stack([t, v, x]),
+        fmt="%.10g",
+        delimiter=",",
+        header=",".join(HEADER),
+        comments="",
+    )
+    return {"file": name, "waveform": "sawtooth", "amplitude_V": _fmt_number(wave.amplitude),
+            "frequency_Hz": _fmt_number(wave.frequency), "direction": wave.direction, "cycles": wave.cycles,
+            "rest_s": rest, "edge_s": edge}
 
 
 def _sampled_experiment(out: Path, i: int, e: Mapping[str, Any], params: Params, model: Model, n_elements: int,
