@@ -155,7 +155,7 @@ def test_structure_labels_and_refusals_come_from_the_declarations():
 def test_the_cli_offers_the_declared_structures():
     import argparse
 
-    from idm_rs.cli import build_parser
+    from idm_rs.cli_parser import build_parser
     from idm_rs.declarations import IDM_MODELS
 
     parser = build_parser()

@@ -10,7 +10,7 @@ import xarray as xr
 
 import idm_rs
 from idm_rs import actuator, methods
-from idm_rs.cli import sweep_summary
+from idm_rs.cli_files import sweep_summary
 from idm_rs.waveforms import STARTUP_CYCLES, Sawtooth
 
 TRAIN = Sawtooth(80.0, 100.0, 4)
