@@ -252,7 +252,7 @@ def test_ctrl_c_keeps_what_was_finished(spring_case, tmp_path, capsys, monkeypat
 def test_the_report_prints_the_refit_model_whole(spring_diagnosis):
     """'Add this effect with the fitted values (the refit model below)': below are the effect's
     and every refitted nominal parameter with units, ±1σ and [at bound], not the null's values."""
-    from idm_rs.diagnosis.report import _unit, at_bound, pm
+    from idm_rs.diagnosis.report_format import at_bound, pm, unit_of
     from idm_rs.diagnosis.thresholds import CALIBRATED
 
     d = spring_diagnosis
@@ -262,7 +262,7 @@ def test_the_report_prints_the_refit_model_whole(spring_diagnosis):
     assert set(cand.calibrated_std) == set(CALIBRATED)
     for name, v in cand.calibrated.items():
         row = next(line for line in tail.splitlines() if line.strip().startswith(name + " "))
-        assert pm(v, cand.calibrated_std[name], _unit(name)) in row, row
+        assert pm(v, cand.calibrated_std[name], unit_of(name)) in row, row
     ranked = next(c for c in d.to_dict()["ranking"] if c["effect"] == "spring_to_ground")
     assert set(ranked["calibrated_std"]) == set(CALIBRATED)
     # a bounded fit stops just inside its bound: still at the bound (sigma1 at +49.97 %)

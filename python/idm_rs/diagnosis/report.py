@@ -6,14 +6,24 @@ candidate ranking with its evidence, and the refitted model in one line. Units e
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Callable, Optional, Sequence
+from typing import TYPE_CHECKING, Callable
 
-from ..params import PARAM_INFO
-from .catalogue import CATALOGUE, by_id
-from .thresholds import AT_BOUND_SHARE, BIC_THRESHOLD, CALIBRATION_RANGE
+from .report_format import (
+    calibrated_rows,
+    evidence_words,
+    first_effect_params,
+    format_params,
+    in_nm,
+    is_finite_number,
+    pm,
+    ratio_words,
+    refit_model_line,
+    refit_parameter_rows,
+    text_table,
+    unit_of,
+)
 
 if TYPE_CHECKING:
-    from typing_extensions import TypeGuard  # typing.TypeGuard from Python 3.10
 
     from .results import Alternative, Candidate, Diagnosis, ThirdSearch
 
@@ -21,182 +31,6 @@ if TYPE_CHECKING:
 TOP_LOCATIONS = 6
 #: systematic time windows listed in the report
 TOP_WINDOWS = 4
-
-_UNITS: dict[str, str] = {ep.name: ep.unit for e in CATALOGUE for ep in e.params}
-_BOUNDS: dict[str, tuple[float, float]] = {ep.name: (ep.lower, ep.upper) for e in CATALOGUE for ep in e.params}
-
-
-def _unit(name: str) -> str:
-    # an effect parameter's declared unit, else Table 1's (mu_s, mu_k of a Stribeck fit)
-    u = _UNITS.get(name) or (PARAM_INFO[name][1] if name in PARAM_INFO else "")
-    return "" if u in ("1", "") else u
-
-
-def _finite(x: Optional[float]) -> TypeGuard[float]:
-    return x is not None and isinstance(x, (int, float)) and math.isfinite(x)
-
-
-def pm(value: float, std: Optional[float] = None, unit: str = "") -> str:
-    """``value ± std unit`` with the uncertainty's significant digits (two) and a shared power of
-    ten: ``1.62e-3 ± 0.02e-3``, ``0.5338 ± 0.0002``; without a usable std, 4 significant digits."""
-    u = f" {unit}" if unit else ""
-    if not _finite(value):
-        return f"{value}{u}"
-    v = float(value)
-    if not _finite(std) or std <= 0:
-        return f"{_g(v)}{u}"
-    s = float(std)
-    mag = max(abs(v), s)
-    e = int(math.floor(math.log10(mag))) if mag > 0 else 0
-    s_digit = int(math.floor(math.log10(s)))
-    if -3 <= e <= 3:
-        dec = min(max(1 - s_digit, 0), 10)
-        return f"{v:.{dec}f} ± {s:.{dec}f}{u}"
-    dec = min(max(e - s_digit + 1, 0), 6)
-    scale = 10.0**e
-    return f"{v / scale:.{dec}f}e{e} ± {s / scale:.{dec}f}e{e}{u}"
-
-
-def _g(x: float) -> str:
-    """4 significant digits, exponents written short (1.24e-7)."""
-    text = f"{x:.4g}"
-    if "e" in text:
-        m, e = text.split("e")
-        text = f"{m}e{int(e)}"
-    return text
-
-
-def _nm(x: float) -> str:
-    return f"{x * 1e9:.2f} nm" if _finite(x) else "–"
-
-
-def _ratio(x: float, sigma: float) -> str:
-    return f"{x / sigma:.2f} ×" if _finite(x) and sigma > 0 else "–"
-
-
-def candidate_params(c: Candidate) -> list[tuple[str, float, Optional[float]]]:
-    """(name, value, std) of a candidate's effect parameters, as reported (the catalogue entry
-    maps a reparametrised fit back: Stribeck's excess to mu_s)."""
-    out = []
-    for name, v in c.params.items():
-        s = c.reported_std.get(name)
-        out.append((name, float(v), None if s is None else float(s)))
-    return out
-
-
-def at_bound(value: float, lower: float, upper: float) -> bool:
-    """Whether a fitted value sits on a bound of its fit (its ±σ then means little)."""
-    width = upper - lower if math.isfinite(upper - lower) else max(abs(lower), abs(upper))
-    tol = AT_BOUND_SHARE * max(width, 1e-300)
-    return _finite(value) and (abs(value - lower) <= tol or abs(value - upper) <= tol)
-
-
-def _bound_note(name: str, value: float) -> str:
-    b = _BOUNDS.get(name)
-    return " [at bound]" if b is not None and at_bound(value, *b) else ""
-
-
-def format_params(c: Candidate) -> str:
-    items = candidate_params(c)
-    if not items:
-        return "(structure only)" if by_id(c.effect).kind == "structure" else "–"
-    return ", ".join(f"{n} = {pm(v, s, _unit(n))}{_bound_note(n, v)}" for n, v, s in items)
-
-
-def refit_model_line(d: Diagnosis) -> str:
-    """The refitted model in one line: the nominal structure, calibrated, plus the verdict's effect."""
-    nom = d.recording.nominal
-    base = f"{nom.model.upper()}" + (f" (n = {nom.n_elements})" if nom.model == "dps" else "")
-    base += ", piezo hysteresis" if nom.piezo_hysteresis else ""
-    eq = "m1 x1'' = Fpe(V, x1 - x2, x1' - x2') - Ff(x1', g, Fh)"
-    cand = d.verdict_candidate
-    found = getattr(d, "discovery", None)
-    sec = getattr(d, "second", None)
-    if sec is not None and sec.named and sec.pair is not None:
-        first = by_id(sec.first.effect)
-        term = f"{sec.first.effect}({first_effect_params(d)}) + {sec.pair.effect}({format_params(sec.pair)})"
-        return f"{eq} + {term}   [{base}, calibrated; {first.term}; {by_id(sec.pair.effect).term}]"
-    if d.verdict.endswith("discovered") and found is not None:
-        return f"{eq} + [{found.equation}]   [{base}, calibrated; a library force found in the data]"
-    if not d.complete:
-        return "not reached (interrupted before a verdict)"
-    if cand is None:
-        tail = "nothing added" if d.verdict == "none" else "missing term not in the catalogue (unexplained)"
-        return f"{eq}   [{base}, calibrated; {tail}]"
-    term = f"{cand.effect}({format_params(cand)})" if candidate_params(cand) else cand.effect
-    return f"{eq} + {term}   [{base}, calibrated; {by_id(cand.effect).term}]"
-
-
-def refit_parameter_rows(d: Diagnosis) -> list[list[str]]:
-    """Every fitted parameter of the verdict's refit model, as the report's table prints it:
-    (parameter, meta.json, refit ±1σ, change against meta.json with [at bound] wherever the fit
-    sits on a bound). Effect parameters first, then the nominal subset refitted beside them (the
-    values to put in the model: they differ from the calibrated null's)."""
-    cand = d.verdict_candidate
-    if cand is None:
-        return []
-    rows: list[list[str]] = []
-    spec = cand.spec
-    if "+" in d.verdict and spec is not None:
-        # the other named effects as refitted beside the last one (its model holds them all)
-        for other in [e for e in d.verdict.split("+") if e != cand.effect]:
-            for ep in by_id(other).params:
-                v = spec.effects.get(ep.name, spec.params.get(ep.name))
-                if v is not None:
-                    rows.append([ep.name, "–", pm(float(v), None, ep.unit) + _bound_note(ep.name, float(v)),
-                                 "effect"])
-    for name, v, sd in candidate_params(cand):
-        rows.append([name, "–", pm(v, sd, _unit(name)) + _bound_note(name, v), "effect"])
-    return rows + calibrated_rows(d, cand.calibrated, cand.calibrated_std)
-
-
-def calibrated_rows(d: Diagnosis, values: dict[str, float], std: dict[str, float]) -> list[list[str]]:
-    """(parameter, meta.json, value ±1σ, change against meta.json [at bound]) of calibrated
-    nominal parameters: the calibrated null's or a refit's."""
-    meta = d.recording.nominal.params.to_dict(resolved=False)
-    rows = []
-    for name, v in values.items():
-        m = meta.get(name)
-        unit = _unit(name)
-        change = f"{100 * (v / m - 1):+.2f} %" if _finite(m) and m else "–"
-        bound = _finite(m) and at_bound(v, CALIBRATION_RANGE[0] * m, CALIBRATION_RANGE[1] * m)
-        rows.append([name, _g(m) + (f" {unit}" if unit else "") if _finite(m) else "–",
-                     pm(v, std.get(name), unit), change + (" [at bound]" if bound else "")])
-    return rows
-
-
-def first_effect_params(d: Diagnosis) -> str:
-    """The first effect of a two-effect verdict with its parameters as refitted beside the second
-    (they move when the second is added)."""
-    sec = d.second
-    assert sec is not None and sec.pair is not None and sec.pair.spec is not None
-    spec = sec.pair.spec
-    items = []
-    for ep in by_id(sec.first.effect).params:
-        v = spec.effects.get(ep.name, spec.params.get(ep.name))
-        if v is not None:
-            items.append(f"{ep.name} = {float(v):.4g} {ep.unit}".rstrip())
-    return ", ".join(items) or "structure"
-
-
-def _table(headers: Sequence[str], rows: Sequence[Sequence[str]], align: str) -> list[str]:
-    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(headers)]
-
-    def line(cells: Sequence[str]) -> str:
-        padded = (c.ljust(w) if a == "l" else c.rjust(w) for c, w, a in zip(cells, widths, align))
-        return "  " + "  ".join(padded).rstrip()
-
-    return [line(headers), "  " + "  ".join("-" * w for w in widths)] + [line(r) for r in rows]
-
-
-def _evidence(delta_bic: float) -> str:
-    """A BIC gain in words (Kass & Raftery's scale: > 10 very strong)."""
-    if delta_bic >= 100:
-        return "overwhelming"
-    if delta_bic >= BIC_THRESHOLD:
-        return "very strong"
-    return "weak"
-
 
 def _one_effect_summary(d: Diagnosis, best: Candidate, alts: list[Alternative], ratio: Callable[[float], float]
                         ) -> list[str]:
@@ -208,8 +42,8 @@ def _one_effect_summary(d: Diagnosis, best: Candidate, alts: list[Alternative], 
                  + " — the nominal model lacks it. With it added and the nominal values re-fitted, the model "
                  f"matches the recordings to {ratio(best.rms_after):.2f} × their noise, against "
                  f"{ratio(d.rms_calibrated):.2f} × with the nominal values re-fitted alone.")
-    sure = f"  How sure: {_evidence(best.delta_bic)} evidence against \"nothing missing\""
-    if _finite(best.heldout_rms):
+    sure = f"  How sure: {evidence_words(best.delta_bic)} evidence against \"nothing missing\""
+    if is_finite_number(best.heldout_rms):
         sure += (f"; the refitted model also predicts an experiment it was not fitted to "
                  f"({ratio(best.heldout_rms):.2f} × noise)")
     if alts:
@@ -245,7 +79,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
     sec = getattr(d, "second", None)
     p_meta = d.recording.nominal.params.to_dict(resolved=False)
     moved = sorted(((n, v / p_meta[n] - 1.0) for n, v in d.calibrated.items()
-                    if _finite(p_meta.get(n)) and p_meta[n]), key=lambda kv: -abs(kv[1]))
+                    if is_finite_number(p_meta.get(n)) and p_meta[n]), key=lambda kv: -abs(kv[1]))
     biggest = f"; the largest change is {moved[0][0]} {100 * moved[0][1]:+.1f} % against meta.json" if moved else ""
     where = next((loc for loc in d.locations if loc.systematic), None)
     alts, third = getattr(d, "alternatives", []) or [], getattr(d, "third", None)
@@ -255,7 +89,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
                      f"{best.description} ({format_params(best)}). With all three added and the nominal values "
                      f"re-fitted, the model matches the recordings to {ratio(best.rms_after):.2f} × their noise, "
                      f"against {ratio(d.rms_calibrated):.2f} × with none.")
-        lines.append(f"  How sure: {_evidence(best.delta_bic)} evidence for the third beside the pair (ΔBIC "
+        lines.append(f"  How sure: {evidence_words(best.delta_bic)} evidence for the third beside the pair (ΔBIC "
                      f"{best.delta_bic:.0f}); dropping either of the pair costs ΔBIC "
                      + " and ".join(f"{v:.0f}" for v in third.over_without.values())
                      + f"; the three predict an experiment they were not fitted to at {ratio(third.heldout_rms):.2f} "
@@ -272,7 +106,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
                      f"{ratio(best.rms_after):.2f} × their noise, against {ratio(sec.first.rms_after):.2f} × with "
                      f"the first alone and {ratio(d.rms_calibrated):.2f} × with neither (share of the improvement: "
                      f"{share}).")
-        lines.append(f"  How sure: {_evidence(best.delta_bic)} evidence for the second beside the first (ΔBIC "
+        lines.append(f"  How sure: {evidence_words(best.delta_bic)} evidence for the second beside the first (ΔBIC "
                      f"{best.delta_bic:.0f}) and for the first beside the second (ΔBIC {sec.over_second_alone:.0f}); "
                      f"the pair predicts an experiment it was not fitted to at {ratio(sec.heldout_rms):.2f} × noise.")
         if alts:
@@ -292,7 +126,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
         top = next((c for c in d.ranking if not c.screened_only), None)
         lines.append("  How sure: no catalogue effect improves the fit by more than the noise allows"
                      + (f" (the closest, {top.effect}, gains ΔBIC {top.delta_bic:.0f}; 10 would be needed)"
-                        if top is not None and _finite(top.delta_bic) else "") + ".")
+                        if top is not None and is_finite_number(top.delta_bic) else "") + ".")
         lines.append("  What to do: use the re-fitted values below; where one moved far from meta.json, check that "
                      "setting of the device.")
     elif d.verdict.endswith("discovered") and getattr(d, "discovery", None) is not None:
@@ -302,7 +136,7 @@ def plain_summary(d: Diagnosis) -> list[str]:
                      f"force on the {'main body' if f.body == 'main' else 'weight'}, its form found in a library of "
                      f"terms and refitted with the nominal values: the model now matches the recordings to "
                      f"{ratio(f.rms_after):.2f} × their noise, against {ratio(d.rms_calibrated):.2f} × without it.")
-        lines.append(f"  How sure: {_evidence(f.delta_bic)} evidence against \"nothing missing\" (ΔBIC "
+        lines.append(f"  How sure: {evidence_words(f.delta_bic)} evidence against \"nothing missing\" (ΔBIC "
                      f"{f.delta_bic:.0f}), and the model refitted without one experiment predicts it better "
                      f"({ratio(f.heldout_rms_before):.2f} → {ratio(f.heldout_rms_after):.2f} × noise). The form is "
                      "the simplest library combination that reproduces the force across experiments; a different "
@@ -423,30 +257,30 @@ def text_report(d: Diagnosis) -> str:
     best = d.verdict_candidate
     lines += _noise_model_lines(d) + ["", RMS_TITLE]
     rows = [
-        [f"noise floor ({getattr(d.noise, 'source', 'rest')})", _nm(sigma), "1.00 ×",
-         f"rest {_nm(d.noise.rest_sigma)}, fitted residual's 2nd differences "
-         f"{_nm(getattr(d.noise, 'residual_sigma', math.nan))}, ±{100 * d.noise.relative_uncertainty:.1f} %"],
-        ["nominal model (meta.json)", _nm(d.rms_before), _ratio(d.rms_before, sigma), ""],
+        [f"noise floor ({getattr(d.noise, 'source', 'rest')})", in_nm(sigma), "1.00 ×",
+         f"rest {in_nm(d.noise.rest_sigma)}, fitted residual's 2nd differences "
+         f"{in_nm(getattr(d.noise, 'residual_sigma', math.nan))}, ±{100 * d.noise.relative_uncertainty:.1f} %"],
+        ["nominal model (meta.json)", in_nm(d.rms_before), ratio_words(d.rms_before, sigma), ""],
     ]
-    if _finite(d.rms_calibrated):  # an interrupted run may stop before the calibration
-        rows.append(["calibrated nominal", _nm(d.rms_calibrated), _ratio(d.rms_calibrated, sigma),
+    if is_finite_number(d.rms_calibrated):  # an interrupted run may stop before the calibration
+        rows.append(["calibrated nominal", in_nm(d.rms_calibrated), ratio_words(d.rms_calibrated, sigma),
                      f"whiteness z = {d.whiteness_z_calibrated:.1f}"])
     label = d.verdict.replace("+", " + ") if "+" in d.verdict and best is not None else (best.effect if best else "")
     if best is not None:
-        rows.append([f"with {label}", _nm(best.rms_after), _ratio(best.rms_after, sigma),
-                     f"whiteness z = {best.whiteness_z:.1f}" if _finite(best.whiteness_z) else ""])
+        rows.append([f"with {label}", in_nm(best.rms_after), ratio_words(best.rms_after, sigma),
+                     f"whiteness z = {best.whiteness_z:.1f}" if is_finite_number(best.whiteness_z) else ""])
     if d.heldout_experiment:  # not computed when the run was interrupted before it
-        rows.append([f"held-out {d.heldout_experiment}: calibrated", _nm(d.heldout_rms_calibrated),
-                     _ratio(d.heldout_rms_calibrated, sigma), "fitted on the other experiments"])
-    if best is not None and _finite(best.heldout_rms):
-        rows.append([f"held-out {d.heldout_experiment}: with {label}", _nm(best.heldout_rms),
-                     _ratio(best.heldout_rms, sigma), ""])
-    lines += _table(["model", "RMS", "/ noise", "note"], rows, "lrrl")
+        rows.append([f"held-out {d.heldout_experiment}: calibrated", in_nm(d.heldout_rms_calibrated),
+                     ratio_words(d.heldout_rms_calibrated, sigma), "fitted on the other experiments"])
+    if best is not None and is_finite_number(best.heldout_rms):
+        rows.append([f"held-out {d.heldout_experiment}: with {label}", in_nm(best.heldout_rms),
+                     ratio_words(best.heldout_rms, sigma), ""])
+    lines += text_table(["model", "RMS", "/ noise", "note"], rows, "lrrl")
 
     # --- calibrated nominal parameters
     lines += ["", "Calibrated nominal parameters (±1σ from the Jacobian), against meta.json"]
     rows = calibrated_rows(d, d.calibrated, d.calibrated_std)
-    lines += _table(["parameter", "meta.json", "calibrated", "change"], rows, "lrrr")
+    lines += text_table(["parameter", "meta.json", "calibrated", "change"], rows, "lrrr")
     summary = getattr(d, "calibration_summary", "")
     if summary:
         lines.append(f"  convergence: {summary}; null model from the {getattr(d, 'null_source', 'calibration')}")
@@ -462,7 +296,7 @@ def text_report(d: Diagnosis) -> str:
             rows.append([loc.experiment, loc.phase, f"{1e3 * loc.t_start:.2f}–{1e3 * loc.t_end:.2f}",
                          f"{100 * loc.excess_share:.1f} %", f"{loc.rms_over_noise:.2f}",
                          f"yes (z = {loc.z:.0f})" if loc.systematic else "no"])
-        lines += _table(["experiment", "phase", "span [ms]", "share", "RMS/noise", "systematic"], rows, "llrrrl")
+        lines += text_table(["experiment", "phase", "span [ms]", "share", "RMS/noise", "systematic"], rows, "llrrrl")
         n_sys = sum(loc.systematic for loc in locs)
         lines.append(f"  {n_sys} of {len(locs)} experiment × phase cells hold a systematic residual")
     if d.windows:
@@ -487,7 +321,7 @@ def text_report(d: Diagnosis) -> str:
     rows = refit_parameter_rows(d)
     if rows:
         lines += ["  every fitted parameter (±1σ from the Jacobian; the values to put in your model):"]
-        lines += ["  " + line for line in _table(["parameter", "meta.json", "refit", "change"], rows, "lrrr")]
+        lines += ["  " + line for line in text_table(["parameter", "meta.json", "refit", "change"], rows, "lrrr")]
     return "\n".join(lines) + "\n"
 
 
@@ -506,14 +340,14 @@ def _ranking_lines(d: Diagnosis, sigma: float) -> list[str]:
         lr = getattr(c, "lr_chi2", math.nan)
         score = getattr(c, "score", math.nan)
         ratio = c.rms_over_noise(sigma)
-        rows.append([f"{mark}{i}", c.effect, format_params(c), _nm(c.rms_after) if _finite(ratio) else "–",
-                     f"{ratio:.2f} ×" if _finite(ratio) else "–",
-                     f"{score:.0f}" if _finite(score) else "–",
+        rows.append([f"{mark}{i}", c.effect, format_params(c), in_nm(c.rms_after) if is_finite_number(ratio) else "–",
+                     f"{ratio:.2f} ×" if is_finite_number(ratio) else "–",
+                     f"{score:.0f}" if is_finite_number(score) else "–",
                      c.delta_bic_words,
-                     f"{lr:.0f} / {c.lr_critical:.1f}" if _finite(lr) and not c.screened_only else "–",
-                     _nm(c.heldout_rms) if _finite(c.heldout_rms) else "–",
+                     f"{lr:.0f} / {c.lr_critical:.1f}" if is_finite_number(lr) and not c.screened_only else "–",
+                     in_nm(c.heldout_rms) if is_finite_number(c.heldout_rms) else "–",
                      c.fit_label])
-    lines += _table(["#", "effect", "fitted parameters (±1σ)", "RMS after", "/ noise", "score", "ΔBIC", "LR / crit",
+    lines += text_table(["#", "effect", "fitted parameters (±1σ)", "RMS after", "/ noise", "score", "ΔBIC", "LR / crit",
                      "held-out RMS", "fit"], rows, "rllrrrrrrl")
     for c in d.ranking:
         corr = getattr(c, "correlation", {}) or {}
@@ -521,7 +355,7 @@ def _ranking_lines(d: Diagnosis, sigma: float) -> list[str]:
         for a in range(len(names)):
             for b in range(a + 1, len(names)):
                 rho = corr[names[a]].get(names[b], math.nan)
-                if _finite(rho) and abs(rho) > 0.8:
+                if is_finite_number(rho) and abs(rho) > 0.8:
                     lines.append(f"  {c.effect}: {names[a]} and {names[b]} are correlated (ρ = {rho:+.2f}): the data "
                                  f"constrain a combination of them; each value alone is uncertain beyond its ±1σ")
     pairs = getattr(d, "degenerate_pairs", []) or []
@@ -545,7 +379,7 @@ def _discovery_and_second_lines(d: Diagnosis, sigma: float) -> list[str]:
         for body, f in found.forces.items():
             rows.append([body, f"{f.chi2_before:.0f}", f"{f.chi2_after:.0f}", f"{f.dof:.1f}",
                          f"{f.smoothing:.2g}", f"{f.seconds:.0f} s"])
-        lines += _table(["force on", "chi² before", "with force", "eff. params", "smoothing (GCV)", "time"],
+        lines += text_table(["force on", "chi² before", "with force", "eff. params", "smoothing (GCV)", "time"],
                         rows, "lrrrrr")
         if found.form is not None:
             form = found.form
@@ -555,22 +389,22 @@ def _discovery_and_second_lines(d: Diagnosis, sigma: float) -> list[str]:
                          + ", ".join(f"{e:.3f}" for e in form.cv_by_size))
         if found.values:
             lines.append("  refitted: " + ", ".join(f"{n} = {pm(v, sd)}" for n, (v, sd) in found.values.items()))
-            lines.append(f"  ΔBIC {found.delta_bic:.0f}; RMS {_nm(found.rms_before)} → {_nm(found.rms_after)} "
-                         f"({_ratio(found.rms_before, sigma)} → {_ratio(found.rms_after, sigma)}); held-out "
+            lines.append(f"  ΔBIC {found.delta_bic:.0f}; RMS {in_nm(found.rms_before)} → {in_nm(found.rms_after)} "
+                         f"({ratio_words(found.rms_before, sigma)} → {ratio_words(found.rms_after, sigma)}); held-out "
                          f"{found.heldout_experiment}: "
-                         f"{_nm(found.heldout_rms_before)} → {_nm(found.heldout_rms_after)}")
+                         f"{in_nm(found.heldout_rms_before)} → {in_nm(found.heldout_rms_after)}")
         lines.append(f"  {'DISCOVERED' if found.discovered else 'not discovered'}: {found.reason}")
 
     sec = getattr(d, "second", None)
     if sec is not None:
         how = ("fitted together with" if getattr(sec, "joint", False) else "searched from the model with")
         lines += ["", f"A second effect, {how} {sec.first.effect} (which left RMS "
-                      f"{_ratio(sec.first.rms_after, sigma)}, whiteness z = {sec.first.whiteness_z:.1f})"
+                      f"{ratio_words(sec.first.rms_after, sigma)}, whiteness z = {sec.first.whiteness_z:.1f})"
                       + (" from the nominal values, each at its fit alone" if getattr(sec, "joint", False) else "")]
-        rows = [[c.effect, format_params(c), _ratio(c.rms_after, sigma),
+        rows = [[c.effect, format_params(c), ratio_words(c.rms_after, sigma),
                  f"{c.delta_bic:.1f}" if c.delta_bic >= 0 else "not supported", c.fit_label] for c in sec.ranking]
         if rows:
-            lines += _table(["effect (beside the first)", "fitted parameters (±1σ)", "RMS / noise",
+            lines += text_table(["effect (beside the first)", "fitted parameters (±1σ)", "RMS / noise",
                              "ΔBIC over the first alone", "fit"], rows, "llrrl")
         if sec.shares:
             lines.append("  share of the improvement over the calibrated null: "
@@ -583,10 +417,10 @@ def _discovery_and_second_lines(d: Diagnosis, sigma: float) -> list[str]:
             member, twin = third.swapped
             lines.append(f"  ({twin} in place of its look-alike {member}: from the pair as found the round named "
                          f"nothing — {third.first_path})")
-        rows = [[c.effect, format_params(c), _ratio(c.rms_after, sigma),
+        rows = [[c.effect, format_params(c), ratio_words(c.rms_after, sigma),
                  f"{c.delta_bic:.1f}" if c.delta_bic >= 0 else "not supported", c.fit_label] for c in third.ranking]
         if rows:
-            lines += _table(["effect (beside the pair)", "fitted parameters (±1σ)", "RMS / noise",
+            lines += text_table(["effect (beside the pair)", "fitted parameters (±1σ)", "RMS / noise",
                              "ΔBIC over the pair", "fit"], rows, "llrrl")
         lines.append(f"  {'ALL THREE NAMED' if third.named else 'no third effect named'}: {third.reason}")
     return lines
@@ -599,7 +433,7 @@ def _identifiability_lines(d: Diagnosis) -> list[str]:
     if not statuses:
         return []
     out = ["", "What these experiments determine (refit model; 95 % intervals from the Fisher matrix)"]
-    out += ["  " + p.words(_unit(p.name)) for p in statuses]
+    out += ["  " + p.words(unit_of(p.name)) for p in statuses]
     weak = [p.name for p in statuses if not p.determined]
     out.append("  all determined" if not weak else
                f"  not determined: {', '.join(weak)} — their values are one point of a range the data allow; "

@@ -140,7 +140,7 @@ class RigDiagnosis:
     def plain_summary(self) -> list[str]:
         """What was found, how sure, what remains and what to do, in words (as the IDM
         diagnosis's report opens)."""
-        from ..diagnosis.report import _evidence
+        from ..diagnosis.report_format import evidence_words
 
         unit = RESIDUAL_UNITS.get(self.rig, "SI")
         named = next((c for c in self.ranking if c.effect == self.verdict), None)
@@ -150,7 +150,7 @@ class RigDiagnosis:
             values = ", ".join(f"{k} = {_with_unit(v, named.std[k], param_unit(self.rig, k))}"
                                for k, v in named.values.items())
             lines.append(f"  Found: {words}.")
-            lines.append(f"  How sure: {_evidence(named.delta_bic)} evidence (BIC lower by {named.delta_bic:.0f}; "
+            lines.append(f"  How sure: {evidence_words(named.delta_bic)} evidence (BIC lower by {named.delta_bic:.0f}; "
                          f"its amplitudes beyond {NULL_SIGMAS:g} σ of zero).")
             lines.append(f"  What to do: add {term} to the identified friction model with {values}"
                          + (f" ({named.setting})" if named.setting else "") + ".")
