@@ -14,7 +14,8 @@ from scipy.linalg import toeplitz
 
 import idm_rs
 from idm_rs.diagnosis.measurement import Measurement, Profile, Whitener, shift
-from idm_rs.diagnosis.noise_model import fit_colour, spikes
+from idm_rs.diagnosis.noise_model import fit_colour
+from idm_rs.diagnosis.spikes import spikes
 from idm_rs.sensor_noise import SensorNoise
 from idm_rs.synthetic import make_case
 
