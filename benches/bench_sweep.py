@@ -371,7 +371,7 @@ def bench_million(a) -> dict:
     print(f"wall time {wall:.1f} s ({n / wall:.0f} points/s), peak memory (ru_maxrss) {maxrss_kib / 1024:.0f} MiB, "
           f"statuses {out['statuses']} (not run, ok, ok at dt/2^k, diverged, invalid)")
     if a.save:
-        from idm_rs.cli import write_sweep_netcdf
+        from idm_rs.cli_files import write_sweep_netcdf
 
         write_sweep_netcdf(ds, Path(a.save))
         print(f"wrote {a.save}")
