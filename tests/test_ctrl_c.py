@@ -129,3 +129,35 @@ def test_ctrl_c_outside_the_engine_call_of_a_piece_keeps_what_finished(monkeypat
             # the two pieces before the stop, joined: saved every 1e-6 s from 0 to their end
             assert partial is not None and partial.t[0] == 0.0 and partial.t.size > 2
             assert np.all(np.diff(partial.t) > 0)
+
+
+def test_a_ctrl_c_as_the_run_ends_keeps_the_whole_run(monkeypatch):
+    """A Ctrl-C that comes as the engine's run ends (after its last look for one) is taken by the
+    engine and reported beside the run (``interrupted``), and one that lands in the Python that
+    builds the result is caught there: either way the KeyboardInterrupt carries the whole,
+    complete result, equal to the run's (before, the run was lost)."""
+    import idm_rs
+    from idm_rs import simulation
+
+    kw = dict(t_end=1e-3, model="lps", method="auto")
+    whole = idm_rs.simulate(idm_rs.Params(), idm_rs.Triangle(), **kw)
+    real = simulation.engine.simulate
+    monkeypatch.setattr(simulation.engine, "simulate", lambda *a: {**real(*a), "interrupted": True})
+    with pytest.raises(KeyboardInterrupt, match="as its run ended") as stop:
+        idm_rs.simulate(idm_rs.Params(), idm_rs.Triangle(), **kw)
+    kept = idm_rs.partial_result(stop.value)
+    assert kept.complete and kept.final_position == whole.final_position
+    monkeypatch.setattr(simulation.engine, "simulate", real)
+    build, calls = simulation._result_of, []
+
+    def interrupted_once(*a):
+        calls.append(1)
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+        return build(*a)
+
+    monkeypatch.setattr(simulation, "_result_of", interrupted_once)
+    with pytest.raises(KeyboardInterrupt, match="after its run reached") as stop:
+        idm_rs.simulate(idm_rs.Params(), idm_rs.Triangle(), **kw)
+    kept = idm_rs.partial_result(stop.value)
+    assert kept.complete and kept.final_position == whole.final_position

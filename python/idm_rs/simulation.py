@@ -6,7 +6,7 @@ import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Mapping, Optional, Sequence, Union
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Optional, Sequence, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -320,6 +320,56 @@ def _joined(pieces: list[SimulationResult]) -> SimulationResult:
     return dataclasses.replace(last, **joined)
 
 
+def _result_of(out: Mapping[str, Any], params: Params, waveform: Waveform, model: str, n_elements: int,
+               step: float, piezo_hysteresis: bool, effects: Effects, energy: bool, method: str, rtol: float,
+               atol: float) -> SimulationResult:
+    """The engine's output of one run as a :class:`SimulationResult` (`rtol`, `atol` NaN for a
+    fixed-step method)."""
+    complete = bool(out["complete"])
+    budget = _energy_budget(out) if energy else None
+    return SimulationResult(
+        t=out["t"],
+        nodes=out["nodes"],
+        velocities=out["velocities"],
+        friction=out["friction"],
+        fh=out["fh"],
+        g=out["g"],
+        h=out["h"],
+        voltage=out["voltage"],
+        piezo_force=out["piezo_force"],
+        reading=out["reading"],
+        final_position=float(out["final_state"][0]) if complete else float(out["nodes"][-1, 0]),
+        params=params,
+        waveform=waveform,
+        model=model,
+        n_elements=n_elements,
+        dt=step,
+        piezo_hysteresis=piezo_hysteresis,
+        effects=effects,
+        energy=budget,
+        final_state=State(out["final_state"], out["state_components"] if complete else [], float(out["t"][-1])),
+        method=method,
+        rtol=rtol,
+        atol=atol,
+        complete=complete,
+        sensitivity_names=tuple(out.get("sensitivity_names", ())),
+        sensitivities=out.get("sensitivities", np.zeros((0, 0))),
+        final_state_sensitivities=out.get("final_state_sensitivities", np.zeros((0, 0))),
+    )
+
+
+def _built_keeping_the_run(build: Callable[[], SimulationResult]) -> SimulationResult:
+    """`build()`, but a Ctrl-C that lands after the engine returned — in the Python that turns its
+    output into a result, where no engine watch sees it — keeps the run: the result is built
+    again and rides on the KeyboardInterrupt as its ``partial``."""
+    try:
+        return build()
+    except KeyboardInterrupt:
+        result = build()
+        raise interrupted(f"simulate interrupted after its run reached t = {result.t[-1]:g} s (the result is in "
+                          "the exception's .partial)", partial=result) from None
+
+
 def _check_types(params: object, waveform: object, external_force: object) -> None:
     """A TypeError naming the argument that is not of its idm_rs type."""
     if not isinstance(params, Params):
@@ -540,39 +590,15 @@ def simulate(
         names or None,
         None if external_force is None else external_force.engine_arg(),
     )
-    complete = bool(out["complete"])
-    budget = _energy_budget(out) if energy else None
-    result = SimulationResult(
-        t=out["t"],
-        nodes=out["nodes"],
-        velocities=out["velocities"],
-        friction=out["friction"],
-        fh=out["fh"],
-        g=out["g"],
-        h=out["h"],
-        voltage=out["voltage"],
-        piezo_force=out["piezo_force"],
-        reading=out["reading"],
-        final_position=float(out["final_state"][0]) if complete else float(out["nodes"][-1, 0]),
-        params=params,
-        waveform=waveform,
-        model=structure.model,
-        n_elements=elements_of(structure.model, n_elements),
-        dt=step,
-        piezo_hysteresis=bool(piezo_hysteresis),
-        effects=effects,
-        energy=budget,
-        final_state=State(out["final_state"], out["state_components"] if complete else [], float(out["t"][-1])),
-        method=method,
-        rtol=float(rtol) if adaptive else math.nan,
-        atol=float(atol) if adaptive else math.nan,
-        complete=complete,
-        sensitivity_names=tuple(out.get("sensitivity_names", ())),
-        sensitivities=out.get("sensitivities", np.zeros((0, 0))),
-        final_state_sensitivities=out.get("final_state_sensitivities", np.zeros((0, 0))),
-    )
-    if not complete:
+    result = _built_keeping_the_run(lambda: _result_of(
+        out, params, waveform, structure.model, elements_of(structure.model, n_elements), step,
+        bool(piezo_hysteresis), effects, energy, method, float(rtol) if adaptive else math.nan,
+        float(atol) if adaptive else math.nan))
+    if not result.complete:
         raise interrupted(f"simulate interrupted at t = {result.t[-1]:g} s (the trajectory up to there is in "
                           "the exception's .partial, complete False, no final_state)", partial=result)
+    if out.get("interrupted", False):  # Ctrl-C as the run ended: the engine kept it for this result
+        raise interrupted(f"simulate interrupted as its run ended at t = {result.t[-1]:g} s (the whole result is "
+                          "in the exception's .partial)", partial=result)
     return result
 

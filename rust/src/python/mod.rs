@@ -354,9 +354,15 @@ fn check_run(
 
 /// `work` run on a worker thread while this one looks for Ctrl-C (Python's signal handlers run
 /// only here) and sets `cancel` on it, so the run stops and keeps what it saved so far; a panic
-/// in `work` becomes a Python RuntimeError, never a crash.
-fn watching_for_ctrl_c<T: Send>(py: Python<'_>, cancel: &AtomicBool, work: impl FnOnce() -> T + Send) -> PyResult<T> {
-    std::thread::scope(|scope| -> PyResult<T> {
+/// in `work` becomes a Python RuntimeError, never a crash. Also returns whether a Ctrl-C came
+/// in the last look, as the work ended: it is taken here (else Python would raise it the moment
+/// this returns, and the finished run would be lost) and the caller says so.
+fn watching_for_ctrl_c<T: Send>(
+    py: Python<'_>,
+    cancel: &AtomicBool,
+    work: impl FnOnce() -> T + Send,
+) -> PyResult<(T, bool)> {
+    std::thread::scope(|scope| -> PyResult<(T, bool)> {
         let worker = scope.spawn(|| catch_unwind(AssertUnwindSafe(work)));
         while !py.detach(|| {
             let deadline = Instant::now() + Duration::from_millis(50);
@@ -369,10 +375,12 @@ fn watching_for_ctrl_c<T: Send>(py: Python<'_>, cancel: &AtomicBool, work: impl 
                 cancel.store(true, Ordering::Relaxed);
             }
         }
+        let late = py.check_signals().is_err();
         worker
             .join()
             .ok()
             .and_then(|r| r.ok())
+            .map(|t| (t, late))
             .ok_or_else(|| PyRuntimeError::new_err("internal error in idm-rs core (please report)"))
     })
 }
@@ -412,7 +420,7 @@ fn simulate<'py>(
         None => m.rest_state(),
     };
     let cancel = AtomicBool::new(false);
-    let (traj, complete, derived) = watching_for_ctrl_c(py, &cancel, || {
+    let (run, late) = watching_for_ctrl_c(py, &cancel, || {
         simulate_with_derivatives(
             &m,
             &wave,
@@ -425,8 +433,8 @@ fn simulate<'py>(
             normal_force_derived,
             &cancel,
         )
-    })?
-    .map_err(|e| sim_error(py, e))?;
+    })?;
+    let (traj, complete, derived) = run.map_err(|e| sim_error(py, e))?;
 
     let nt = traj.t.len();
     let dof = traj.dof;
@@ -447,6 +455,8 @@ fn simulate<'py>(
     d.set_item("final_state", traj.final_state.into_pyarray(py))?;
     d.set_item("state_components", m.layout.components())?;
     d.set_item("complete", complete)?;
+    // a Ctrl-C that came as the run ended: the run is whole, Python raises with it attached
+    d.set_item("interrupted", late)?;
     if let Some(s) = derived {
         let n = s.names;
         d.set_item("sensitivity_names", names)?;
