@@ -482,7 +482,8 @@ def simulate(
     on the device); its samples are differentiable as ``"f_ext[k]"`` (``force.knot_names()``).
 
     Ctrl-C stops the run within about 50 ms and raises a ``KeyboardInterrupt`` whose ``partial``
-    (:func:`idm_rs.partial_result`) is the result up to there (``complete`` False).
+    (:func:`idm_rs.partial_result`) is the result up to there (``complete`` False; a Ctrl-C as
+    the run ends: the whole result, ``complete`` True).
 
     Parameters
     ----------
