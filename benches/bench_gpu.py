@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 import idm_rs
+from idm_rs import engine
 
 P = idm_rs.Params()
 W = idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
@@ -63,11 +64,11 @@ def kernel_resources() -> list[dict]:
     benches/ncu_probe.py under Nsight Compute."""
     import cupy as cp
 
-    from idm_rs.gpu import Spec
+    from idm_rs.gpu import spec_of
     from idm_rs.gpu.backend import ENTRY, NVRTC_OPTIONS, kernel_source
 
     rows = []
-    for spec in (Spec(2, True), Spec(5, True)):
+    for spec in (spec_of("lps", 1, True), spec_of("dps", 4, True)):
         mod = cp.RawModule(code=kernel_source(spec), options=NVRTC_OPTIONS)
         for name in ENTRY.values():
             f = mod.get_function(name)
@@ -80,8 +81,8 @@ def kernel_resources() -> list[dict]:
 #: layout variants for the A/B: label -> (block for the LPS, block beyond it, extra #defines)
 VARIANTS = {
     "default": (None, None, ""),
-    "scalars in place": (None, None, "#define IDM_SCAL_REG 0\n"),
-    "scalars in place, block 64": (64, 64, "#define IDM_SCAL_REG 0\n"),
+    "block 64": (64, 64, ""),
+    "LPS block 256": (256, None, ""),
 }
 
 
@@ -96,7 +97,7 @@ def use_variant(label: str) -> None:
 
     def new_defines(self):
         d = defines(self)
-        return d.replace("#define IDM_MAT_REG 0\n", "#define IDM_MAT_REG 0\n" + extra)
+        return d + extra
 
     def new_block(self):
         b = lps_block if self.nodes == 2 else dps_block
@@ -112,7 +113,7 @@ def kernel_ab(size: int) -> list[dict]:
     layout variants (VARIANTS) of both structures and methods: measured, not guessed."""
     from idm_rs import methods
     from idm_rs.batch import Structure, param_row
-    from idm_rs.gpu import Spec, launch_cuda, pack, wave_columns
+    from idm_rs.gpu import launch_cuda, pack, wave_columns
 
     g = _grid(size)
     rows = np.array([param_row(P.replace(m2=float(m) * P.m1)) for m in g["mass_ratio"]])
@@ -126,12 +127,12 @@ def kernel_ab(size: int) -> list[dict]:
             cfg = Structure(model, nodes - 1 if model == "dps" else 1, True).config(method="rk4", dt=5e-8)
             for method, t_end in (("rk4", 2e-3), ("dopri5", T_END)):
                 kw = dict(method="dopri5", rtol=rtol, atol=atol, first_step=1e-8) if method == "dopri5" else {}
-                b = pack(cfg, Spec(nodes, True), rows, idx, wave, t_end, 5e-8, **kw)
+                b = pack(cfg, rows, np.zeros((rows.shape[0], len(engine.effect_names()))), idx, wave, t_end, 5e-8, **kw)
                 launch_cuda(b).result()  # compile + warm
                 h = launch_cuda(b)
                 res = h.result()
                 out.append(dict(variant=label, model=model, method=method, t_end=t_end, points=b.points,
-                                block=Spec(nodes, True).block, kernel_s=round(h.kernel_s, 4),
+                                block=b.spec.block, kernel_s=round(h.kernel_s, 4),
                                 points_per_s=round(b.points / h.kernel_s), ok=int((res["status"] == 1).sum())))
                 print(json.dumps(out[-1]), flush=True)
     use_variant("default")

@@ -14,9 +14,9 @@ import os
 import numpy as np
 
 import idm_rs
-from idm_rs import methods
+from idm_rs import engine, methods
 from idm_rs.batch import Structure, param_row
-from idm_rs.gpu import Spec, launch_cuda, pack, wave_columns
+from idm_rs.gpu import launch_cuda, pack, wave_columns
 
 P = idm_rs.Params()
 side = int(os.environ.get("SIDE", "128"))
@@ -31,7 +31,7 @@ for model, nodes in (("lps", 2), ("dps", 5)):
     cfg = st.config(method="rk4", dt=5e-8)
     for method, t_end in (("rk4", 1e-3), ("dopri5", 10e-3)):
         kw = dict(method="dopri5", rtol=rtol, atol=atol, first_step=1e-8) if method == "dopri5" else {}
-        b = pack(cfg, Spec(nodes, True), rows, idx, wave, t_end, 5e-8, **kw)
+        b = pack(cfg, rows, np.zeros((rows.shape[0], len(engine.effect_names()))), idx, wave, t_end, 5e-8, **kw)
         h = launch_cuda(b)
         r = h.result()
         print(model, method, b.points, "points", round(h.kernel_s, 4), "s", "ok", int((r["status"] == 1).sum()),

@@ -241,13 +241,14 @@ def rk4_step_limit(params: dict[str, float], config: RunConfig) -> float:
     """The largest RK4 step [s] the damped structure of ``config`` allows: every eigenvalue of
     the first-order system inside RK4's stability region, with the up-front check's margin."""
 
-def kernel_constants(config: RunConfig, params: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The GPU kernel's constants per point: ``params`` (P, len(param_names())), NaN
-    normal_force = derived; returns (P, kernel_constant_count()[0]). Refuses, naming the point,
-    a model the kernel cannot run (effects on, a rig, more than MAX_DOF nodes)."""
-
-def kernel_constant_count() -> tuple[int, int, int]:
-    """(constants per point, scalars before the matrices, MAX_DOF) of the kernel's layout."""
+def kernel_program(config: RunConfig, params: NDArray[np.float64],
+                   effects: NDArray[np.float64]) -> tuple[str, str, NDArray[np.float64]]:
+    """The GPU kernel's program for points of one shape: the generated layout ``#define``s, the
+    right-hand side ``idm_rhs`` (C, traced from the engine's model of the first point) and each
+    point's constants row (P, IDM_NC). ``params`` (P, len(param_names())), NaN normal_force =
+    derived; ``effects`` (P, len(effect_names())). Refuses, naming the point, a model the kernel
+    cannot run (a rig, a sampled force, more than MAX_DOF nodes) or whose state differs from the
+    first point's."""
 
 def kernel_accepts() -> dict[str, Any]:
     """What the GPU kernel implements: ``params``, ``effects`` (names), ``waves`` (family ->

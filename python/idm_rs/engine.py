@@ -26,8 +26,7 @@ effect_names = _core.effect_names
 wave_fields = _core.wave_fields
 highest_frequency = _core.highest_frequency
 rk4_step_limit = _core.rk4_step_limit
-kernel_constants = _core.kernel_constants
-kernel_constant_count = _core.kernel_constant_count
+kernel_program = _core.kernel_program
 kernel_header = _core.kernel_header
 kernel_accepts = _core.kernel_accepts
 # the engine's own forms: the library's terms along a run, a waveform family's breakpoints
@@ -57,8 +56,7 @@ __all__ = [
     "effect_names",
     "highest_frequency",
     "rk4_step_limit",
-    "kernel_constants",
-    "kernel_constant_count",
+    "kernel_program",
     "kernel_header",
     "kernel_accepts",
     "library_columns",

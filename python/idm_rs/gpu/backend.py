@@ -1,22 +1,25 @@
 """Packing sweep points for the kernel, and running it on a GPU (CuPy, NVRTC) or on the CPU (the
 same source compiled by the system C compiler, loaded with ctypes).
 
-The kernel is specialised at compile time (``Spec``: node count, hysteresis on/off), so its state
+The kernel is specialised at compile time (``Spec``: the right-hand side and state layout the
+engine generates from its model for the points' shape, ``engine.kernel_program``), so its state
 lives in registers. Its inputs are columns: the per-point constants of each distinct parameter
-row (the engine packs them: ``engine.kernel_constants``), indexed per point by ``rows``, and the
-wave's six numbers per point; a column equal over the whole batch is sent once (step 0)."""
+row (packed by the engine in the order the generated code reads them), indexed per point by
+``rows``, and the wave's six numbers per point; a column equal over the whole batch is sent once
+(step 0)."""
 
 from __future__ import annotations
 
 import ctypes
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,11 +45,17 @@ class GpuUnavailable(RuntimeError):
 
 @dataclass(frozen=True)
 class Spec:
-    """A compile-time specialisation of the kernel: ``nodes`` (2 for the LPS, n + 1 for the DPS),
-    piezo hysteresis on/off."""
+    """A compile-time specialisation of the kernel: the generated ``layout`` (``#define``s: node
+    count, state size, error scales, the constants row) and right-hand side ``rhs`` (the C
+    function ``idm_rhs``), both from ``engine.kernel_program`` for one shape of model."""
 
-    nodes: int
-    hysteresis: bool
+    layout: str
+    rhs: str
+
+    @property
+    def nodes(self) -> int:
+        """Number of nodes (2 for the LPS, n + 1 for the DPS with n elements)."""
+        return int(re.search(r"#define IDM_N (\d+)", self.layout).group(1))  # type: ignore[union-attr]
 
     @property
     def block(self) -> int:
@@ -54,35 +63,60 @@ class Spec:
         return BLOCK if self.nodes == 2 else 64
 
     def defines(self) -> str:
-        """The compile-time constants. The matrices are read in place (IDM_MAT_REG 0: held in
-        registers, the LPS's spilled 16 bytes in RK4 for sm_80, ptxas -v); beyond the LPS the
-        middle Dormand-Prince stages live in shared memory (in registers they spilled from 3
-        nodes on). Measured as the way to 0 bytes of stack for every node count. The LPS takes
-        the lean RK4 step (the same numbers to the bit): IDM_LEAN (per-point branches decided
-        once, the input's slope once per segment, the Stribeck exponential skipped where it
-        cannot change S), IDM_WAVE_SHARED and IDM_METRICS_SHARED (the wave's numbers and the
-        step loop's bounds and metrics in shared memory: 126 registers instead of 154, 16 warps
-        per SM instead of 12). H200, 10^6 points: RK4 150 k points/s instead of 131 k. The DPS
-        kernels, at the register limit, spilled with these and keep the per-evaluation form."""
-        lps = int(self.nodes == 2)
-        return (f"#define IDM_N {self.nodes}\n#define IDM_HYST {int(self.hysteresis)}\n"
-                f"#define IDM_BLOCK {self.block}\n"
-                f"#define IDM_MAT_REG 0\n#define IDM_SHARED_STAGES {int(self.nodes > 2)}\n"
-                f"#define IDM_LEAN {lps}\n#define IDM_WAVE_SHARED {lps}\n#define IDM_METRICS_SHARED {lps}\n")
+        """The compile-time constants besides the layout. Beyond the LPS the middle
+        Dormand-Prince stages live in shared memory (in registers they spilled from 3 nodes on).
+        The wave's numbers and the step loop's metrics stay in registers (IDM_WAVE_SHARED and
+        IDM_METRICS_SHARED 0: with the generated right-hand side the LPS's RK4 needs 124
+        registers without them, and with them ptxas spilled 8 bytes for sm_90)."""
+        return (f"#define IDM_BLOCK {self.block}\n#define IDM_SHARED_STAGES {int(self.nodes > 2)}\n"
+                "#define IDM_WAVE_SHARED 0\n#define IDM_METRICS_SHARED 0\n")
+
+
+def program(config: Any, param_rows: NDArray[np.float64],
+            effect_rows: NDArray[np.float64]) -> tuple[Spec, NDArray[np.float64]]:
+    """The kernel's specialisation for points of one shape and each row's constants: the engine
+    traces its model of the first row and refuses, naming the row, what the kernel cannot run."""
+    layout, rhs, consts = engine.kernel_program(config, np.ascontiguousarray(param_rows, dtype=float),
+                                                np.ascontiguousarray(effect_rows, dtype=float))
+    return Spec(layout, rhs), np.ascontiguousarray(consts)
+
+
+def spec_of(model: Literal["lps", "dps"] = "lps", n_elements: int = 1, piezo_hysteresis: bool = True,
+            effects: Any = None) -> Spec:
+    """The specialisation for one structure and set of effects (``Effects``; none by default) at
+    Table 1's values (the shape, not the values, decides it)."""
+    from ..batch import Structure, param_row
+    from ..effects import Effects
+    from ..params import Params
+
+    config = Structure(model, n_elements, piezo_hysteresis).config(method="rk4", dt=1e-8)
+    e = effects or Effects()
+    row = np.array([[getattr(e, name) for name in engine.effect_names()]], dtype=float)
+    return program(config, np.asarray([param_row(Params())], dtype=float), row)[0]
 
 
 def all_specs() -> list[Spec]:
-    """Every specialisation the backend can launch (the NVRTC test compiles each)."""
-    max_dof = engine.kernel_constant_count()[2]
-    return [Spec(n, h) for n in range(2, max_dof + 1) for h in (True, False)]
+    """The specialisations the NVRTC test compiles: every node count with and without piezo
+    hysteresis and no effect, and the LPS and the DPS 4 with every catalogue effect on at once
+    (the largest right-hand sides)."""
+    from ..effects import Effects
+
+    max_dof = engine.kernel_accepts()["max_dof"]
+    specs = [spec_of("lps" if n == 2 else "dps", max(n - 1, 1), h)
+             for n in range(2, max_dof + 1) for h in (True, False)]
+    # every effect parameter on (1e-3 in SI: in every domain; its size does not change the code)
+    every = Effects(**{name: 1e-3 for name in engine.effect_names()})
+    largest: list[tuple[Literal["lps", "dps"], int]] = [("lps", 1), ("dps", 4)]
+    specs += [spec_of(m, k, True, every) for m, k in largest]
+    return specs
 
 
 @dataclass
 class KernelBatch:
-    """The kernel's inputs for P points: ``consts`` (R, scalars + matrices) one row per distinct
-    parameter row, ``rows`` (P,) each point's row; the wave's six columns in ``data``: column k
-    of point p is ``data[off[k] + step[k] * p]`` (step 0: one value for all). ``method`` "rk4"
-    uses ``dt`` and ``steps``; "dopri5" uses ``t_end``, ``rtol``, ``atol`` and ``first_step``."""
+    """The kernel's inputs for P points: ``consts`` (R, IDM_NC) one row per distinct parameter
+    row, ``rows`` (P,) each point's row; the wave's six columns in ``data``: column k of point p
+    is ``data[off[k] + step[k] * p]`` (step 0: one value for all). ``method`` "rk4" uses ``dt``
+    and ``steps``; "dopri5" uses ``t_end``, ``rtol``, ``atol`` and ``first_step``."""
 
     spec: Spec
     consts: NDArray[np.float64]
@@ -134,28 +168,14 @@ def _columns(values: list[Any], points: int) -> tuple[NDArray[np.float64], NDArr
     return np.concatenate(cols), off, np.asarray(steps, dtype=np.int64)
 
 
-def constant_columns(nodes: int) -> NDArray[np.intp]:
-    """The engine's constants the kernel reads for ``nodes`` nodes, in its column order: the
-    scalars, M^-1 K and M^-1 C (n x n of the MAX_DOF x MAX_DOF padding), the two force columns."""
-    _, n_scalars, max_dof = engine.kernel_constant_count()
-    n = nodes
-    mat = np.add.outer(np.arange(n) * max_dof, np.arange(n)).ravel()
-    mk = n_scalars + mat
-    mc = n_scalars + max_dof * max_dof + mat
-    m0 = n_scalars + 2 * max_dof * max_dof + np.arange(n)
-    ml = m0 + max_dof
-    return np.concatenate([np.arange(n_scalars), mk, mc, m0, ml])
-
-
-def pack(config: Any, spec: Spec, param_rows: NDArray[np.float64], rows: NDArray[np.integer],
+def pack(config: Any, param_rows: NDArray[np.float64], effect_rows: NDArray[np.float64], rows: NDArray[np.integer],
          wave: list[Any], t_end: float, dt: float, *, method: str = "rk4", rtol: float = 1e-7,
          atol: float = 1e-7, first_step: float = 1e-8) -> KernelBatch:
-    """The kernel's inputs: the constants of each distinct parameter row (``param_rows``, (R,
-    len(param_names())); the engine refuses what the kernel cannot run), ``rows`` (P,) the row
-    of each point, ``wave`` the six wave columns (scalars or (P,) arrays: ``wave_columns``)."""
-    _check_layout()
-    consts = engine.kernel_constants(config, np.ascontiguousarray(param_rows, dtype=float))
-    consts = np.ascontiguousarray(consts[:, constant_columns(spec.nodes)])
+    """The kernel's inputs: the specialisation and constants of the distinct parameter rows
+    (``param_rows`` (R, len(param_names())), ``effect_rows`` (R, len(effect_names())); the engine
+    refuses what the kernel cannot run), ``rows`` (P,) the row of each point, ``wave`` the six
+    wave columns (scalars or (P,) arrays: ``wave_columns``)."""
+    spec, consts = program(config, param_rows, effect_rows)
     rows32 = np.ascontiguousarray(rows, dtype=np.int32)
     data, off, step = _columns(list(wave), rows32.size)
     return KernelBatch(spec, consts, rows32, data, off, step, float(dt), int(round(t_end / dt)), method,
@@ -163,30 +183,31 @@ def pack(config: Any, spec: Spec, param_rows: NDArray[np.float64], rows: NDArray
 
 
 def prepare(config: Any, params_table: NDArray[np.float64], waves: tuple[str, dict[str, Any]], t_end: float,
-            dt: float, *, spec: Spec, method: str = "rk4", rtol: float = 1e-7, atol: float = 1e-7,
+            dt: float, *, effects_table: Any = None, method: str = "rk4", rtol: float = 1e-7, atol: float = 1e-7,
             first_step: float = 1e-8) -> KernelBatch:
-    """One row of ``params_table`` per point, with its wave as (family, batch fields: scalars or
-    per-point arrays), for the specialisation ``spec``. For tests and small batches; the sweep
-    packs with ``pack`` (one row per distinct parameter row)."""
+    """One row of ``params_table`` (and of ``effects_table``; none by default) per point, with its
+    wave as (family, batch fields: scalars or per-point arrays). For tests and small batches;
+    the sweep packs with ``pack`` (one row per distinct parameter row)."""
     p = np.asarray(params_table).shape[0]
-    return pack(config, spec, params_table, np.arange(p), wave_columns(*waves), t_end, dt, method=method,
+    if effects_table is None:
+        effects_table = np.zeros((p, len(engine.effect_names())))
+    return pack(config, params_table, effects_table, np.arange(p), wave_columns(*waves), t_end, dt, method=method,
                 rtol=rtol, atol=atol, first_step=first_step)
 
 
+#: where the generated right-hand side goes in the kernel source
+RHS_MARKER = "IDM_GENERATED_RHS"
+
+
 def kernel_source(spec: Spec) -> str:
-    """The kernel as compiled: the engine's layout header (the constants' offsets by name,
-    ``engine.kernel_header()``) and the specialisation in front of ``idm_kernel.cu``."""
-    return engine.kernel_header() + spec.defines() + SOURCE.read_text()
-
-
-def _check_layout() -> None:
-    """The kernel source must read its constants by the names the engine declares (a source
-    from another install that still counts them by hand would read past each point's row)."""
-    import re
-
-    if re.search(r"#define IDM_N_SCALARS", SOURCE.read_text()):
-        raise GpuUnavailable(f"kernel source ({SOURCE}) defines its own constants' layout instead of the "
-                             "engine's: reinstall idm-rs")
+    """The kernel as compiled: the engine's shared header (crawl limits, tableaus), the generated
+    layout and the specialisation in front of ``idm_kernel.cu``, the generated right-hand side in
+    place of its marker."""
+    source = SOURCE.read_text()
+    if source.count(RHS_MARKER) != 1:
+        raise GpuUnavailable(f"kernel source ({SOURCE}) has no place for the generated right-hand side: "
+                             "reinstall idm-rs")
+    return engine.kernel_header() + spec.layout + spec.defines() + source.replace(RHS_MARKER, spec.rhs)
 
 
 def _outputs(raw: NDArray[np.float64]) -> dict[str, NDArray[Any]]:

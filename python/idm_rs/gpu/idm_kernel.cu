@@ -1,24 +1,20 @@
-/* The IDM's physics, a fixed-step RK4 and an adaptive Dormand-Prince for one point per thread: the source of the CUDA
- * sweep backend (compiled by NVRTC through CuPy) and, unchanged, of the CPU build the test suite
- * compiles with the system C compiler to check it against the Rust engine.
+/* The IDM's fixed-step RK4 and adaptive Dormand-Prince for one point per thread: the source of the
+ * CUDA sweep backend (compiled by NVRTC through CuPy) and, unchanged, of the CPU build the test
+ * suite compiles with the system C compiler to check it against the Rust engine.
  *
- * It mirrors rust/src/model/mod.rs for the models the kernel admits (rust/src/gpu/kernel.rs: the LPS or
- * the DPS, Leuven friction, Bouc-Wen piezo hysteresis on or off, a constant load on the main
- * body, no effects). It is specialised at compile time, as DiffEqGPU generates one kernel per
- * ODE: the backend puts in front of it the engine's layout header (the constants' offsets by
- * name) and
- *   IDM_N     the number of nodes (2 for the LPS, n + 1 for the DPS with n elements),
- *   IDM_HYST  1 with piezo hysteresis, 0 without,
- *   IDM_LEAN, IDM_WAVE_SHARED, IDM_METRICS_SHARED  1 for the LPS: the lean RK4 step (see there),
- * so the state and the stages are fixed-size arrays indexed by constants after unrolling: they
- * live in registers (ptxas -v: 0 bytes stack frame), which tests/test_gpu_kernel.py checks.
+ * It holds no physics: the right-hand side `idm_rhs` and the state's layout are generated from the
+ * engine's model for the points' shape (rust/src/gpu/generate.rs: Model::rhs_impl traced, every
+ * effect and the library forces included) and put in front of this file with the engine's
+ * shared header (crawl limits, tableaus: rust/src/gpu/kernel.rs). Specialised at compile time,
+ * as DiffEqGPU generates one kernel per ODE, so the state and the stages are fixed-size arrays
+ * indexed by constants after unrolling: they live in registers (ptxas -v: 0 bytes stack frame),
+ * which tests/test_gpu_kernel.py checks.
  *
- * Inputs: the constants of each distinct parameter row (consts, one row of IDM_N_SCALARS +
- * IDM_NM numbers each; point p reads row rows[p], neighbouring points of one row read the same
- * address), and the wave's six numbers as columns: column k of point p is data[off[k] +
- * step[k] * p] (step 1: one value per point, coalesced; step 0: one value for the whole batch).
- * The right-hand side's scalars are copied into registers once per point; the matrices are read
- * in place (IDM_M). Outputs are columns: out[k * points + p]. */
+ * Inputs: the constants of each distinct parameter row (consts, IDM_NC numbers per row: those the
+ * right-hand side reads, IDM_CK, then the integrators' IDM_H_*; point p reads row rows[p],
+ * neighbouring points of one row read the same address), and the wave's six numbers as columns:
+ * column k of point p is data[off[k] + step[k] * p] (step 1: one value per point, coalesced;
+ * step 0: one value for the whole batch). Outputs are columns: out[k * points + p]. */
 
 #if defined(__CUDACC__) || defined(__CUDACC_RTC__)
 #define IDM_HD __device__ __forceinline__
@@ -31,26 +27,45 @@
 #define IDM_UNROLL
 #endif
 
-/* IDM_N_SCALARS and the offset of each scalar by name come from the engine
- * (rust/src/gpu/kernel.rs: kernel_header); IDM_N, IDM_HYST from the backend */
-#ifndef IDM_N_SCALARS
-#error "compile with the engine's header in front: idm_rs.engine.kernel_header()"
+/* IDM_N, IDM_DIM, IDM_NC and the rest of the layout come in front of this file, idm_rhs in place of
+ * the marker below (idm_rs.gpu.backend.kernel_source) */
+#ifndef IDM_NC
+#error "compile with the generated layout in front: idm_rs.gpu.backend.kernel_source(spec)"
 #endif
-#if !defined(IDM_N) || !defined(IDM_HYST)
-#error "compile with the specialisation in front: IDM_N, IDM_HYST (idm_rs.gpu.backend.Spec.defines)"
+
+/* A point's constant k, as the generated right-hand side reads it: on the GPU a load the compiler
+ * may not hoist out of the step loop (where the constants would crowd the stages out of the
+ * registers; the warp's points of one parameter row read one address: an L1 broadcast). */
+#if defined(__CUDACC__) || defined(__CUDACC_RTC__)
+IDM_HD double idm_ld(const double *p) {
+    double v;
+    asm volatile("ld.global.nc.f64 %0, [%1];" : "=d"(v) : "l"(p));
+    return v;
+}
+#define IDM_CK(c, k) idm_ld((c) + (k))
+/* NVRTC has no INFINITY or NAN */
+#define IDM_INF __longlong_as_double(0x7ff0000000000000LL)
+#define IDM_NAN __longlong_as_double(0x7ff8000000000000LL)
+/* sin and cos through sinpi and cospi: CUDA's sin keeps a 40-byte array on the stack for the
+ * reduction of huge arguments, sinpi reduces exactly without one. The argument's division by pi
+ * rounds once (a relative 1e-16 of the force term, far inside the kernel's 1e-12 m budget). */
+#define IDM_SIN(x) sinpi((x) * 0.31830988618379067154)
+#define IDM_COS(x) cospi((x) * 0.31830988618379067154)
+#else
+#define IDM_CK(c, k) ((c)[k])
+#define IDM_INF INFINITY
+#define IDM_NAN NAN
+#define IDM_SIN(x) sin(x)
+#define IDM_COS(x) cos(x)
 #endif
+
+/* idm_rhs(c, t, volt, dvolt, y, dy): dy/dt of the state, returning the friction force Ff [N] */
+IDM_GENERATED_RHS
+
 #ifndef IDM_BLOCK
 #define IDM_BLOCK 128
 #endif
-#define IDM_DIM (2 * IDM_N + 3)
-/* the matrix columns after the scalars: M^-1 K and M^-1 C (row-major, n x n), then the force
- * columns of M^-1 for the main body and the last node (n each) */
-#define IDM_MK 0
-#define IDM_MC (IDM_N * IDM_N)
-#define IDM_M0 (2 * IDM_N * IDM_N)
-#define IDM_ML (2 * IDM_N * IDM_N + IDM_N)
-#define IDM_NM (2 * IDM_N * IDM_N + 2 * IDM_N)
-/* the wave's columns after the matrices (waveforms.py: Triangle, Sawtooth) */
+/* the wave's columns (waveforms.py: Triangle, Sawtooth) */
 #define IDM_W_DELAY 0
 #define IDM_W_AMP 1
 #define IDM_W_PEAK 2   /* peak time within a cycle: rise (forward), period - rise (backward) [s] */
@@ -58,142 +73,11 @@
 #define IDM_W_CYCLES 4
 #define IDM_W_TRIANGLE 5 /* 1 for a Triangle (its end is delay + rise + fall), 0 for a Sawtooth */
 #define IDM_NW 6
-/* the slip threshold of the slip-fraction metric, in units of the Stribeck velocity */
-#define IDM_SLIP_FACTOR 0.1
 
-/* The matrices: with IDM_MAT_REG (the LPS: 12 numbers) held in registers; otherwise read from
- * the point's constants row at each use (a volatile load the compiler may not hoist out of the
- * step loop, where they would crowd the stages out of the registers; the warp's points of one
- * parameter row read one address: an L1 broadcast). */
-#ifndef IDM_MAT_REG
-#define IDM_MAT_REG 1
-#endif
 #if !(defined(__CUDACC__) || defined(__CUDACC_RTC__)) || !defined(IDM_SHARED_STAGES)
 #undef IDM_SHARED_STAGES
 #define IDM_SHARED_STAGES 0
 #endif
-#if defined(__CUDACC__) || defined(__CUDACC_RTC__)
-IDM_HD double idm_ld(const double *p) {
-    double v;
-    asm volatile("ld.global.nc.f64 %0, [%1];" : "=d"(v) : "l"(p));
-    return v;
-}
-#endif
-#if (defined(__CUDACC__) || defined(__CUDACC_RTC__)) && !IDM_MAT_REG
-#define IDM_M(m, k) idm_ld((m) + (k))
-#else
-#define IDM_M(m, k) ((m)[k])
-#endif
-/* The scalars the right-hand side reads: with IDM_SCAL_REG held in registers (copied once per
- * point), else read in place at each use as the matrices are */
-#ifndef IDM_SCAL_REG
-#define IDM_SCAL_REG 1
-#endif
-#if (defined(__CUDACC__) || defined(__CUDACC_RTC__)) && !IDM_SCAL_REG
-#define IDM_CS(x) idm_ld(&(x))
-#else
-#define IDM_CS(x) (x)
-#endif
-
-IDM_HD double idm_sign0(double x) { return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0); }
-
-/* The lean step (IDM_LEAN 1, the LPS; the backend's Spec.defines): per-point decisions taken once
- * per point instead of at each evaluation, the input's slope once per segment, the Stribeck
- * exponential skipped where it cannot change S, the scalars of the rare branches (pow, eps) read
- * in place. Each gives the same numbers to the bit. The DPS kernels, at the register limit,
- * keep the per-evaluation form (IDM_LEAN 0), where these extra live values spilled. */
-#ifndef IDM_LEAN
-#define IDM_LEAN 0
-#endif
-#define IDM_F_STRIBECK 1 /* fs - fc != 0 */
-#define IDM_F_SQUARE 2   /* delta == 2 */
-#define IDM_F_EPS 4      /* eps != 0 */
-#define IDM_F_N1 8       /* n == 1 */
-#define IDM_F_CUT 16     /* e_cut applies */
-typedef struct {
-    int flags;
-    double e_cut; /* with IDM_F_CUT: beyond this exponent fc + (fs - fc) exp(-e) rounds to fc */
-} idm_fric;
-
-/* A point's friction branches (the comparisons idm_stribeck and idm_rhs make, as bits), and
- * e_cut: fc + d exp(-e) == fc to the bit (rounded once, fused, or twice) where |d| exp(-e) <
- * fc 2^-56, a quarter of fc's half-ulp: for e > ln(|d| / fc) + 56 ln 2 + 1 (the 1 covers the
- * rounding of exp and log); only for a positive, finite fc and a finite d of sane ratio. */
-IDM_HD idm_fric idm_fric_of(const double *c) {
-    double fc = c[IDM_C_FC], fs_fc = c[IDM_C_FS_FC];
-    idm_fric f;
-    f.flags = (fs_fc != 0.0 ? IDM_F_STRIBECK : 0) | (c[IDM_C_DELTA] == 2.0 ? IDM_F_SQUARE : 0) |
-              (c[IDM_C_EPS] != 0.0 ? IDM_F_EPS : 0) | (c[IDM_C_FRIC_N] == 1.0 ? IDM_F_N1 : 0);
-    f.e_cut = 0.0;
-    double r = fabs(fs_fc) / fc;
-    if (fc > 0.0 && fc < 1e300 && r > 1e-300 && r < 1e300) {
-        f.flags |= IDM_F_CUT;
-        f.e_cut = log(r) + (56.0 * 0.69314718055994531 + 1.0);
-    }
-    return f;
-}
-#if IDM_LEAN
-#define IDM_FR(fr, c, bit, cmp) (((fr)->flags & (bit)) != 0)
-#define IDM_RARE(c, m, k) IDM_M(m, (k) - IDM_N_SCALARS)
-#else
-#define IDM_FR(fr, c, bit, cmp) (cmp)
-#define IDM_RARE(c, m, k) IDM_CS(c[k])
-#endif
-
-/* Stribeck curve S(v) [N] (physics/friction.rs: Leuven::stribeck) */
-IDM_HD double idm_stribeck(const double *c, const double *m, const idm_fric *fr, double v) {
-    double fc = IDM_CS(c[IDM_C_FC]);
-    double s;
-    if (!IDM_FR(fr, c, IDM_F_STRIBECK, IDM_CS(c[IDM_C_FS_FC]) != 0.0)) {
-        s = fc;
-    } else {
-        double x = fabs(v) * IDM_CS(c[IDM_C_INV_VS]);
-        double e = IDM_FR(fr, c, IDM_F_SQUARE, IDM_CS(c[IDM_C_DELTA]) == 2.0) ? x * x : pow(x, IDM_RARE(c, m, IDM_C_DELTA));
-#if IDM_LEAN
-        if ((fr->flags & IDM_F_CUT) && e > fr->e_cut)
-            s = fc; /* = fc + (fs - fc) exp(-e), to the bit */
-        else
-#endif
-            s = fc + IDM_CS(c[IDM_C_FS_FC]) * exp(-e);
-    }
-    return IDM_FR(fr, c, IDM_F_EPS, IDM_CS(c[IDM_C_EPS]) != 0.0) ? s * (1.0 + IDM_RARE(c, m, IDM_C_EPS) * idm_sign0(v)) : s;
-}
-
-/* dy/dt of the state [q (n), v (n), g, Fh, h] at voltage volt rising at dvolt [V/s]; returns
- * the friction force Ff [N] (model/mod.rs: Model::rhs_impl with the constant load, no effects).
- * c: the scalars, m: the matrix columns, both in registers. */
-IDM_HD double idm_rhs(const double *c, const idm_fric *fr, const double *m, double volt, double dvolt, const double *y,
-                      double *dy) {
-    const int n = IDM_N, ig = 2 * IDM_N, ifh = 2 * IDM_N + 1, ih = 2 * IDM_N + 2;
-    double h = y[ih];
-#if IDM_HYST
-    dy[ih] = IDM_CS(c[IDM_C_HYST_AP_D33]) * dvolt - IDM_CS(c[IDM_C_HYST_BP]) * fabs(dvolt) * h - IDM_CS(c[IDM_C_HYST_CP]) * dvolt * fabs(h);
-#else
-    dy[ih] = 0.0;
-#endif
-    double fp = IDM_CS(c[IDM_C_KP]) * (IDM_CS(c[IDM_C_D33]) * volt + 0.0 - h);
-    double v1 = y[n], fh = y[ifh];
-    double ratio = fh / idm_stribeck(c, m, fr, v1);
-    double gdot = IDM_FR(fr, c, IDM_F_N1, IDM_CS(c[IDM_C_FRIC_N]) == 1.0)
-                      ? v1 - fabs(v1) * ratio
-                      : v1 - fabs(v1) * idm_sign0(fh) * pow(fabs(ratio), IDM_RARE(c, m, IDM_C_FRIC_N));
-    double fhdot = IDM_CS(c[IDM_C_A]) * gdot - IDM_CS(c[IDM_C_B]) * fabs(gdot) * fh - IDM_CS(c[IDM_C_C]) * gdot * fabs(fh);
-    double ff = (fh + IDM_CS(c[IDM_C_SIGMA2]) * v1) + IDM_CS(c[IDM_C_SIGMA1]) * gdot;
-    dy[ig] = gdot;
-    dy[ifh] = fhdot;
-    /* the load acts on the main body (model/mod.rs: f_constant), the piezo pushes both ends */
-    double f_main = (fp + IDM_CS(c[IDM_C_F_CONST])) - ff, f_weight = 0.0 - fp;
-    IDM_UNROLL
-    for (int i = 0; i < IDM_N; i++) dy[i] = y[n + i];
-    IDM_UNROLL
-    for (int i = 0; i < IDM_N; i++) {
-        double acc = 0.0;
-        IDM_UNROLL
-        for (int j = 0; j < IDM_N; j++) acc -= IDM_M(m, IDM_MK + i * IDM_N + j) * y[j] + IDM_M(m, IDM_MC + i * IDM_N + j) * y[n + j];
-        dy[n + i] = acc + IDM_M(m, IDM_ML + i) * f_weight + IDM_M(m, IDM_M0 + i) * f_main;
-    }
-    return ff;
-}
 
 /* The piecewise-linear input, evaluated from its few numbers (waveforms.py / physics/waveform.rs:
  * the same arithmetic, so the breakpoints are the engine's to the bit): breakpoint k [s, V]. */
@@ -311,8 +195,8 @@ __shared__ double idm_msh[5][IDM_BLOCK];
 /* One point: RK4 from rest over `steps` steps of `dt` [s]. Outputs (column k of out, stride
  * `points`): 0 final x1 [m], 1 peak |v1| [m/s], 2 peak |Ff| [N], 3 slip fraction, 4 status (1 ok,
  * 3 diverged), 5 time of divergence [s]. */
-IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, double dt, long long steps,
-                          double *out, long long points) {
+IDM_HD void idm_rk4_point(const double *c, const double *wc, double dt, long long steps, double *out,
+                          long long points) {
     const int n = IDM_N;
     /* four vectors: the state, the stages' running sum (k1 + 2 k2 + 2 k3, added in the order of
      * integrate/rk4.rs), the latest stage and the stage input */
@@ -322,63 +206,48 @@ IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, do
     idm_wave w = idm_wave_of(wc, 1);
     idm_cursor cu;
     idm_cursor_start(&w, &cu);
-    idm_fric fr = idm_fric_of(c);
 #if !IDM_METRICS_SHARED
     double mt[5];
 #endif
-    IDM_MT(IDM_MT_BOUND) = c[IDM_C_FH_BOUND] * (1.0 + 1e-6) + 1e-12;
-    IDM_MT(IDM_MT_SLIP_V) = IDM_SLIP_FACTOR / c[IDM_C_INV_VS];
+    IDM_MT(IDM_MT_BOUND) = c[IDM_H_FH_BOUND] * (1.0 + 1e-6) + 1e-12;
+    IDM_MT(IDM_MT_SLIP_V) = c[IDM_H_SLIP_V];
     IDM_MT(IDM_MT_PEAK_V) = 0.0;
     IDM_MT(IDM_MT_PEAK_F) = 0.0;
     IDM_MT(IDM_MT_SLIP_T) = 0.0;
     double status = 1.0, div_at = 0.0;
-#if IDM_LEAN
     /* the input's slope on the cursor's segment, computed when the cursor moves (0 on the last) */
     double s = cu.seg + 1 >= w.nb ? 0.0 : (cu.vb - cu.va) / (cu.tb - cu.ta);
-#endif
     for (long long kk = 0; kk < steps; kk++) {
         double t0 = (double)kk * dt, v0;
         /* the segment holding the step's middle; breakpoints fall on step boundaries (drive/) */
-#if IDM_LEAN
         if (idm_cursor_walk(&w, &cu, t0 + 0.5 * dt)) s = cu.seg + 1 >= w.nb ? 0.0 : (cu.vb - cu.va) / (cu.tb - cu.ta);
         v0 = cu.seg + 1 >= w.nb ? cu.va : cu.va + s * (t0 - cu.ta);
-#else
-        double s;
-        idm_cursor_walk(&w, &cu, t0 + 0.5 * dt);
-        if (cu.seg + 1 >= w.nb) {
-            v0 = cu.va;
-            s = 0.0;
-        } else {
-            s = (cu.vb - cu.va) / (cu.tb - cu.ta);
-            v0 = cu.va + s * (t0 - cu.ta);
-        }
-#endif
         /* the tableau of rust/src/integrate/tableau.rs (its #defines generated: gpu/kernel.rs) */
         double h2 = IDM_RK4_C2 * dt, h3 = IDM_RK4_C3 * dt, h4 = IDM_RK4_C4 * dt;
-        double ff = idm_rhs(c, &fr, m, v0, s, y, k);
+        double ff = idm_rhs(c, t0, v0, s, y, k);
         /* the state at the step's start is held over the step (metrics.rs) */
         if (fabs(y[n]) > IDM_MT(IDM_MT_PEAK_V)) IDM_MT(IDM_MT_PEAK_V) = fabs(y[n]);
         if (fabs(ff) > IDM_MT(IDM_MT_PEAK_F)) IDM_MT(IDM_MT_PEAK_F) = fabs(ff);
         if (fabs(y[n]) > IDM_MT(IDM_MT_SLIP_V)) IDM_MT(IDM_MT_SLIP_T) = IDM_MT(IDM_MT_SLIP_T) + dt;
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + h2 * k[i]; acc[i] = k[i]; }
-        idm_rhs(c, &fr, m, v0 + s * h2, s, tmp, k);
+        idm_rhs(c, t0 + h2, v0 + s * h2, s, tmp, k);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + h3 * k[i]; acc[i] = acc[i] + IDM_RK4_MIDDLE_WEIGHT * k[i]; }
-        idm_rhs(c, &fr, m, v0 + s * h3, s, tmp, k);
+        idm_rhs(c, t0 + h3, v0 + s * h3, s, tmp, k);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) { tmp[i] = y[i] + h4 * k[i]; acc[i] = acc[i] + IDM_RK4_MIDDLE_WEIGHT * k[i]; }
-        idm_rhs(c, &fr, m, v0 + s * h4, s, tmp, k);
+        idm_rhs(c, t0 + h4, v0 + s * h4, s, tmp, k);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) y[i] += dt / IDM_RK4_DENOMINATOR * (acc[i] + k[i]);
-        if (!(fabs(y[2 * n + 1]) <= IDM_MT(IDM_MT_BOUND)) || !isfinite(y[n]) || !isfinite(y[0])) {
+        if (!(fabs(y[IDM_IFH]) <= IDM_MT(IDM_MT_BOUND)) || !isfinite(y[n]) || !isfinite(y[0])) {
             status = 3.0;
             div_at = (double)(kk + 1) * dt;
             break;
         }
     }
-    /* the final state's friction, at the input's last value */
-    double ff_end = idm_rhs(c, &fr, m, 0.0, 0.0, y, k);
+    /* the final state's friction (which reads no input) */
+    double ff_end = idm_rhs(c, (double)steps * dt, 0.0, 0.0, y, k);
     double peak_v = IDM_MT(IDM_MT_PEAK_V), peak_f = IDM_MT(IDM_MT_PEAK_F), slip_t = IDM_MT(IDM_MT_SLIP_T);
     if (fabs(y[n]) > peak_v) peak_v = fabs(y[n]);
     if (fabs(ff_end) > peak_f) peak_f = fabs(ff_end);
@@ -397,7 +266,7 @@ IDM_HD void idm_rk4_point(const double *c, const double *m, const double *wc, do
  * where the run stopped because its step collapsed (integrate/crawl.rs: every IDM_CRAWL_CHECK_STEPS
  * accepted steps, the steps it would need at the pace of the last ones are projected; beyond
  * IDM_MAX_ADAPTIVE_STEPS it stops, status 3 at that time), else 0. */
-IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc, double t_end, double rtol,
+IDM_HD void idm_dopri5_point(const double *c, const double *wc, double t_end, double rtol,
                              double atol, double first_step, double *out, long long points) {
     /* the tableau of rust/src/integrate/tableau.rs (its #defines generated: gpu/kernel.rs) */
     const double C2 = IDM_DP5_C2, C3 = IDM_DP5_C3, C4 = IDM_DP5_C4, C5 = IDM_DP5_C5;
@@ -407,15 +276,16 @@ IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc,
     const double B1 = IDM_DP5_B1, B3 = IDM_DP5_B3, B4 = IDM_DP5_B4, B5 = IDM_DP5_B5, B6 = IDM_DP5_B6;
     const double E1 = IDM_DP5_E1, E3 = IDM_DP5_E3, E4 = IDM_DP5_E4, E5 = IDM_DP5_E5, E6 = IDM_DP5_E6, E7 = IDM_DP5_E7;
     const int n = IDM_N;
-    /* the state, the next state, a stage's input and output, the first and last stages in
-     * registers; the middle stages k2..k6 too with IDM_SHARED_STAGES 0, else in shared memory
-     * (each thread its own column: conflict-free), where many nodes would not fit beside them */
-    double y[IDM_DIM], yn[IDM_DIM], tmp[IDM_DIM], kt[IDM_DIM], k1[IDM_DIM], k7[IDM_DIM];
+    /* the state, a stage's input and output and the first stage in registers; the later stages
+     * k2..k7 too with IDM_SHARED_STAGES 0, else in shared memory (each thread its own column:
+     * conflict-free), where many nodes would not fit beside them */
+    /* tmp holds each stage's input, then the next state (its last use: one vector fewer) */
+    double y[IDM_DIM], tmp[IDM_DIM], kt[IDM_DIM], k1[IDM_DIM];
 #if IDM_SHARED_STAGES
-    __shared__ double idm_ks[5][IDM_DIM][IDM_BLOCK];
+    __shared__ double idm_ks[6][IDM_DIM][IDM_BLOCK];
 #define KS(s, i) idm_ks[(s) - 2][i][threadIdx.x]
 #else
-    double idm_kr[5][IDM_DIM];
+    double idm_kr[6][IDM_DIM];
 #define KS(s, i) idm_kr[(s) - 2][i]
 #endif
     IDM_UNROLL
@@ -423,14 +293,15 @@ IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc,
     idm_wave w = idm_wave_of(wc, 0);
     idm_cursor cu;
     idm_cursor_start(&w, &cu);
-    /* the error norm's scales: every component but g (IDM_N positions, IDM_N velocities, Fh, h) */
-    double stroke = fmax(c[IDM_C_D33] * fabs(w.amp), 1e-9), fs = c[IDM_C_FC] + fmax(c[IDM_C_FS_FC], 0.0);
-    const double in_norm = (double)(2 * IDM_N + 2);
+    /* the error norm's scales (model/mod.rs: state_scales, from the generated IDM_SCALE_KINDS:
+     * 0 out of the norm, 1 the stroke, 2 stroke x the LPS frequency, 3 Fs, 4 the voltage) */
+    const int kinds[IDM_DIM] = IDM_SCALE_KINDS;
+    double stroke = fmax(c[IDM_H_STROKE_PER_V] * fabs(w.amp), 1e-9);
+    const double in_norm = (double)IDM_IN_NORM;
     double h_max = fmax(t_end / 10.0, first_step), h = fmin(first_step, h_max), h_min = 1e-14;
     double t = 0.0, peak_v = 0.0, peak_f = 0.0, slip_t = 0.0, min_step = 1e300;
-    double slip_v = IDM_SLIP_FACTOR / c[IDM_C_INV_VS];
-    idm_fric fr = idm_fric_of(c);
-    double ff_prev = idm_rhs(c, &fr, m, 0.0, 0.0, y, k7), v_prev = 0.0;
+    double slip_v = c[IDM_H_SLIP_V];
+    double ff_prev = idm_rhs(c, 0.0, 0.0, 0.0, y, kt), v_prev = 0.0;
     double status = 1.0, div_at = 0.0, crawled = 0.0;
     long long accepted = 0;
     double t_check = 0.0; /* the time of the last crawl check */
@@ -448,48 +319,53 @@ IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc,
             slope = 0.0;
         }
         if (fresh) {
-            idm_rhs(c, &fr, m, v0, slope, y, k1);
+            idm_rhs(c, t, v0, slope, y, k1);
             fresh = 0;
         }
         int last = end - (t + h) < 1e-3 * h;
         double st = last ? end - t : h;
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A21 * k1[i]);
-        idm_rhs(c, &fr, m, v0 + slope * C2 * st, slope, tmp, kt);
+        idm_rhs(c, t + C2 * st, v0 + slope * C2 * st, slope, tmp, kt);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) KS(2, i) = kt[i];
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A31 * k1[i] + A32 * KS(2, i));
-        idm_rhs(c, &fr, m, v0 + slope * C3 * st, slope, tmp, kt);
+        idm_rhs(c, t + C3 * st, v0 + slope * C3 * st, slope, tmp, kt);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) KS(3, i) = kt[i];
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A41 * k1[i] + A42 * KS(2, i) + A43 * KS(3, i));
-        idm_rhs(c, &fr, m, v0 + slope * C4 * st, slope, tmp, kt);
+        idm_rhs(c, t + C4 * st, v0 + slope * C4 * st, slope, tmp, kt);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) KS(4, i) = kt[i];
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) tmp[i] = y[i] + st * (A51 * k1[i] + A52 * KS(2, i) + A53 * KS(3, i) + A54 * KS(4, i));
-        idm_rhs(c, &fr, m, v0 + slope * C5 * st, slope, tmp, kt);
+        idm_rhs(c, t + C5 * st, v0 + slope * C5 * st, slope, tmp, kt);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) KS(5, i) = kt[i];
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++)
             tmp[i] = y[i] + st * (A61 * k1[i] + A62 * KS(2, i) + A63 * KS(3, i) + A64 * KS(4, i) + A65 * KS(5, i));
-        idm_rhs(c, &fr, m, v0 + slope * st, slope, tmp, kt);
+        idm_rhs(c, t + st, v0 + slope * st, slope, tmp, kt);
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) KS(6, i) = kt[i];
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++)
-            yn[i] = y[i] + st * (B1 * k1[i] + B3 * KS(3, i) + B4 * KS(4, i) + B5 * KS(5, i) + B6 * KS(6, i));
-        idm_rhs(c, &fr, m, v0 + slope * st, slope, yn, k7);
+            tmp[i] = y[i] + st * (B1 * k1[i] + B3 * KS(3, i) + B4 * KS(4, i) + B5 * KS(5, i) + B6 * KS(6, i));
+        idm_rhs(c, t + st, v0 + slope * st, slope, tmp, kt);
+        IDM_UNROLL
+        for (int i = 0; i < IDM_DIM; i++) KS(7, i) = kt[i];
         double err2 = 0.0;
         IDM_UNROLL
         for (int i = 0; i < IDM_DIM; i++) {
-            if (i == 2 * IDM_N) continue; /* g: out of the norm */
-            double sc = i < IDM_N ? stroke : (i < 2 * IDM_N ? stroke * c[IDM_C_OMEGA_LPS] : (i == 2 * IDM_N + 1 ? fs : stroke));
-            double e = E1 * k1[i] + E3 * KS(3, i) + E4 * KS(4, i) + E5 * KS(5, i) + E6 * KS(6, i) + E7 * k7[i];
-            double tol = atol * sc + rtol * fmax(fabs(y[i]), fabs(yn[i]));
+            if (kinds[i] == 0) continue; /* g and what else is out of the norm */
+            /* kinds[i] is known after unrolling: one expression per component, nothing held */
+            double sc = kinds[i] == 1 ? stroke
+                        : kinds[i] == 2 ? stroke * c[IDM_H_OMEGA]
+                        : kinds[i] == 3 ? c[IDM_H_FS] : fmax(fabs(w.amp), 1.0);
+            double e = E1 * k1[i] + E3 * KS(3, i) + E4 * KS(4, i) + E5 * KS(5, i) + E6 * KS(6, i) + E7 * KS(7, i);
+            double tol = atol * sc + rtol * fmax(fabs(y[i]), fabs(tmp[i]));
             err2 += (st * e / tol) * (st * e / tol);
         }
         double err = sqrt(err2 / in_norm);
@@ -503,19 +379,19 @@ IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc,
             t = t_new;
             IDM_UNROLL
             for (int i = 0; i < IDM_DIM; i++) {
-                y[i] = yn[i];
-                k1[i] = k7[i];
+                y[i] = tmp[i];
+                k1[i] = KS(7, i);
             }
             accepted++;
             double grow = err == 0.0 ? 5.0 : fmin(fmax(0.9 * pow(err, -0.2), 0.2), 5.0);
             if (!last || grow < 1.0) h = fmin(st * grow, h_max);
-            if (!isfinite(y[n]) || !isfinite(y[0]) || !isfinite(y[2 * n + 1])) {
+            if (!isfinite(y[n]) || !isfinite(y[0]) || !isfinite(y[IDM_IFH])) {
                 status = 3.0;
                 div_at = t;
                 break;
             }
             v_prev = y[n];
-            ff_prev = idm_rhs(c, &fr, m, v0, slope, y, kt);
+            ff_prev = idm_rhs(c, t, v0, slope, y, kt);
             if (accepted % IDM_CRAWL_CHECK_STEPS == 0) {
                 double pace = (t - t_check) / (double)IDM_CRAWL_CHECK_STEPS;
                 t_check = t;
@@ -550,29 +426,8 @@ IDM_HD void idm_dopri5_point(const double *c, const double *m, const double *wc,
     out[8 * points] = crawled;
 }
 
-/* A thread's constants: the scalars copied once into registers; the matrices too with
- * IDM_MAT_REG, else read in place (IDM_M) */
-#if IDM_MAT_REG
-#define IDM_NREG (IDM_N_SCALARS + IDM_NM)
-#else
-#define IDM_NREG IDM_N_SCALARS
-#endif
-#if IDM_SCAL_REG || !(defined(__CUDACC__) || defined(__CUDACC_RTC__))
-#define IDM_CONSTS(row)                                                                                              \
-    const double *row_ = (row);                                                                                      \
-    double cm[IDM_NREG];                                                                                             \
-    IDM_UNROLL                                                                                                       \
-    for (int k = 0; k < IDM_NREG; k++) cm[k] = row_[k];                                                              \
-    const double *mat = IDM_MAT_REG ? cm + IDM_N_SCALARS : row_ + IDM_N_SCALARS;
-#else
-#define IDM_CONSTS(row)                                                                                              \
-    const double *cm = (row);                                                                                        \
-    const double *mat = cm + IDM_N_SCALARS;
-#endif
-
 /* The fixed-step sweep: thread p runs point p (neighbouring grid points share a warp) with the
- * constants of its parameter row (consts + rows[p] * (IDM_N_SCALARS + IDM_NM): the scalars, then
- * the matrices) and its wave (data, off, step: IDM_NW columns), `steps` steps of dt [s]; outputs
+ * constants of its parameter row (consts + rows[p] * IDM_NC) and its wave (data, off, step: IDM_NW columns), `steps` steps of dt [s]; outputs
  * column by column in out (6 x points). */
 IDM_KERNEL idm_rk4_sweep(const double *__restrict__ consts, const int *__restrict__ rows,
                          const double *__restrict__ data, const long long *__restrict__ off,
@@ -587,8 +442,7 @@ IDM_KERNEL idm_rk4_sweep(const double *__restrict__ consts, const int *__restric
     {
         double w[IDM_NW];
         idm_load_wave(data, off, step, p, w);
-        IDM_CONSTS(consts + (long long)rows[p] * (IDM_N_SCALARS + IDM_NM))
-        idm_rk4_point(cm, mat, w, dt, steps, out + p, points);
+        idm_rk4_point(consts + (long long)rows[p] * IDM_NC, w, dt, steps, out + p, points);
     }
 }
 
@@ -607,7 +461,6 @@ IDM_KERNEL idm_dopri5_sweep(const double *__restrict__ consts, const int *__rest
     {
         double w[IDM_NW];
         idm_load_wave(data, off, step, p, w);
-        IDM_CONSTS(consts + (long long)rows[p] * (IDM_N_SCALARS + IDM_NM))
-        idm_dopri5_point(cm, mat, w, t_end, rtol, atol, first_step, out + p, points);
+        idm_dopri5_point(consts + (long long)rows[p] * IDM_NC, w, t_end, rtol, atol, first_step, out + p, points);
     }
 }

@@ -56,14 +56,14 @@ def check_kernel_admits(plan: SweepPlan, backend: str) -> None:
     no_effect = Effects()
     for name in engine.effect_names():
         if name not in acc["effects"] and (name in swept or getattr(plan.effects, name) != getattr(no_effect, name)):
-            raise ValueError(f"backend={backend!r} runs the paper's model only; effect parameter '{name}' is "
-                             f"{'swept' if name in swept else 'on'} {fix}")
+            raise ValueError(f"backend={backend!r} does not implement effect parameter '{name}' "
+                             f"({'swept' if name in swept else 'on'}) {fix}")
 
 
-def kernel_block(plan: SweepPlan, start: int, stop: int) -> tuple[NDArray[np.float64], NDArray[np.intp], dict[str, Any],
-                                                                 NDArray[np.bool_]]:
-    """Flat points [start, stop) for the kernel, with no loop per point: the parameter rows of
-    the distinct points of the parameter axes (the engine's tables), each point's row, the
+def kernel_block(plan: SweepPlan, start: int, stop: int) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                                 NDArray[np.intp], dict[str, Any], NDArray[np.bool_]]:
+    """Flat points [start, stop) for the kernel, with no loop per point: the parameter and effect
+    rows of the distinct points of the parameter axes (the engine's tables), each point's row, the
     wave's batch fields (a swept field per point, the others once), and the points whose wave
     is invalid only in combination (a sawtooth edge not shorter than its period)."""
     shape = plan.shape
@@ -80,7 +80,7 @@ def kernel_block(plan: SweepPlan, start: int, stop: int) -> tuple[NDArray[np.flo
         reps = np.ravel_multi_index(full, shape)
     else:
         reps, rows = np.zeros(1, dtype=np.intp), np.zeros(stop - start, dtype=np.intp)
-    params = plan.tables_at(reps).params
+    tables = plan.tables_at(reps)
     fields: dict[str, Any] = dict(plan.waveform.batch_fields())
     for a in wave_axes:
         name = "amplitude" if plan.names[a] == "voltage" else plan.names[a]
@@ -91,7 +91,7 @@ def kernel_block(plan: SweepPlan, start: int, stop: int) -> tuple[NDArray[np.flo
         invalid = np.broadcast_to(np.asarray(fields["rise"]) >= period, invalid.shape).copy()
         if invalid.any():  # such a point is not run: give it a valid edge, its result is discarded
             fields["rise"] = np.where(invalid, 0.5 * period, fields["rise"])
-    return params, rows, fields, invalid
+    return tables.params, tables.effects, rows, fields, invalid
 
 
 @dataclass(frozen=True)
@@ -111,23 +111,22 @@ class KernelBackend:
         engine with the plan's own method (``"auto"`` changes a stiff point to Rodas4 there) when
         ``plan.retries`` > 0. Ctrl-C keeps the finished blocks."""
         # through the package, where a test can stand in for a launch
-        from . import Spec, launch_cuda, pack, run_cpu, wave_columns
+        from . import launch_cuda, pack, run_cpu, wave_columns
         from .backend import Finished, Launched
 
         threads, block_size, backend = self.threads, self.block_size, self.name
         adaptive = methods.is_adaptive(plan.method)
         config = plan.structure.config(method="rk4", dt=plan.dt)  # the constants do not depend on the method
-        spec = Spec(2 if plan.model == "lps" else plan.n_elements + 1, plan.piezo_hysteresis)
         kind = plan.waveform.batch_kind
         n = plan.size
         pending = None
         try:
             for start in range(0, n, block_size):
                 stop = min(n, start + block_size)
-                params, rows, fields, invalid = kernel_block(plan, start, stop)
+                params, effects, rows, fields, invalid = kernel_block(plan, start, stop)
                 how: dict[str, Any] = (dict(method="dopri5", rtol=plan.rtol, atol=plan.atol, first_step=plan.first_step)
                                        if adaptive else {})
-                batch = pack(config, spec, params, rows, wave_columns(kind, fields), plan.t_end, plan.dt, **how)
+                batch = pack(config, params, effects, rows, wave_columns(kind, fields), plan.t_end, plan.dt, **how)
                 handle: Union[Launched, Finished] = (launch_cuda(batch) if backend == "cuda"
                                                      else Finished(run_cpu(batch)))
                 previous, pending = pending, (handle, start, stop, invalid)

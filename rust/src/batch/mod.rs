@@ -13,7 +13,7 @@ mod runner;
 mod steady;
 
 pub use metrics::{MetricColumn, PointMetrics, METRIC_COLUMNS, SLIP_VELOCITY_FACTOR};
-pub use points::{PointTables, WaveFamily};
+pub use points::{row_point, PointTables, WaveFamily};
 pub use run::{run_batch, CHUNK, LANES};
 pub use runner::BatchRunner;
 pub use steady::{Steady, Train, STALL_STEP_FRACTION};

@@ -73,6 +73,24 @@ impl WaveFamily {
     }
 }
 
+/// A point's Table 1 parameters and effects from its rows (`params` in `PARAM_NAMES` order, NaN
+/// normal_force = derived from the masses; `effects` in `EFFECT_NAMES` order), and whether the
+/// normal force was derived.
+pub fn row_point(params: &[f64], effects: &[f64]) -> Result<(Params, Effects, bool), InputError> {
+    let pairs: Vec<(&str, f64)> = PARAM_NAMES
+        .iter()
+        .copied()
+        .zip(params.iter().copied())
+        .filter(|(name, v)| !(*name == "normal_force" && v.is_nan()))
+        .collect();
+    let epairs: Vec<(&str, f64)> = EFFECT_NAMES.iter().copied().zip(effects.iter().copied()).collect();
+    Ok((
+        Params::from_pairs(&pairs)?,
+        Effects::from_pairs(&epairs)?,
+        pairs.len() < PARAM_NAMES.len(),
+    ))
+}
+
 /// Per-point tables, row-major. `params` rows may hold NaN for `normal_force`: derived from the
 /// masses. `t_ends`, `t_starts`, `states` (rows of `state_dim`) are optional per-point columns.
 pub struct PointTables<'a> {
@@ -113,25 +131,14 @@ impl PointTables<'_> {
     /// Point `i`, or why its row is not a valid point.
     pub fn point(&self, i: usize) -> Result<PointSpec, InputError> {
         let (np, ne, nw) = (PARAM_NAMES.len(), EFFECT_NAMES.len(), self.family.fields().len());
-        let pairs: Vec<(&str, f64)> = PARAM_NAMES
-            .iter()
-            .copied()
-            .zip(self.params[i * np..(i + 1) * np].iter().copied())
-            .filter(|(name, v)| !(*name == "normal_force" && v.is_nan()))
-            .collect();
-        let epairs: Vec<(&str, f64)> = EFFECT_NAMES
-            .iter()
-            .copied()
-            .zip(self.effects[i * ne..(i + 1) * ne].iter().copied())
-            .collect();
-        let params = Params::from_pairs(&pairs)?;
-        let effects = Effects::from_pairs(&epairs)?;
+        let (params, effects, derived) =
+            row_point(&self.params[i * np..(i + 1) * np], &self.effects[i * ne..(i + 1) * ne])?;
         let (wave, train) = self.family.build(&self.waves[i * nw..(i + 1) * nw])?;
         let mut spec = PointSpec::new(params, effects, wave, train);
         spec.t_end = self.t_ends.map(|t| t[i]);
         spec.t_start = self.t_starts.map_or(0.0, |t| t[i]);
         spec.y0 = self.states.map(|(s, d)| s[i * d..(i + 1) * d].to_vec());
-        spec.normal_force_derived = pairs.len() < PARAM_NAMES.len();
+        spec.normal_force_derived = derived;
         Ok(spec)
     }
 

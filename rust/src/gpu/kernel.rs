@@ -1,80 +1,12 @@
-//! The per-point constants of the GPU kernel (`python/idm_rs/gpu/idm_kernel.cu`), packed from
-//! a [`Model`] in one order declared here ([`SCALARS`]), which the kernel reads by name: the
-//! `#define`s of the offsets ([`kernel_header`]) are generated from the same list and put in
-//! front of the kernel source when it is compiled, so the two cannot disagree. The kernel's physics mirrors `model/mod.rs`
-//! for the models it supports (LPS or DPS up to `MAX_DOF` nodes, piezo hysteresis on or off,
-//! no effects); the test suite compiles the same kernel source for the CPU and checks it
-//! against this engine, so a change of the model that is not mirrored there fails a test.
-
-use crate::model::Model;
+//! What the GPU kernel (`python/idm_rs/gpu/idm_kernel.cu`) is given besides its generated
+//! right-hand side (`gpu/generate.rs`): the engine's limits on a crawling adaptive run and the
+//! integrators' tableaus as C `#define`s ([`kernel_header`]), and what the kernel backends admit
+//! (a sweep is refused, naming the field, when anything outside it varies or differs from its
+//! default). The kernel's integrators and metrics mirror the engine's; the test suite compiles
+//! the same source for the CPU and checks it against this engine for every effect.
 
 /// Largest node count the kernel holds (DPS with 5 elements).
 pub const MAX_DOF: usize = 6;
-/// The scalars before the matrices, in order, by the name the kernel reads them with
-/// (`c[IDM_C_<NAME>]`): kp [N/m], d33 [m/V], the 11 friction constants of `Leuven::constants`,
-/// the 3 hysteresis constants (`PiezoHysteresis::constants`; zero when it is off, which the
-/// kernel knows at compile time), the constant force on the main body [N] (`load_force`), the
-/// |Fh| bound [N], and the LPS frequency sqrt(kp (1/m1 + 1/m2)) [rad/s] that scales velocities
-/// in the adaptive method's error norm (`Model::state_scales`). The node count and whether
-/// hysteresis is on are compile-time constants of the kernel (`IDM_N`, `IDM_HYST`).
-pub const SCALARS: [&str; 19] = [
-    "KP",
-    "D33",
-    "FC",
-    "FS_FC",
-    "INV_VS",
-    "DELTA",
-    "FRIC_N",
-    "A",
-    "B",
-    "C",
-    "SIGMA1",
-    "SIGMA2",
-    "EPS",
-    "HYST_AP_D33",
-    "HYST_BP",
-    "HYST_CP",
-    "F_CONST",
-    "FH_BOUND",
-    "OMEGA_LPS",
-];
-/// Number of scalars before the matrices.
-pub const N_SCALARS: usize = SCALARS.len();
-
-/// What the kernel implements, the list every kernel backend admits work by (a sweep is
-/// refused, naming the field, when anything outside it varies or differs from its default):
-/// the Table 1 parameters it reads (each reaches its constants: a test perturbs every one and
-/// sees them change; a parameter added to Table 1 is refused until it is added here and the
-/// kernel reads it), the effects (none), the waveform families with the fields it evaluates,
-/// the structures and the metrics it computes (`step_per_cycle` is x1 / cycles, on the host).
-pub const PARAMS: [&str; 24] = [
-    "m1",
-    "m2",
-    "pe_area",
-    "pe_youngs",
-    "pe_length",
-    "pe_density",
-    "d33",
-    "rayleigh_alpha",
-    "rayleigh_beta",
-    "hyst_alpha",
-    "hyst_beta",
-    "hyst_gamma",
-    "fric_alpha",
-    "fric_beta",
-    "fric_gamma",
-    "fric_n",
-    "stribeck_velocity",
-    "stribeck_exponent",
-    "mu_k",
-    "mu_s",
-    "sigma1",
-    "sigma2",
-    "load_force",
-    "normal_force",
-];
-/// Effects the kernel implements (none: each must be at its no-effect value).
-pub const EFFECTS: [&str; 0] = [];
 /// Waveform families and the fields the kernel evaluates them from.
 pub const WAVES: [(&str, &[&str]); 2] = [
     ("triangle", &["amplitude", "rise", "fall", "delay"]),
@@ -94,24 +26,14 @@ pub const METRICS: [&str; 5] = [
 /// Structures: the LPS and the DPS with 1 to MAX_DOF - 1 elements.
 pub const STRUCTURES: [&str; 2] = ["lps", "dps"];
 
-/// The offset of scalar `name` in a point's constants (a panic names an undeclared one).
-fn at(name: &str) -> usize {
-    SCALARS
-        .iter()
-        .position(|s| *s == name)
-        .unwrap_or_else(|| panic!("kernel constant {name} is not declared"))
-}
-
-/// The C preprocessor lines that give the kernel its layout: `IDM_MAX_DOF`, `IDM_N_SCALARS` and
-/// one `IDM_C_<NAME>` offset per scalar, generated from [`SCALARS`]; and the engine's limits on
-/// a crawling adaptive run (`IDM_CRAWL_CHECK_STEPS`, `IDM_MAX_ADAPTIVE_STEPS`, `integrate/crawl.rs`)
-/// and the integrators' tableaus (`IDM_RK4_*`, `IDM_DP5_*`, `integrate/tableau.rs`).
+/// The C preprocessor lines every kernel specialisation shares: `IDM_MAX_DOF`, the engine's
+/// limits on a crawling adaptive run (`IDM_CRAWL_CHECK_STEPS`, `IDM_MAX_ADAPTIVE_STEPS`,
+/// `integrate/crawl.rs`) and the integrators' tableaus (`IDM_RK4_*`, `IDM_DP5_*`,
+/// `integrate/tableau.rs`). The layout of a point's constants comes with its generated
+/// right-hand side (`gpu/generate.rs`).
 pub fn kernel_header() -> String {
-    let mut h = String::from("/* generated by idm-rs (rust/src/gpu/kernel.rs): the layout of a point's constants */\n");
-    h += &format!("#define IDM_MAX_DOF {MAX_DOF}\n#define IDM_N_SCALARS {N_SCALARS}\n");
-    for (i, name) in SCALARS.iter().enumerate() {
-        h += &format!("#define IDM_C_{name} {i}\n");
-    }
+    let mut h = String::from("/* generated by idm-rs (rust/src/gpu/kernel.rs): the engine's limits and tableaus */\n");
+    h += &format!("#define IDM_MAX_DOF {MAX_DOF}\n");
     // the adaptive kernel stops a crawling run as the engine does (`integrate/crawl.rs`)
     h += &format!(
         "#define IDM_CRAWL_CHECK_STEPS {}\n#define IDM_MAX_ADAPTIVE_STEPS {:e}\n",
@@ -122,92 +44,24 @@ pub fn kernel_header() -> String {
     h += &crate::integrate::tableau::c_defines();
     h
 }
-/// Total constants per point: the scalars, M^-1 K and M^-1 C (MAX_DOF^2 each, row-major,
-/// zero-padded), and the two force columns of M^-1 (MAX_DOF each).
-pub const N_CONSTANTS: usize = N_SCALARS + 2 * MAX_DOF * MAX_DOF + 2 * MAX_DOF;
-
-/// The kernel's constants for `model`, or why the kernel cannot run it.
-pub fn kernel_constants(model: &Model) -> Result<Vec<f64>, String> {
-    let n = model.layout.dof;
-    if n > MAX_DOF {
-        return Err(format!(
-            "the GPU kernel holds at most {MAX_DOF} nodes (DPS with {} elements); got {n}",
-            MAX_DOF - 1
-        ));
-    }
-    if !model.is_plain() || model.effects != crate::physics::effects::Effects::default() {
-        return Err(
-            "the GPU kernel runs the paper's model only: switch every effect off (or use the CPU backend)".into(),
-        );
-    }
-    if matches!(model.actuator, crate::physics::mechanics::Actuator::Rig(_)) {
-        return Err("the GPU kernel runs the IDM, not a rig".into());
-    }
-    let mut c = vec![0.0; N_CONSTANTS];
-    c[at("KP")] = model.kp;
-    c[at("D33")] = model.d33;
-    let friction = [
-        "FC", "FS_FC", "INV_VS", "DELTA", "FRIC_N", "A", "B", "C", "SIGMA1", "SIGMA2", "EPS",
-    ];
-    for (name, v) in friction.iter().zip(model.friction.constants()) {
-        c[at(name)] = v;
-    }
-    if let Some(h) = model.hysteresis {
-        for (name, v) in ["HYST_AP_D33", "HYST_BP", "HYST_CP"].iter().zip(h.constants()) {
-            c[at(name)] = v;
-        }
-    }
-    c[at("F_CONST")] = model.f_constant;
-    c[at("FH_BOUND")] = model.presliding_bound();
-    let p = &model.params;
-    c[at("OMEGA_LPS")] = (p.kp() * (1.0 / p.m1 + 1.0 / p.m2)).sqrt();
-    let (mk, mc) = (N_SCALARS, N_SCALARS + MAX_DOF * MAX_DOF);
-    let (m0, ml) = (
-        N_SCALARS + 2 * MAX_DOF * MAX_DOF,
-        N_SCALARS + 2 * MAX_DOF * MAX_DOF + MAX_DOF,
-    );
-    for i in 0..n {
-        for j in 0..n {
-            c[mk + i * MAX_DOF + j] = model.mech.minv_k[i * n + j];
-            c[mc + i * MAX_DOF + j] = model.mech.minv_c[i * n + j];
-        }
-        c[m0 + i] = model.mech.minv_main[i];
-        c[ml + i] = model.mech.minv_weight[i];
-    }
-    Ok(c)
-}
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn the_kernel_source_reads_exactly_the_declared_constants_by_name() {
+    fn the_kernel_source_writes_no_physics_and_no_coefficient_of_its_own() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/python/idm_rs/gpu/idm_kernel.cu");
         let src = std::fs::read_to_string(path).unwrap();
-        for name in SCALARS {
-            assert!(src.contains(&format!("IDM_C_{name}]")), "the kernel never reads {name}");
-        }
-        // The name after each `IDM_C_` is the identifier that follows (read through `c[...]`
-        // or passed to a macro such as IDM_RARE).
-        fn ident(s: &str) -> &str {
-            s.split(|ch: char| !(ch.is_ascii_alphanumeric() || ch == '_'))
-                .next()
-                .unwrap_or("")
-        }
-        let used: Vec<&str> = src.split("IDM_C_").skip(1).map(ident).collect();
-        for u in used {
+        // the right-hand side is generated: the source names no friction, piezo or effect law
+        for physics in ["stribeck", "idm_fric", "HYST", "SIGMA", "exp(-", "IDM_C_"] {
             assert!(
-                SCALARS.contains(&u),
-                "the kernel reads IDM_C_{u}, which gpu/kernel.rs does not declare"
+                !src.contains(physics),
+                "the kernel source writes physics itself: {physics}"
             );
         }
-        assert!(
-            !src.contains("#define IDM_N_SCALARS"),
-            "the layout comes from kernel_header(), not the source"
-        );
+        assert!(src.contains("idm_rhs(") && !src.contains("IDM_HD double idm_rhs("));
         let h = kernel_header();
-        assert!(h.contains("#define IDM_C_OMEGA_LPS 18") && h.contains(&format!("#define IDM_N_SCALARS {N_SCALARS}")));
         assert!(
             h.contains("#define IDM_CRAWL_CHECK_STEPS 4096\n") && h.contains("#define IDM_MAX_ADAPTIVE_STEPS 1e8\n"),
             "{h}"
@@ -250,12 +104,14 @@ mod tests {
         }
     }
 
-    /// Every parameter the kernel claims reaches its constants: perturbed alone, it changes
-    /// them (on the DPS with hysteresis, where each one acts), and it is a declared Table 1
-    /// parameter; the waves' fields are the engine's.
+    /// Every Table 1 parameter reaches the kernel's constants: perturbed alone, it changes the
+    /// row of the DPS with hysteresis (where each one acts); the waves' fields and the metrics
+    /// are the engine's.
     #[test]
-    fn every_admitted_parameter_reaches_the_kernel_constants() {
+    fn every_parameter_reaches_the_kernel_constants() {
         use crate::batch::WaveFamily;
+        use crate::gpu::generate::Generated;
+        use crate::model::Model;
         use crate::physics::params::{Params, PARAM_NAMES};
         let config = |p: Params| {
             Model::new(
@@ -268,16 +124,16 @@ mod tests {
             .expect("the paper's device builds")
         };
         let base = Params::paper();
-        let c0 = kernel_constants(&config(base)).unwrap();
-        for name in PARAMS {
-            assert!(PARAM_NAMES.contains(&name), "{name} is not a Table 1 parameter");
+        let g = Generated::trace(&config(base)).unwrap();
+        let c0 = g.constants(&config(base)).unwrap();
+        for name in PARAM_NAMES {
             let mut p = base;
             let v = p.get(name).unwrap();
             p.set(name, if v == 0.0 { 0.5 } else { v * 1.1 }).unwrap();
             if name == "mu_s" || name == "mu_k" {
                 p.set(name, v * 0.95).unwrap();
             }
-            let c = kernel_constants(&config(p)).unwrap();
+            let c = g.constants(&config(p)).unwrap();
             assert!(c != c0, "{name} changes nothing the kernel reads");
         }
         for (kind, fields) in WAVES {

@@ -152,6 +152,18 @@ pub struct Model<T: Real = f64> {
     pub(crate) library: (bool, bool),
 }
 
+/// What a state component's error scale is (see [`Model::state_scales`]): out of the norm, the
+/// free stroke (positions, h, a creep or sensor lag), the stroke times the LPS frequency
+/// (velocities), the static friction (Fh), or the voltage amplitude (the amplifier lag).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScaleKind {
+    Excluded,
+    Stroke,
+    Velocity,
+    Force,
+    Voltage,
+}
+
 /// What every lane of one group must share: all that is not a number (the structure, the state
 /// layout, the mechanism, which parts of the physics are on, the external force's body and knot
 /// times). Models of one shape differ only in values, so one [`Model`] over lanes holds them.
@@ -391,29 +403,50 @@ impl<T: Real> Model<T> {
     /// and h by the free stroke d33 V_max, velocities by stroke x the LPS frequency, Fh by Fs;
     /// g and the accounting states are left out (inf).
     pub fn state_scales(&self, v_max: f64) -> Vec<f64> {
-        let p = &self.params;
+        let (stroke_per_v, omega, fs) = self.scale_parts();
+        let stroke = (stroke_per_v * v_max.abs()).max(1e-9);
+        self.state_scale_kinds()
+            .iter()
+            .map(|k| match k {
+                ScaleKind::Excluded => f64::INFINITY,
+                ScaleKind::Stroke => stroke,
+                ScaleKind::Velocity => stroke * omega,
+                ScaleKind::Force => fs,
+                ScaleKind::Voltage => v_max.abs().max(1.0),
+            })
+            .collect()
+    }
+
+    /// What each state component's scale in [`Model::state_scales`] is made of (the GPU kernel
+    /// combines them the same way, from its generated list).
+    pub fn state_scale_kinds(&self) -> Vec<ScaleKind> {
         let l = &self.layout;
-        let stroke = (p.d33 * v_max.abs()).max(1e-9);
-        let omega = (p.kp() * (1.0 / p.m1 + 1.0 / p.m2)).sqrt();
-        let fs = p.mu_s.max(p.mu_k) * p.normal_force;
-        let mut s = vec![f64::INFINITY; l.dim];
+        let mut s = vec![ScaleKind::Excluded; l.dim];
         for i in 0..l.dof {
-            s[i] = stroke;
-            s[l.dof + i] = stroke * omega;
+            s[i] = ScaleKind::Stroke;
+            s[l.dof + i] = ScaleKind::Velocity;
         }
         // g feeds nothing back (Ff uses Fh and dg/dt), so its error need not limit the step
-        s[l.g] = f64::INFINITY;
-        s[l.fh] = fs;
-        s[l.h] = stroke;
+        s[l.g] = ScaleKind::Excluded;
+        s[l.fh] = ScaleKind::Force;
+        s[l.h] = ScaleKind::Stroke;
         for (slot, lag) in l.lags.iter().zip(LAGS) {
             if let Some(i) = *slot {
                 s[i] = match lag.scale {
-                    LagScale::Voltage => v_max.abs().max(1.0),
-                    LagScale::Stroke => stroke,
+                    LagScale::Voltage => ScaleKind::Voltage,
+                    LagScale::Stroke => ScaleKind::Stroke,
                 };
             }
         }
         s
+    }
+
+    /// The numbers the scales are made of: the free stroke per volt d33 [m/V], the LPS
+    /// frequency sqrt(kp (1/m1 + 1/m2)) [rad/s] and the static friction Fs [N].
+    pub fn scale_parts(&self) -> (f64, f64, f64) {
+        let p = &self.params;
+        let omega = (p.kp() * (1.0 / p.m1 + 1.0 / p.m2)).sqrt();
+        (p.d33, omega, p.mu_s.max(p.mu_k) * p.normal_force)
     }
 
     /// Friction force Ff [N] on the main body in state `y`.

@@ -6,4 +6,5 @@ pub mod fast_exp;
 pub mod lane_real;
 pub mod real;
 pub mod scalar;
+pub mod symbolic;
 pub mod tangent;
