@@ -14,7 +14,7 @@ use crate::gpu::kernel::MAX_DOF;
 use crate::model::{Model, ScaleKind, Shape};
 use crate::numbers::lane_real::Lanewise;
 use crate::numbers::real::Real;
-use crate::numbers::symbolic::{record, Node, Sym};
+use crate::numbers::symbolic::{record, Node, Sym, Tape};
 use crate::physics::mechanics::Actuator;
 
 /// The numbers after the traced constants, which the integrators (not the right-hand side) read:
@@ -57,6 +57,20 @@ pub fn refusal(model: &Model) -> Option<String> {
     None
 }
 
+/// `model`'s right-hand side on a tape: (dy, Ff) over the variables y (0..dim), t (dim), the
+/// voltage (dim + 1) and its rate (dim + 2).
+fn record_rhs(model: &Model) -> ((Vec<Sym>, Sym), Tape) {
+    let dim = model.layout.dim;
+    record(|| {
+        let m = <Model<Sym> as Lanewise<Model>>::splat(model);
+        let y: Vec<Sym> = (0..dim as u32).map(Sym::var).collect();
+        let (t, volt, dvolt) = (Sym::var(dim as u32), Sym::var(dim as u32 + 1), Sym::var(dim as u32 + 2));
+        let mut dy = vec![Sym::zero(); dim];
+        let (ff, _) = m.rhs_impl::<0, true>(t, volt, dvolt, &y, &mut dy);
+        (dy, ff)
+    })
+}
+
 /// The numbers a symbolic model built from `model` reads, in order.
 fn model_numbers(model: &Model) -> Vec<f64> {
     record(|| {
@@ -73,14 +87,7 @@ impl Generated {
             return Err(why);
         }
         let dim = model.layout.dim;
-        let ((dy, ff), tape) = record(|| {
-            let m = <Model<Sym> as Lanewise<Model>>::splat(model);
-            let y: Vec<Sym> = (0..dim as u32).map(Sym::var).collect();
-            let (t, volt, dvolt) = (Sym::var(dim as u32), Sym::var(dim as u32 + 1), Sym::var(dim as u32 + 2));
-            let mut dy = vec![Sym::zero(); dim];
-            let (ff, _) = m.rhs_impl::<0, true>(t, volt, dvolt, &y, &mut dy);
-            (dy, ff)
-        });
+        let ((dy, ff), tape) = record_rhs(model);
         let (rhs, used) = emit(&tape.nodes, &dy, ff, dim);
         Ok(Generated {
             layout: header(model, used.len()),
@@ -397,6 +404,67 @@ mod tests {
             assert!(g.constants(&m).is_ok(), "{name}");
             if m.shape() != plain.shape {
                 assert!(plain.constants(&m).unwrap_err().contains("split the sweep"), "{name}");
+            }
+        }
+    }
+
+    /// The tape, evaluated in f64, is the engine's right-hand side to the bit, for every effect
+    /// and library term on the DPS with hysteresis, at states on both sides of every branch
+    /// (sliding both ways, stuck, |Fh| near its bound) and for a point with other values than the
+    /// traced one (its branches taken the other way: n != 1, delta != 2, no Stribeck peak).
+    #[test]
+    fn the_trace_is_the_engines_right_hand_side_to_the_bit() {
+        use crate::numbers::symbolic::evaluate;
+        let mut cases: Vec<Effects> = vec![Effects::default()];
+        for name in EFFECT_NAMES {
+            let mut e = Effects::default();
+            let v = if name.starts_with("tau") {
+                1e-4
+            } else if name.starts_with("lib") {
+                0.3
+            } else {
+                0.05
+            };
+            e.set(name, v).unwrap();
+            if name == "kappa" {
+                e.set("tau_creep", 1e-3).unwrap();
+            }
+            cases.push(e);
+        }
+        let mut other = Params::paper();
+        (other.fric_n, other.stribeck_exponent, other.mu_s) = (1.7, 1.3, other.mu_k);
+        for e in cases {
+            for (p, s) in [(Params::paper(), Structure::Dps(3)), (other, Structure::Lps)] {
+                let traced = Model::new(Params::paper(), e, s, true, false).unwrap();
+                let m = Model::new(p, e, s, true, false).unwrap();
+                let ((dy, ff), _) = record_rhs(&traced);
+                let tape = record_rhs(&m).1; // the same nodes, this point's constants
+                let dim = m.layout.dim;
+                for (k, (v1, fh)) in [
+                    (0.02, 0.3),
+                    (-0.015, -0.8),
+                    (0.0, 0.1),
+                    (1e-7, 0.999 * m.presliding_bound()),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    let mut y: Vec<f64> = (0..dim).map(|i| 1e-7 * (i as f64 + 1.0) * (k as f64 - 1.5)).collect();
+                    (y[m.layout.dof], y[m.layout.fh]) = (v1, fh);
+                    let (t, volt, dvolt) = (1.3e-3, 73.0, -2.1e5 * (k as f64 - 1.0));
+                    let mut want = vec![0.0; dim];
+                    let (ff_want, _) = m.rhs_impl::<0, true>(t, volt, dvolt, &y, &mut want);
+                    let vars: Vec<f64> = y.iter().copied().chain([t, volt, dvolt]).collect();
+                    let v = evaluate(&tape.nodes, &tape.constants, &vars);
+                    for i in 0..dim {
+                        assert_eq!(
+                            v[dy[i].0 as usize].to_bits(),
+                            want[i].to_bits(),
+                            "{e:?} dy[{i}] state {k}"
+                        );
+                    }
+                    assert_eq!(v[ff.0 as usize].to_bits(), ff_want.to_bits(), "Ff, state {k}");
+                }
             }
         }
     }

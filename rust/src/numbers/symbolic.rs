@@ -387,6 +387,47 @@ impl Lanewise<bool> for SymMask {
     }
 }
 
+/// The tape's value of every node for the inputs `constants` and the variables `vars`, in f64
+/// as the engine computes (truth values as 1 or 0): the reference the generated C is held to.
+pub fn evaluate(nodes: &[Node], constants: &[f64], vars: &[f64]) -> Vec<f64> {
+    let mut v = vec![0.0; nodes.len()];
+    let truth = |b: bool| if b { 1.0 } else { 0.0 };
+    for (i, n) in nodes.iter().enumerate() {
+        let at = |k: u32| v[k as usize];
+        v[i] = match *n {
+            Node::Constant(k) => constants[k as usize],
+            Node::Var(k) => vars[k as usize],
+            Node::Literal(x) => x,
+            Node::Truth(b) => truth(b),
+            Node::Neg(a) => -at(a),
+            Node::Add(a, b) => at(a) + at(b),
+            Node::Sub(a, b) => at(a) - at(b),
+            Node::Mul(a, b) => at(a) * at(b),
+            Node::Div(a, b) => at(a) / at(b),
+            Node::Abs(a) => at(a).abs(),
+            Node::Exp(a) => at(a).exp(),
+            Node::Ln(a) => at(a).ln(),
+            Node::Sin(a) => at(a).sin(),
+            Node::Cos(a) => at(a).cos(),
+            Node::Tanh(a) => at(a).tanh(),
+            Node::Pow(a, b) => at(a).powf(at(b)),
+            Node::Sign0(a) => <f64 as Real>::sign0(&at(a)),
+            Node::Select(m, a, b) => {
+                if at(m) != 0.0 {
+                    at(a)
+                } else {
+                    at(b)
+                }
+            }
+            Node::Less(a, b) => truth(at(a) < at(b)),
+            Node::Greater(a, b) => truth(at(a) > at(b)),
+            Node::Equal(a, b) => truth(at(a) == at(b)),
+            Node::Or(a, b) => truth(at(a) != 0.0 || at(b) != 0.0),
+        };
+    }
+    v
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
