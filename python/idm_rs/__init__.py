@@ -19,6 +19,7 @@ from .interrupted import partial_result
 from .params import Params
 from .recording import Recording, RecordingError, load_case
 from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate
+from .solver import Solver
 from .state import State
 from .sweep import sweep
 from .sweep_plan import METRICS
@@ -38,6 +39,7 @@ __all__ = [
     "Sampled",
     "Sawtooth",
     "SimulationResult",
+    "Solver",
     "State",
     "Triangle",
     "Waveform",

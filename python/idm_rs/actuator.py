@@ -37,6 +37,7 @@ from .effects import Effects
 from .interrupted import interrupted, partial_result
 from .methods import MethodName
 from .params import Params
+from .solver import Solver, resolve_solver
 from .units import si
 from .waveforms import STARTUP_CYCLES, Sawtooth
 
@@ -255,7 +256,7 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
                  step_voltages: Optional[Floats] = None, frequency: float = 100.0,
                  voltage: float = 80.0, rise: float = 0.5e-3, cycles: int = 6, skip_cycles: int = STARTUP_CYCLES,
                  loads: int = 9, method: MethodName = "auto", threads: Optional[int] = None,
-                 progress: bool = True) -> "xarray.Dataset":
+                 progress: bool = True, solver: Optional[Solver] = None) -> "xarray.Dataset":
     """The standard characteristics of a design as one Dataset.
 
     * ``mean_velocity(voltage, frequency)`` and the other steady-state metrics over the
@@ -299,6 +300,9 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
         Threads (default: every core).
     progress : bool
         Progress bars, one per curve.
+    solver : Solver, optional
+        The method and its settings for every run (:class:`idm_rs.Solver`); refused where
+        ``method`` says otherwise.
 
     Returns
     -------
@@ -328,8 +332,12 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
     step_voltages = np.linspace(20.0, 120.0, 11) if step_voltages is None else step_voltages
     train = Sawtooth(amplitude=voltage, frequency=frequency, cycles=cycles, rise=rise)
     _check_train(train, skip_cycles)
+    unset = dict.fromkeys(("dt", "rtol", "atol", "first_step", "retries"))
+    how = resolve_solver(solver, dict(method=method, **unset), dict(method="auto", **unset), "characterize")
+    method = how.pop("method")
+    extra = {k: v for k, v in how.items() if v is not None}  # what a Solver set beside the method
     common: dict[str, Any] = dict(model=model, n_elements=n_elements, effects=effects, method=method,
-                                  threads=threads, skip_cycles=skip_cycles)
+                                  threads=threads, skip_cycles=skip_cycles, **extra)
     done: dict[str, Any] = {}
     try:
         vmap = done["vmap"] = _kept(sweep, params, train, {"voltage": np.asarray(voltages, float),
@@ -338,7 +346,7 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
         steps = done["steps"] = _kept(sweep, params, train, {"voltage": np.asarray(step_voltages, float)},
                                       done, "steps", **common, progress=progress and "characterize: step curve")
         stall = stall_force(params, train, model=model, n_elements=n_elements, effects=effects,
-                            skip_cycles=skip_cycles, method=method, loads=loads, threads=threads)
+                            skip_cycles=skip_cycles, method=method, loads=loads, threads=threads, **extra)
         load_grid, load_v = stall.loads, stall.velocities
         if math.isfinite(stall.force) and stall.force > 0:
             # the curve a designer reads: from no load to past the stall, not the coarse bracket
@@ -346,7 +354,7 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
             load_grid = np.linspace(0.0, 1.5 * stall.force, max(int(loads), 5))
             ps = [replace(params, load_force=params.load_force - stall.direction * f) for f in load_grid]
             out = _run_trains(ps, [train] * len(ps), model=model, n_elements=n_elements, effects=effects,
-                              skip_cycles=skip_cycles, method=method, threads=threads)
+                              skip_cycles=skip_cycles, method=method, threads=threads, **extra)
             load_v = np.array([_steady(out, i).mean_velocity for i in range(len(ps))])
     except KeyboardInterrupt:
         partial = _interrupted(done, step_voltages, frequency, params, model, n_elements, rise, cycles, skip_cycles,

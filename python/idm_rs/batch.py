@@ -27,6 +27,7 @@ from . import engine
 from .declarations import StructureName
 from .effects import Effects
 from .params import Params
+from .solver import Solver, resolve_solver
 from .waveforms import STARTUP_CYCLES, Sampled, Waveform
 
 
@@ -176,9 +177,16 @@ class Tables:
 def start(tables: Tables, structure: Structure, *, t_end: float, method: str = "rk4", dt: float = 1e-8,
           rtol: float = 1e-7, atol: float = 1e-7, first_step: Optional[float] = None, retries: int = 2,
           threads: Optional[int] = None, record_every: int = 0, final_states: bool = False,
-          skip_cycles: int = STARTUP_CYCLES, sensitivities: Optional[Sequence[str]] = None) -> Any:
+          skip_cycles: int = STARTUP_CYCLES, sensitivities: Optional[Sequence[str]] = None,
+          solver: Optional[Solver] = None) -> Any:
     """Start the batch on a background thread; returns an ``engine.BatchRun`` (``progress()``,
-    ``wait(timeout)``, ``cancel()``, ``result()``). Settings as in :func:`run`."""
+    ``wait(timeout)``, ``cancel()``, ``result()``). Settings as in :func:`run`; ``solver`` (an
+    :class:`idm_rs.Solver`) gives the method's settings as one object."""
+    how = resolve_solver(solver, dict(method=method, dt=dt, rtol=rtol, atol=atol, first_step=first_step,
+                                      retries=retries),
+                         dict(method="rk4", dt=1e-8, rtol=1e-7, atol=1e-7, first_step=None, retries=2), "batch")
+    method, dt, rtol, atol, first_step, retries = (how["method"], how["dt"], how["rtol"], how["atol"],
+                                                   how["first_step"], how["retries"])
     config = structure.config(method=method, dt=float(dt), rtol=float(rtol), atol=float(atol),
                               first_step=None if first_step is None else float(first_step), retries=int(retries),
                               threads=int(threads or os.cpu_count() or 1), record_every=int(record_every),
@@ -208,7 +216,8 @@ def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: 
     ``sensitivities`` (names, as for :func:`idm_rs.simulate`; needs ``record_every``): then
     ``sensitivities`` is an array (points x names x samples) of d trace / d name (NaN where a
     point did not finish or its derivatives could not be taken, with the reason in ``reasons``), and
-    ``sensitivity_names``."""
+    ``sensitivity_names``; ``solver`` (an :class:`idm_rs.Solver`) for the method's settings as
+    one object."""
     tables = points if isinstance(points, Tables) else Tables.from_points(points)
     handle = start(tables, structure, t_end=t_end, **how)
     try:

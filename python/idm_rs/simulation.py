@@ -18,6 +18,7 @@ from .external_force import ExternalForce
 from .interrupted import interrupted, partial_result
 from .methods import MethodName
 from .params import PARAM_INFO, Params
+from .solver import Solver, resolve_solver
 from .state import State
 from .waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
 
@@ -431,6 +432,7 @@ def simulate(
     sensitivities: Optional[Sequence[str]] = None,
     external_force: Optional[ExternalForce] = None,
     progress: bool = False,
+    solver: Optional[Solver] = None,
 ) -> SimulationResult:
     """Simulate the IDM over [``t_start``, ``t_end``] s, from rest or from ``initial_state``.
 
@@ -525,6 +527,9 @@ def simulate(
         A progress bar over the steps, for a long RK4 run: the run is cut into about 100 pieces
         on its save grid, each continued from the last one's final state (bit for bit the same
         result). Ignored by the adaptive methods and with ``energy`` or ``sensitivities``.
+    solver : Solver, optional
+        ``method``, ``dt``, ``rtol``, ``atol`` and ``first_step`` as one object
+        (:class:`idm_rs.Solver`); refused where a flat keyword says otherwise.
 
     Returns
     -------
@@ -550,6 +555,9 @@ def simulate(
     1.68
     """
     _check_types(params, waveform, external_force)
+    how = resolve_solver(solver, dict(method=method, dt=dt, rtol=rtol, atol=atol, first_step=first_step),
+                         dict(method="rk4", dt=None, rtol=None, atol=None, first_step=None), "simulate")
+    method, dt, rtol, atol, first_step = how["method"], how["dt"], how["rtol"], how["atol"], how["first_step"]
     t_end = options.time("t_end", t_end)
     effects = effects or Effects()
     n_elements = options.elements(model, n_elements)

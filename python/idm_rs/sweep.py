@@ -25,6 +25,7 @@ from .effects import Effects
 from .interrupted import interrupted
 from .methods import MethodName
 from .params import PARAM_INFO, Params
+from .solver import Solver, resolve_solver
 from .sweep_backends import backend_for
 from .sweep_plan import (
     DERIVED_AXES,
@@ -133,6 +134,7 @@ def sweep(
     block_size: int = 65_536,
     backend: Literal["cpu", "cuda", "kernel-cpu"] = "cpu",
     out: Optional[Union[str, "os.PathLike[str]"]] = None,
+    solver: Optional[Solver] = None,
 ) -> "xarray.Dataset":
     """Sweep the outer product of ``grid`` and return the metrics as an ``xarray.Dataset``.
 
@@ -238,6 +240,9 @@ def sweep(
         Where the points run.
     out : path, optional
         A Zarr store (``….zarr``) to write the results into slab by slab.
+    solver : Solver, optional
+        ``method``, ``dt``, ``rtol``, ``atol``, ``first_step`` and ``retries`` as one object
+        (:class:`idm_rs.Solver`); refused where a flat keyword says otherwise.
 
     Returns
     -------
@@ -265,6 +270,11 @@ def sweep(
     """
     if not isinstance(params, Params):
         raise TypeError(f"params must be idm_rs.Params, got {type(params).__name__}")
+    how = resolve_solver(solver, dict(method=method, dt=dt, rtol=rtol, atol=atol, first_step=first_step,
+                                      retries=retries),
+                         dict(method="rk4", dt=None, rtol=None, atol=None, first_step=None, retries=2), "sweep")
+    method, dt, rtol, atol, first_step, retries = (how["method"], how["dt"], how["rtol"], how["atol"],
+                                                   how["first_step"], how["retries"])
     kernel = backend in ("cuda", "kernel-cpu")
     metrics, not_computed = _metrics_kept(metrics, backend)
     structure(model)  # an IDM structure, else a ValueError naming the choices

@@ -22,6 +22,7 @@ import numpy as np
 from ..engine import DivergenceError
 from ..interrupted import interrupted
 from ..recording import Recording, load_case
+from ..solver import Solver, resolve_solver
 from .beyond_catalogue import discovery_start, settle_discovery
 from .candidates import (
     calibrate_null,
@@ -107,7 +108,8 @@ class _State:
 
 
 def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: float = FIT_DT,
-             threads: Optional[int] = None, refit_top: int = REFIT_TOP, discover: bool = True) -> Diagnosis:
+             threads: Optional[int] = None, refit_top: int = REFIT_TOP, discover: bool = True,
+             solver: Optional[Solver] = None) -> Diagnosis:
     """Diagnose a recorded case (a directory in the `idm-recording/1` format, or a Recording).
     With `discover` (the default), a case no catalogue effect explains goes on to discovery
     (:mod:`.discovery`): the missing force inferred, its form found in a library, modelled and
@@ -130,6 +132,9 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
         Candidates refitted over every experiment after the screening.
     discover : bool
         Go beyond the catalogue when no effect of it explains the residual.
+    solver : Solver, optional
+        The fits' integration as an :class:`idm_rs.Solver`: RK4 (their exact derivatives are
+        RK4's) with its ``dt``; another method is refused.
 
     Returns
     -------
@@ -154,6 +159,11 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     >>> print(idm_rs.text_report(d))                 # doctest: +SKIP
     """
     t_start = time.perf_counter()
+    how = resolve_solver(solver, dict(method="rk4", dt=dt), dict(method="rk4", dt=FIT_DT), "diagnose")
+    if how["method"] != "rk4":
+        raise ValueError(f"diagnose fits with RK4 (its derivatives are exact for RK4's steps); got "
+                         f"solver.method = {how['method']!r}: use Solver('rk4', dt=...)")
+    dt = how["dt"]
     rec = case if isinstance(case, Recording) else load_case(case)
     noise = estimate_noise(rec)
     sim = CaseSimulator(rec, dt=dt, threads=threads)
