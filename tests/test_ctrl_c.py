@@ -161,3 +161,26 @@ def test_a_ctrl_c_as_the_run_ends_keeps_the_whole_run(monkeypatch):
         idm_rs.simulate(idm_rs.Params(), idm_rs.Triangle(), **kw)
     kept = idm_rs.partial_result(stop.value)
     assert kept.complete and kept.final_position == whole.final_position
+
+
+def test_a_ctrl_c_as_a_piece_of_a_long_run_ends_keeps_the_pieces_as_incomplete(monkeypatch):
+    """A run with a progress bar goes in pieces; a Ctrl-C as the second piece ends keeps that
+    piece whole, but the run is not: the kept result ends there and says it is incomplete (before,
+    the CLI printed it as the final position with exit code 0)."""
+    import idm_rs
+    from idm_rs import simulation
+
+    real, calls = simulation.engine.simulate, []
+
+    def second_piece_interrupted(*a):
+        calls.append(1)
+        out = real(*a)
+        return {**out, "interrupted": True} if len(calls) == 2 else out
+
+    monkeypatch.setattr(simulation.engine, "simulate", second_piece_interrupted)
+    with pytest.raises(KeyboardInterrupt) as stop:
+        idm_rs.simulate(idm_rs.Params(), idm_rs.Triangle(), t_end=1e-3, dt=1e-8, model="lps", save_every=100,
+                        progress=True)
+    kept = idm_rs.partial_result(stop.value)
+    assert len(calls) == 2 and not kept.complete
+    assert 0 < kept.t[-1] < 1e-3

@@ -300,7 +300,11 @@ def _in_pieces(common: dict[str, Any], t_start: Optional[float], t_end: float, d
                 # carries no trajectory: what finished is then the pieces before it (or nothing)
                 last = partial_result(stop)
                 done = pieces + ([last] if last is not None else [])
-                raise interrupted(str(stop), partial=_joined(done) if done else None) from None
+                kept = _joined(done) if done else None
+                if kept is not None and end != ends[-1]:
+                    # each piece may be whole (a Ctrl-C as one ended), the run is not
+                    kept = dataclasses.replace(kept, complete=False)
+                raise interrupted(str(stop), partial=kept) from None
             pieces.append(r)
             bar.update(int(round((end - start) / dt)))
             state, start = r.final_state, end
