@@ -1,0 +1,346 @@
+"""Issue 54's prototype: steps and right-hand-side work per point of candidate integrators at the
+sweep's promise (x1 at t_end within 1 nm of RK4 at dt = 1e-8 s), before anything is built.
+
+The right-hand side is the engine's own: the C function the GPU kernel compiles, generated from
+the Rust model (`engine.kernel_program`), built here with the C compiler and called through
+ctypes, so every candidate integrates the same physics as the engine. Each run goes segment by
+segment of the piecewise-linear input (landing on every breakpoint, as the engine's adaptive
+methods do), with the engine's error scales (atol times each state's natural scale, g left out).
+
+Candidates: scipy's RK45 (Dormand-Prince 5(4): today's explicit method, the baseline), DOP853
+(a higher-order explicit pair), Radau (implicit, order 5), BDF and LSODA; and exprb32, an
+exponential Rosenbrock method of order 3(2) (Hochbruck, Ostermann & Schweitzer 2009) written
+here: the step's Jacobian (finite differences of the C right-hand side) and phi functions of the
+small dense matrix (scipy's expm of the augmented matrix), exact for the linearised ringing.
+For each, the loosest tolerance in a ladder that keeps the point within 1 nm, and there: the
+accepted steps, the right-hand-side evaluations (Jacobians by finite differences included; the
+count an analytic Jacobian would need is reported beside), the Jacobians and the matrix
+exponentials.
+
+    python benches/proto_fewer_steps.py [--models lps] [--json PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+from scipy.integrate import solve_ivp
+from scipy.linalg import expm
+
+import idm_rs
+from idm_rs import engine
+from idm_rs.batch import Structure, param_row
+from idm_rs.gpu.backend import program
+
+#: the points: the paper's device and the five corners of bench_auto_corners.py at their extremes
+POINTS = {
+    "paper (m2/m1 1, 80 V)": dict(mass_ratio=None, voltage=80.0),
+    "light weight, high voltage": dict(mass_ratio=0.25, voltage=120.0),
+    "heavy weight, low voltage": dict(mass_ratio=2.0, voltage=40.0),
+    "light weight, low voltage": dict(mass_ratio=0.25, voltage=40.0),
+    "heavy weight, high voltage": dict(mass_ratio=2.0, voltage=120.0),
+    "stiff contact (fric_alpha 2e11)": dict(mass_ratio=None, voltage=80.0, fric_alpha=2e11),
+}
+LADDER = (1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6, 3e-7, 1e-7, 3e-8, 1e-8, 3e-9, 1e-9)
+T_END = 10e-3
+NM = 1e-9
+
+
+class Rhs:
+    """The engine's right-hand side for one point, compiled from its generated C, with counters."""
+
+    def __init__(self, params: idm_rs.Params, model: str, n_elements: int) -> None:
+        cfg = Structure(model, n_elements, True).config(method="rk4", dt=1e-8)
+        spec, consts = program(cfg, np.asarray([param_row(params)], dtype=float),
+                               np.zeros((1, len(engine.effect_names()))))
+        src = ("#include <math.h>\n#define IDM_HD\n#define IDM_CK(c, k) ((c)[k])\n#define IDM_INF INFINITY\n"
+               "#define IDM_NAN NAN\n#define IDM_SIN(x) sin(x)\n#define IDM_COS(x) cos(x)\n" + spec.layout + spec.rhs)
+        self.dll = _compiled(src)
+        self.dll.idm_rhs.restype = ctypes.c_double
+        d, p = ctypes.c_double, np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")
+        self.dll.idm_rhs.argtypes = [p, d, d, d, p, p]
+        self.c = np.ascontiguousarray(consts[0])
+        self.dim = int(spec.layout.split("#define IDM_DIM ")[1].split()[0])
+        kinds = [int(k) for k in spec.layout.split("IDM_SCALE_KINDS {")[1].split("}")[0].split(",")]
+        n = len(self.c)
+        stroke_per_v, omega, fs = self.c[n - 3], self.c[n - 2], self.c[n - 1]
+        self.kinds, self.parts = kinds, (stroke_per_v, omega, fs)
+        self.calls = 0
+
+    def scales(self, v_max: float) -> np.ndarray:
+        """Model::state_scales: the error norm's scale of each component (g: out, as inf)."""
+        stroke_per_v, omega, fs = self.parts
+        stroke = max(stroke_per_v * abs(v_max), 1e-9)
+        by_kind = {0: np.inf, 1: stroke, 2: stroke * omega, 3: fs, 4: max(abs(v_max), 1.0)}
+        return np.array([by_kind[k] for k in self.kinds])
+
+    def __call__(self, t: float, volt: float, dvolt: float, y: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        dy = np.empty(self.dim)
+        self.dll.idm_rhs(self.c, t, volt, dvolt, np.ascontiguousarray(y, dtype=float), dy)
+        return dy
+
+
+def _compiled(src: str) -> ctypes.CDLL:
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        raise SystemExit("no C compiler")
+    lib = Path(tempfile.gettempdir()) / f"idm_rhs_{hashlib.sha256(src.encode()).hexdigest()[:16]}.so"
+    if not lib.exists():
+        subprocess.run([cc, "-O2", "-shared", "-fPIC", "-x", "c", "-", "-o", str(lib), "-lm"], input=src, text=True,
+                       check=True)
+    return ctypes.CDLL(str(lib))
+
+
+def segments(w: idm_rs.Triangle, t_end: float) -> list[tuple[float, float, float, float]]:
+    """(t_a, t_b, V at t_a, slope [V/s]) of each piece of the input up to t_end."""
+    t, v = (np.asarray(a, dtype=float) for a in w.breakpoints())
+    out = []
+    for k in range(len(t) - 1):
+        if t[k] >= t_end:
+            break
+        out.append((t[k], min(t[k + 1], t_end), v[k], (v[k + 1] - v[k]) / (t[k + 1] - t[k])))
+    if t[-1] < t_end:
+        out.append((t[-1], t_end, v[-1], 0.0))
+    return out
+
+
+def run_scipy(rhs: Rhs, segs: list, method: str, tol: float, scales: np.ndarray) -> dict[str, Any]:
+    y = np.zeros(rhs.dim)
+    atol = tol * np.where(np.isfinite(scales), scales, 1e30)
+    steps = njev = 0
+    rhs.calls = 0
+    for ta, tb, va, s in segs:
+        r = solve_ivp(lambda t, yy: rhs(t, va + s * (t - ta), s, yy), (ta, tb), y, method=method, rtol=tol,
+                      atol=atol)
+        if r.status != 0:
+            return dict(ok=False)
+        y = r.y[:, -1]
+        steps += r.t.size - 1
+        njev += int(r.njev)
+    return dict(ok=True, x1=float(y[0]), steps=steps, rhs=rhs.calls, jacobians=njev, expm=0,
+                rhs_analytic_jacobian=rhs.calls - njev * rhs.dim + njev * 2)
+
+
+def run_exprb32(rhs: Rhs, segs: list, tol: float, scales: np.ndarray) -> dict[str, Any]:
+    """exprb32 with its embedded error estimate (the order-3 correction 2 h phi3(hJ) D2), on the
+    autonomous system (y, t); the Jacobian by forward differences of the C right-hand side."""
+    m = rhs.dim + 1
+    z = np.zeros(m)
+    sc = np.append(np.where(np.isfinite(scales), scales, np.inf), np.inf)
+    counted = np.isfinite(sc)
+    steps = jacs = exps = 0
+    rhs.calls = 0
+    h = 1e-8
+    for ta, tb, va, s in segs:
+        f = lambda zz: np.append(rhs(zz[-1], va + s * (zz[-1] - ta), s, zz[:-1]), 1.0)  # noqa: E731
+        z[-1] = ta
+        while z[-1] < tb * (1 - 1e-15):
+            h = min(h, tb - z[-1])
+            fz = f(z)
+            jac = np.empty((m, m))
+            for j in range(m):
+                dz = 1e-7 * max(abs(z[j]), sc[j] if np.isfinite(sc[j]) else 1e-6)
+                zp = z.copy()
+                zp[j] += dz
+                jac[:, j] = (f(zp) - fz) / dz
+            jacs += 1
+            while True:
+                big = np.zeros((m + 3, m + 3))
+                big[:m, :m] = h * jac
+                big[m, m + 1] = big[m + 1, m + 2] = 1.0
+                big[:m, m] = fz
+                u2 = z + h * expm(big)[:m, m]
+                d2 = f(u2) - fz - jac @ (u2 - z)
+                big[:m, m] = d2
+                corr = 2.0 * h * expm(big)[:m, m + 2]
+                exps += 2
+                z1 = u2 + corr
+                tolv = tol * sc[counted] + tol * np.maximum(np.abs(z[counted]), np.abs(z1[counted]))
+                err = float(np.sqrt(np.mean((corr[counted] / tolv) ** 2)))
+                if err <= 1.0 and np.all(np.isfinite(z1)):
+                    z = z1
+                    steps += 1
+                    h *= min(5.0, 0.9 * err ** (-1 / 3)) if err > 0 else 5.0
+                    break
+                h *= max(0.1, 0.9 * err ** (-1 / 3)) if np.isfinite(err) else 0.1
+                if h < 1e-15:
+                    return dict(ok=False)
+        z[-1] = tb
+    return dict(ok=True, x1=float(z[0]), steps=steps, rhs=rhs.calls, jacobians=jacs, expm=exps,
+                rhs_analytic_jacobian=rhs.calls - jacs * m + jacs * 2)
+
+
+def unit_costs(model: str = "lps") -> dict[str, float]:
+    """What one right-hand side and one dense matrix product of the phi functions' size cost in C
+    on this machine [ns] (-O2, one core): the exchange rate between the candidates' counts. An
+    expm by Pade 13 with scaling and squaring costs about 6 products, a solve (~3 products) and
+    one product per squaring: 13 products is taken for it (|hJ| up to 2^4 times Pade's range)."""
+    n = 4 if model == "dps" else 1
+    cfg = Structure(model, n, True).config(method="rk4", dt=1e-8)
+    spec, consts = program(cfg, np.asarray([param_row(idm_rs.Params())], dtype=float),
+                           np.zeros((1, len(engine.effect_names()))))
+    dim = int(spec.layout.split("#define IDM_DIM ")[1].split()[0])
+    m = dim + 1 + 3
+    src = ("#include <math.h>\n#include <time.h>\n#define IDM_HD static\n#define IDM_CK(c, k) ((c)[k])\n"
+           "#define IDM_INF INFINITY\n#define IDM_NAN NAN\n#define IDM_SIN(x) sin(x)\n#define IDM_COS(x) cos(x)\n"
+           + spec.layout + spec.rhs + f"""
+static double now(void) {{ struct timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }}
+double rhs_ns(const double *c, long reps) {{
+    double y[IDM_DIM] = {{0}}, dy[IDM_DIM], acc = 0.0;
+    y[IDM_N] = 1e-3; y[IDM_IFH] = 0.1;
+    double t0 = now();
+    for (long r = 0; r < reps; r++) {{
+        double u = (double)(r & 1023) / 1024.0;  /* every input moves: nothing can leave the loop */
+        for (int i = 0; i < IDM_DIM; i++) y[i] = 1e-7 * u * (double)(i + 1);
+        y[IDM_N] = 1e-3 * (u - 0.5); y[IDM_IFH] = 0.2 * (u - 0.3);
+        acc += idm_rhs(c, 1e-4 * u, 50.0 + u, 1e5, y, dy);
+        for (int i = 0; i < IDM_DIM; i++) acc += dy[i];
+    }}
+    double t1 = now();
+    return acc == 12345.0 ? -1.0 : 1e9 * (t1 - t0) / (double)reps;
+}}
+double matmul_ns(long reps) {{
+    enum {{ M = {m} }};
+    double a[M][M], b[M][M], o[M][M];
+    for (int i = 0; i < M; i++) for (int j = 0; j < M; j++) {{ a[i][j] = 1e-3 * (i - j); b[i][j] = 1e-3 * (i + j); }}
+    double t0 = now();
+    for (long r = 0; r < reps; r++) {{
+        for (int i = 0; i < M; i++) for (int j = 0; j < M; j++) {{ double s = 0.0; for (int k = 0; k < M; k++) s += a[i][k] * b[k][j]; o[i][j] = s; }}
+        a[r % M][0] = o[0][r % M];
+    }}
+    double t1 = now();
+    return o[1][1] == 12345.0 ? -1.0 : 1e9 * (t1 - t0) / (double)reps;
+}}
+""")
+    dll = _compiled(src)
+    dll.rhs_ns.restype = dll.matmul_ns.restype = ctypes.c_double
+    dll.rhs_ns.argtypes = [np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS"), ctypes.c_long]
+    dll.matmul_ns.argtypes = [ctypes.c_long]
+    rhs = min(dll.rhs_ns(np.ascontiguousarray(consts[0]), 2_000_000) for _ in range(3))
+    mm = min(dll.matmul_ns(200_000) for _ in range(3))
+    return dict(model=model, rhs_ns=rhs, matmul_ns=mm, matrix_size=m, expm_ns=13 * mm, expm_in_rhs=13 * mm / rhs)
+
+
+def engine_work(name: str, point: dict[str, Any], model: str = "lps") -> list[dict[str, Any]]:
+    """The engine's own cost of the point, single-threaded, in right-hand-side equivalents: its
+    wall time over the time of one RK4 evaluation (an RK4 run at 1e-8 s, 4 per step), for
+    `auto` (which does not report how many of its steps were Rodas4's), dopri5 at auto's
+    tolerance and rodas4 at 1e-5."""
+    p = idm_rs.Params()
+    if point.get("mass_ratio") is not None:
+        p = p.replace(m2=point["mass_ratio"] * p.m1)
+    if "fric_alpha" in point:
+        p = p.replace(fric_alpha=point["fric_alpha"])
+    w = idm_rs.Triangle(point["voltage"], 0.5e-3, 9.5e-3)
+    n = 4 if model == "dps" else 1
+
+    def best(**kw: Any) -> tuple[float, Any]:
+        runs = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            r = idm_rs.simulate(p, w, T_END, model=model, n_elements=n, save_every=10**9, **kw)
+            runs.append((time.perf_counter() - t0, r))
+        return min(runs, key=lambda x: x[0])
+
+    dt = 1e-8
+    while True:
+        try:
+            wall_rk4, ref = best(dt=dt)
+            break
+        except idm_rs.DivergenceError:
+            dt /= 2
+    per_rhs = wall_rk4 / (4 * round(T_END / dt))
+    rows = []
+    for label, kw in (("engine auto", dict(method="auto")), ("engine dopri5 3e-7", dict(method="dopri5", rtol=3e-7,
+                      atol=3e-7)), ("engine rodas4 1e-5", dict(method="rodas4", rtol=1e-5, atol=1e-5))):
+        wall, r = best(**kw)
+        rows.append(dict(model=model, point=name, method=label, rhs_equivalents=round(wall / per_rhs),
+                         err_m=abs(r.final_position - ref.final_position), wall_ms=round(wall * 1e3, 2)))
+        print(json.dumps(rows[-1]), flush=True)
+    return rows
+
+
+def measure(name: str, point: dict[str, Any], model: str, methods: list[str]) -> list[dict[str, Any]]:
+    p = idm_rs.Params()
+    if point.get("mass_ratio") is not None:
+        p = p.replace(m2=point["mass_ratio"] * p.m1)
+    if "fric_alpha" in point:
+        p = p.replace(fric_alpha=point["fric_alpha"])
+    w = idm_rs.Triangle(point["voltage"], 0.5e-3, 9.5e-3)
+    n = 4 if model == "dps" else 1
+    ref, dt_ref = None, 1e-8
+    while ref is None:  # RK4 at 1e-8 s, halved where the contact is too stiff for it (as a sweep retries)
+        try:
+            ref = idm_rs.simulate(p, w, T_END, dt_ref, model=model, n_elements=n, save_every=10**9).final_position
+        except idm_rs.DivergenceError:
+            dt_ref /= 2
+    auto = idm_rs.simulate(p, w, T_END, model=model, n_elements=n, method="auto", save_every=1)
+    rhs = Rhs(p, model, n)
+    segs, scales = segments(w, T_END), rhs.scales(point["voltage"])
+    rows = [dict(model=model, point=name, method="engine auto (DP5 + Rodas4 switch)", tol=auto.rtol,
+                 steps=int(auto.t.size - 1), err_m=abs(auto.final_position - ref), rk4_reference_dt=dt_ref)]
+    print(json.dumps(rows[-1]), flush=True)
+    for method in methods:
+        for tol in LADDER:
+            t0 = time.perf_counter()
+            r = run_exprb32(rhs, segs, tol, scales) if method == "exprb32" else run_scipy(rhs, segs, method, tol,
+                                                                                          scales)
+            if r["ok"] and abs(r["x1"] - ref) <= NM:
+                rows.append(dict(model=model, point=name, method=method, tol=tol, err_m=abs(r["x1"] - ref),
+                                 wall_s=round(time.perf_counter() - t0, 2),
+                                 **{k: v for k, v in r.items() if k not in ("ok", "x1")}))
+                print(json.dumps(rows[-1]), flush=True)
+                break
+        else:
+            rows.append(dict(model=model, point=name, method=method, tol=None, note="no tolerance of the ladder "
+                             "kept it within 1 nm"))
+            print(json.dumps(rows[-1]), flush=True)
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--models", default="lps")
+    ap.add_argument("--methods", default="RK45,DOP853,Radau,BDF,LSODA,exprb32")
+    ap.add_argument("--points", default="", help="comma-separated name fragments (default: all)")
+    ap.add_argument("--json", type=Path)
+    ap.add_argument("--engine", action="store_true", help="the engine's own cost of each point (auto, dopri5, "
+                    "rodas4) in right-hand-side equivalents, and stop")
+    ap.add_argument("--costs", action="store_true", help="print the C cost of a right-hand side and of an "
+                    "expm of the phi functions' size, and stop")
+    a = ap.parse_args()
+    if a.costs:
+        for model in a.models.split(","):
+            print(json.dumps(unit_costs(model)))
+        return
+    rows: list[dict[str, Any]] = []
+    if a.engine:
+        for model in a.models.split(","):
+            for name, point in POINTS.items():
+                rows += engine_work(name, point, model)
+        if a.json:
+            a.json.write_text(json.dumps(rows, indent=1))
+        return
+    for model in a.models.split(","):
+        for name, point in POINTS.items():
+            if a.points and not any(f in name for f in a.points.split(",")):
+                continue
+            rows += measure(name, point, model, a.methods.split(","))
+            if a.json:
+                a.json.write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()
