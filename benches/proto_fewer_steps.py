@@ -122,8 +122,10 @@ def run_scipy(rhs: Rhs, segs: list, method: str, tol: float, scales: np.ndarray)
     steps = njev = 0
     rhs.calls = 0
     for ta, tb, va, s in segs:
-        r = solve_ivp(lambda t, yy: rhs(t, va + s * (t - ta), s, yy), (ta, tb), y, method=method, rtol=tol,
-                      atol=atol)
+        def f(t: float, yy: np.ndarray, va: float = va, s: float = s, ta: float = ta) -> np.ndarray:
+            return rhs(t, va + s * (t - ta), s, yy)
+
+        r = solve_ivp(f, (ta, tb), y, method=method, rtol=tol, atol=atol)
         if r.status != 0:
             return dict(ok=False)
         y = r.y[:, -1]
@@ -144,7 +146,9 @@ def run_exprb32(rhs: Rhs, segs: list, tol: float, scales: np.ndarray) -> dict[st
     rhs.calls = 0
     h = 1e-8
     for ta, tb, va, s in segs:
-        f = lambda zz: np.append(rhs(zz[-1], va + s * (zz[-1] - ta), s, zz[:-1]), 1.0)  # noqa: E731
+        def f(zz: np.ndarray, va: float = va, s: float = s, ta: float = ta) -> np.ndarray:
+            return np.append(rhs(zz[-1], va + s * (zz[-1] - ta), s, zz[:-1]), 1.0)
+
         z[-1] = ta
         while z[-1] < tb * (1 - 1e-15):
             h = min(h, tb - z[-1])
@@ -217,7 +221,12 @@ double matmul_ns(long reps) {{
     for (int i = 0; i < M; i++) for (int j = 0; j < M; j++) {{ a[i][j] = 1e-3 * (i - j); b[i][j] = 1e-3 * (i + j); }}
     double t0 = now();
     for (long r = 0; r < reps; r++) {{
-        for (int i = 0; i < M; i++) for (int j = 0; j < M; j++) {{ double s = 0.0; for (int k = 0; k < M; k++) s += a[i][k] * b[k][j]; o[i][j] = s; }}
+        for (int i = 0; i < M; i++)
+            for (int j = 0; j < M; j++) {{
+                double s = 0.0;
+                for (int k = 0; k < M; k++) s += a[i][k] * b[k][j];
+                o[i][j] = s;
+            }}
         a[r % M][0] = o[0][r % M];
     }}
     double t1 = now();
