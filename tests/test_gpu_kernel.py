@@ -476,3 +476,17 @@ def test_ctrl_c_keeps_the_finished_kernel_blocks(monkeypatch):
     assert ds.attrs["complete"] == 0
     assert (ds.status.values[:4] == 1).all() and np.isfinite(ds.final_position.values[:4]).all()
     assert (ds.status.values[8:] == 0).all() and np.isnan(ds.final_position.values[8:]).all()
+
+
+@needs_cc
+def test_a_swept_effect_runs_on_the_kernel_as_on_the_cpu():
+    """An effect is a sweep axis like a parameter: k_ground over 0 and two stiffnesses, and the
+    amplifier lag over two time constants (its state on at every point), equal to the CPU sweep."""
+    kw = dict(t_end=2e-3, dt=1e-8, model="lps", progress=False, method="rk4", retries=0)
+    for grid, e in (({"k_ground": [0.0, 2e3, 2e4], "voltage": [60.0, 120.0]}, None),
+                    ({"tau_amp": [5e-6, 2e-5]}, idm_rs.Effects(tau_amp=1e-5))):
+        a = idm_rs.sweep(P, W, grid, effects=e, **kw)
+        b = idm_rs.sweep(P, W, grid, effects=e, backend="kernel-cpu", **kw)
+        assert (a.status.values == 1).all() and (b.status.values == 1).all()
+        np.testing.assert_allclose(b.final_position.values, a.final_position.values, rtol=0, atol=1e-12)
+        assert np.ptp(a.final_position.values) > 1e-9, "the swept effect changes nothing"
