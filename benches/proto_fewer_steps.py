@@ -119,7 +119,7 @@ def segments(w: idm_rs.Triangle, t_end: float) -> list[tuple[float, float, float
 def run_scipy(rhs: Rhs, segs: list, method: str, tol: float, scales: np.ndarray) -> dict[str, Any]:
     y = np.zeros(rhs.dim)
     atol = tol * np.where(np.isfinite(scales), scales, 1e30)
-    steps = njev = 0
+    steps = njev = nlu = 0
     rhs.calls = 0
     for ta, tb, va, s in segs:
         def f(t: float, yy: np.ndarray, va: float = va, s: float = s, ta: float = ta) -> np.ndarray:
@@ -131,7 +131,8 @@ def run_scipy(rhs: Rhs, segs: list, method: str, tol: float, scales: np.ndarray)
         y = r.y[:, -1]
         steps += r.t.size - 1
         njev += int(r.njev)
-    return dict(ok=True, x1=float(y[0]), steps=steps, rhs=rhs.calls, jacobians=njev, expm=0,
+        nlu += int(r.nlu)
+    return dict(ok=True, x1=float(y[0]), steps=steps, rhs=rhs.calls, jacobians=njev, expm=0, lu=nlu,
                 rhs_analytic_jacobian=rhs.calls - njev * rhs.dim + njev * 2)
 
 
