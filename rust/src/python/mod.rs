@@ -10,7 +10,7 @@ use std::borrow::Cow;
 use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::create_exception;
@@ -362,14 +362,23 @@ fn watching_for_ctrl_c<T: Send>(
     cancel: &AtomicBool,
     work: impl FnOnce() -> T + Send,
 ) -> PyResult<(T, bool)> {
+    // the worker says when it is done: the wait ends then, not at the next poll (a poll every 2 ms
+    // put a floor of ~2 ms under every call, twice a 10 ms LPS run's own time)
+    let done = (std::sync::Mutex::new(false), std::sync::Condvar::new());
     std::thread::scope(|scope| -> PyResult<(T, bool)> {
-        let worker = scope.spawn(|| catch_unwind(AssertUnwindSafe(work)));
+        let worker = scope.spawn(|| {
+            let r = catch_unwind(AssertUnwindSafe(work));
+            *done.0.lock().unwrap_or_else(|e| e.into_inner()) = true;
+            done.1.notify_all();
+            r
+        });
         while !py.detach(|| {
-            let deadline = Instant::now() + Duration::from_millis(50);
-            while !worker.is_finished() && Instant::now() < deadline {
-                std::thread::sleep(Duration::from_millis(2));
-            }
-            worker.is_finished()
+            let guard = done.0.lock().unwrap_or_else(|e| e.into_inner());
+            let (guard, _) = done
+                .1
+                .wait_timeout_while(guard, Duration::from_millis(50), |finished| !*finished)
+                .unwrap_or_else(|e| e.into_inner());
+            *guard
         }) {
             if py.check_signals().is_err() {
                 cancel.store(true, Ordering::Relaxed);
