@@ -45,6 +45,8 @@ def main(argv=None) -> int:
     ap.add_argument("--size", type=int, default=12, help="points per corner axis (default 12)")
     ap.add_argument("--corners", default="", help="comma-separated name fragments (default: all)")
     ap.add_argument("--json", metavar="PATH")
+    ap.add_argument("--candidates", default="", help="method:tol,... instead of CANDIDATES (e.g. "
+                    "'rodas4:3e-5,rodas4:1e-4,auto:')")
     ap.add_argument("--summary", metavar="PATH.json", help="print the ratios of a finished run's JSON and stop")
     a = ap.parse_args(argv)
     if a.summary:
@@ -60,7 +62,9 @@ def main(argv=None) -> int:
             first = np.geomspace(a0, a1, a.size) if log else np.linspace(a0, a1, a.size)
             g = {axis: first, "voltage": np.linspace(v0, v1, a.size)}
             ref = idm_rs.sweep(p, w, g, dt=1e-8, **kw)["final_position"].values
-            for method, tol in CANDIDATES:
+            chosen = CANDIDATES if not a.candidates else tuple(
+                (m, float(t) if t else None) for m, t in (c.split(":") for c in a.candidates.split(",")))
+            for method, tol in chosen:
                 t0 = time.perf_counter()
                 ds = idm_rs.sweep(p, w, g, method=method, **(dict(rtol=tol, atol=tol) if tol else {}), **kw)
                 wall = time.perf_counter() - t0
