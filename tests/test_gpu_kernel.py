@@ -366,7 +366,7 @@ def test_adaptive_kernel_agrees_with_the_engines_dopri5():
 
 @pytest.mark.parametrize("kw, needle", [
     (dict(method="rodas4"), "rodas4 runs on backend='cpu'"),
-    (dict(model="dps", n_elements=6), "up to 5 elements"),
+    (dict(model="dps", n_elements=6), r"up to 6 nodes \(5 elements\)"),
     (dict(metrics=["final_position", "mean_velocity"]), r"steady-state metric\(s\) \['mean_velocity'\]"),
 ])
 def test_kernel_backends_refuse_what_they_do_not_run(kw, needle):

@@ -35,10 +35,14 @@ def check_kernel_admits(plan: SweepPlan, backend: str) -> None:
     rust/src/gpu/kernel.rs beside the packing); anything else is refused by name."""
     acc = engine.kernel_accepts()
     fix = "(use backend='cpu')"
-    nodes = 2 if plan.model == "lps" else plan.n_elements + 1
+    # nodes of a mechanism with elements: one per element boundary; without: its two bodies (the
+    # engine refuses, by name, any model with more nodes than the kernel holds)
+    with_elements = {d["name"]: bool(d["elements"]) for d in engine.structure_declarations()}
+    nodes = plan.n_elements + 1 if with_elements.get(plan.model) else 2
     if plan.model not in acc["structures"] or nodes > acc["max_dof"]:
-        raise ValueError(f"backend={backend!r} runs the LPS and the DPS with up to {acc['max_dof'] - 1} elements; "
-                         f"got model={plan.model!r}, n_elements={plan.n_elements} {fix}")
+        raise ValueError(f"backend={backend!r} runs the IDM mechanisms ({', '.join(acc['structures'])}) with up to "
+                         f"{acc['max_dof']} nodes ({acc['max_dof'] - 1} elements); got model={plan.model!r}, "
+                         f"n_elements={plan.n_elements} {fix}")
     kind = plan.waveform.batch_kind
     if kind not in acc["waves"]:
         raise ValueError(f"backend={backend!r} runs {' and '.join(k.capitalize() for k in acc['waves'])} inputs, "

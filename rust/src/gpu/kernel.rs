@@ -23,8 +23,15 @@ pub const METRICS: [&str; 5] = [
     "peak_friction",
     "slip_fraction",
 ];
-/// Structures: the LPS and the DPS with 1 to MAX_DOF - 1 elements.
-pub const STRUCTURES: [&str; 2] = ["lps", "dps"];
+/// Structures: every IDM mechanism the engine declares (its right-hand side is traced like any
+/// other; `generate::refusal` refuses more than `MAX_DOF` nodes and a rig by name).
+pub fn structures() -> Vec<&'static str> {
+    crate::physics::mechanics::STRUCTURES
+        .iter()
+        .filter(|d| d.idm)
+        .map(|d| d.name)
+        .collect()
+}
 
 /// The C preprocessor lines every kernel specialisation shares: `IDM_MAX_DOF`, the engine's
 /// limits on a crawling adaptive run (`IDM_CRAWL_CHECK_STEPS`, `IDM_MAX_ADAPTIVE_STEPS`,

@@ -61,7 +61,7 @@ fn kernel_accepts(py: Python<'_>) -> PyResult<Bound<'_, pyo3::types::PyDict>> {
         waves.set_item(kind, fields.to_vec())?;
     }
     d.set_item("waves", waves)?;
-    d.set_item("structures", crate::gpu::kernel::STRUCTURES.to_vec())?;
+    d.set_item("structures", crate::gpu::kernel::structures())?;
     d.set_item("metrics", crate::gpu::kernel::METRICS.to_vec())?;
     d.set_item("max_dof", crate::gpu::kernel::MAX_DOF)?;
     let methods: Vec<&str> = crate::integrate::method::METHODS
