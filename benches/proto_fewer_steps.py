@@ -417,6 +417,44 @@ def measure(name: str, point: dict[str, Any], model: str, methods: list[str]) ->
     return rows
 
 
+def grid_run(model: str, size: int, tol: float, method: str, out: Path) -> None:
+    """One tolerance for every point of bench_auto_corners.py's corner grids (size x size each):
+    the largest error against RK4 at dt = 1e-8 s (halved where it diverges), the points beyond
+    1 nm, the median steps and right-hand-side equivalents; rows appended to ``out`` (JSON lines)
+    as each corner finishes, so a long run resumes by skipping what is there."""
+    from bench_auto_corners import CORNERS  # the same grids
+
+    done = {(r["model"], r["corner"], r["method"], r["tol"]) for r in
+            (json.loads(line) for line in out.read_text().splitlines())} if out.exists() else set()
+    n = 4 if model == "dps" else 1
+    w = idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
+    for name, (axis, (a0, a1), log, (v0, v1)) in CORNERS.items():
+        if (model, name, method, tol) in done:
+            continue
+        first = np.geomspace(a0, a1, size) if log else np.linspace(a0, a1, size)
+        grid = {axis: first, "voltage": np.linspace(v0, v1, size)}
+        ref = idm_rs.sweep(idm_rs.Params(), w, grid, dt=1e-8, t_end=T_END, model=model, n_elements=n, progress=False,
+                           retries=3)["final_position"].values
+        errs, steps, work = [], [], []
+        for i, x in enumerate(first):
+            for j, v in enumerate(grid["voltage"]):
+                p = idm_rs.Params()
+                p = p.replace(m2=x * p.m1) if axis == "mass_ratio" else p.replace(**{axis: float(x)})
+                wv = idm_rs.Triangle(float(v), 0.5e-3, 9.5e-3)
+                rhs = Rhs(p, model, n)
+                r = run_rodas5p(rhs, segments(wv, T_END), tol, rhs.scales(float(v)))
+                errs.append(abs(r["x1"] - ref[i, j]) if r["ok"] else np.inf)
+                steps.append(r.get("steps", 0))
+                work.append(r.get("rhs_analytic_jacobian", 0))
+        e = np.asarray(errs)
+        row = dict(model=model, corner=name, method=method, tol=tol, size=size, max_err_m=float(e.max()),
+                   points_over_1nm=int((e > NM).sum()), median_steps=float(np.median(steps)),
+                   median_rhs_equivalents=float(np.median(work)))
+        print(json.dumps(row), flush=True)
+        with out.open("a") as f:
+            f.write(json.dumps(row) + "\n")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--models", default="lps")
@@ -425,9 +463,20 @@ def main() -> None:
     ap.add_argument("--json", type=Path)
     ap.add_argument("--engine", action="store_true", help="the engine's own cost of each point (auto, dopri5, "
                     "rodas4) in right-hand-side equivalents, and stop")
+    ap.add_argument("--grid", type=int, default=0, help="Rodas5P at one tolerance (--tol) over "
+                    "bench_auto_corners.py's corner grids of this size, rows appended to --out")
+    ap.add_argument("--tol", type=float, default=1e-5)
+    ap.add_argument("--out", type=Path, default=Path("benches/results/proto_rodas5p_grids.jsonl"))
     ap.add_argument("--costs", action="store_true", help="print the C cost of a right-hand side and of an "
                     "expm of the phi functions' size, and stop")
     a = ap.parse_args()
+    if a.grid:
+        import sys
+
+        sys.path.insert(0, str(Path(__file__).parent))
+        for model in a.models.split(","):
+            grid_run(model, a.grid, a.tol, "rodas5p", a.out)
+        return
     if a.costs:
         for model in a.models.split(","):
             print(json.dumps(unit_costs(model)))
