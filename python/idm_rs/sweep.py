@@ -176,9 +176,10 @@ def sweep(
     ``load_force`` for the load curve.
 
     ``backend="cuda"`` runs points one per GPU thread (CuPy; ``pip install 'idm-rs[cuda]'``)
-    with what the kernel admits (``engine.kernel_accepts()``: every Table 1 parameter
-    including ``load_force``, no effects, Triangle or Sawtooth input, LPS or DPS up to 5
-    elements; anything else swept or set is refused by name): ``method="rk4"`` (points
+    with what the kernel admits (``engine.kernel_accepts()``: every Table 1 parameter, every
+    effect and library term (its right-hand side is generated from the engine's model),
+    Triangle or Sawtooth input, LPS or DPS up to 5 elements; anything else swept or set, and a
+    sweep that switches a lag on at some points and off at others, is refused by name): ``method="rk4"`` (points
     that diverge are retried on the CPU at dt/2, dt/4), ``"dopri5"`` or ``"auto"`` (Dormand-Prince
     at the method's tolerances, with the engine's step collapse check; a point that diverges or
     whose step collapses there is rerun on the CPU with the same method, where ``"auto"`` can
