@@ -32,7 +32,7 @@ import subprocess
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -136,6 +136,27 @@ def run_scipy(rhs: Rhs, segs: list, method: str, tol: float, scales: np.ndarray)
                 rhs_analytic_jacobian=rhs.calls - njev * rhs.dim + njev * 2)
 
 
+def _autonomous(rhs: Rhs, ta: float, va: float, s: float) -> Callable[[np.ndarray], np.ndarray]:
+    """The right-hand side on the segment starting at ta (input va + s (t - ta)) as an autonomous
+    system in (y, t): t' = 1."""
+    def f(zz: np.ndarray) -> np.ndarray:
+        return np.append(rhs(zz[-1], va + s * (zz[-1] - ta), s, zz[:-1]), 1.0)
+
+    return f
+
+
+def _jacobian(f: Callable[[np.ndarray], np.ndarray], z: np.ndarray, fz: np.ndarray, sc: np.ndarray) -> np.ndarray:
+    """df/dz by forward differences, each component stepped by 1e-7 of its size or scale."""
+    m = z.size
+    jac = np.empty((m, m))
+    for j in range(m):
+        dz = 1e-7 * max(abs(z[j]), sc[j] if np.isfinite(sc[j]) else 1e-6)
+        zp = z.copy()
+        zp[j] += dz
+        jac[:, j] = (f(zp) - fz) / dz
+    return jac
+
+
 def run_exprb32(rhs: Rhs, segs: list, tol: float, scales: np.ndarray) -> dict[str, Any]:
     """exprb32 with its embedded error estimate (the order-3 correction 2 h phi3(hJ) D2), on the
     autonomous system (y, t); the Jacobian by forward differences of the C right-hand side."""
@@ -147,19 +168,12 @@ def run_exprb32(rhs: Rhs, segs: list, tol: float, scales: np.ndarray) -> dict[st
     rhs.calls = 0
     h = 1e-8
     for ta, tb, va, s in segs:
-        def f(zz: np.ndarray, va: float = va, s: float = s, ta: float = ta) -> np.ndarray:
-            return np.append(rhs(zz[-1], va + s * (zz[-1] - ta), s, zz[:-1]), 1.0)
-
+        f = _autonomous(rhs, ta, va, s)
         z[-1] = ta
         while z[-1] < tb * (1 - 1e-15):
             h = min(h, tb - z[-1])
             fz = f(z)
-            jac = np.empty((m, m))
-            for j in range(m):
-                dz = 1e-7 * max(abs(z[j]), sc[j] if np.isfinite(sc[j]) else 1e-6)
-                zp = z.copy()
-                zp[j] += dz
-                jac[:, j] = (f(zp) - fz) / dz
+            jac = _jacobian(f, z, fz, sc)
             jacs += 1
             while True:
                 big = np.zeros((m + 3, m + 3))
@@ -328,19 +342,12 @@ def run_rodas5p(rhs: Rhs, segs: list, tol: float, scales: np.ndarray) -> dict[st
     rhs.calls = 0
     h = 1e-8
     for ta, tb, va, s in segs:
-        def f(zz: np.ndarray, va: float = va, s: float = s, ta: float = ta) -> np.ndarray:
-            return np.append(rhs(zz[-1], va + s * (zz[-1] - ta), s, zz[:-1]), 1.0)
-
+        f = _autonomous(rhs, ta, va, s)
         z[-1] = ta
         while z[-1] < tb * (1 - 1e-15):
             h = min(h, tb - z[-1])
             fz = f(z)
-            jac = np.empty((m, m))
-            for j in range(m):
-                dz = 1e-7 * max(abs(z[j]), sc[j] if np.isfinite(sc[j]) else 1e-6)
-                zp = z.copy()
-                zp[j] += dz
-                jac[:, j] = (f(zp) - fz) / dz
+            jac = _jacobian(f, z, fz, sc)
             jacs += 1
             while True:
                 lu = lu_factor(np.eye(m) / (h * RODAS5P_GAMMA) - jac, check_finite=False)
