@@ -11,6 +11,12 @@ use super::Status;
 /// presliding (elastic asperity) motion is orders of magnitude slower.
 pub const SLIP_VELOCITY_FACTOR: f64 = 0.1;
 
+/// The speed above which the main body counts as sliding for `slip_fraction` [m/s] (the GPU
+/// kernel reads the same, `gpu/generate.rs`).
+pub fn slip_velocity(m: &Model) -> f64 {
+    SLIP_VELOCITY_FACTOR * m.params.stribeck_velocity
+}
+
 /// Metrics of one point. NaN where not available.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PointMetrics {
@@ -185,7 +191,7 @@ impl<'a> MetricsObserver<'a> {
             acc: models
                 .iter()
                 .map(|m| Accumulator {
-                    slip_velocity: SLIP_VELOCITY_FACTOR * m.params.stribeck_velocity,
+                    slip_velocity: slip_velocity(m),
                     ..Default::default()
                 })
                 .collect(),

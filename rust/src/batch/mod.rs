@@ -12,7 +12,7 @@ mod run;
 mod runner;
 mod steady;
 
-pub use metrics::{MetricColumn, PointMetrics, METRIC_COLUMNS, SLIP_VELOCITY_FACTOR};
+pub use metrics::{slip_velocity, MetricColumn, PointMetrics, METRIC_COLUMNS, SLIP_VELOCITY_FACTOR};
 pub use points::{row_point, PointTables, WaveFamily};
 pub use run::{run_batch, CHUNK, LANES};
 pub use runner::BatchRunner;

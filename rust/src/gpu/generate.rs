@@ -119,7 +119,7 @@ impl Generated {
         let (stroke_per_v, omega, fs) = model.scale_parts();
         row.extend([
             model.presliding_bound(),
-            crate::batch::SLIP_VELOCITY_FACTOR * model.params.stribeck_velocity,
+            crate::batch::slip_velocity(model),
             stroke_per_v,
             omega,
             fs,
