@@ -10,7 +10,7 @@ Prints, per model, corner and candidate: the largest |x1 - x1_RK4| [m], the numb
 beyond 1 nm, the median steps per point and the points per second (2 threads). A fifth corner
 is a stiff contact (presliding stiffness up to 1,000x the paper's), where ``auto`` should change
 to Rodas4. (Together with the 16 x 16 grid of
-``bench_sweep.py``, this is the measurement ``idm_rs.methods.AUTO`` follows.)
+``bench_sweep.py``, this is the measurement ``idm_rs.core.methods.AUTO`` follows.)
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ CORNERS = {
     # is held at its stability limit through every sliding phase (the issue's 192-point sweep)
     "stiff contact (fric_alpha 2e9-2e11)": ("fric_alpha", (2e9, 2e11), True, (40.0, 120.0)),
 }
-#: (method, rtol = atol); None: the method's own setting ("auto": idm_rs.methods.AUTO)
+#: (method, rtol = atol); None: the method's own setting ("auto": idm_rs.core.methods.AUTO)
 CANDIDATES = (("dopri5", 1e-6), ("dopri5", 3e-7), ("dopri5", 1e-7), ("rodas4", 1e-5), ("rodas4", 3e-6),
               ("auto", None))
 

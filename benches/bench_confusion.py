@@ -8,7 +8,7 @@ Every catalogue effect at two sizes — its signal left after a (linearised) ref
 subset about 3x and 8x the noise RMS — on two devices (LPS and DPS n = 4, neither with piezo
 hysteresis in its nominal model), the nominal values in meta.json mis-set by 5-15 % (1-3 of the
 calibrated parameters), plus `--healthy` devices that lack nothing (as in
-``bench_false_alarm.py``). Each case is written with ``idm_rs.synthetic.make_case`` (RK4 at
+``bench_false_alarm.py``). Each case is written with ``idm_rs.io.synthetic.make_case`` (RK4 at
 dt = 2e-8 s, white noise of 1-2 nm RMS, 0.25 nm quantisation) and diagnosed. The size is tuned
 per case before writing it: the effect's reading minus the true null model's, its per-segment
 offsets removed and projected off the exact Jacobian of the calibrated subset (what a refit of
@@ -141,8 +141,8 @@ def _tuned(effect: str, device: str, target: float, noise: float) -> tuple[float
     from idm_rs.diagnosis.catalogue import by_id
     from idm_rs.diagnosis.fitting import FreeParam, Objective, set_param
     from idm_rs.diagnosis.thresholds import CALIBRATION_SCALE
-    from idm_rs.recording import load_case
-    from idm_rs.synthetic import make_case
+    from idm_rs.io.recording import load_case
+    from idm_rs.io.synthetic import make_case
 
     if effect == "pe_mass":
         return math.nan, math.nan
@@ -204,7 +204,7 @@ def effect_case(directory: Path, c: dict[str, Any], rng: np.random.Generator,
     """Write one effect case with its size tuned; returns what was set. `sensor`: a function of
     the drawn white-noise RMS giving the reading's ``SensorNoise`` (None: white noise)."""
     import idm_rs
-    from idm_rs.synthetic import make_case
+    from idm_rs.io.synthetic import make_case
 
     effect, device = c["effect"], c["device"]
     noise = float(rng.uniform(1.0e-9, 2.0e-9))

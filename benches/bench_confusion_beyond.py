@@ -83,7 +83,7 @@ def effects_case(directory: Path, effects: list[str], device: str, rng: np.rando
     after a linearised refit, in noise units) drawn from `size_range` (default: the large size,
     SIZES["large"]), 1-3 calibrated parameters mis-set in meta.json."""
     import idm_rs
-    from idm_rs.synthetic import make_case
+    from idm_rs.io.synthetic import make_case
 
     noise = float(rng.uniform(1.0e-9, 2.0e-9))
     seed = int(rng.integers(0, 2**31))

@@ -137,7 +137,7 @@ def tuned(c: dict[str, Any], extra: Any, target: float, noise: float) -> tuple[A
     from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
     from idm_rs.diagnosis.fitting import FreeParam, Objective, set_param
     from idm_rs.diagnosis.thresholds import CALIBRATED, CALIBRATION_SCALE
-    from idm_rs.recording import load_case
+    from idm_rs.io.recording import load_case
 
     structure = (c["model"], c["piezo_hysteresis"])
     p = idm_rs.Params(**oc.DEV10_PARAMS)

@@ -1,6 +1,6 @@
 """Measure the diagnosis's false-alarm rate on simulated null recordings: devices that lack
 nothing (the nominal model is right up to mis-set nominal values), with the noise of a real
-recording. Each null case is written by ``idm_rs.synthetic.make_case`` from Table 1 with 1–3 of
+recording. Each null case is written by ``idm_rs.io.synthetic.make_case`` from Table 1 with 1–3 of
 the calibrated parameters mis-set in ``meta.json`` by 5–15 % (as in the dev sets), and diagnosed;
 a false alarm is any verdict naming an effect. For every null case the largest ΔBIC of a
 candidate whose parameters are beyond 2σ of "no effect" is recorded: the decision threshold
@@ -38,7 +38,7 @@ CALIBRATED = ("mu_k", "d33", "sigma1", "sigma2", "fric_alpha", "m1", "m2")
 def null_case(directory: Path, rng: np.random.Generator) -> dict[str, Any]:
     """Write one null case; returns what was mis-set and the structure."""
     import idm_rs
-    from idm_rs.synthetic import make_case
+    from idm_rs.io.synthetic import make_case
 
     true = idm_rs.Params()
     names = rng.choice(CALIBRATED, size=int(rng.integers(1, 4)), replace=False)

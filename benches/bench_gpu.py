@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 import idm_rs
-from idm_rs import engine
+from idm_rs.core import engine
 
 P = idm_rs.Params()
 W = idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
@@ -112,7 +112,7 @@ def kernel_ab(size: int) -> list[dict]:
     """The kernels alone (CUDA events, no host work) on size x size points of the grid, for the
     layout variants (VARIANTS) of both structures and methods: measured, not guessed."""
     from idm_rs import methods
-    from idm_rs.batch import Structure, param_row
+    from idm_rs.core.batch import Structure, param_row
     from idm_rs.gpu import launch_cuda, pack, wave_columns
 
     g = _grid(size)
@@ -141,7 +141,7 @@ def kernel_ab(size: int) -> list[dict]:
 
 def reference(model: str, i: np.ndarray, j: np.ndarray, g: dict) -> np.ndarray:
     """x1 [m] from the CPU engine's RK4 at dt = 1e-8 s on the sampled points."""
-    from idm_rs.batch import Point, Structure, run
+    from idm_rs.core.batch import Point, Structure, run
 
     pts = [Point(P.replace(m2=float(g["mass_ratio"][a]) * P.m1),
                  waveform=idm_rs.Triangle(float(g["voltage"][b]), 0.5e-3, 9.5e-3)) for a, b in zip(i, j)]

@@ -13,8 +13,8 @@ import time
 from pathlib import Path
 
 import idm_rs
-from idm_rs import engine
-from idm_rs.actuator import characterize
+from idm_rs.apps.actuator import characterize
+from idm_rs.core import engine
 
 
 def main(argv=None) -> int:

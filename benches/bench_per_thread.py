@@ -33,13 +33,13 @@ def main() -> None:
     a = ap.parse_args()
     w = idm_rs.Triangle()
     idm_rs.sweep(idm_rs.Params(), w, {"voltage": [80.0]}, model="lps", method="auto", progress=False)  # warm-up
-    host = {"host": platform.node(), "cpus": os.cpu_count(), "level": idm_rs.engine.simd_level()}
+    host = {"host": platform.node(), "cpus": os.cpu_count(), "level": idm_rs.core.engine.simd_level()}
     print(json.dumps(host), flush=True)
     levels = ["scalar", "avx2"] + (["avx512"] if "avx512f" in open("/proc/cpuinfo").read() else [])
-    default = idm_rs.engine.simd_level()
+    default = idm_rs.core.engine.simd_level()
     for model in ["lps", "dps"]:
         for level in levels:
-            idm_rs.engine.set_simd_level(level)
+            idm_rs.core.engine.set_simd_level(level)
             for method, kw, g in [("auto", {}, grid(a.side)), ("dopri5", {}, grid(a.side)),
                                   ("rodas4", {}, grid(8)), ("rk4", {"dt": 5e-8}, grid(8))]:
                 kws = dict(kw, n_elements=4) if model == "dps" else dict(kw)
@@ -53,7 +53,7 @@ def main() -> None:
                                       "points_per_s": n / wall, "steps_mean": float(ds.steps.values.mean()),
                                       "ns_per_step": wall / float(ds.steps.values.sum()) * 1e9,
                                       "fp_sum": float(np.nansum(ds.final_position.values))}), flush=True)
-    idm_rs.engine.set_simd_level(default)
+    idm_rs.core.engine.set_simd_level(default)
     for th in a.threads:
         t0 = time.perf_counter()
         ds = idm_rs.sweep(idm_rs.Params(), w, grid(a.scale), model="lps", method="auto", threads=th, progress=False,

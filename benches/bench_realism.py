@@ -86,8 +86,8 @@ def draw_artefacts(rng: np.random.Generator, sigma: float, names: list[str]) -> 
 
 def healthy_case(directory: Path, rng: np.random.Generator) -> dict[str, Any]:
     import idm_rs
-    from idm_rs.sensor_noise import SensorNoise
-    from idm_rs.synthetic import make_case
+    from idm_rs.io.sensor_noise import SensorNoise
+    from idm_rs.io.synthetic import make_case
 
     true = idm_rs.Params()
     names = rng.choice(CALIBRATED, size=int(rng.integers(1, 5)), replace=False)
@@ -136,7 +136,7 @@ def noise_truth(c: dict[str, Any]) -> dict[str, Any]:
 
 
 def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
-    from idm_rs.sensor_noise import SensorNoise
+    from idm_rs.io.sensor_noise import SensorNoise
 
     rng = np.random.default_rng([seed, c["id"]])
     directory = tmp / f"case{c['id']:03d}"

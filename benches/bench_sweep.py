@@ -231,7 +231,7 @@ def bench_256(a, model: str = "lps") -> dict:
     idm_cases = [("idm-rs rk4", "rk4", RK4_DT, 1e-7, f"dt = {RK4_DT:g} s")]
     for method, tol in ADAPTIVE_CASES:
         if method == "auto":
-            m, t, _ = idm_rs.methods.AUTO
+            m, t, _ = idm_rs.core.methods.AUTO
             idm_cases.append(("idm-rs auto", "auto", RK4_DT, t, f"= {m} {t:g}"))
         else:
             idm_cases.append((f"idm-rs {method}", method, RK4_DT, tol, f"rtol = atol = {tol:g}"))
@@ -243,13 +243,13 @@ def bench_256(a, model: str = "lps") -> dict:
         wall1, ds1, walls1 = best_time(functools.partial(run_idm_rs, g, threads=1, **case), a.repeats)
         same = all(ds[v].values.tobytes() == ds1[v].values.tobytes() for v in ds.data_vars)
         # the same run with the lanes' vector code forced to scalar (SIMD against scalar dispatch)
-        level = idm_rs.engine.simd_level()
+        level = idm_rs.core.engine.simd_level()
         print(f"{label} ({setting}), {a.threads} threads, scalar dispatch (SIMD: {level}) ...", flush=True)
-        idm_rs.engine.set_simd_level("scalar")
+        idm_rs.core.engine.set_simd_level("scalar")
         try:
             wall_sc, ds_sc, _ = best_time(functools.partial(run_idm_rs, g, threads=a.threads, **case), a.repeats)
         finally:
-            idm_rs.engine.set_simd_level(level)
+            idm_rs.core.engine.set_simd_level(level)
         x, x_sc = ds["final_position"].values, ds_sc["final_position"].values
         st = ds["status"].values.ravel()
         rows.append(dict(
@@ -358,7 +358,7 @@ def bench_million(a) -> dict:
     n = a.size * a.size
     print(f"{n} points ({a.size} x {a.size}), idm-rs {a.method}"
           + (f" dt = {a.dt:g} s" if a.method == "rk4" else f" rtol = atol = {a.tol:g}" if a.method != "auto"
-             else f" = {idm_rs.methods.AUTO}") + f", {a.threads} threads",
+             else f" = {idm_rs.core.methods.AUTO}") + f", {a.threads} threads",
           flush=True)
     wall, ds = run_idm_rs(g, method=a.method, dt=a.dt, tol=a.tol, threads=a.threads, progress=not a.no_progress)
     maxrss_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB on Linux
@@ -371,7 +371,7 @@ def bench_million(a) -> dict:
     print(f"wall time {wall:.1f} s ({n / wall:.0f} points/s), peak memory (ru_maxrss) {maxrss_kib / 1024:.0f} MiB, "
           f"statuses {out['statuses']} (not run, ok, ok at dt/2^k, diverged, invalid)")
     if a.save:
-        from idm_rs.cli_files import write_sweep_netcdf
+        from idm_rs.apps.cli_files import write_sweep_netcdf
 
         write_sweep_netcdf(ds, Path(a.save))
         print(f"wrote {a.save}")
@@ -388,7 +388,7 @@ def main(argv=None) -> int:
     ap.add_argument("--million", action="store_true", help="run only the large sweep (see --size)")
     ap.add_argument("--size", type=int, default=1000, help="--million: grid of SIZE x SIZE points (default 1000)")
     ap.add_argument("--models", default="lps,dps", help="256-point grid: lps, dps or both (default: lps,dps)")
-    ap.add_argument("--method", choices=idm_rs.methods.METHODS, default="auto", help="--million: idm-rs method")
+    ap.add_argument("--method", choices=idm_rs.core.methods.METHODS, default="auto", help="--million: idm-rs method")
     ap.add_argument("--tol", type=float, default=1e-7, help="--million: adaptive rtol = atol (default 1e-7)")
     ap.add_argument("--dt", type=float, default=RK4_DT, help="--million: rk4 step [s]")
     ap.add_argument("--save", metavar="FILE.nc", help="--million: save the sweep as netCDF")

@@ -23,7 +23,7 @@ def main() -> None:
     ap.add_argument("--big", type=int, default=200, help="grid side of the all-cores run (0: skip)")
     ap.add_argument("--json", default=None)
     a = ap.parse_args()
-    out = {"cpu_count": os.cpu_count(), "simd_level": idm_rs.engine.simd_level(), "rows": []}
+    out = {"cpu_count": os.cpu_count(), "simd_level": idm_rs.core.engine.simd_level(), "rows": []}
     w = idm_rs.Triangle()
     idm_rs.sweep(idm_rs.Params(), w, {"voltage": [80.0]}, model="lps", method="auto", progress=False)  # warm-up
     grid = {"mass_ratio": np.linspace(0.25, 2, a.side), "voltage": np.linspace(40, 120, a.side)}

@@ -14,8 +14,9 @@ import os
 import numpy as np
 
 import idm_rs
-from idm_rs import engine, methods
-from idm_rs.batch import Structure, param_row
+from idm_rs import methods
+from idm_rs.core import engine
+from idm_rs.core.batch import Structure, param_row
 from idm_rs.gpu import launch_cuda, pack, wave_columns
 
 P = idm_rs.Params()

@@ -16,11 +16,11 @@ import numpy as np
 
 
 def landscape(root: Path, case: str, name: str, span: float = 0.2, points: int = 61):
-    from idm_rs.batch import Structure
+    from idm_rs.core.batch import Structure
     from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec
     from idm_rs.diagnosis.fitting import Objective
     from idm_rs.diagnosis.noise import estimate_noise
-    from idm_rs.recording import load_case
+    from idm_rs.io.recording import load_case
 
     s, c = case.split("/")
     key = json.loads((root / s / "KEY.json").read_text())[c]

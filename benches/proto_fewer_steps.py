@@ -39,8 +39,8 @@ from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
 import idm_rs
-from idm_rs import engine
-from idm_rs.batch import Structure, param_row
+from idm_rs.core import engine
+from idm_rs.core.batch import Structure, param_row
 from idm_rs.gpu.backend import program
 
 #: the points: the paper's device and the five corners of bench_auto_corners.py at their extremes

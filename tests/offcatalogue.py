@@ -269,7 +269,7 @@ def _resolve(params: Mapping[str, Any]) -> dict[str, float]:
     p = dict(params)
     missing = [k for k in DEV10_PARAMS if k not in p and k not in ("normal_force", "load_force")]
     if missing:  # fill Table 1 defaults (values only; no physics comes from the engine)
-        from idm_rs.params import Params
+        from idm_rs.core.params import Params
 
         defaults = Params().to_dict(resolved=False)
         for k in missing:
@@ -644,7 +644,7 @@ def _integrate(rhs: _Rhs, wave_t: Sequence[float], wave_v: Sequence[float], t_en
 # writing a case
 # --------------------------------------------------------------------------------------------
 def _fmt_number(v: float) -> Union[int, float]:
-    """Integers as JSON integers (80, not 80.0), as idm_rs.synthetic writes them."""
+    """Integers as JSON integers (80, not 80.0), as idm_rs.io.synthetic writes them."""
     return int(v) if float(v).is_integer() and abs(v) < 2**53 else float(v)
 
 
@@ -664,7 +664,7 @@ def write_case(out_dir: Union[str, Path], nominal: Mapping[str, Any], true_param
     ``nominal``: meta.json's "nominal" ({"model": "lps" or "dps", "n_elements": n (dps),
     "piezo_hysteresis": bool, "params": {...}}).
     ``experiments``: dicts with direction, amplitude_V, frequency_Hz, cycles and optionally
-    rest_s (default 0.002), edge_s (0.0005) and file. As idm_rs.synthetic.make_case: all
+    rest_s (default 0.002), edge_s (0.0005) and file. As idm_rs.io.synthetic.make_case: all
     randomness from ``numpy.random.default_rng(seed)`` (first the per-file offsets, uniform in
     ±2 µm, then each file's white noise of RMS ``noise_rms`` [m]); x rounded to multiples of
     ``resolution`` [m]; CSV "%.10g". ``truth``: extra entries for truth.json.

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs.actuator import STEADY_METRICS, characterize, plot_characteristics, stall_force, steady_state
+from idm_rs.apps.actuator import STEADY_METRICS, characterize, plot_characteristics, stall_force, steady_state
 
 P = idm_rs.Params()
 #: moves forward (with this device a much faster edge, 0.1 ms at 1 kHz, moves it backward)
@@ -136,7 +136,7 @@ def test_characterize_gives_the_standard_set_and_its_figures(tmp_path):
 
 
 def test_characterize_cli(tmp_path):
-    from idm_rs.cli import main
+    from idm_rs.apps.cli import main
 
     rc = main(["characterize", "--out", str(tmp_path), "--model", "lps", "--frequencies", "200,500",
                "--voltages", "80", "--step-voltages", "60,100", "--frequency", "200", "--rise", "5e-4",

@@ -107,7 +107,7 @@ def test_rodas4_keeps_the_presliding_force_within_its_bound():
 
 def test_auto_resolves_to_the_measured_setting(rk4):
     r = idm_rs.simulate(P, PAPER_WAVE, t_end=10e-3, model="lps", method="auto")
-    method, rtol, atol = idm_rs.methods.AUTO
+    method, rtol, atol = idm_rs.core.methods.AUTO
     assert (r.method, r.rtol, r.atol) == (method, rtol, atol)
     assert abs(r.final_position - rk4.final_position) < 1e-9
 

@@ -1,4 +1,4 @@
-"""The public batch API (``idm_rs.batch``: Point, Structure, Tables, start, run): each point of a
+"""The public batch API (``idm_rs.core.batch``: Point, Structure, Tables, start, run): each point of a
 batch is the same computation as ``simulate`` (bitwise with RK4), final states come back per
 point and restart a batch mid-record, an invalid point is flagged while the others run, and
 input errors are named. LPS, spans of 1-2 ms: the file runs in a couple of seconds."""
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import idm_rs
-import idm_rs.batch
-from idm_rs.batch import Point, Structure, Tables, run, start
+import idm_rs.core.batch
+from idm_rs.core.batch import Point, Structure, Tables, run, start
 
 P = idm_rs.Params()
 WAVE = idm_rs.Triangle(80.0, 0.3e-3, 0.7e-3)  # up and back down within 1 ms
@@ -31,8 +31,8 @@ def sims(points) -> list[idm_rs.SimulationResult]:
 
 
 def test_batch_is_a_submodule_of_the_package():
-    assert idm_rs.batch.run is run
-    assert {"Point", "Structure", "Tables", "start", "run"} <= set(vars(idm_rs.batch))
+    assert idm_rs.core.batch.run is run
+    assert {"Point", "Structure", "Tables", "start", "run"} <= set(vars(idm_rs.core.batch))
 
 
 def test_each_point_equals_simulate_bitwise(points, sims):

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs import paper
-from idm_rs.cli import main
-from idm_rs.cli_files import paper_case_csv, parse_param_overrides
-from idm_rs.units import si
+from idm_rs.apps import paper
+from idm_rs.apps.cli import main
+from idm_rs.apps.cli_files import paper_case_csv, parse_param_overrides
+from idm_rs.core.units import si
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 FIGURES = [f"fig6{c}.png" for c in "abcd"] + [f"fig7{c}.png" for c in "abcd"]
@@ -172,7 +172,7 @@ def test_sweep_line_plot_marks_diverged_points(tmp_path, capsys):
 
 def test_sweep_netcdf3_fallback_keeps_values(tmp_path):
     xr = pytest.importorskip("xarray")
-    from idm_rs.cli_files import write_sweep_netcdf
+    from idm_rs.apps.cli_files import write_sweep_netcdf
 
     ds = idm_rs.sweep(idm_rs.Params(), idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3), {"voltage": [40.0, 80.0]},
                       t_end=1e-3, dt=5e-8, model="lps", progress=False)
@@ -185,7 +185,7 @@ def test_sweep_netcdf3_fallback_keeps_values(tmp_path):
 
 
 def test_parse_grid():
-    from idm_rs.cli_files import parse_grid
+    from idm_rs.apps.cli_files import parse_grid
 
     g = parse_grid(["mass_ratio=0.25:2:8", "voltage=40,80, 120", "m1=0.3"])
     assert list(g) == ["mass_ratio", "voltage", "m1"]

@@ -3,7 +3,7 @@ value that is the problem (not only the expected form)."""
 
 import pytest
 
-from idm_rs.cli import main
+from idm_rs.apps.cli import main
 
 
 def _error(capsys, argv) -> str:

@@ -14,11 +14,11 @@ import xarray as xr
 
 import idm_rs
 from conftest import interrupt_main_when
-from idm_rs.cli import main
-from idm_rs.interrupted import interrupted
+from idm_rs.apps.cli import main
+from idm_rs.core.interrupted import interrupted
+from idm_rs.core.units import si
 from idm_rs.rigs import RigData
 from idm_rs.rigs.diagnosis import _linear_rig, diagnose_spring_slider
-from idm_rs.units import si
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata"
 needs_real = pytest.mark.skipif(not REAL.exists(), reason="the measured data sets are not here")
@@ -118,7 +118,7 @@ def test_ctrl_c_in_the_simulate_command_keeps_the_trajectory(tmp_path, capsys, m
     import threading
 
     started = threading.Event()
-    engine = importlib.import_module("idm_rs.simulation").engine
+    engine = importlib.import_module("idm_rs.core.simulation").engine
     real = engine.simulate
     monkeypatch.setattr(engine, "simulate", lambda *a: (started.set(), real(*a))[1])
     out = tmp_path / "r.csv"
@@ -139,7 +139,7 @@ def test_ctrl_c_in_characterize_keeps_what_was_finished(tmp_path, capsys, monkey
     writes it and exits 130 (no figures, no stall force)."""
     import importlib
 
-    sweep_module = importlib.import_module("idm_rs.sweep")
+    sweep_module = importlib.import_module("idm_rs.sweeps.sweep")
     real = sweep_module.sweep
     calls = []
 
@@ -171,7 +171,7 @@ def test_dask_blocks_follow_block_size_and_run_one_thread_each(monkeypatch):
     import importlib
     import warnings
 
-    backends = importlib.import_module("idm_rs.sweep_backends")
+    backends = importlib.import_module("idm_rs.sweeps.backends")
     monkeypatch.setattr(backends, "DASK_MIN_BLOCK", 2)  # so that a small sweep makes several tasks
     grid = {"voltage": np.linspace(40.0, 120.0, 8)}
     kw = dict(t_end=5e-4, dt=5e-8, model="lps", progress=False)

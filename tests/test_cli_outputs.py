@@ -8,7 +8,7 @@ import importlib
 
 import pytest
 
-from idm_rs.cli import main
+from idm_rs.apps.cli import main
 
 
 @pytest.fixture
@@ -17,11 +17,11 @@ def nothing_runs(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("the command ran before checking its outputs")
 
-    for module, name in (("idm_rs.simulation", "simulate"), ("idm_rs.sweep", "sweep"),
-                         ("idm_rs.actuator", "characterize"), ("idm_rs.paper", "run_paper_case"),
+    for module, name in (("idm_rs.core.simulation", "simulate"), ("idm_rs.sweeps.sweep", "sweep"),
+                         ("idm_rs.apps.actuator", "characterize"), ("idm_rs.apps.paper", "run_paper_case"),
                          ("idm_rs.diagnosis", "diagnose")):
         monkeypatch.setattr(importlib.import_module(module), name, refuse)
-    monkeypatch.setattr(importlib.import_module("idm_rs.cli"), "simulate", refuse)
+    monkeypatch.setattr(importlib.import_module("idm_rs.apps.cli"), "simulate", refuse)
 
 
 @pytest.mark.parametrize("argv, words", [

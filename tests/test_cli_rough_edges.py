@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs.cli import main
-from idm_rs.cli_figures import result_title, sweep_title
+from idm_rs.apps.cli import main
+from idm_rs.apps.cli_figures import result_title, sweep_title
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -69,7 +69,7 @@ def test_a_script_looping_over_simulate_stops_on_ctrl_c(tmp_path):
 
 @pytest.mark.parametrize("after", [1.0, 3.0])
 def test_reproduce_exits_130_and_draws_nothing_it_did_not_finish(tmp_path, after):
-    proc = _start(["-c", "print('started', flush=True); from idm_rs.cli import main; raise SystemExit(main())",
+    proc = _start(["-c", "print('started', flush=True); from idm_rs.apps.cli import main; raise SystemExit(main())",
                    "reproduce", "--no-progress", "--out", str(tmp_path / "figs")], tmp_path)
     rc, out, err, took = _interrupt(proc, after=after)
     assert rc == 130, (rc, err[-2000:])
@@ -86,7 +86,7 @@ def test_reproduce_exits_130_and_draws_nothing_it_did_not_finish(tmp_path, after
 def test_the_sweep_command_exits_130_and_writes_the_finished_points(tmp_path):
     xr = pytest.importorskip("xarray")
     out = tmp_path / "s.nc"
-    proc = _start(["-c", "print('started', flush=True); from idm_rs.cli import main; raise SystemExit(main())",
+    proc = _start(["-c", "print('started', flush=True); from idm_rs.apps.cli import main; raise SystemExit(main())",
                    "sweep", "--model", "lps", "--grid", "voltage=40:120:2000", "--t-end", "0.002", "--dt", "1e-8",
                    "--method", "rk4", "--threads", "1", "--no-progress", "--out", str(out)], tmp_path)
     rc, stdout, err, took = _interrupt(proc, after=6.0, limit=20.0)
@@ -103,7 +103,7 @@ def test_ctrl_c_outside_the_engine_call_of_a_piece_keeps_what_finished(monkeypat
     piece's engine call (no trajectory on the stop) gave an IndexError on the first piece (seen
     on a loaded machine); it must be a KeyboardInterrupt whose partial is the pieces finished."""
     import idm_rs
-    from idm_rs import simulation
+    from idm_rs.core import simulation
 
     real = simulation.engine.simulate
     calls = []
@@ -137,7 +137,7 @@ def test_a_ctrl_c_as_the_run_ends_keeps_the_whole_run(monkeypatch):
     builds the result is caught there: either way the KeyboardInterrupt carries the whole,
     complete result, equal to the run's (before, the run was lost)."""
     import idm_rs
-    from idm_rs import simulation
+    from idm_rs.core import simulation
 
     kw = dict(t_end=1e-3, model="lps", method="auto")
     whole = idm_rs.simulate(idm_rs.Params(), idm_rs.Triangle(), **kw)
@@ -168,7 +168,7 @@ def test_a_ctrl_c_as_a_piece_of_a_long_run_ends_keeps_the_pieces_as_incomplete(m
     piece whole, but the run is not: the kept result ends there and says it is incomplete (before,
     the CLI printed it as the final position with exit code 0)."""
     import idm_rs
-    from idm_rs import simulation
+    from idm_rs.core import simulation
 
     real, calls = simulation.engine.simulate, []
 

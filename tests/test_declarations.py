@@ -14,10 +14,10 @@ from pathlib import Path
 import pytest
 
 import idm_rs
-from idm_rs import engine
-from idm_rs.declarations import EFFECT_PARAMS, EFFECTS, GRAVITY, TABLE1
+from idm_rs.core import engine
+from idm_rs.core.declarations import EFFECT_PARAMS, EFFECTS, GRAVITY, TABLE1
+from idm_rs.core.params import PARAM_INFO
 from idm_rs.diagnosis.catalogue import CATALOGUE, LIBRARY_IDS, by_id
-from idm_rs.params import PARAM_INFO
 
 PACKAGE = Path(idm_rs.__file__).parent
 
@@ -42,7 +42,7 @@ def test_every_effects_field_is_declared_once_with_a_unit():
 
 
 def test_effects_stub_lists_the_declared_fields():
-    assert stub_fields("effects.pyi", "Effects") == [f.name for f in fields(idm_rs.Effects)]
+    assert stub_fields("core/effects.pyi", "Effects") == [f.name for f in fields(idm_rs.Effects)]
 
 
 def test_effect_domains_reach_the_engine_with_their_rule():
@@ -76,7 +76,7 @@ def test_param_info_is_the_declaration():
 
 
 def test_params_stub_lists_the_declared_fields():
-    assert stub_fields("params.pyi", "Params") == [f.name for f in fields(idm_rs.Params)]
+    assert stub_fields("core/params.pyi", "Params") == [f.name for f in fields(idm_rs.Params)]
 
 
 # --- sweep --------------------------------------------------------------------------------------
@@ -132,19 +132,19 @@ def test_stribeck_setter_keeps_mu_s_above_mu_k():
 def test_the_structure_names_in_type_hints_are_the_engines():
     import typing
 
-    from idm_rs.declarations import IDM_MODELS, STRUCTURES, Model, StructureName
+    from idm_rs.core.declarations import IDM_MODELS, STRUCTURES, Model, StructureName
 
     assert typing.get_args(Model) == IDM_MODELS and {"lps", "dps"} <= set(IDM_MODELS)
     assert typing.get_args(StructureName) == tuple(s.name for s in STRUCTURES)
 
 
 def test_structure_labels_and_refusals_come_from_the_declarations():
-    from idm_rs.declarations import elements_of, structure, structure_label
+    from idm_rs.core.declarations import elements_of, structure, structure_label
 
     assert structure_label("lps", 4) == "LPS" and structure_label("dps", 4) == "DPS (n = 4)"
     assert structure_label("rig", 1) == "rig"
     assert elements_of("dps", 6) == 6 and elements_of("lps", 6) == 1
-    from idm_rs.declarations import IDM_MODELS, STRUCTURES
+    from idm_rs.core.declarations import IDM_MODELS, STRUCTURES
 
     with pytest.raises(ValueError, match=f"'model' must be one of {', '.join(map(repr, IDM_MODELS))}, got 'fem'"):
         structure("fem")
@@ -155,8 +155,8 @@ def test_structure_labels_and_refusals_come_from_the_declarations():
 def test_the_cli_offers_the_declared_structures():
     import argparse
 
-    from idm_rs.cli_parser import build_parser
-    from idm_rs.declarations import IDM_MODELS
+    from idm_rs.apps.cli_parser import build_parser
+    from idm_rs.core.declarations import IDM_MODELS
 
     parser = build_parser()
     commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import idm_rs
+from idm_rs.core.interrupted import interrupted
 from idm_rs.diagnosis import plot_diagnosis, text_report
-from idm_rs.interrupted import interrupted
-from idm_rs.synthetic import make_case
+from idm_rs.io.synthetic import make_case
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 #: nominal model of the synthetic cases: Table 1 with the normal force written out
@@ -123,7 +123,7 @@ def test_alternatives_are_named_in_report_and_json(spring_diagnosis):
 def test_cli_diagnose_writes_report_json_and_plots(spring_case, spring_diagnosis, tmp_path, capsys, monkeypatch):
     """The command line around the diagnosis (the diagnosis itself is the one above, not re-run)."""
     import idm_rs.diagnosis
-    from idm_rs.cli import main
+    from idm_rs.apps.cli import main
 
     calls = []
 
@@ -162,7 +162,7 @@ def test_cli_diagnose_writes_report_json_and_plots(spring_case, spring_diagnosis
 
 
 def test_cli_diagnose_refuses_a_malformed_case(tmp_path, capsys):
-    from idm_rs.cli import main
+    from idm_rs.apps.cli import main
 
     case = tmp_path / "bad"
     case.mkdir()
@@ -226,7 +226,7 @@ def test_ctrl_c_keeps_what_was_finished(spring_case, tmp_path, capsys, monkeypat
     incomplete, the report says so in plain words, the CLI writes the JSON and exits 130."""
     import importlib
 
-    from idm_rs.cli import main
+    from idm_rs.apps.cli import main
 
     module = importlib.import_module("idm_rs.diagnosis.diagnose")  # the module, not the function
 
@@ -274,7 +274,7 @@ def test_an_interrupted_diagnosis_reports_and_plots_only_what_finished(spring_ca
     figures of what finished written (--plots is not skipped), exit code 130 as every command."""
     import importlib
 
-    from idm_rs.cli import main
+    from idm_rs.apps.cli import main
 
     module = importlib.import_module("idm_rs.diagnosis.diagnose")
 

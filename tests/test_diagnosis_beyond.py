@@ -18,7 +18,7 @@ import idm_rs.diagnosis.problem as diag_problem
 import idm_rs.diagnosis.proposals as diag_proposals
 import idm_rs.diagnosis.second_effect as diag_second_effect
 from idm_rs.diagnosis import text_report
-from idm_rs.synthetic import make_case
+from idm_rs.io.synthetic import make_case
 from offcatalogue import make_offcatalogue_case
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "recordings"

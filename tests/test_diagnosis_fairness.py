@@ -13,14 +13,14 @@ import pytest
 
 import idm_rs
 import idm_rs.diagnosis.verdict as diag_verdict
-from idm_rs.batch import Structure
+from idm_rs.core.batch import Structure
 from idm_rs.diagnosis import text_report
 from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec
 from idm_rs.diagnosis.fitting import FreeParam, Objective, fit, set_param
 from idm_rs.diagnosis.results import Candidate
 from idm_rs.diagnosis.thresholds import BIC_THRESHOLD
-from idm_rs.recording import load_case
-from idm_rs.synthetic import make_case
+from idm_rs.io.recording import load_case
+from idm_rs.io.synthetic import make_case
 
 NOMINAL = idm_rs.Params(normal_force=(0.4 + 0.3) * 9.81)
 NOISE = 1.5e-9

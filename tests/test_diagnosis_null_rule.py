@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from idm_rs.batch import Structure
+from idm_rs.core.batch import Structure
 from idm_rs.diagnosis.candidates import against_null, make_candidate
 from idm_rs.diagnosis.case_model import ModelSpec
 from idm_rs.diagnosis.catalogue import CATALOGUE

@@ -17,7 +17,7 @@ import idm_rs.diagnosis.problem as diag_problem
 import idm_rs.diagnosis.rules as diag_rules
 import idm_rs.diagnosis.second_effect as diag_second_effect
 import idm_rs.diagnosis.verdict as diag_verdict
-from idm_rs.batch import Structure
+from idm_rs.core.batch import Structure
 from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec
 from idm_rs.diagnosis.catalogue import CATALOGUE, by_id
 from idm_rs.diagnosis.fitting import FreeParam, Objective, apply, fit, set_param
@@ -26,8 +26,8 @@ from idm_rs.diagnosis.noise import cross_check, estimate_noise, residual_sigma
 from idm_rs.diagnosis.results import Candidate
 from idm_rs.diagnosis.screening import Screened, near_degenerate, screen
 from idm_rs.diagnosis.thresholds import SEPARATION
-from idm_rs.recording import load_case
-from idm_rs.synthetic import make_case
+from idm_rs.io.recording import load_case
+from idm_rs.io.synthetic import make_case
 from test_diagnosis_fairness import LONG, NOISE, NOMINAL  # the same synthetic device and records
 
 SHORT = ({"amplitude_V": 80, "frequency_Hz": 200, "direction": "forward", "cycles": 3},

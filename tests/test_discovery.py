@@ -20,7 +20,7 @@ from idm_rs.diagnosis.discovery.regress import _choose
 from idm_rs.diagnosis.fitting import Objective
 from idm_rs.diagnosis.noise import estimate_noise
 from idm_rs.diagnosis.problem import HeldOut, Problem, calibration_params
-from idm_rs.recording import load_case
+from idm_rs.io.recording import load_case
 from offcatalogue import make_offcatalogue_case
 
 
@@ -554,7 +554,7 @@ def test_the_library_columns_are_the_engines_library_force_one_term_at_a_time():
     coefficient at 1), so what is regressed on and what is then simulated cannot differ: the
     package's term tables name exactly the engine's terms, a simulated library force equals the
     columns weighted by its coefficients, and a few columns are their closed forms."""
-    from idm_rs import engine
+    from idm_rs.core import engine
     from idm_rs.diagnosis.discovery import WEIGHT_TERMS, library_columns
 
     main, weight = engine.library_terms()

@@ -38,7 +38,7 @@ def test_the_site_builds_strict(tmp_path):
 
 def test_the_parameter_tables_are_the_declarations():
     """docs/PARAMETERS.md is written from the declarations the engine reads; regenerate it with
-    `python -m idm_rs.reference_tables > docs/PARAMETERS.md` when a parameter changes."""
-    from idm_rs.reference_tables import markdown
+    `python -m idm_rs.apps.reference_tables > docs/PARAMETERS.md` when a parameter changes."""
+    from idm_rs.apps.reference_tables import markdown
 
     assert (ROOT / "docs" / "PARAMETERS.md").read_text(encoding="utf-8") == markdown()

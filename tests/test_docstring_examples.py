@@ -7,9 +7,9 @@ import doctest
 import pytest
 
 import idm_rs
-from idm_rs.actuator import characterize, stall_force, steady_state
+from idm_rs.apps.actuator import characterize, stall_force, steady_state
+from idm_rs.io.synthetic import make_case
 from idm_rs.rigs import diagnose_rig, rig_fit
-from idm_rs.synthetic import make_case
 
 
 @pytest.mark.parametrize("obj", [idm_rs.simulate, idm_rs.sweep, idm_rs.diagnose, characterize, steady_state,

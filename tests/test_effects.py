@@ -255,8 +255,8 @@ def test_energy_balance_closes_with_each_force_effect(name):
 def test_bench_fixed_forces_are_declared_effect_parameters_and_turn_with_the_rig():
     """Every name in BENCH_FIXED is an effect parameter of the engine's declarations whose
     domain is symmetric (the turned value is valid too), and `oriented` negates exactly those."""
-    from idm_rs import engine
-    from idm_rs.effects import BENCH_FIXED, oriented
+    from idm_rs.core import engine
+    from idm_rs.core.effects import BENCH_FIXED, oriented
 
     names = set(engine.effect_names())
     assert BENCH_FIXED and BENCH_FIXED <= names
@@ -278,7 +278,7 @@ def test_the_effect_lists_of_the_tests_cover_every_catalogue_effect():
     effects of the property tests (conftest.EFFECT_RANGES; creep is drawn as its pair) know it:
     these lists are kept by hand, so a gap is made loud."""
     from conftest import EFFECT_RANGES
-    from idm_rs.declarations import EFFECTS
+    from idm_rs.core.declarations import EFFECTS
     from idm_rs.diagnosis.catalogue import LIBRARY_IDS
 
     term = [e for e in EFFECTS if e.kind == "term" and e.id not in LIBRARY_IDS]

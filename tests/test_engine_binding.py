@@ -1,4 +1,4 @@
-"""The native binding as ``idm_rs.engine`` exposes it: ``RunConfig`` checks its settings on
+"""The native binding as ``idm_rs.core.engine`` exposes it: ``RunConfig`` checks its settings on
 construction and is read-only, and the type stub ``_core.pyi`` declares exactly what the
 extension defines, with the same parameter names, kinds and defaults."""
 
@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 
 import idm_rs
-from idm_rs import _core, engine
+from idm_rs import _core
+from idm_rs.core import engine
 
 STUB = Path(idm_rs.__file__).with_name("_core.pyi")
 
@@ -73,7 +74,7 @@ def test_engine_is_the_only_module_importing_the_core():
                 names = [a.name for a in node.names]
             if any(n == "_core" or n.endswith("._core") for n in names):
                 importers.append(path.relative_to(pkg).as_posix())
-    assert sorted(set(importers)) == ["engine.py"]
+    assert sorted(set(importers)) == ["core/engine.py"]
 
 
 # --- the stub ----------------------------------------------------------------------------------

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs.cli import main
+from idm_rs.apps.cli import main
 
 matplotlib.use("Agg")
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata"
@@ -96,8 +96,8 @@ def test_a_drift_is_drawn_against_the_time_of_the_record_not_the_stick_time(tmp_
 def test_fig7_legends_sit_off_the_data(tmp_path, saved, key, quick):
     """Fig. 7c's legends covered its curves. Drawn from the full Fig. 7 values (adaptive runs,
     which draw the same curves within the figure's resolution)."""
-    from idm_rs import paper
-    from idm_rs.figures import fig7
+    from idm_rs.apps import paper
+    from idm_rs.apps.figures import fig7
 
     sweep = next(s for s in paper.fig7_sweeps(quick=quick) if s.key == key)
     runs = []

@@ -7,11 +7,11 @@ import importlib
 import numpy as np
 
 import idm_rs
-from idm_rs.cli import main
+from idm_rs.apps.cli import main
 
 
 def test_simulate_plot_draws_every_accepted_step_and_the_csv_every_save_every_th(tmp_path, monkeypatch):
-    cli = importlib.import_module("idm_rs.cli")
+    cli = importlib.import_module("idm_rs.apps.cli")
     drawn = {}
     real = cli.plot_result
     monkeypatch.setattr(cli, "plot_result", lambda r, p: drawn.setdefault("fig", real(r, p)))

@@ -85,3 +85,21 @@ def test_no_long_function_without_a_reason():
                 if n > LIMIT and not _reason_above(lines, first, "# Long:"):
                     long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({n} lines)")
     assert not long, "split these, or say why above them (`// Long: ...` / `# Long: ...`):\n" + "\n".join(long)
+
+
+#: lines a file of the engine or the package may have before it must say why it is one file
+FILE_LIMIT = 600
+
+
+def test_no_long_file_without_a_reason():
+    """A file over FILE_LIMIT lines holds more than one idea, unless its first lines say why it
+    is one (a ``Long:`` line in the module docstring or the leading comments). Test modules in
+    their own files (``tests.rs``, ``*_tests.rs``) hold a module's tests, not its ideas."""
+    long = []
+    for path in sorted([*(ROOT / "rust" / "src").rglob("*.rs"), *(ROOT / "python" / "idm_rs").rglob("*.py")]):
+        if path.name == "tests.rs" or path.name.endswith("_tests.rs"):
+            continue
+        lines = path.read_text().splitlines()
+        if len(lines) > FILE_LIMIT and not any("Long:" in line for line in lines[:20]):
+            long.append(f"{path.relative_to(ROOT)} ({len(lines)} lines)")
+    assert not long, "split these by idea, or say why each is one (a `Long:` line at the top):\n" + "\n".join(long)

@@ -19,8 +19,8 @@ from hypothesis import strategies as st
 
 import idm_rs
 from conftest import EFFECT_RANGES, some_effects
-from idm_rs import engine
-from idm_rs.batch import Structure, param_row
+from idm_rs.core import engine
+from idm_rs.core.batch import Structure, param_row
 from idm_rs.gpu import GpuUnavailable, all_specs, kernel_source, prepare, run_cpu, run_cuda
 from idm_rs.gpu.backend import ENTRY, NVRTC_OPTIONS
 

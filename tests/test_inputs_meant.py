@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs.cli import main
+from idm_rs.apps.cli import main
 
 P = idm_rs.Params()
 W = idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=0.5e-3)

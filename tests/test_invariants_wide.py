@@ -21,7 +21,7 @@ from conftest import (
     some_effects,
     wide_params,
 )
-from idm_rs.batch import Point, Structure, run
+from idm_rs.core.batch import Point, Structure, run
 
 LONG = settings(max_examples=300)
 

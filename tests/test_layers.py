@@ -184,6 +184,45 @@ def test_python_package_imports_no_circle_deferred_imports_included():
     assert _circle(graph) == []
 
 
+#: the Python package's layers, lowest first (a folder of python/idm_rs); a module may import
+#: modules of its own layer and of the layers before it (the package's __init__ and __main__,
+#: which gather the public names, stand above them all)
+PYTHON_LAYERS: tuple[tuple[str, ...], ...] = (
+    ("core",), ("io",), ("gpu",), ("sweeps",), ("diagnosis", "rigs"), ("apps",),
+)
+
+
+def _python_layer(module: str) -> int:
+    parts = module.split(".")
+    if len(parts) < 2 or parts[1] in ("__main__", "_core"):
+        return len(PYTHON_LAYERS)
+    for i, names in enumerate(PYTHON_LAYERS):
+        if parts[1] in names:
+            return i
+    raise AssertionError(f"python/idm_rs/{parts[1]} is in no layer of PYTHON_LAYERS: put it in the folder of its layer")
+
+
+def test_python_modules_live_in_a_layer_folder():
+    """No module at the package's top but its __init__ and __main__: each lives in its layer."""
+    loose = sorted(p.name for p in PYTHON.glob("*.py") if p.name not in ("__init__.py", "__main__.py"))
+    assert not loose, f"modules outside a layer folder: {loose}"
+
+
+def test_python_modules_import_only_their_layer_and_the_layers_below():
+    modules = _python_modules()
+    wrong = []
+    for name, path in modules.items():
+        if path.name == "__init__.py" and name == "idm_rs":
+            continue
+        for dep in _python_imports(name, path, modules):
+            if dep == "idm_rs":
+                if name != "idm_rs.core.engine":  # the engine imports the extension module, idm_rs._core
+                    wrong.append(f"{name} imports the package's __init__ (import the module itself)")
+            elif _python_layer(dep) > _python_layer(name):
+                wrong.append(f"{name} imports {dep} (a layer above)")
+    assert not wrong, "\n".join(wrong)
+
+
 @pytest.mark.parametrize("module", ["results", "report", "plots"])
 def test_the_result_types_and_their_presentation_do_not_import_the_algorithm(module):
     """The report and the figures are functions of a Diagnosis; the result types import neither

@@ -13,8 +13,8 @@ import idm_rs
 from idm_rs.diagnosis.case_model import ModelSpec, Structure
 from idm_rs.diagnosis.next_experiment import Drive, drives, separation, virtual_recording
 from idm_rs.diagnosis.problem import calibration_params
-from idm_rs.recording import load_case
-from idm_rs.synthetic import make_case
+from idm_rs.io.recording import load_case
+from idm_rs.io.synthetic import make_case
 
 NOMINAL = idm_rs.Params(normal_force=(0.4 + 0.3) * 9.81)
 EXPERIMENTS = (

@@ -16,8 +16,8 @@ import idm_rs
 from idm_rs.diagnosis.measurement import Measurement, Profile, Whitener, shift
 from idm_rs.diagnosis.noise_model import fit_colour
 from idm_rs.diagnosis.spikes import spikes
-from idm_rs.sensor_noise import SensorNoise
-from idm_rs.synthetic import make_case
+from idm_rs.io.sensor_noise import SensorNoise
+from idm_rs.io.synthetic import make_case
 
 EXPERIMENTS = (
     {"amplitude_V": 80, "frequency_Hz": 200, "direction": "forward", "cycles": 3},
@@ -103,7 +103,7 @@ def test_sensor_noise_refuses_a_non_stationary_colour_and_keeps_its_marginal_rms
 
 
 def test_make_case_reads_the_motion_late_by_the_channel_delay(tmp_path: Path) -> None:
-    from idm_rs.recording import load_case
+    from idm_rs.io.recording import load_case
 
     p = idm_rs.Params()
     exps = EXPERIMENTS[:1]
@@ -120,7 +120,7 @@ def test_a_late_simulator_is_the_recording_of_a_late_channel(tmp_path: Path) -> 
     # the delay weighed against a verdict is simulated (the drive felt late), not interpolated:
     # it reproduces a recording written with that delay to the integration error
     from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
-    from idm_rs.recording import load_case
+    from idm_rs.io.recording import load_case
 
     p = idm_rs.Params()
     a = load_case(make_case(tmp_path / "a", nominal_params=p, experiments=EXPERIMENTS[:2], noise=SensorNoise(rms=0.0),
@@ -137,7 +137,7 @@ def test_a_late_simulator_is_the_recording_of_a_late_channel(tmp_path: Path) -> 
 
 
 def test_white_noise_draws_as_before(tmp_path: Path) -> None:
-    from idm_rs.recording import load_case
+    from idm_rs.io.recording import load_case
 
     p = idm_rs.Params()
     a = load_case(make_case(tmp_path / "a", nominal_params=p, experiments=EXPERIMENTS[:1], seed=7))
@@ -152,7 +152,7 @@ def test_hum_and_a_drifting_zero_are_told_apart_on_records_of_one_or_two_mains_p
     # the hum (a drift "not shown by the rest"). Fitted together, each is found at its level.
     from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
     from idm_rs.diagnosis.noise_model import learn
-    from idm_rs.recording import load_case
+    from idm_rs.io.recording import load_case
 
     p = idm_rs.Params()
     kw = dict(nominal_params=p, experiments=EXPERIMENTS, resolution=0.0, seed=11, dt=2e-8)
@@ -179,7 +179,7 @@ def test_a_hum_is_found_through_a_delay_read_slightly_short(tmp_path: Path) -> N
     # the line only with what a slightly different delay could not take up
     from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
     from idm_rs.diagnosis.noise_model import Residuals, find_lines
-    from idm_rs.recording import load_case
+    from idm_rs.io.recording import load_case
 
     p = idm_rs.Params()
     rec = load_case(make_case(tmp_path / "h", nominal_params=p, experiments=EXPERIMENTS, resolution=0.0, seed=3,
@@ -199,7 +199,7 @@ def test_a_drifting_zero_is_found_under_a_reading_coarser_than_its_noise(tmp_pat
     # file's own where white noise would allow 5. The rest's check allows the rounding's ramp
     from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
     from idm_rs.diagnosis.noise_model import Residuals, find_drift, rounding_slope
-    from idm_rs.recording import load_case
+    from idm_rs.io.recording import load_case
 
     p = idm_rs.Params()
     rec = load_case(make_case(tmp_path / "q", nominal_params=p, experiments=EXPERIMENTS, resolution=6e-9, seed=5,
@@ -217,7 +217,7 @@ def test_artefacts_are_read_again_off_a_null_that_reaches_the_data(tmp_path: Pat
     # refitted to the data the zero's drift is found, and the colour learned first is kept
     from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
     from idm_rs.diagnosis.noise_model import learn, relearn
-    from idm_rs.recording import load_case
+    from idm_rs.io.recording import load_case
 
     p = idm_rs.Params()
     rec = load_case(make_case(tmp_path / "d", nominal_params=p, experiments=EXPERIMENTS, resolution=0.0, seed=5,
@@ -313,7 +313,7 @@ def test_a_colour_the_rest_shows_by_chance_is_not_taken_for_the_noise(tmp_path: 
     # colour must whiten the calibrated residual to stand; a real one does.
     from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
     from idm_rs.diagnosis.noise_model import Colour, Residuals, _confirmed, whitens
-    from idm_rs.recording import load_case
+    from idm_rs.io.recording import load_case
 
     p = idm_rs.Params()
     spec = ModelSpec(Structure("lps", 1, False), p.to_dict(resolved=False), {})

@@ -10,9 +10,9 @@ import math
 import pytest
 
 import idm_rs
-from idm_rs import options
-from idm_rs.actuator import characterize
-from idm_rs.cli import main
+from idm_rs.apps.actuator import characterize
+from idm_rs.apps.cli import main
+from idm_rs.core import options
 
 P = idm_rs.Params()
 TRAIN = idm_rs.Sawtooth(amplitude=80.0, frequency=500.0, cycles=3)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import importlib
 
 import idm_rs
-from idm_rs.actuator import characterize
+from idm_rs.apps.actuator import characterize
 
 
 def test_characterize_names_its_curves_on_its_bars(capsys):
@@ -18,7 +18,7 @@ def test_characterize_names_its_curves_on_its_bars(capsys):
 
 
 def test_a_sweep_bar_estimates_from_the_whole_run():
-    bar = importlib.import_module("idm_rs.sweep")._progress_bar(10, "label")
+    bar = importlib.import_module("idm_rs.sweeps.sweep")._progress_bar(10, "label")
     assert bar.smoothing == 0 and bar.desc == "label"
     bar.close()
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs.batch import Rig
+from idm_rs.core.batch import Rig
 from idm_rs.rigs import RealDataError, RigData, load
 from idm_rs.rigs.fit import EMPS_REFERENCE, idim_ls, rig_fit
 
@@ -55,7 +55,7 @@ def test_unknown_files_are_refused_by_name(tmp_path):
 
 @needs_data
 def test_emps_identification_matches_the_benchmark_reference(tmp_path, capsys):
-    from idm_rs.cli import main
+    from idm_rs.apps.cli import main
 
     out = tmp_path / "emps.json"
     assert main(["rig-fit", str(REAL / "emps" / "DATA_EMPS.mat"), "--json", str(out), "--plots", str(tmp_path)]) == 0
@@ -196,7 +196,7 @@ def test_rig_diagnosis_names_a_ripple_and_stays_quiet_without_one(ripple, verdic
 
 @needs_data
 def test_cli_diagnoses_a_rig_data_file(tmp_path, capsys):
-    from idm_rs.cli import main
+    from idm_rs.apps.cli import main
 
     out = tmp_path / "d.json"
     assert main(["diagnose", str(REAL / "emps" / "DATA_EMPS.mat"), "--json", str(out)]) == 0

@@ -1,7 +1,7 @@
 """Recordings (``idm-recording/1``): the reader, the synthetic-case writer, and every refusal.
 
 The dev cases are read from ``../shared/recordings/dev`` (skipped when that folder is absent, as
-in a user's clone); everything else runs on small cases written by ``idm_rs.synthetic``.
+in a user's clone); everything else runs on small cases written by ``idm_rs.io.synthetic``.
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs.recording import Experiment, Recording, RecordingError, load_case
-from idm_rs.synthetic import make_case
-from idm_rs.waveforms import voltage_at
+from idm_rs.core.waveforms import voltage_at
+from idm_rs.io.recording import Experiment, Recording, RecordingError, load_case
+from idm_rs.io.synthetic import make_case
 
 DEV = Path(__file__).resolve().parents[2] / "shared" / "recordings" / "dev"
 DEV_CASES = sorted(p.name for p in DEV.glob("dev*") if (p / "meta.json").is_file()) if DEV.is_dir() else []

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import idm_rs
-from idm_rs.waveforms import voltage_at
+from idm_rs.core.waveforms import voltage_at
 
 WAVE = idm_rs.Triangle(amplitude=80.0, rise=0.3e-3, fall=0.5e-3)
 

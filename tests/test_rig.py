@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs.batch import Rig
+from idm_rs.core.batch import Rig
 
 RIG_PARAMS = idm_rs.Params(m1=0.5, normal_force=0.5 * 9.81)
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from idm_rs.cli import main
+from idm_rs.apps.cli import main
 from idm_rs.rigs import RealDataError, diagnose_rig, load, rig_fit
 from idm_rs.rigs.signals import robust_noise_rms
 

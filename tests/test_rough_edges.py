@@ -14,8 +14,8 @@ import pytest
 
 import idm_rs
 from conftest import interrupt_main_when
-from idm_rs.cli import main
-from idm_rs.cli_figures import _waveform_title
+from idm_rs.apps.cli import main
+from idm_rs.apps.cli_figures import _waveform_title
 
 P = idm_rs.Params()
 W = idm_rs.Triangle()
@@ -111,7 +111,7 @@ def test_a_step_that_does_not_divide_gets_one_that_does():
 def test_ctrl_c_stops_simulate_and_keeps_the_trajectory_so_far(monkeypatch):
     # Ctrl-C 0.5 s after the engine call began (not after a fixed time: see interrupt_main_when)
     started = threading.Event()
-    engine = importlib.import_module("idm_rs.simulation").engine
+    engine = importlib.import_module("idm_rs.core.simulation").engine
     engine_simulate = engine.simulate
 
     def simulate(*args):
@@ -172,7 +172,7 @@ def test_fit_plots_align_models_on_the_rest_before_the_drive():
 
 
 def test_sawtooth_friction_panel_zooms_on_one_cycle(tmp_path):
-    from idm_rs.cli import plot_result
+    from idm_rs.apps.cli import plot_result
 
     r = idm_rs.simulate(P, idm_rs.Sawtooth(cycles=5, frequency=1000.0, rise=1e-4), t_end=5e-3, model="lps",
                         method="auto", save_every=1)

@@ -12,8 +12,8 @@ import pytest
 import idm_rs
 from idm_rs.diagnosis import text_report
 from idm_rs.diagnosis.noise import estimate_noise
-from idm_rs.recording import RecordingError
-from idm_rs.synthetic import make_case
+from idm_rs.io.recording import RecordingError
+from idm_rs.io.synthetic import make_case
 
 P = idm_rs.Params()
 

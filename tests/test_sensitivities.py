@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs import batch
-from idm_rs.params import PARAM_INFO
+from idm_rs.core import batch
+from idm_rs.core.params import PARAM_INFO
 
 WAVE = idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
 RUN = dict(t_end=1e-3, dt=1e-8, model="lps", save_every=2000)
@@ -127,9 +127,9 @@ def test_a_case_simulator_predicts_with_sensitivities_as_its_fits_need():
     state's stability limit (fast slips), it says so instead of returning chatter's derivatives."""
     from pathlib import Path
 
-    from idm_rs.batch import Structure
+    from idm_rs.core.batch import Structure
     from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec
-    from idm_rs.recording import load_case
+    from idm_rs.io.recording import load_case
 
     case = Path(__file__).resolve().parents[1].parent / "shared" / "recordings" / "dev" / "dev02"
     if not case.is_dir():

@@ -13,8 +13,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import idm_rs
-from idm_rs import engine
-from idm_rs.batch import Point, Structure, run
+from idm_rs.core import engine
+from idm_rs.core.batch import Point, Structure, run
 
 LEVELS = ("scalar", "avx2", "avx512")
 

@@ -9,7 +9,7 @@ import pytest
 
 import idm_rs
 from idm_rs import Solver
-from idm_rs.batch import Point, Structure, run
+from idm_rs.core.batch import Point, Structure, run
 
 P = idm_rs.Params()
 W = idm_rs.Triangle(80.0, 0.5e-3, 1.5e-3)
@@ -67,7 +67,7 @@ def test_a_bad_solver_is_refused_when_made(kw, needle):
 def test_characterize_takes_a_solver_for_every_curve(monkeypatch):
     """Every sweep and batch characterize runs gets the Solver's settings (recorded here by
     standing in for the engine's batch start)."""
-    import idm_rs.batch as batch
+    import idm_rs.core.batch as batch
 
     seen = []
     real = batch.start
@@ -77,7 +77,7 @@ def test_characterize_takes_a_solver_for_every_curve(monkeypatch):
         return real(*args, **kwargs)
 
     monkeypatch.setattr(batch, "start", spy)
-    from idm_rs.actuator import characterize
+    from idm_rs.apps.actuator import characterize
 
     ds = characterize(model="lps", frequencies=[200.0], voltages=[80.0], step_voltages=[80.0], loads=3,
                       cycles=3, skip_cycles=1, progress=False, solver=Solver("dopri5", rtol=2e-7))

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs import engine
+from idm_rs.core import engine
 
 P = idm_rs.Params()
 #: a fast edge that excites every mode of the bar, then a fall: 10 µs in all

@@ -16,7 +16,7 @@ import xarray  # noqa: F401  (imported here so that the Ctrl-C test does not int
 
 import idm_rs
 from conftest import interrupt_main_when
-from idm_rs.sweep import METRICS
+from idm_rs.sweeps.sweep import METRICS
 
 P = idm_rs.Params()
 WAVE = idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
@@ -81,7 +81,7 @@ def test_sweep_equals_simulate_point_by_point(model, grid, params):
         q = r.params
         resolved = q.to_dict(resolved=True)["normal_force"]
         if params.normal_force is None:
-            from idm_rs.declarations import GRAVITY
+            from idm_rs.core.declarations import GRAVITY
 
             assert resolved == pytest.approx((q.m1 + q.m2 + q.pe_density * q.pe_area * q.pe_length) * GRAVITY,
                                              rel=1e-12), index
@@ -183,7 +183,7 @@ def test_interrupted_sweep_keeps_finished_points(monkeypatch):
     grid = {"mass_ratio": np.linspace(0.5, 1.5, 32), "voltage": np.linspace(60.0, 100.0, 32)}
     kw = dict(t_end=20e-3, dt=2e-8, model="lps", progress=False)
     runs = []
-    module = importlib.import_module("idm_rs.sweep_backends")
+    module = importlib.import_module("idm_rs.sweeps.backends")
     start = module.start_block
 
     def recording_start(*args):
@@ -295,7 +295,7 @@ def test_adaptive_sweeps_need_no_dt(method):
     assert (ds.status.values == 1).all()
     assert np.abs(ds.final_position.values - rk4.final_position.values).max() < 1e-9
     assert (ds.steps.values < rk4.steps.values / 10).all()
-    resolved = idm_rs.methods.AUTO[0] if method == "auto" else method
+    resolved = idm_rs.core.methods.AUTO[0] if method == "auto" else method
     assert ds.attrs["method"] == resolved and ds.attrs["method_asked"] == method
     assert math.isnan(ds.attrs["dt_s"]) and ds.attrs["first_step_s"] == 1e-8
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs.cli import main
+from idm_rs.apps.cli import main
 
-sweep_module = importlib.import_module("idm_rs.sweep")
+sweep_module = importlib.import_module("idm_rs.sweeps.sweep")
 
 pytest.importorskip("zarr")
 
@@ -45,7 +45,7 @@ def test_a_store_written_block_by_block_holds_what_memory_holds(tmp_path):
 
 
 def test_an_interrupted_store_keeps_the_slabs_it_wrote(tmp_path, monkeypatch):
-    from idm_rs.sweep_backends import LocalEngine
+    from idm_rs.sweeps.backends import LocalEngine
 
     real, calls = LocalEngine.run, []
 
@@ -89,7 +89,7 @@ def test_a_1e8_grid_runs_into_a_store_in_bounded_memory_and_stops_on_ctrl_c(tmp_
     store = tmp_path / "big.zarr"
     out_file = (tmp_path / "stdout.txt").open("w")
     proc = subprocess.Popen(
-        [sys.executable, "-c", "from idm_rs.cli import main; raise SystemExit(main())", "sweep", "--model", "lps",
+        [sys.executable, "-c", "from idm_rs.apps.cli import main; raise SystemExit(main())", "sweep", "--model", "lps",
          "--grid", "m2=0.1:0.5:10000", "--grid", "voltage=40:120:10000", "--t-end", "2e-4", "--method", "auto",
          "--threads", "1", "--no-progress", "--out", str(store)],
         env=env, text=True, stdout=out_file, stderr=subprocess.PIPE,

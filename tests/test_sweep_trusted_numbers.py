@@ -9,9 +9,10 @@ import pytest
 import xarray as xr
 
 import idm_rs
-from idm_rs import actuator, methods
-from idm_rs.cli_files import sweep_summary
-from idm_rs.waveforms import STARTUP_CYCLES, Sawtooth
+from idm_rs import methods
+from idm_rs.apps import actuator
+from idm_rs.apps.cli_files import sweep_summary
+from idm_rs.core.waveforms import STARTUP_CYCLES, Sawtooth
 
 TRAIN = Sawtooth(80.0, 100.0, 4)
 

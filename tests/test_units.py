@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 
-from idm_rs.actuator import StallForce, SteadyState
+from idm_rs.apps.actuator import StallForce, SteadyState
+from idm_rs.core.units import interval, si
 from idm_rs.diagnosis.identifiability import ParamStatus
-from idm_rs.units import interval, si
 
 
 def test_si_prefixes_keep_the_significant_digits():

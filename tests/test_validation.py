@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import idm_rs
-from idm_rs import engine
+from idm_rs.core import engine
 
 PAPER_WAVE = idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=9.5e-3)
 SHORT_WAVE = idm_rs.Triangle(amplitude=80.0, rise=0.5e-3, fall=0.5e-3)

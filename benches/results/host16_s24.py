@@ -13,7 +13,7 @@ import numpy as np
 import idm_rs
 
 p, w = idm_rs.Params(), idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
-info = {"simd": idm_rs.engine.simd_level(), "cpus": os.cpu_count(), "processor": platform.processor()}
+info = {"simd": idm_rs.core.engine.simd_level(), "cpus": os.cpu_count(), "processor": platform.processor()}
 print(json.dumps(info), flush=True)
 for side, threads in [(int(a.split("x")[0]), int(a.split("x")[1])) for a in sys.argv[1:]]:
     g = {"mass_ratio": np.linspace(0.25, 2.0, side), "voltage": np.linspace(40.0, 120.0, side)}

@@ -5,6 +5,6 @@
 set -x
 lscpu | head -30; grep -m1 "model name" /proc/cpuinfo; ldd --version | head -1; which perf valgrind; nproc
 export PYTHONPATH=$PWD/python
-python -c "import idm_rs; print(idm_rs.engine.simd_level())"
+python -c "import idm_rs; print(idm_rs.core.engine.simd_level())"
 timeout 330 python benches/bench_per_thread.py --side 20 --threads 1 2 4 8 16 --scale 48 > $OUT/percore_device.jsonl
 cat $OUT/percore_device.jsonl

@@ -10,20 +10,21 @@ typed Python API. Quick start::
     r.final_position                                      # x1(10 ms) [m]
 """
 
-from . import methods
+from .core import methods
+from .core.effects import Effects
+from .core.engine import __version__
+from .core.external_force import ExternalForce
+from .core.interrupted import partial_result
+from .core.params import Params
+from .core.simulation import DivergenceError, simulate
+from .core.simulation_result import EnergyBudget, SimulationResult
+from .core.solver import Solver
+from .core.state import State
+from .core.waveforms import Sampled, Sawtooth, Triangle, Waveform
 from .diagnosis import Diagnosis, diagnose, plot_diagnosis, text_report
-from .effects import Effects
-from .engine import __version__
-from .external_force import ExternalForce
-from .interrupted import partial_result
-from .params import Params
-from .recording import Recording, RecordingError, load_case
-from .simulation import DivergenceError, EnergyBudget, SimulationResult, simulate
-from .solver import Solver
-from .state import State
-from .sweep import sweep
-from .sweep_plan import METRICS
-from .waveforms import Sampled, Sawtooth, Triangle, Waveform
+from .io.recording import Recording, RecordingError, load_case
+from .sweeps.plan import METRICS
+from .sweeps.sweep import sweep
 
 __all__ = [
     "__version__",

@@ -1,6 +1,6 @@
 """Type stubs of the private native module (Rust, PyO3; ``rust/src/python/mod.rs``).
 
-The public API is ``idm_rs``; inside the package only ``idm_rs.engine`` imports this module.
+The public API is ``idm_rs``; inside the package only ``idm_rs.core.engine`` imports this module.
 Arrays cross the boundary as numpy arrays: C-contiguous float64 inputs are read in place (a
 strided one is copied), outputs are handed over without a copy. Every run releases the GIL.
 Units are SI throughout: times [s], positions [m], velocities [m/s], forces [N], voltages [V].

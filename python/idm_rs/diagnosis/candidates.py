@@ -11,8 +11,8 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ..batch import Structure
-from ..declarations import GRAVITY
+from ..core.batch import Structure
+from ..core.declarations import GRAVITY
 from .calibration import calibrate as global_calibration
 from .calibration import search
 from .case_model import ModelSpec

@@ -11,12 +11,12 @@ from typing import Any, Mapping, Optional, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import engine
-from ..batch import Structure, Tables, param_row
-from ..batch import run as run_batch
-from ..effects import BENCH_FIXED, oriented
-from ..recording import Recording
-from ..waveforms import Sawtooth
+from ..core import engine
+from ..core.batch import Structure, Tables, param_row
+from ..core.batch import run as run_batch
+from ..core.effects import BENCH_FIXED, oriented
+from ..core.waveforms import Sawtooth
+from ..io.recording import Recording
 from .thresholds import FIT_DT
 
 

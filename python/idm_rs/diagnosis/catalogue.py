@@ -2,7 +2,7 @@
 
 What each effect *is* (id, one-line physics, the term it adds, its parameters with units and
 physical bounds) is declared once in the Rust core (``rust/src/physics/effects.rs``) and read here through
-:mod:`idm_rs.declarations`. This module adds only how the diagnosis *fits* it: per parameter the
+:mod:`idm_rs.core.declarations`. This module adds only how the diagnosis *fits* it: per parameter the
 fit bounds, scale, starting values and log scaling (:data:`FIT`), and per effect how it enters
 the model when it is not a plain engine term (:data:`PLACEMENT`). Adding an effect means
 declaring it in Rust (with its term in the engine) and giving its parameters a line in
@@ -14,8 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Mapping, Optional
 
-from ..batch import Structure
-from ..declarations import EFFECT_PARAMS, EFFECTS, TABLE1, EffectDecl, EffectKind, ParamDecl
+from ..core.batch import Structure
+from ..core.declarations import EFFECT_PARAMS, EFFECTS, TABLE1, EffectDecl, EffectKind, ParamDecl
 from .fitting import FreeParam, Setter, set_effect, set_param
 
 #: a fitted effect's parameters as reported: (fitted values, their 1-sigma) of every free

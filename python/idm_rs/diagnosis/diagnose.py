@@ -19,10 +19,10 @@ from typing import Callable, Optional, Union
 
 import numpy as np
 
-from ..engine import DivergenceError
-from ..interrupted import interrupted
-from ..recording import Recording, load_case
-from ..solver import Solver, resolve_solver
+from ..core.engine import DivergenceError
+from ..core.interrupted import interrupted
+from ..core.solver import Solver, resolve_solver
+from ..io.recording import Recording, load_case
 from .beyond_catalogue import discovery_start, settle_discovery
 from .candidates import (
     calibrate_null,

@@ -13,7 +13,7 @@ from typing import Any, Callable, Optional, Sequence, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from ..recording import Recording
+from ..io.recording import Recording
 from .case_model import CaseSimulator, ModelSpec
 from .measurement import Measurement, Profile
 from .segments import segment_starts

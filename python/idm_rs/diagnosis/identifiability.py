@@ -16,7 +16,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Optional, Sequence
 
-from .. import units
+from ..core import units
 from .thresholds import DETERMINED_WITHIN, STRONG_CORRELATION
 
 #: the normal quantile of a two-sided 95 % interval

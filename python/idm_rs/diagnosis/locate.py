@@ -11,7 +11,7 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..recording import Experiment, Recording
+from ..io.recording import Experiment, Recording
 from .thresholds import SYSTEMATIC_Z, WINDOW_S
 
 PHASES = ("rest", "rapid edge / slip", "slow edge / stick")

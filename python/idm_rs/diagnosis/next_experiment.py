@@ -25,8 +25,8 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..effects import BENCH_FIXED
-from ..recording import Experiment, Recording
+from ..core.effects import BENCH_FIXED
+from ..io.recording import Experiment, Recording
 from .case_model import CaseSimulator, ModelSpec
 from .fitting import FreeParam, Objective
 from .thresholds import (

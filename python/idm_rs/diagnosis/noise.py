@@ -9,7 +9,7 @@ from typing import Optional, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..recording import Recording
+from ..io.recording import Recording
 from .noise_model import NoiseModel
 from .thresholds import DISAGREE_SIGMAS
 from .whiteness import whiteness_z  # noqa: F401  (the residual test, named here as before)

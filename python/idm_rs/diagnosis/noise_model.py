@@ -15,7 +15,7 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..recording import Recording
+from ..io.recording import Recording
 from .measurement import Measurement, Profile, Whitener
 from .segments import segment_starts
 from .spikes import reject_spikes

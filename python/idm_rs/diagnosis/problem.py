@@ -11,8 +11,8 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..batch import Structure
-from ..recording import Recording
+from ..core.batch import Structure
+from ..io.recording import Recording
 from .calibration import Calibration
 from .case_model import CaseSimulator, ModelSpec
 from .fitting import FitResult, FreeParam, Objective, fit, set_param

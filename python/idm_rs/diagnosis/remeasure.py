@@ -16,7 +16,7 @@ from typing import Callable, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from ..recording import Recording
+from ..io.recording import Recording
 from .case_model import ModelSpec
 from .fitting import Objective, apply, fit
 from .measurement import Measurement, Whitener

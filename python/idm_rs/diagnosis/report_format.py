@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Optional, Sequence
 
-from ..params import PARAM_INFO
+from ..core.params import PARAM_INFO
 from .catalogue import CATALOGUE, by_id
 from .thresholds import AT_BOUND_SHARE, BIC_THRESHOLD, CALIBRATION_RANGE
 

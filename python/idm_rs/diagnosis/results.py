@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from ..recording import Recording
+from ..io.recording import Recording
 from .case_model import CaseSimulator, ModelSpec
 from .identifiability import ParamStatus
 from .locate import Location

@@ -12,7 +12,7 @@ slip event appears or vanishes), which is what a global calibration needs."""
 
 from __future__ import annotations
 
-from ..recording import Experiment
+from ..io.recording import Experiment
 
 
 def segment_starts(e: Experiment, sample_rate_Hz: float, n_samples: int) -> list[int]:

@@ -10,7 +10,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..recording import Recording
+from ..io.recording import Recording
 from .thresholds import OUTLIER_ISOLATION, OUTLIER_Z
 
 

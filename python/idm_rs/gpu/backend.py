@@ -24,7 +24,7 @@ from typing import Any, Callable, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import engine
+from ..core import engine
 
 SOURCE = Path(__file__).with_name("idm_kernel.cu")
 #: outputs per point, in the kernel's order
@@ -85,9 +85,9 @@ def spec_of(model: Literal["lps", "dps"] = "lps", n_elements: int = 1, piezo_hys
             effects: Any = None) -> Spec:
     """The specialisation for one structure and set of effects (``Effects``; none by default) at
     Table 1's values (the shape, not the values, decides it)."""
-    from ..batch import Structure, param_row
-    from ..effects import Effects
-    from ..params import Params
+    from ..core.batch import Structure, param_row
+    from ..core.effects import Effects
+    from ..core.params import Params
 
     config = Structure(model, n_elements, piezo_hysteresis).config(method="rk4", dt=1e-8)
     e = effects or Effects()
@@ -99,7 +99,7 @@ def all_specs() -> list[Spec]:
     """The specialisations the NVRTC test compiles: every node count with and without piezo
     hysteresis and no effect, and the LPS and the DPS 4 with every catalogue effect on at once
     (the largest right-hand sides)."""
-    from ..effects import Effects
+    from ..core.effects import Effects
 
     max_dof = engine.kernel_accepts()["max_dof"]
     specs = [spec_of("lps" if n == 2 else "dps", max(n - 1, 1), h)

@@ -183,19 +183,21 @@ def simulate_emps(data: RigData, params: dict[str, float], *, rtol: float = 1e-6
     run's times. The validation run's external force pulses are not modelled (the rig takes one
     input; and their recorded scale, uint8 0-5, did not improve even the inverse model with
     either sign)."""
-    import idm_rs
-    from idm_rs.batch import Rig
+    from ..core.batch import Rig
+    from ..core.params import Params
+    from ..core.simulation import simulate as run_simulation
+    from ..core.waveforms import Sampled
 
     meta = data.meta
     fc = max(params["fc"], 1e-6)
-    p = idm_rs.Params(m1=params["m"], normal_force=1.0, mu_k=fc, mu_s=fc, sigma2=max(params["fv"], 0.0),
+    p = Params(m1=params["m"], normal_force=1.0, mu_k=fc, mu_s=fc, sigma2=max(params["fv"], 0.0),
                       sigma1=0.0, fric_alpha=EMPS_PRESLIDING_STIFFNESS,
                       fric_beta=EMPS_PRESLIDING_STIFFNESS / (100.0 * fc), fric_gamma=0.0,
                       load_force=-params["offset"])
     rig = Rig("closed_loop", kp=meta["kp_per_s"], kv=meta["kv_V_s_per_m"], gain=meta["gtau_N_per_V"],
               limit=meta["saturation_V"])
-    wave = idm_rs.Sampled(data.t, data.drive)
-    r = idm_rs.simulate(p, wave, t_end=float(data.t[-1]), model=rig, piezo_hysteresis=False, method="rodas4",
+    wave = Sampled(data.t, data.drive)
+    r = run_simulation(p, wave, t_end=float(data.t[-1]), model=rig, piezo_hysteresis=False, method="rodas4",
                         rtol=rtol, atol=rtol, save_every=1, first_step=1e-5)
     q = np.interp(data.t, r.t, r.main_body)
     v = np.interp(data.t, r.t, r.main_body_velocity)
@@ -268,8 +270,10 @@ def fit_spring_slider(data: RigData, *, simulate: bool = True) -> RigFit:
     at the drive speed, the Leuven element with those levels) is simulated over
     ``SLIDER_PERIODS`` periods and its peaks, troughs and period compared with the record's.
     A run without stick-slip (steady sliding) gives the sliding friction level only."""
-    import idm_rs
-    from idm_rs.batch import Rig
+    from ..core.batch import Rig
+    from ..core.params import Params
+    from ..core.simulation import simulate as run_simulation
+    from ..core.waveforms import Sampled
 
     meta = data.meta
     n_force, k, speed = meta["normal_force_N"], meta["stiffness_N_per_m"], meta["drive_speed_m_per_s"]
@@ -299,14 +303,14 @@ def fit_spring_slider(data: RigData, *, simulate: bool = True) -> RigFit:
     if simulate:
         t_end = min(float(data.t[-1]), SLIDER_PERIODS * period)
         a = SLIDER_PRESLIDING_STIFFNESS
-        p = idm_rs.Params(m1=meta["mass_kg"], normal_force=n_force, mu_s=params["mu_s"], mu_k=params["mu_k"],
+        p = Params(m1=meta["mass_kg"], normal_force=n_force, mu_s=params["mu_s"], mu_k=params["mu_k"],
                           stribeck_velocity=1e-4, sigma2=0.0, sigma1=0.0, fric_alpha=a, fric_beta=a / (100 * fs),
                           fric_gamma=0.0)
         # the record starts mid-stick: the spring already holds the first sample's force
         state = np.zeros(5)  # the rig's state: x, v, g, Fh, h
         state[0], state[3] = -force[0] / k, np.clip(force[0], -0.999 * fs, 0.999 * fs)
-        drive = idm_rs.Sampled([0.0, t_end], [0.0, speed * t_end])
-        r = idm_rs.simulate(p, drive, t_end=t_end, model=Rig("position", stiffness=k), piezo_hysteresis=False,
+        drive = Sampled([0.0, t_end], [0.0, speed * t_end])
+        r = run_simulation(p, drive, t_end=t_end, model=Rig("position", stiffness=k), piezo_hysteresis=False,
                             method="rodas4", rtol=1e-7, atol=1e-7, save_every=1, first_step=1e-6,
                             initial_state=state)
         sel = data.t <= t_end
@@ -356,17 +360,19 @@ def fit_frame(data: RigData, *, simulate: bool = True) -> RigFit:
                           "inverse_model_relative_error_pct": float(100 * np.linalg.norm(e) /
                                                                     np.linalg.norm(reg.y))})
     if simulate:
-        import idm_rs
-        from idm_rs.batch import Rig
+        from ..core.batch import Rig
+        from ..core.params import Params
+        from ..core.simulation import simulate as run_simulation
+        from ..core.waveforms import Sampled
 
         k = FRAME_SIM_MASS / m_k
         fc = max(fc_k * k, 1e-9)
         alpha = 1e3 * k
-        p = idm_rs.Params(m1=FRAME_SIM_MASS, normal_force=1.0, mu_s=fc, mu_k=fc, stribeck_velocity=1e-4,
+        p = Params(m1=FRAME_SIM_MASS, normal_force=1.0, mu_s=fc, mu_k=fc, stribeck_velocity=1e-4,
                           sigma2=0.0, sigma1=0.0, fric_alpha=alpha, fric_beta=alpha / (100 * fc), fric_gamma=0.0,
                           load_force=-off * k)
         rig = Rig("position", stiffness=k, damping=max(c_k, 0.0) * k)
-        r = idm_rs.simulate(p, idm_rs.Sampled(t, y), t_end=float(t[-1]), model=rig, piezo_hysteresis=False,
+        r = run_simulation(p, Sampled(t, y), t_end=float(t[-1]), model=rig, piezo_hysteresis=False,
                             method="rodas4", rtol=1e-7, atol=1e-7, save_every=1, first_step=1e-5,
                             initial_state=np.array([x[0], 0.0, 0.0, 0.0, 0.0]))
         x_sim = np.interp(t, r.t, r.main_body)

@@ -13,8 +13,8 @@ from typing import Any, Callable, Optional, Sequence, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from ... import engine
-from ...recording import Recording
+from ...core import engine
+from ...io.recording import Recording
 from ..case_model import CaseSimulator, ModelSpec
 from ..fitting import FreeParam, Objective
 from ..thresholds import (

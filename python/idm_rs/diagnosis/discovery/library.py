@@ -74,7 +74,7 @@ def library_columns(tr: Trajectory, terms: Sequence[Term], wavelength: float) ->
     """Each term's function along the trajectory (samples x terms), computed by the engine's own
     library force with that term's coefficient at 1 (rust/src/physics/library_columns.rs: sgn
     smoothed as tanh(v/v_s); the periodic terms at `wavelength` [m])."""
-    from ... import engine
+    from ...core import engine
 
     def f64(a: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.ascontiguousarray(a, dtype=np.float64)

@@ -10,7 +10,7 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
-from ...recording import Recording
+from ...io.recording import Recording
 from ..case_model import ModelSpec
 from ..fitting import FitResult, FreeParam, Objective, fit, set_effect
 from ..thresholds import (

@@ -17,7 +17,13 @@ from typing import TYPE_CHECKING, Any, Optional, Sequence
 
 import numpy as np
 
-from . import methods, options
+from ..core import methods, options
+from ..core.declarations import structure_label
+from ..core.interrupted import partial_result
+from ..core.simulation import DivergenceError, simulate
+from ..core.units import si
+from ..core.waveforms import Sawtooth
+from ..sweeps.plan import STEADY_METRICS
 from .cli_figures import plot_result, plot_sweep
 from .cli_files import (
     CliError,
@@ -34,12 +40,6 @@ from .cli_files import (
 )
 from .cli_outputs import check_outputs
 from .cli_parser import build_parser
-from .declarations import structure_label
-from .interrupted import partial_result
-from .simulation import DivergenceError, simulate
-from .sweep_plan import STEADY_METRICS
-from .units import si
-from .waveforms import Sawtooth
 
 if TYPE_CHECKING:
     pass
@@ -123,7 +123,7 @@ def _largest_divisor_at_most(n: int, limit: int) -> int:
 
 
 def cmd_sweep(a: argparse.Namespace) -> int:
-    from .sweep import sweep
+    from ..sweeps.sweep import sweep
 
     grid = parse_grid(a.grid)
     if a.plot and len(grid) not in (1, 2):
@@ -270,7 +270,7 @@ def cmd_characterize(a: argparse.Namespace) -> int:
 def cmd_rig_fit(a: argparse.Namespace) -> int:
     import json
 
-    from .rigs import load, plot_rig_fit, rig_fit
+    from ..rigs import load, plot_rig_fit, rig_fit
 
     t0 = time.perf_counter()
     fit = rig_fit(load(a.path), simulate=not a.no_simulation)
@@ -290,11 +290,11 @@ def cmd_rig_fit(a: argparse.Namespace) -> int:
 def cmd_diagnose(a: argparse.Namespace) -> int:
     import json
 
-    from .diagnosis import diagnose, plot_diagnosis, text_report
-    from .diagnosis.report import json_safe
+    from ..diagnosis import diagnose, plot_diagnosis, text_report
+    from ..diagnosis.report import json_safe
 
     if Path(a.case_dir).is_file():  # a measured rig data file: the rig diagnosis
-        from .rigs import diagnose_rig, load, plot_rig_diagnosis
+        from ..rigs import diagnose_rig, load, plot_rig_diagnosis
 
         rd = diagnose_rig(load(a.case_dir))
         print(rd.report())

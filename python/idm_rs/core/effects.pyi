@@ -7,7 +7,7 @@ from typing import Mapping
 @dataclass(frozen=True)
 class Effects:
     """Effect parameters (SI); all 0 is the paper's model. Units and meanings: the runtime
-    docstring and `idm_rs.declarations.EFFECT_PARAMS`, both from the declaration."""
+    docstring and `idm_rs.core.declarations.EFFECT_PARAMS`, both from the declaration."""
 
     theta_rad: float = ...
     k_ground: float = ...

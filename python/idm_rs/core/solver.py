@@ -32,7 +32,7 @@ class Solver:
     ----------
     method : {"rk4", "dopri5", "rodas4", "auto"}
         ``"rk4"``: fixed step ``dt``; the others choose their steps from ``rtol``/``atol``
-        (:mod:`idm_rs.methods`).
+        (:mod:`idm_rs.core.methods`).
     dt : float, optional
         RK4 step [s]; None: the entry point's default.
     rtol, atol : float, optional

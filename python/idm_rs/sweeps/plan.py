@@ -10,13 +10,13 @@ from typing import Any, Mapping
 import numpy as np
 from numpy.typing import NDArray
 
-from . import engine, methods
-from .batch import Structure, Tables, param_row
-from .batch import start as start_batch
-from .declarations import Model
-from .effects import Effects
-from .params import Params
-from .waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
+from ..core import engine, methods
+from ..core.batch import Structure, Tables, param_row
+from ..core.batch import start as start_batch
+from ..core.declarations import Model
+from ..core.effects import Effects
+from ..core.params import Params
+from ..core.waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
 
 #: metric name -> (units, long name), declared once in the engine (``batch/metrics.rs``); the
 #: steady state of a sawtooth train is over the cycles after `skip_cycles` (NaN for other inputs)

@@ -20,11 +20,12 @@ from typing import Any, Callable, NamedTuple, Optional
 
 import numpy as np
 
-from .declarations import Model
-from .methods import MethodName
-from .params import Params
-from .simulation import DivergenceError, SimulationResult, simulate
-from .waveforms import Triangle, Waveform
+from ..core.declarations import Model
+from ..core.methods import MethodName
+from ..core.params import Params
+from ..core.simulation import DivergenceError, simulate
+from ..core.simulation_result import SimulationResult
+from ..core.waveforms import Triangle, Waveform
 
 # --- the paper's reported values (Section 3, Fig. 6a) -------------------------------------------
 PAPER_LPS_UM = 2.413  #: paper: LPS x1(10 ms) [µm]
@@ -291,7 +292,7 @@ def run_dense(
     status 3. ``method="dopri5"`` is the adaptive Dormand-Prince 5(4) with ``rtol``/``atol`` (default 1e-7; "auto" as in
     :func:`idm_rs.sweep`).
     ``on_done()`` is called once per point when the sweep is done."""
-    from .sweep import sweep as batch_sweep
+    from ..sweeps.sweep import sweep as batch_sweep
 
     if not sweep.dense:
         return []

@@ -7,7 +7,7 @@ inputs are read in place (zero copy), outputs are handed over without a copy.
 
 from __future__ import annotations
 
-from . import _core
+from .. import _core
 
 __version__: str = _core.__version__
 DivergenceError = _core.DivergenceError

@@ -11,7 +11,7 @@ from typing import Any, Protocol
 
 from numpy.typing import NDArray
 
-from .sweep_plan import SweepPlan, run_block, start_block, store
+from .plan import SweepPlan, run_block, start_block, store
 
 #: smallest number of points per Dask task (the scheduler's overhead is ~1 ms per task)
 DASK_MIN_BLOCK = 10_000
@@ -104,6 +104,6 @@ def backend_for(name: str, threads: int, block_size: int, client: Any) -> SweepB
     "kernel-cpu": the GPU kernel)."""
     if name == "cpu":
         return DaskCluster(client, block_size) if client is not None else LocalEngine(threads, block_size)
-    from .gpu.kernel_sweep import KernelBackend
+    from .kernel_sweep import KernelBackend
 
     return KernelBackend(name, threads, block_size)

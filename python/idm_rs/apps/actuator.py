@@ -30,132 +30,29 @@ from typing import TYPE_CHECKING, Any, Iterable, Optional, Sequence, Union, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from . import options
-from .batch import Point, Structure, run
-from .declarations import Model, elements_of
-from .effects import Effects
-from .interrupted import interrupted, partial_result
-from .methods import MethodName
-from .params import Params
-from .solver import Solver, resolve_solver
-from .units import si
-from .waveforms import STARTUP_CYCLES, Sawtooth
+from ..core import options
+from ..core.declarations import Model, elements_of
+from ..core.effects import Effects
+from ..core.interrupted import interrupted, partial_result
+from ..core.methods import MethodName
+from ..core.params import Params
+from ..core.solver import Solver, resolve_solver
+from ..core.steady_state import STEADY_METRICS, SteadyState, check_train, run_trains, steady_of, steady_state
+from ..core.units import si
+from ..core.waveforms import STARTUP_CYCLES, Sawtooth
 
 if TYPE_CHECKING:
     import xarray
 
+#: the designer's curves, the steady state of one train (core.steady_state) among them
+__all__ = ["STEADY_METRICS", "StallForce", "SteadyState", "characterize", "plot_characteristics", "stall_force",
+           "steady_state"]
+
 #: numbers given as a sequence or a float array
 Floats = Union[Sequence[float], NDArray[np.float64]]
 
-#: steady-state metric -> (units, meaning)
-STEADY_METRICS: dict[str, tuple[str, str]] = {
-    "mean_velocity": ("m/s", "mean velocity of the main body (mean step x frequency)"),
-    "step_mean": ("m", "mean step per cycle"),
-    "step_std": ("m", "standard deviation of the step over the cycles"),
-    "backslip": ("m", "mean back-slip per cycle: travel against the net direction"),
-    "backslip_ratio": ("1", "back-slip over the travel along the net direction"),
-    "direction": ("1", "+1 forward, -1 backward, 0 stalled"),
-}
-
 #: the stall force is bracketed to this share of the static friction force mu_s Fn
 STALL_XTOL_FRACTION = 1e-3
-
-
-@dataclass(frozen=True)
-class SteadyState:
-    """Steady-state metrics of one sawtooth train (NaN when no full cycle was averaged)."""
-
-    mean_velocity: float  #: [m/s]
-    step_mean: float  #: [m]
-    step_std: float  #: [m]
-    backslip: float  #: [m]
-    backslip_ratio: float  #: [-]
-    direction: float  #: +1, -1, 0 (stalled), NaN
-
-    @property
-    def motion(self) -> str:
-        """"forward", "backward", "stalled" or "unknown"."""
-        return {1.0: "forward", -1.0: "backward", 0.0: "stalled"}.get(self.direction, "unknown")
-
-    def __str__(self) -> str:
-        return (f"SteadyState({self.motion}: mean velocity {si(self.mean_velocity, 'm/s')}, step "
-                f"{si(self.step_mean, 'm')} ± {si(self.step_std, 'm')} per cycle, back-slip {si(self.backslip, 'm')} "
-                f"per cycle ({self.backslip_ratio:.3g} of the travel along the net direction))")
-
-
-def _check_train(waveform: Any, skip_cycles: int) -> Sawtooth:
-    if not isinstance(waveform, Sawtooth):
-        raise ValueError(f"steady-state metrics need a Sawtooth train, got {type(waveform).__name__}")
-    options.skip_cycles(skip_cycles, waveform.cycles)
-    return waveform
-
-
-def _run_trains(params: Sequence[Params], waves: Sequence[Sawtooth], *, model: Model, n_elements: int,
-                effects: Optional[Effects], skip_cycles: int, method: MethodName, threads: Optional[int],
-                piezo_hysteresis: bool = True, t_end: Optional[float] = None, **how: Any) -> dict[str, Any]:
-    """One batch of trains (each point to its own train's end, or to ``t_end``)."""
-    from . import methods
-
-    method_name, rtol, atol = methods.resolve(method, how.pop("rtol", None), how.pop("atol", None))
-    effects = effects or Effects()
-    points = [Point(p, effects, w, t_end=t_end or w.duration) for p, w in zip(params, waves)]
-    longest = max(pt.t_end for pt in points if pt.t_end is not None)  # every point has one
-    return run(points, Structure(model, int(n_elements), bool(piezo_hysteresis)),
-               t_end=longest, method=method_name, rtol=rtol, atol=atol, skip_cycles=int(skip_cycles),
-               threads=threads, **how)
-
-
-def _steady(out: dict[str, Any], i: int) -> SteadyState:
-    if int(out["status"][i]) not in (1, 2):
-        return SteadyState(*(math.nan,) * 6)
-    return SteadyState(*(float(out[k][i]) for k in STEADY_METRICS))
-
-
-def steady_state(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_elements: Optional[int] = None,
-                 effects: Optional[Effects] = None, skip_cycles: int = STARTUP_CYCLES, method: MethodName = "auto",
-                 threads: Optional[int] = None, piezo_hysteresis: bool = True, t_end: Optional[float] = None,
-                 **how: Any) -> SteadyState:
-    """Steady-state metrics of ``params`` driven by the sawtooth train ``waveform`` (to its end,
-    or to ``t_end`` [s]), averaged over its full cycles after the first ``skip_cycles``.
-    ``method`` (default ``"auto"``) and ``how`` (``dt`` for RK4, ``rtol``/``atol``/``first_step``
-    for adaptive methods) as in :func:`idm_rs.sweep`. A run that diverges gives NaN metrics.
-
-    Parameters
-    ----------
-    params : Params
-        The device.
-    waveform : Sawtooth
-        The drive train ([V], [Hz], its fast edge ``rise`` [s]).
-    model : {"lps", "dps"}
-        The structure; ``n_elements`` FEM elements for the DPS (default 4).
-    effects : Effects, optional
-        Extra physics of the catalogue.
-    skip_cycles : int
-        Start-up cycles left out (fewer than the train's cycles).
-    method : str
-        The integrator (default ``"auto"``).
-    t_end : float, optional
-        End of the run [s] (default: the train's end).
-
-    Returns
-    -------
-    SteadyState
-        ``mean_velocity`` [m/s], ``step_mean`` and ``step_std`` [m] per cycle, ``backslip`` [m]
-        per cycle, ``backslip_ratio``, ``direction`` (+1, -1, 0 stalled).
-
-    Examples
-    --------
-    >>> from idm_rs.actuator import steady_state
-    >>> s = steady_state(idm_rs.Params(), idm_rs.Sawtooth(amplitude=80.0, frequency=100.0, cycles=6), model="lps")
-    >>> s.motion
-    'forward'
-    """
-    n_elements = options.elements(model, n_elements)
-    _check_train(waveform, skip_cycles)
-    out = _run_trains([params], [waveform], model=model, n_elements=n_elements, effects=effects,
-                      skip_cycles=skip_cycles, method=method, threads=threads, piezo_hysteresis=piezo_hysteresis,
-                      t_end=t_end, **how)
-    return _steady(out, 0)
 
 
 @dataclass(frozen=True)
@@ -210,7 +107,7 @@ def stall_force(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_e
 
     Examples
     --------
-    >>> from idm_rs.actuator import stall_force
+    >>> from idm_rs.apps.actuator import stall_force
     >>> f = stall_force(idm_rs.Params(), idm_rs.Sawtooth(amplitude=80.0, frequency=100.0, cycles=6),
     ...                 model="lps")  # doctest: +SKIP
     >>> print(f)  # doctest: +SKIP
@@ -219,7 +116,7 @@ def stall_force(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_e
     from scipy.optimize import brentq
 
     n_elements = options.elements(model, n_elements)
-    _check_train(waveform, skip_cycles)
+    check_train(waveform, skip_cycles)
     loads = options.count("loads", loads, minimum=3)
     fs = max(params.mu_s, params.mu_k) * params.effective_normal_force
     xtol = float(xtol) if xtol is not None else STALL_XTOL_FRACTION * fs
@@ -229,8 +126,8 @@ def stall_force(params: Params, waveform: Sawtooth, *, model: Model = "dps", n_e
 
     def velocities(forces: Iterable[float], sign: float) -> np.ndarray:
         ps = [replace(params, load_force=base - sign * f) for f in forces]
-        out = _run_trains(ps, [waveform] * len(ps), **kw)
-        return np.array([_steady(out, i).mean_velocity for i in range(len(ps))])
+        out = run_trains(ps, [waveform] * len(ps), **kw)
+        return np.array([steady_of(out, i).mean_velocity for i in range(len(ps))])
 
     v0 = velocities([0.0], 1.0)[0]
     sign = float(np.sign(v0)) if np.isfinite(v0) else 0.0
@@ -313,14 +210,14 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
 
     Examples
     --------
-    >>> from idm_rs.actuator import characterize
+    >>> from idm_rs.apps.actuator import characterize
     >>> ds = characterize(model="lps", progress=False)   # doctest: +SKIP
     >>> float(ds["stall_force"])                          # [N]   # doctest: +SKIP
     """
     import xarray as xr
 
-    from .engine import __version__
-    from .sweep import sweep
+    from ..core.engine import __version__
+    from ..sweeps.sweep import sweep
 
     n_elements = options.elements(model, n_elements)
     params = params or Params()
@@ -331,7 +228,7 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
         frequencies = np.geomspace(20.0, f_max, 12)
     step_voltages = np.linspace(20.0, 120.0, 11) if step_voltages is None else step_voltages
     train = Sawtooth(amplitude=voltage, frequency=frequency, cycles=cycles, rise=rise)
-    _check_train(train, skip_cycles)
+    check_train(train, skip_cycles)
     unset = dict.fromkeys(("dt", "rtol", "atol", "first_step", "retries"))
     how = resolve_solver(solver, dict(method=method, **unset), dict(method="auto", **unset), "characterize")
     method = how.pop("method")
@@ -353,9 +250,9 @@ def characterize(params: Optional[Params] = None, *, model: Model = "dps", n_ele
             # (which runs to where the load drags the body backwards at speed)
             load_grid = np.linspace(0.0, 1.5 * stall.force, max(int(loads), 5))
             ps = [replace(params, load_force=params.load_force - stall.direction * f) for f in load_grid]
-            out = _run_trains(ps, [train] * len(ps), model=model, n_elements=n_elements, effects=effects,
+            out = run_trains(ps, [train] * len(ps), model=model, n_elements=n_elements, effects=effects,
                               skip_cycles=skip_cycles, method=method, threads=threads, **extra)
-            load_v = np.array([_steady(out, i).mean_velocity for i in range(len(ps))])
+            load_v = np.array([steady_of(out, i).mean_velocity for i in range(len(ps))])
     except KeyboardInterrupt:
         partial = _interrupted(done, step_voltages, frequency, params, model, n_elements, rise, cycles, skip_cycles,
                                voltage)
@@ -404,7 +301,7 @@ def _interrupted(done: dict[str, Any], step_voltages: Any, frequency: float, par
     step curve as far as they ran (NaN where not), no stall force; ``attrs["complete"]`` 0."""
     import xarray as xr
 
-    from .engine import __version__
+    from ..core.engine import __version__
 
     ds = xr.Dataset()
     if "vmap" in done:

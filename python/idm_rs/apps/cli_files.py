@@ -12,13 +12,13 @@ from typing import TYPE_CHECKING, Any, Literal, Optional, Sequence, cast
 
 import numpy as np
 
-from . import methods
-from .declarations import structure_label
-from .effects import Effects
-from .params import Params
-from .simulation import SimulationResult
-from .sweep_plan import STEADY_METRICS
-from .waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
+from ..core import methods
+from ..core.declarations import structure_label
+from ..core.effects import Effects
+from ..core.params import Params
+from ..core.simulation_result import SimulationResult
+from ..core.waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
+from ..sweeps.plan import STEADY_METRICS
 
 if TYPE_CHECKING:
     import xarray
@@ -177,7 +177,7 @@ def effects_from_overrides(items: Sequence[str]) -> Effects:
 
 def snap(t: float, dt: float) -> float:
     """``t`` rounded to a whole number of steps when it is within 1e-9 of one."""
-    from .sweep_plan import snap_to_steps
+    from ..sweeps.plan import snap_to_steps
 
     return cast(float, snap_to_steps(t, dt))  # a number in, a number out
 

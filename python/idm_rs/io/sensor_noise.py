@@ -1,5 +1,5 @@
 """What a lab's displacement reading carries besides the motion, for writing realistic
-recordings (:func:`idm_rs.synthetic.make_case` ``noise=``): coloured noise (autoregressive, or
+recordings (:func:`idm_rs.io.synthetic.make_case` ``noise=``): coloured noise (autoregressive, or
 pink: 1/f), mains hum, spikes, a sensor zero drifting within a file and a delay of the
 displacement channel behind the voltage. Quantisation is make_case's ``resolution``."""
 

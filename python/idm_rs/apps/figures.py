@@ -21,8 +21,9 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.ticker import FormatStrFormatter
 
-from .declarations import structure_label
-from .methods import MethodName
+from ..core.declarations import structure_label
+from ..core.methods import MethodName
+from ..core.simulation_result import SimulationResult
 from .paper import (
     FIG7_CHECK_CASE_NAME,
     PAPER_DPS_UM,
@@ -38,7 +39,6 @@ from .paper import (
     run_dense,
     run_sweep,
 )
-from .simulation import SimulationResult
 
 PathLike = Union[str, "os.PathLike[str]"]
 

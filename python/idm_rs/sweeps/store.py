@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
 
-from .interrupted import interrupted
+from ..core.interrupted import interrupted
 
 if TYPE_CHECKING:
     import xarray

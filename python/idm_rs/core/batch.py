@@ -3,7 +3,7 @@ initial state), each reduced to metrics inside the Rust loop, optionally with it
 reading every few steps and its final state. ``idm_rs.sweep`` and the diagnosis's fits are
 built on it; use it directly for a list of runs that is not a grid::
 
-    from idm_rs.batch import Point, Structure, run
+    from idm_rs.core.batch import Point, Structure, run
     pts = [Point(idm_rs.Params(m2=m2), waveform=idm_rs.Triangle()) for m2 in (0.2, 0.3)]
     out = run(pts, Structure("lps"), t_end=10e-3, dt=1e-8)
     out["final_position"]                    # x1(t_end) per point [m]
@@ -212,7 +212,7 @@ def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: 
     ``how``: ``method`` ("rk4", "dopri5" or "rodas4"), ``dt`` [s] (RK4 step), ``rtol``/``atol``
     and ``first_step`` [s] (adaptive), ``retries`` (RK4 retries at dt/2, dt/4 of a diverging
     point), ``threads``, ``record_every``, ``final_states``, ``skip_cycles`` (start-up cycles
-    left out of the steady-state metrics, default :data:`~idm_rs.waveforms.STARTUP_CYCLES` = 2),
+    left out of the steady-state metrics, default :data:`~idm_rs.core.waveforms.STARTUP_CYCLES` = 2),
     ``sensitivities`` (names, as for :func:`idm_rs.simulate`; needs ``record_every``): then
     ``sensitivities`` is an array (points x names x samples) of d trace / d name (NaN where a
     point did not finish or its derivatives could not be taken, with the reason in ``reasons``), and

@@ -19,25 +19,16 @@ from typing import TYPE_CHECKING, Any, Literal, Mapping, Optional, Sequence, Uni
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import engine, methods, options
-from .declarations import EFFECT_PARAMS, GRAVITY, Model, structure
-from .effects import Effects
-from .interrupted import interrupted
-from .methods import MethodName
-from .params import PARAM_INFO, Params
-from .solver import Solver, resolve_solver
-from .sweep_backends import backend_for
-from .sweep_plan import (
-    DERIVED_AXES,
-    METRICS,
-    OUTPUTS,
-    STATUS_MEANINGS,
-    STEADY_METRICS,
-    WAVE_FIELDS,
-    SweepPlan,
-    durations,
-)
-from .waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
+from ..core import engine, methods, options
+from ..core.declarations import EFFECT_PARAMS, GRAVITY, Model, structure
+from ..core.effects import Effects
+from ..core.interrupted import interrupted
+from ..core.methods import MethodName
+from ..core.params import PARAM_INFO, Params
+from ..core.solver import Solver, resolve_solver
+from ..core.waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
+from .backends import backend_for
+from .plan import DERIVED_AXES, METRICS, OUTPUTS, STATUS_MEANINGS, STEADY_METRICS, WAVE_FIELDS, SweepPlan, durations
 
 if TYPE_CHECKING:
     import xarray
@@ -162,13 +153,13 @@ def sweep(
     natural scale: the free stroke d33·V for positions, Fs for friction) and no ``dt``; ``first_step`` [s] is an
     optional first trial step (default 1e-8; a ``dt`` given with an adaptive method is taken as
     its first step, as in earlier versions). ``method="auto"``: the fastest adaptive setting
-    measured to keep every benchmark point within 1 nm of RK4 (:data:`idm_rs.methods.AUTO`,
+    measured to keep every benchmark point within 1 nm of RK4 (:data:`idm_rs.core.methods.AUTO`,
     rtol = atol = 3e-7) when no tolerance is given; a given ``rtol``/``atol`` is honoured.
 
     Metrics (computed in the Rust loop): ``final_position`` [m], ``step_per_cycle`` [m] (sawtooth
     trains), ``peak_velocity`` [m/s], ``peak_friction`` [N], ``slip_fraction`` [-], and for
     sawtooth trains the steady state over the cycles after the first ``skip_cycles`` (default
-    :data:`~idm_rs.waveforms.STARTUP_CYCLES`, 2, as in :func:`idm_rs.characterize`):
+    :data:`~idm_rs.core.waveforms.STARTUP_CYCLES`, 2, as in :func:`idm_rs.characterize`):
     ``mean_velocity`` [m/s], ``step_mean`` and ``step_std`` [m] per cycle, ``backslip`` [m] per
     cycle (travel against the net direction) and ``backslip_ratio`` (over the travel along it),
     ``direction`` (+1, -1, 0 stalled); always with ``status``, ``diverged_at``
@@ -303,7 +294,7 @@ def sweep(
     plan = SweepPlan(params, waveform, effects, names, values, float(t_end), float(dt), model, int(n_elements),
                      bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries), first, skips, own)
     if kernel:
-        from .gpu.kernel_sweep import check_kernel_admits
+        from .kernel_sweep import check_kernel_admits
 
         check_kernel_admits(plan, backend)
         if own:
@@ -336,7 +327,7 @@ def _metrics_kept(metrics: Optional[Sequence[str]], backend: str) -> tuple[list[
     """(the metrics kept, those the backend does not compute): unknown names and names the
     backend does not compute are refused by name."""
     if backend in ("cuda", "kernel-cpu"):
-        from .gpu.kernel_sweep import kernel_metrics
+        from .kernel_sweep import kernel_metrics
 
         admitted = kernel_metrics()
     else:
@@ -399,7 +390,7 @@ def _attrs(plan: SweepPlan, asked: str, given: bool, span: tuple[float, float], 
            backend: str, not_computed: list[str]) -> dict[str, Any]:
     """The Dataset's fixed attributes: how the sweep was run (`asked`: the method as the user
     named it; `span`: the shortest and longest waveform end [s])."""
-    from .engine import __version__
+    from ..core.engine import __version__
 
     params, effects, waveform, piezo_hysteresis = plan.params, plan.effects, plan.waveform, plan.piezo_hysteresis
     model, n_elements, method, dt, first, t_end = (plan.model, plan.n_elements, plan.method, plan.dt,
@@ -545,7 +536,7 @@ def _check_memory(points: int, out_hint: bool) -> None:
 def _run_to_store(plan: SweepPlan, run: _Run, path: Path, progress: Union[bool, str]) -> "xarray.Dataset":
     """The grid slab by slab into the Zarr store at ``path`` (:mod:`.sweep_store`); returns the
     store opened lazily. Ctrl-C keeps the slabs written (the rest ``status`` 0)."""
-    from .sweep_store import chunk_shape, run_to_store
+    from .store import chunk_shape, run_to_store
 
     if path.suffix.lower() != ".zarr":
         raise ValueError(f"parameter 'out' must name a Zarr store (…/name.zarr), got {str(path)!r}")

@@ -8,13 +8,13 @@ import argparse
 import dataclasses
 from typing import TYPE_CHECKING, Callable
 
+from ..core.declarations import IDM_MODELS
+from ..core.effects import Effects
+from ..core.engine import __version__
+from ..core.methods import METHODS
+from ..core.waveforms import STARTUP_CYCLES
+from ..sweeps.plan import METRICS
 from .cli_files import CSV_COLUMNS
-from .declarations import IDM_MODELS
-from .effects import Effects
-from .engine import __version__
-from .methods import METHODS
-from .sweep_plan import METRICS
-from .waveforms import STARTUP_CYCLES
 
 if TYPE_CHECKING:
     pass

@@ -8,10 +8,10 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from .declarations import structure_label
-from .methods import is_adaptive
-from .simulation import SimulationResult
-from .waveforms import Sawtooth
+from ..core.declarations import structure_label
+from ..core.methods import is_adaptive
+from ..core.simulation_result import SimulationResult
+from ..core.waveforms import Sawtooth
 
 if TYPE_CHECKING:
     import xarray

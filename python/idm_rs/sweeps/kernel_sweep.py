@@ -12,12 +12,12 @@ from typing import Any, Union
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import engine, methods
-from ..batch import param_row
-from ..batch import start as start_batch
-from ..effects import Effects
-from ..params import Params
-from ..sweep_plan import METRICS, WAVE_FIELDS, SweepPlan
+from ..core import engine, methods
+from ..core.batch import param_row
+from ..core.batch import start as start_batch
+from ..core.effects import Effects
+from ..core.params import Params
+from .plan import METRICS, WAVE_FIELDS, SweepPlan
 
 #: what a derived axis sets (the gate refuses a derived axis as it refuses the parameter)
 DERIVED_SETS = {"mass_ratio": "m2", "pe_mass_ratio": "pe_density", "stiffness": "pe_youngs"}
@@ -115,8 +115,8 @@ class KernelBackend:
         engine with the plan's own method (``"auto"`` changes a stiff point to Rodas4 there) when
         ``plan.retries`` > 0. Ctrl-C keeps the finished blocks."""
         # through the package, where a test can stand in for a launch
-        from . import launch_cuda, pack, run_cpu, wave_columns
-        from .backend import Finished, Launched
+        from ..gpu import launch_cuda, pack, run_cpu, wave_columns
+        from ..gpu.backend import Finished, Launched
 
         threads, block_size, backend = self.threads, self.block_size, self.name
         adaptive = methods.is_adaptive(plan.method)

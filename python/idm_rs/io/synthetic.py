@@ -7,7 +7,7 @@ that is how test cases with known answers (mis-set parameters, missing physics) 
 
     p = idm_rs.Params(normal_force=6.90624)
     case = make_case(tmp / "case", nominal_params=p, effects=idm_rs.Effects(k_ground=5e3))
-    rec = idm_rs.recording.load_case(case)
+    rec = idm_rs.io.recording.load_case(case)
 """
 
 from __future__ import annotations
@@ -21,13 +21,13 @@ from typing import Any, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from .declarations import Model, structure
-from .effects import Effects, oriented
-from .params import Params
+from ..core.declarations import Model, structure
+from ..core.effects import Effects, oriented
+from ..core.params import Params
+from ..core.simulation import simulate
+from ..core.waveforms import Sampled, Sawtooth, voltage_at
 from .recording import FORMAT_ID, HEADER, META, ORIENTATIONS
 from .sensor_noise import SensorNoise
-from .simulation import simulate
-from .waveforms import Sampled, Sawtooth, voltage_at
 
 __all__ = ["DEFAULT_EXPERIMENTS", "make_case"]
 
@@ -88,7 +88,7 @@ def make_case(
     for a drive recorded sample by sample, ``{"sampled": idm_rs.Sampled(t, V)}`` (its times on
     the sample grid, from 0; optionally ``file``), written as ``waveform: "sampled"``.
     ``write_noise_rms`` puts the noise RMS in meta.json (``sensor.noise_rms_m``).
-    ``noise`` (an :class:`idm_rs.sensor_noise.SensorNoise`) replaces the white noise of
+    ``noise`` (an :class:`idm_rs.io.sensor_noise.SensorNoise`) replaces the white noise of
     ``noise_rms`` with what a lab's reading carries: coloured noise, hum, spikes, a drifting zero,
     a late displacement channel (the device is driven that much later than the voltage column
     says, the delay rounded to ``dt``; its motion after the file's end is not recorded).
@@ -135,7 +135,7 @@ def make_case(
 
     Examples
     --------
-    >>> from idm_rs.synthetic import make_case
+    >>> from idm_rs.io.synthetic import make_case
     >>> case = make_case("/tmp/spring_case", nominal_params=idm_rs.Params(),
     ...                  effects=idm_rs.Effects(k_ground=2e4))   # doctest: +SKIP
     """
@@ -150,7 +150,7 @@ def make_case(
     if not exps:
         raise ValueError("experiments must not be empty")
     if noise is not None and not isinstance(noise, SensorNoise):
-        raise TypeError(f"noise must be idm_rs.sensor_noise.SensorNoise, got {type(noise).__name__}")
+        raise TypeError(f"noise must be idm_rs.io.sensor_noise.SensorNoise, got {type(noise).__name__}")
     if not (noise_rms >= 0 and math.isfinite(noise_rms)):
         raise ValueError(f"noise_rms must be finite and non-negative, got {noise_rms}")
     sensor = noise if noise is not None else SensorNoise(rms=noise_rms)

@@ -12,8 +12,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from ..core.waveforms import Sawtooth, voltage_at
 from .recording_error import HEADER, RecordingError
-from .waveforms import Sawtooth, voltage_at
 
 #: |t_k - k/sample_rate| tolerance, as a fraction of the step (times are written exactly)
 TIME_TOLERANCE = 1e-2

@@ -2,7 +2,7 @@
 
 A *case* is a directory holding ``meta.json`` and one CSV file (``t,voltage,x``) per experiment::
 
-    rec = idm_rs.recording.load_case("recordings/dev/dev01")
+    rec = idm_rs.io.recording.load_case("recordings/dev/dev01")
     rec.nominal.params                  # idm_rs.Params of meta.json (normal_force as given)
     for e in rec.experiments:
         e.t, e.voltage, e.x             # numpy arrays [s], [V], [m]
@@ -27,11 +27,11 @@ from typing import Any, Iterator, Mapping, Optional, Sequence, Union, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from .declarations import IDM_MODELS, Model, structure
-from .params import Params
+from ..core.declarations import IDM_MODELS, Model, structure
+from ..core.params import Params
+from ..core.waveforms import Sampled, Sawtooth
 from .recording_error import FORMAT_ID, HEADER, META, PathLike, RecordingError
 from .recording_table import check_experiment, read_csv, sampled_from_table
-from .waveforms import Sampled, Sawtooth
 
 __all__ = [
     "FORMAT_ID",

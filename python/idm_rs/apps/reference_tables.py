@@ -1,13 +1,13 @@
 """The reference tables of the documentation, written from the declarations the engine reads
 (Table 1 and the effect catalogue): every :class:`~idm_rs.Params` and :class:`~idm_rs.Effects`
 field with its symbol, unit, default and meaning. ``docs/PARAMETERS.md`` is this module's output
-(``python -m idm_rs.reference_tables > docs/PARAMETERS.md``); a test keeps the two equal."""
+(``python -m idm_rs.apps.reference_tables > docs/PARAMETERS.md``); a test keeps the two equal."""
 
 from __future__ import annotations
 
 import math
 
-from .declarations import EFFECTS, TABLE1, ParamDecl
+from ..core.declarations import EFFECTS, TABLE1, ParamDecl
 
 
 def _unit(d: ParamDecl) -> str:
@@ -35,7 +35,7 @@ def markdown() -> str:
         "",
         "Every field of `idm_rs.Params` (the paper's Table 1; SI units) and of `idm_rs.Effects` (the",
         "catalogue's extra physics, each off at its default), as the engine declares them. Written by",
-        "`python -m idm_rs.reference_tables`; set a value with `Params(mu_k=0.45)`,",
+        "`python -m idm_rs.apps.reference_tables`; set a value with `Params(mu_k=0.45)`,",
         "`Effects(k_ground=2e4)`, or `--param mu_k=0.45` / `--effect k_ground=2e4` on the command line.",
         "",
         "## `Params`",
