@@ -10,6 +10,8 @@ from typing import Any, Optional
 
 import numpy as np
 
+from .declarations import STRUCTURES
+
 
 def count(name: str, value: Any, minimum: int = 1) -> int:
     """``value`` as an int, refused unless it is a whole number >= ``minimum`` (a bool, a
@@ -58,14 +60,16 @@ def time(name: str, value: Any) -> float:
 
 def elements(model: Any, n_elements: Optional[Any], default: int = 4, say_ignored: bool = False) -> int:
     """The FEM bar's element count for ``model``: ``n_elements`` (None: ``default``) for the DPS;
-    1 for the LPS, which has no bar. ``say_ignored``: warn, by name, that the LPS ignores a count
-    other than 1 (the command line, where it was typed for this run; the API stays quiet, as code
-    that loops over both models passes one count to each). Another model (a rig) keeps it."""
+    1 for a structure declared without elements (the LPS, which has no bar). ``say_ignored``:
+    warn, by name, that the LPS ignores a count other than 1 (the command line, where it was typed
+    for this run; the API stays quiet, as code that loops over both models passes one count to
+    each). Another model (a rig) keeps it."""
     n = default if n_elements is None else count("n_elements", n_elements)
-    if model == "lps":
+    decl = next((s for s in STRUCTURES if s.idm and s.name == model), None) if isinstance(model, str) else None
+    if decl is not None and not decl.elements:
         if say_ignored and n_elements is not None and n != 1:
-            warnings.warn(f"--n-elements {n} is for --model dps (the FEM bar); the LPS has none and ignores it",
-                          UserWarning, stacklevel=3)
+            warnings.warn(f"--n-elements {n} is for --model dps (the FEM bar); the {decl.label} has none and ignores "
+                          "it", UserWarning, stacklevel=3)
         return 1
     return n
 

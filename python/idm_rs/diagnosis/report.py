@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Callable
 
+from ..core.declarations import structure_label
 from .report_format import (
     calibrated_rows,
     evidence_words,
@@ -24,7 +25,6 @@ from .report_format import (
 )
 
 if TYPE_CHECKING:
-
     from .results import Alternative, Candidate, Diagnosis, ThirdSearch
 
 #: experiment x phase locations listed in the report
@@ -234,8 +234,7 @@ def text_report(d: Diagnosis) -> str:
     title = f"Diagnosis of case {d.case!r}"
     lines += [title, "=" * len(title)]
     lines.append(f"{len(rec.experiments)} experiments, {rec.n_samples} samples at {rec.sample_rate_Hz / 1e3:g} kHz; "
-                 f"nominal {rec.nominal.model.upper()}"
-                 + (f" (n = {rec.nominal.n_elements})" if rec.nominal.model == "dps" else "")
+                 f"nominal {structure_label(rec.nominal.model, rec.nominal.n_elements)}"
                  + f"; {d.simulations} simulated runs in {d.seconds:.1f} s")
     timings = getattr(d, "timings", None) or {}
     if timings:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Optional, Sequence
 
+from ..core.declarations import structure_label
 from ..core.params import PARAM_INFO
 from .catalogue import CATALOGUE, by_id
 from .thresholds import AT_BOUND_SHARE, BIC_THRESHOLD, CALIBRATION_RANGE
@@ -100,7 +101,7 @@ def format_params(c: Candidate) -> str:
 def refit_model_line(d: Diagnosis) -> str:
     """The refitted model in one line: the nominal structure, calibrated, plus the verdict's effect."""
     nom = d.recording.nominal
-    base = f"{nom.model.upper()}" + (f" (n = {nom.n_elements})" if nom.model == "dps" else "")
+    base = structure_label(nom.model, nom.n_elements)
     base += ", piezo hysteresis" if nom.piezo_hysteresis else ""
     eq = "m1 x1'' = Fpe(V, x1 - x2, x1' - x2') - Ff(x1', g, Fh)"
     cand = d.verdict_candidate

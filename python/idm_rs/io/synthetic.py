@@ -200,7 +200,7 @@ def make_case(
                               **placed))
 
     nominal: dict[str, Any] = {"model": model}
-    if model == "dps":
+    if structure(model).elements:
         nominal["n_elements"] = int(n_elements)
     nominal["piezo_hysteresis"] = bool(piezo_hysteresis)
     resolved = nominal_params.to_dict(resolved=True)

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..core import engine, methods, options
-from ..core.declarations import EFFECT_PARAMS, GRAVITY, Model, structure
+from ..core.declarations import EFFECT_PARAMS, GRAVITY, Model, elements_of, structure
 from ..core.effects import Effects
 from ..core.interrupted import interrupted
 from ..core.methods import MethodName
@@ -401,7 +401,7 @@ def _attrs(plan: SweepPlan, asked: str, given: bool, span: tuple[float, float], 
     attrs: dict[str, Any] = {
         "idm_rs_version": __version__,
         "model": model,
-        "n_elements": int(n_elements) if model == "dps" else 1,
+        "n_elements": elements_of(model, n_elements),
         "method": method,
         "method_asked": asked,
         "dt_s": float(dt) if not adaptive else math.nan,
