@@ -1,8 +1,11 @@
-"""How a sweep's blocks are run: one protocol (:class:`SweepBackend`: fill the plan's columns
-block by block, and say whether every block finished; Ctrl-C keeps what finished) and the CPU
-engine's two executors, rayon threads on this machine (:class:`LocalEngine`) and a Dask cluster
-(:class:`DaskCluster`). The GPU kernel's backend (CUDA, or the same source built for the CPU)
-lives with the kernel, in ``gpu/kernel_sweep.py``; :func:`backend_for` picks one by name."""
+"""How a sweep's blocks are run, behind two protocols: a backend's kind (:class:`BackendKind`:
+what it computes and admits, refused by name before anything runs, and the executor it makes)
+and the executor (:class:`SweepBackend`: fill the plan's columns block by block, and say whether
+every block finished; Ctrl-C keeps what finished). Here the CPU engine (:class:`CpuEngine`) and
+its two executors, rayon threads on this machine (:class:`LocalEngine`) and a Dask cluster
+(:class:`DaskCluster`); the GPU kernel's kind and executor (CUDA, or the same source built for
+the CPU) are in :mod:`.kernel_sweep`. :func:`backend_kind` picks a kind by name; ``sweep.py``
+asks only these protocols."""
 
 from __future__ import annotations
 
@@ -11,7 +14,10 @@ from typing import Any, Protocol
 
 from numpy.typing import NDArray
 
-from .plan import SweepPlan, run_block, start_block, store
+from .plan import METRICS, SweepPlan, run_block, start_block, store
+
+#: the backends' names (``sweep(backend=...)``)
+BACKENDS: tuple[str, ...] = ("cpu", "cuda", "kernel-cpu")
 
 #: smallest number of points per Dask task (the scheduler's overhead is ~1 ms per task)
 DASK_MIN_BLOCK = 10_000
@@ -20,7 +26,7 @@ DASK_MIN_BLOCK = 10_000
 
 
 class SweepBackend(Protocol):
-    """What runs a sweep's blocks."""
+    """What runs a sweep's blocks (made by a :class:`BackendKind`)."""
 
     def run(self, plan: SweepPlan, out: dict[str, NDArray[Any]], bar: Any) -> bool:
         """Fill `out` (the plan's columns, flat) block by block, advancing the progress `bar`
@@ -99,11 +105,68 @@ class DaskCluster:
         return True
 
 
-def backend_for(name: str, threads: int, block_size: int, client: Any) -> SweepBackend:
-    """The backend called `name` ("cpu": on `client`'s cluster when one is given; "cuda",
-    "kernel-cpu": the GPU kernel)."""
-    if name == "cpu":
-        return DaskCluster(client, block_size) if client is not None else LocalEngine(threads, block_size)
-    from .kernel_sweep import KernelBackend
+class BackendKind(Protocol):
+    """A backend as ``sweep`` sees it before and while it runs: what it computes, what it
+    refuses (each check raises a ValueError naming the fix), the words of its executor for the
+    Dataset's attributes, and the executor itself."""
 
-    return KernelBackend(name, threads, block_size)
+    @property
+    def name(self) -> str:
+        """The name ``sweep(backend=...)`` takes."""
+        ...
+
+    def metrics(self) -> list[str]:
+        """The metrics it computes, in METRICS order."""
+        ...
+
+    def check(self, method: str, client: Any) -> None:
+        """Refuse a method it does not run or a cluster it does not use."""
+        ...
+
+    def admit(self, plan: SweepPlan, span: tuple[float, float]) -> None:
+        """Refuse a plan it cannot run (`span`: the shortest and the longest waveform end [s])."""
+        ...
+
+    def executor(self, threads: int, client: Any) -> str:
+        """How it runs, in words (the Dataset's ``executor`` attribute)."""
+        ...
+
+    def backend(self, threads: int, block_size: int, client: Any) -> SweepBackend:
+        """The executor of its blocks."""
+        ...
+
+
+@dataclass(frozen=True)
+class CpuEngine:
+    """The CPU engine: every metric, every method, every plan; rayon threads here or, given a
+    Dask `client`, a cluster."""
+
+    name: str = "cpu"
+
+    def metrics(self) -> list[str]:
+        return list(METRICS)
+
+    def check(self, method: str, client: Any) -> None:
+        return None
+
+    def admit(self, plan: SweepPlan, span: tuple[float, float]) -> None:
+        return None
+
+    def executor(self, threads: int, client: Any) -> str:
+        return "dask" if client is not None else f"local rayon, {threads} threads"
+
+    def backend(self, threads: int, block_size: int, client: Any) -> SweepBackend:
+        return DaskCluster(client, block_size) if client is not None else LocalEngine(threads, block_size)
+
+
+def backend_kind(name: str) -> BackendKind:
+    """The backend called `name` ("cpu": the engine; "cuda", "kernel-cpu": the GPU kernel on the
+    device or built for the CPU); any other name refused with the choices."""
+    if name == "cpu":
+        return CpuEngine()
+    if name in BACKENDS:
+        from .kernel_sweep import KernelKind
+
+        return KernelKind(name)
+    raise ValueError(f"parameter 'backend' must be {', '.join(map(repr, BACKENDS[:-1]))} or {BACKENDS[-1]!r}, "
+                     f"got {name!r}")

@@ -23,6 +23,40 @@ from .plan import METRICS, WAVE_FIELDS, SweepPlan
 DERIVED_SETS = {"mass_ratio": "m2", "pe_mass_ratio": "pe_density", "stiffness": "pe_youngs"}
 
 
+@dataclass(frozen=True)
+class KernelKind:
+    """The GPU kernel as a backend kind (`name` "cuda" or "kernel-cpu"): the metrics and
+    methods the kernel declares (``engine.kernel_accepts()``), the plans its gate admits, one
+    device on this machine (no cluster)."""
+
+    name: str
+
+    def metrics(self) -> list[str]:
+        return kernel_metrics()
+
+    def check(self, method: str, client: Any) -> None:
+        on_kernel = engine.kernel_accepts()["methods"]
+        if method not in on_kernel:
+            raise ValueError(f"backend={self.name!r} runs the methods {', '.join(map(repr, on_kernel))}; "
+                             f"{method} runs on backend='cpu'")
+        if client is not None:
+            raise ValueError(f"backend={self.name!r} runs on this machine's device; drop 'client'")
+
+    def admit(self, plan: SweepPlan, span: tuple[float, float]) -> None:
+        check_kernel_admits(plan, self.name)
+        if plan.own_t_end:
+            shortest, longest = span
+            raise ValueError(f"backend={self.name!r} runs every point to one t_end, and this grid's waveforms end "
+                             f"between {shortest:g} and {longest:g} s: give t_end={longest:g} (the shorter ones "
+                             "then rest until it) or use backend='cpu', which runs each point to its own end")
+
+    def executor(self, threads: int, client: Any) -> str:
+        return f"{self.name} kernel"
+
+    def backend(self, threads: int, block_size: int, client: Any) -> "KernelBackend":
+        return KernelBackend(self.name, threads, block_size)
+
+
 def kernel_metrics() -> list[str]:
     """The metrics the kernel backends return (``engine.kernel_accepts()``), in METRICS order."""
     return [m for m in METRICS if m in engine.kernel_accepts()["metrics"]]

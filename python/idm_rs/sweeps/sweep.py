@@ -27,7 +27,7 @@ from ..core.methods import MethodName
 from ..core.params import PARAM_INFO, Params
 from ..core.solver import Solver, resolve_solver
 from ..core.waveforms import STARTUP_CYCLES, Sampled, Sawtooth, Triangle, Waveform
-from .backends import backend_for
+from .backends import BackendKind, backend_kind
 from .plan import DERIVED_AXES, METRICS, OUTPUTS, STATUS_MEANINGS, STEADY_METRICS, WAVE_FIELDS, SweepPlan, durations
 
 if TYPE_CHECKING:
@@ -267,8 +267,8 @@ def sweep(
                          dict(method="rk4", dt=None, rtol=None, atol=None, first_step=None, retries=2), "sweep")
     method, dt, rtol, atol, first_step, retries = (how["method"], how["dt"], how["rtol"], how["atol"],
                                                    how["first_step"], how["retries"])
-    kernel = backend in ("cuda", "kernel-cpu")
-    metrics, not_computed = _metrics_kept(metrics, backend)
+    kind = backend_kind(backend)
+    metrics, not_computed = _metrics_kept(metrics, kind)
     structure(model)  # an IDM structure, else a ValueError naming the choices
     asked = methods.check(method)
     options.tolerances_for(method, rtol, atol)
@@ -278,7 +278,7 @@ def sweep(
         first_step = dt  # the adaptive methods' first step was once given as dt: still honoured
     if dt is None or adaptive:
         dt = 1e-8
-    _check_backend(backend, method, client)
+    kind.check(method, client)
     names, values = _check_grid(grid, waveform)
     effects = effects or Effects()
     first = float(first_step) if first_step is not None else 1e-8
@@ -293,21 +293,14 @@ def sweep(
     t_end, own, given, (shortest, longest) = _t_end_rule(t_end, waveform, names, values, method, dt)
     plan = SweepPlan(params, waveform, effects, names, values, float(t_end), float(dt), model, int(n_elements),
                      bool(piezo_hysteresis), method, float(rtol), float(atol), int(retries), first, skips, own)
-    if kernel:
-        from .kernel_sweep import check_kernel_admits
-
-        check_kernel_admits(plan, backend)
-        if own:
-            raise ValueError(f"backend={backend!r} runs every point to one t_end, and this grid's waveforms end "
-                             f"between {shortest:g} and {longest:g} s: give t_end={longest:g} (the shorter ones then "
-                             "rest until it) or use backend='cpu', which runs each point to its own end")
+    kind.admit(plan, (shortest, longest))
     if out is None:
         _check_memory(plan.size, out_hint=True)
     _validate_axes(plan)
 
     threads = int(threads or os.cpu_count() or 1)
-    attrs = _attrs(plan, asked, given, (shortest, longest), threads, client, backend, not_computed)
-    run = _Run(metrics, attrs, threads, block_size, client, backend)
+    attrs = _attrs(plan, asked, given, (shortest, longest), threads, client, kind, not_computed)
+    run = _Run(metrics, attrs, threads, block_size, client, kind)
     if out is not None:
         return _run_to_store(plan, run, Path(out), progress)
     bar = None
@@ -323,15 +316,10 @@ def sweep(
     return ds
 
 
-def _metrics_kept(metrics: Optional[Sequence[str]], backend: str) -> tuple[list[str], list[str]]:
+def _metrics_kept(metrics: Optional[Sequence[str]], kind: BackendKind) -> tuple[list[str], list[str]]:
     """(the metrics kept, those the backend does not compute): unknown names and names the
     backend does not compute are refused by name."""
-    if backend in ("cuda", "kernel-cpu"):
-        from .kernel_sweep import kernel_metrics
-
-        admitted = kernel_metrics()
-    else:
-        admitted = list(METRICS)
+    admitted = kind.metrics()
     if metrics is None:
         not_computed = [m for m in METRICS if m not in admitted]
         return [m for m in METRICS if m not in not_computed], not_computed
@@ -341,23 +329,9 @@ def _metrics_kept(metrics: Optional[Sequence[str]], backend: str) -> tuple[list[
         raise ValueError(f"unknown metric(s) {unknown}; known: {list(METRICS)}")
     refused = [m for m in metrics if m not in admitted]
     if refused:
-        kind = "steady-state " if all(m in STEADY_METRICS for m in refused) else ""
-        raise ValueError(f"backend={backend!r} does not compute the {kind}metric(s) {refused} (use backend='cpu')")
+        what = "steady-state " if all(m in STEADY_METRICS for m in refused) else ""
+        raise ValueError(f"backend={kind.name!r} does not compute the {what}metric(s) {refused} (use backend='cpu')")
     return metrics, []
-
-
-def _check_backend(backend: str, method: str, client: Any) -> None:
-    """Refuse a backend that is not one, a method the kernel backends do not run, a cluster with a
-    device backend."""
-    if backend not in ("cpu", "cuda", "kernel-cpu"):
-        raise ValueError(f"parameter 'backend' must be 'cpu', 'cuda' or 'kernel-cpu', got {backend!r}")
-    if backend != "cpu":
-        on_kernel = engine.kernel_accepts()["methods"]
-        if method not in on_kernel:
-            raise ValueError(f"backend={backend!r} runs the methods {', '.join(map(repr, on_kernel))}; "
-                             f"{method} runs on backend='cpu'")
-        if client is not None:
-            raise ValueError(f"backend={backend!r} runs on this machine's device; drop 'client'")
 
 
 def _t_end_rule(t_end: Optional[float], waveform: Waveform, names: Sequence[str],
@@ -387,7 +361,7 @@ def _t_end_rule(t_end: Optional[float], waveform: Waveform, names: Sequence[str]
 
 
 def _attrs(plan: SweepPlan, asked: str, given: bool, span: tuple[float, float], threads: int, client: Any,
-           backend: str, not_computed: list[str]) -> dict[str, Any]:
+           kind: BackendKind, not_computed: list[str]) -> dict[str, Any]:
     """The Dataset's fixed attributes: how the sweep was run (`asked`: the method as the user
     named it; `span`: the shortest and longest waveform end [s])."""
     from ..core.engine import __version__
@@ -416,9 +390,8 @@ def _attrs(plan: SweepPlan, asked: str, given: bool, span: tuple[float, float], 
         "piezo_hysteresis": int(piezo_hysteresis),
         "waveform": repr(waveform),
         "normal_force_rule": "as set" if params.normal_force is not None else f"(m1+m2+mPE)*{GRAVITY:g} per point",
-        "executor": ("dask" if client is not None else f"local rayon, {threads} threads") if backend == "cpu"
-        else f"{backend} kernel",
-        "backend": backend,
+        "executor": kind.executor(threads, client),
+        "backend": kind.name,
         "metrics_not_computed": ", ".join(not_computed),
     }
     for name, value in params.to_dict(resolved=False).items():
@@ -450,7 +423,7 @@ class _Run:
     threads: int
     block_size: int
     client: Any
-    backend: str
+    kind: BackendKind
 
 
 def _run_in_memory(plan: SweepPlan, run: _Run, bar: Any) -> tuple["xarray.Dataset", bool]:
@@ -463,7 +436,7 @@ def _run_in_memory(plan: SweepPlan, run: _Run, bar: Any) -> tuple["xarray.Datase
     t0 = time.perf_counter()
     complete = True
     try:
-        complete = backend_for(run.backend, run.threads, run.block_size, run.client).run(plan, out, bar)
+        complete = run.kind.backend(run.threads, run.block_size, run.client).run(plan, out, bar)
     except KeyboardInterrupt:  # between blocks or before the first: nothing finished is lost
         complete = False
     wall = time.perf_counter() - t0
