@@ -3,7 +3,7 @@ two artefacts (coloured or pink noise, spikes, a coarse resolution, mains hum, a
 drifting zero), and catalogue effects under coloured noise or spikes.
 
     python benches/bench_realism.py --jsonl benches/realism_runs.jsonl [--healthy 100] \
-        [--limit N] [--shard K/N] [--summary]
+        [--limit N] [--shard K/N] [--only ID ...] [--summary]
 
 Healthy devices: LPS, LPS with piezo hysteresis, DPS (n = 4), DPS with hysteresis, drawn alike;
 1-4 of the calibrated nominal values mis-set by 5-15 % in meta.json; noise 1-2 nm; each with one
@@ -240,6 +240,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--limit", type=int)
     ap.add_argument("--shard", type=shard, default=(0, 1), metavar="K/N")
+    ap.add_argument("--only", type=int, nargs="+", metavar="ID", help="run these cases only")
     ap.add_argument("--summary", action="store_true", help="print the table of the finished cases and stop")
     ap.add_argument("--code", default="", help="the commit the diagnosis runs (kept in every row)")
     a = ap.parse_args(argv)
@@ -251,7 +252,8 @@ def main(argv: Optional[list[str]] = None) -> int:
     cases = plan(a.healthy)[: a.limit]
     with tempfile.TemporaryDirectory() as tmp:
         for c in cases:
-            if c["id"] % n != k or c["id"] in {r["id"] for r in finished(a.jsonl)}:
+            if (c["id"] % n != k or c["id"] in {r["id"] for r in finished(a.jsonl)}
+                    or (a.only is not None and c["id"] not in a.only)):
                 continue
             row = {**run_case(c, Path(tmp), a.seed), "code": a.code}
             row["noise_truth"] = noise_truth(row)

@@ -392,9 +392,10 @@ def test_a_look_alike_is_refitted_in_the_found_terms_place_and_the_data_choose(m
 
 def test_backward_elimination_keeps_the_units_that_pay_their_way(monkeypatch):
     """A form carrying a friction periodic in position, a force periodic in position at the same
-    wavelength and a cubic term, where only the friction's pair is needed: each unit (a periodic
-    term with its quadrature partner, any other term alone) is refitted away in turn, and the
-    cheapest removal is taken while the form without it is within BIC_THRESHOLD of the form with it."""
+    wavelength and a cubic term, where only the friction's pair is needed: the units (a periodic
+    term with its quadrature partner, any other term alone) are refitted away in the order of
+    their linearised cost, the first removal within BIC_THRESHOLD of the form with it taken, and
+    a unit whose linearised cost is far beyond what it must pay kept without a refit."""
     from types import SimpleNamespace
 
     from idm_rs.diagnosis.discovery import FoundForm
@@ -413,7 +414,11 @@ def test_backward_elimination_keeps_the_units_that_pay_their_way(monkeypatch):
         chi2 = 1000.0 + (0.0 if {"lib_ff_sin", "lib_ff_cos"} <= have else 1e4) - 3.0 * len(have - {"lib_ff_sin",
                                                                                               "lib_ff_cos"})
         values = {**{t.param: 1.0 for t in f.terms}, "lib_wavelength": 20e-6, "mu_k": 0.5}
-        return SimpleNamespace(chi2=chi2, values=values), [t.param for t in f.terms] + ["lib_wavelength"]
+        # the friction's coefficients 100 sigma from zero, the others 3 (the cubic) and 2 (the force's pair)
+        std = {n: {"lib_ff_sin": 0.01, "lib_ff_cos": 0.01, "lib_x1cube": 1 / 3}.get(n, 0.5) for n in values}
+        corr = {x: {y: float(x == y) for y in values} for x in values}
+        return (SimpleNamespace(chi2=chi2, values=values, std=std, corr=corr),
+                [t.param for t in f.terms] + ["lib_wavelength"])
 
     def refit(objective, spec, free, f, progress):
         refits.append({t.param for t in f.terms})
@@ -425,7 +430,10 @@ def test_backward_elimination_keeps_the_units_that_pay_their_way(monkeypatch):
     out, r2, lib2 = rf.eliminated(objective, None, [], form, r, lib, None)
     assert {t.param for t in out.terms} == {"lib_ff_sin", "lib_ff_cos"} and out.wavelength == 20e-6
     assert r2.chi2 == 1000.0 and lib2 == ["lib_ff_sin", "lib_ff_cos", "lib_wavelength"]
-    assert len(refits) == 3 + 2  # three units tried, then the two left
+    # the force's pair (Wald 8, two parameters saved) first, then the cubic (Wald 9); the
+    # friction's pair (Wald 2e4) is never refitted away
+    assert refits == [{"lib_x1cube", "lib_ff_sin", "lib_ff_cos"}, {"lib_ff_sin", "lib_ff_cos"}]
+    assert rf.linear_cost(r, frozenset({"lib_ff_sin", "lib_ff_cos"})) == pytest.approx(2e4)
     # a single unit is left as it is (nothing refitted)
     refits.clear()
     assert rf.eliminated(objective, None, [], out, r2, lib2, None)[0] is out and not refits

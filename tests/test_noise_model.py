@@ -329,3 +329,21 @@ def test_a_colour_the_rest_shows_by_chance_is_not_taken_for_the_noise(tmp_path: 
     assert whitens(res_c, Measurement(whiten=Whitener.from_acf(np.array([1.0, 0.7]), 1)))
     strong = Colour(1.9e-9, np.array([1.0, -0.0886, -0.1432]), 600, 100.0)  # far past the critical value
     assert _confirmed(strong, res, spurious)
+
+
+@pytest.mark.slow
+def test_a_thermal_drift_is_not_taken_for_a_zero_drifting_in_each_file(tmp_path: Path) -> None:
+    # one drift rate for every file, read beside a null with m1 and the presliding stiffness
+    # mis-set: the null's misfit gives each file a slope of its own around the common one, and the
+    # per-file zeros (nf parameters) explained it as well as the drift's one rate did — the
+    # verdict was "none". On the residual of the model with the rate the per-file slopes agree
+    true = idm_rs.Params()
+    nominal = true.replace(m1=true.m1 * 0.90, fric_alpha=true.fric_alpha * 1.09,
+                           normal_force=true.effective_normal_force)
+    case = make_case(tmp_path / "t", nominal_params=nominal, true_params=true.replace(
+        normal_force=true.effective_normal_force), effects=idm_rs.Effects(drift_rate=-5e-6), experiments=EXPERIMENTS,
+        noise=SensorNoise(rms=1.4e-9, outliers=6), seed=11, dt=2e-8)
+    d = idm_rs.diagnose(case, progress=False)
+    assert d.verdict == "thermal_drift", d.reason
+    cand = next(c for c in d.ranking if c.effect == "thermal_drift")
+    assert abs(cand.params["drift_rate"] / -5e-6 - 1.0) < 0.05

@@ -48,7 +48,7 @@ from .pair_twins import judged_pairs
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .progress import Clock, Progress, progress_bar
 from .proposals import determining_experiment, look_alike_experiment, separating_experiment, travel_experiment
-from .remeasure import artefacts_instead, relearned, remeasured, synced
+from .remeasure import COMMON_DRIFT_EFFECT, artefacts_instead, drift_beside, relearned, remeasured, synced
 from .results import Alternative, Candidate, Diagnosis, SecondSearch, ThirdSearch
 from .rules import better_of, by_rank, candidate_explains, is_finite, null_leaves_noise
 from .screening import Screened, near_degenerate
@@ -308,7 +308,14 @@ def _artefact_check(s: _State) -> None:
     lead_chi2 = min((c.chi2 for c in named), default=math.inf)
     fitted = [c for c in s.ranking if not c.screened_only and c.calibrated]
     leads = named or fitted
-    out = artefacts_instead(s.pb, s.cal, s.nominal, s.noise, s.learned, lead_chi2,
+    learned = s.learned
+    drifting = [c for c in named if c.effect == COMMON_DRIFT_EFFECT and c.spec is not None]
+    if learned.drift and drifting and not drift_beside(s.pb, s.cal, s.nominal, s.noise, learned, drifting[0].spec):
+        # one rate for every file explains the slopes the per-file zeros took
+        learned = replace(learned, drift=False)
+        if not learned.weighable:
+            return
+    out = artefacts_instead(s.pb, s.cal, s.nominal, s.noise, learned, lead_chi2,
                             dict(leads[0].calibrated) if leads else None, named[0].spec if named else None)
     if out is None:
         return

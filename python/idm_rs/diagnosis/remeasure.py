@@ -45,6 +45,9 @@ from .thresholds import (
 )
 from .whiteness import whiteness_z
 
+#: the catalogue effect that is a drift of the reading at one rate for every file
+COMMON_DRIFT_EFFECT = "thermal_drift"
+
 
 def remeasured(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate
                ) -> tuple[Problem, CalibratedNull, NoiseEstimate, Learned]:
@@ -64,6 +67,24 @@ def relearned(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEs
     the calibration from the candidates' optima), on the recording as the fits take it."""
     preds = pb.sim.predict([cal.fit.spec])[0]
     return relearn(pb.rec, preds, noise.sigma, found, _jacobians(pb, cal, nominal, noise))
+
+
+def drift_beside(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, found: Learned,
+                 spec: ModelSpec) -> bool:
+    """Whether a zero drifting in each file is still found on the residual of `spec`, a model with
+    a drift rate common to every file (the catalogue's thermal drift), its hum and delay as found.
+    Per-file slopes beyond one common slope on the null's residual can be the null's misfit beside
+    a common drift (a thermal drift under spikes with m1 and the presliding stiffness mis-set:
+    -95, -103, -128 nm per file), which the model with the rate and its own refitted values takes
+    up; then the per-file zeros are nf parameters where one rate does, and they are not weighed
+    against it. The calibrated parameters' Jacobian at the null's optimum is projected off the
+    slopes, as on the null's residual."""
+    preds = pb.sim.predict([spec])[0]
+    jac = _jacobians(pb, cal, nominal, noise)
+    res = Residuals.of(pb.rec, preds, lambda m: jac(pb.rec, m))
+    delay = found.delay_s if delay_significant(found.delay_gain, found.delay_s) else 0.0
+    m = replace(found.measurement, lines_Hz=found.lines_Hz, drift=False).with_delay(delay)
+    return find_drift(res, m, noise.sigma)[0]
 
 
 def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, found: Learned,

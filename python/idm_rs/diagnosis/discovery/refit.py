@@ -17,6 +17,7 @@ from ..thresholds import (
     BIC_THRESHOLD,
     DISCOVERY_REFIT_NFEV,
     DISCOVERY_WIDE_FORMS,
+    ELIMINATION_LINEAR_FACTOR,
     NOISE_RATIO_OK,
     PRUNE_ROUNDS,
     PRUNE_Z,
@@ -240,33 +241,60 @@ def _units(form: FoundForm) -> list[frozenset[str]]:
     return out
 
 
+def linear_cost(r: FitResult, unit: frozenset[str]) -> float:
+    """The chi^2 a refit without `unit` would cost to first order: the Wald statistic of its
+    coefficients at zero, a^T C^-1 a over the refit's covariance C (from its standard deviations
+    and correlations; inflated by chi^2/dof where the refit leaves more than noise, so a misfit
+    lowers the cost and more units are refitted). 0 where the covariance is not known."""
+    names = sorted(unit)
+    a = np.array([r.values.get(n, 0.0) for n in names])
+    sd = np.array([r.std.get(n, math.nan) for n in names])
+    rho = np.array([[r.corr.get(x, {}).get(y, 1.0 if x == y else math.nan) for y in names] for x in names])
+    cov = rho * np.outer(sd, sd)
+    if not (np.all(np.isfinite(cov)) and np.all(sd > 0)):
+        return 0.0
+    try:
+        return float(max(a @ np.linalg.solve(cov, a), 0.0))
+    except np.linalg.LinAlgError:
+        return 0.0
+
+
 def eliminated(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[FreeParam], form: FoundForm,
                r: FitResult, lib: list[FreeParam], progress: Optional[Callable[..., Any]]
                ) -> tuple[FoundForm, FitResult, list[FreeParam]]:
-    """Backward elimination on the refit: each unit of the form (:func:`_units`) refitted
-    away in turn, and the one whose removal costs least dropped while the form without it is
-    within BIC_THRESHOLD of the form with it (each unit must pay for itself, as in
-    :func:`_pruned`); repeated until every unit pays. :func:`_pruned` drops terms the refit
-    finds weak one by one; a force periodic in position and a friction periodic in position
-    (sin, cos and Ff sin, Ff cos at one wavelength) are strong together and one of the two
-    is redundant: a form carrying both, and a cubic term beside them, left 1.00 x noise on the
-    recordings and 1.15 x on the held-out experiment (an off-catalogue periodic friction)."""
+    """Backward elimination on the refit: the units of the form (:func:`_units`) refitted away
+    in the order of their linearised cost (:func:`linear_cost` less the BIC their parameters
+    save), and the first whose removal leaves the form within BIC_THRESHOLD of the form with it
+    dropped (each unit must pay for itself, as in :func:`_pruned`); repeated until every unit
+    pays. A unit whose linearised cost is beyond ELIMINATION_LINEAR_FACTOR x BIC_THRESHOLD is
+    kept without a refit. :func:`_pruned` drops terms the refit finds weak one by one; a force
+    periodic in position and a friction periodic in position (sin, cos and Ff sin, Ff cos at one
+    wavelength) are strong together and one of the two is redundant: a form carrying both, and
+    a cubic term beside them, left 1.00 x noise on the recordings and 1.15 x on the held-out
+    experiment (an off-catalogue periodic friction)."""
     while len(units := _units(form)) > 1:
         ln_n = math.log(objective.n)
         bic = r.chi2 + len(lib) * ln_n
-        best: Optional[tuple[float, FoundForm, FitResult, list[FreeParam]]] = None
+        smaller_of = {}
         for unit in units:
             keep = [t for t in form.terms if t.param not in unit]
             periodic = any(t.periodic for t in keep)
-            smaller = replace(form, terms=keep, coefficients={t.param: r.values[t.param] for t in keep},
-                              wavelength=r.values.get("lib_wavelength", form.wavelength) if periodic else 0.0)
+            saved = len(unit) + (1 if form.wavelength > 0 and not periodic else 0)
+            smaller_of[unit] = (linear_cost(r, unit) - saved * ln_n, replace(
+                form, terms=keep, coefficients={t.param: r.values[t.param] for t in keep},
+                wavelength=r.values.get("lib_wavelength", form.wavelength) if periodic else 0.0))
+        dropped: Optional[tuple[FoundForm, FitResult, list[FreeParam]]] = None
+        for unit in sorted(units, key=lambda u: smaller_of[u][0]):
+            cost, smaller = smaller_of[unit]
+            if cost > ELIMINATION_LINEAR_FACTOR * BIC_THRESHOLD:
+                break
             r2, lib2 = _refit(objective, spec, [f.at(r.values[f.name]) for f in calibrated_free], smaller, progress)
-            bic2 = r2.chi2 + len(lib2) * ln_n
-            if bic2 < bic + BIC_THRESHOLD and (best is None or bic2 < best[0]):
-                best = (bic2, smaller, r2, lib2)
-        if best is None:
+            if r2.chi2 + len(lib2) * ln_n < bic + BIC_THRESHOLD:
+                dropped = (smaller, r2, lib2)
+                break
+        if dropped is None:
             break
-        _, form, r, lib = best
+        form, r, lib = dropped
     return form, r, lib
 
 
