@@ -356,11 +356,8 @@ def find_drift(res: Residuals, m: Measurement, sigma: float) -> tuple[bool, tupl
 
     exps = res.rec.experiments
     nf = len(exps)
-    jt = res.joint(m, _slopes(res.rec), sigma)
-    ones = np.ones(nf)
-    common = float(ones @ jt.b) ** 2 / max(float(ones @ jt.A @ ones), 1e-300)
-    common_sig = common > chi2_dist.isf(MEASUREMENT_ALPHA, 1)
-    if nf < 2 or jt.gain - common <= chi2_dist.isf(MEASUREMENT_ALPHA, nf - 1):
+    jt, differ, common_sig = _slopes_tested(res, m, sigma)
+    if not differ:
         return False, (), common_sig
     # a zero drifts before the drive as it does after: each file's slope over its rest (the
     # device still) must agree with its slope over the whole file. A missing effect puts a
@@ -379,6 +376,26 @@ def find_drift(res: Residuals, m: Measurement, sigma: float) -> tuple[bool, tupl
         return False, (), common_sig
     drift = tuple(float(jt.of_file(f)[0][0]) * float(e.t[-1] - e.t[0]) for f, e in enumerate(exps))
     return True, drift, common_sig
+
+
+def _slopes_tested(res: Residuals, m: Measurement, sigma: float) -> tuple["Joint", bool, bool]:
+    """Each file's slope fitted (jointly, beside `m`'s nuisances and the calibrated parameters):
+    (the fit, the slopes differ significantly beyond one common to every file, the common one
+    is significant)."""
+    from scipy.stats import chi2 as chi2_dist
+
+    nf = len(res.rec.experiments)
+    jt = res.joint(m, _slopes(res.rec), sigma)
+    ones = np.ones(nf)
+    common = float(ones @ jt.b) ** 2 / max(float(ones @ jt.A @ ones), 1e-300)
+    common_sig = common > chi2_dist.isf(MEASUREMENT_ALPHA, 1)
+    return jt, nf >= 2 and jt.gain - common > chi2_dist.isf(MEASUREMENT_ALPHA, nf - 1), common_sig
+
+
+def slopes_differ(res: Residuals, m: Measurement, sigma: float) -> bool:
+    """Whether the files' slopes of `res` differ significantly beyond one slope common to every
+    file (the first half of :func:`find_drift`; the rest's check is the drift's, not this)."""
+    return _slopes_tested(res, m, sigma)[1]
 
 
 def rounding_slope(resolution: float, span: float) -> float:

@@ -31,6 +31,7 @@ from .noise_model import (
     fit_colour,
     learn,
     relearn,
+    slopes_differ,
 )
 from .problem import CalibratedNull, Nominal, Problem
 from .rules import null_leaves_noise
@@ -71,8 +72,9 @@ def relearned(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEs
 
 def drift_beside(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, found: Learned,
                  spec: ModelSpec) -> bool:
-    """Whether a zero drifting in each file is still found on the residual of `spec`, a model with
-    a drift rate common to every file (the catalogue's thermal drift), its hum and delay as found.
+    """Whether the files' slopes still differ beyond one common slope on the residual of `spec`, a
+    model with a drift rate common to every file (the catalogue's thermal drift), its hum and
+    delay as found (the rest's check of :func:`find_drift` was passed on the null's residual).
     Per-file slopes beyond one common slope on the null's residual can be the null's misfit beside
     a common drift (a thermal drift under spikes with m1 and the presliding stiffness mis-set:
     -95, -103, -128 nm per file), which the model with the rate and its own refitted values takes
@@ -84,7 +86,7 @@ def drift_beside(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: Nois
     res = Residuals.of(pb.rec, preds, lambda m: jac(pb.rec, m))
     delay = found.delay_s if delay_significant(found.delay_gain, found.delay_s) else 0.0
     m = replace(found.measurement, lines_Hz=found.lines_Hz, drift=False).with_delay(delay)
-    return find_drift(res, m, noise.sigma)[0]
+    return slopes_differ(res, m, noise.sigma)
 
 
 def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise: NoiseEstimate, found: Learned,
