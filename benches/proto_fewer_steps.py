@@ -462,6 +462,67 @@ def grid_run(model: str, size: int, tol: float, method: str, out: Path) -> None:
             f.write(json.dumps(row) + "\n")
 
 
+def sweep_grid_run(model: str, size: int, tol: float, out: Path) -> dict[str, Any]:
+    """bench_sweep.py's grid (m2/m1 in linspace(0.25, 2, size) x V in linspace(40, 120, size)):
+    per point the engine's `auto` (single-threaded wall, best of 3; accepted steps), the engine's
+    Rodas4 at 1e-5 (its wall, its error, and its wall per accepted step: what one Rosenbrock
+    step of the engine costs)
+    and the Rodas5P prototype at `tol` (accepted steps, attempts, error against RK4 at 1e-8 s).
+    Rodas5P's engine time is estimated as its attempts x Rodas4's time per step x 8/6 (two
+    stages more per step, the Jacobian and the LU alike): what the grid's time would be with
+    Rodas5P in `auto`'s place, where it is the faster of the two, point by point. Rows appended
+    to `out`; returns the totals."""
+    n = 4 if model == "dps" else 1
+    w = idm_rs.Triangle(80.0, 0.5e-3, 9.5e-3)
+    grid = {"mass_ratio": np.linspace(0.25, 2.0, size), "voltage": np.linspace(40.0, 120.0, size)}
+    ref = idm_rs.sweep(idm_rs.Params(), w, grid, dt=1e-8, t_end=T_END, model=model, n_elements=n, progress=False,
+                       retries=3)["final_position"].values
+    rows = []
+    for i, ratio in enumerate(grid["mass_ratio"]):
+        for j, v in enumerate(grid["voltage"]):
+            p = idm_rs.Params().replace(m2=float(ratio) * idm_rs.Params().m1)
+            wv = idm_rs.Triangle(float(v), 0.5e-3, 9.5e-3)
+
+            def best(**kw: Any) -> tuple[float, Any]:
+                runs = []
+                for _ in range(3):
+                    t0 = time.perf_counter()
+                    r = idm_rs.simulate(p, wv, T_END, model=model, n_elements=n, save_every=1, **kw)
+                    runs.append((time.perf_counter() - t0, r))
+                return min(runs, key=lambda x: x[0])
+
+            wall_auto, ra = best(method="auto")
+            wall_r4, r4 = best(method="rodas4", rtol=1e-5, atol=1e-5)
+            rhs = Rhs(p, model, n)
+            r5 = run_rodas5p(rhs, segments(wv, T_END), tol, rhs.scales(float(v)))
+            per_step = wall_r4 / max(r4.t.size - 1, 1)
+            est = r5["lu"] * per_step * 8.0 / 6.0 if r5["ok"] else np.inf
+            rows.append(dict(model=model, mass_ratio=float(ratio), voltage=float(v), auto_steps=int(ra.t.size - 1),
+                             auto_wall_s=wall_auto, auto_err_m=abs(ra.final_position - ref[i, j]),
+                             rodas4_steps=int(r4.t.size - 1), rodas4_wall_s=wall_r4,
+                             rodas4_err_m=abs(r4.final_position - ref[i, j]),
+                             rodas5p_steps=r5.get("steps"), rodas5p_attempts=r5.get("lu"),
+                             rodas5p_err_m=abs(r5["x1"] - ref[i, j]) if r5["ok"] else None,
+                             rodas5p_wall_estimate_s=est))
+    with out.open("a") as f:
+        for r in rows:
+            f.write(json.dumps({**r, "tol": tol}) + "\n")
+    auto = np.array([r["auto_wall_s"] for r in rows])
+    est = np.array([r["rodas5p_wall_estimate_s"] for r in rows])
+    errs = np.array([r["rodas5p_err_m"] if r["rodas5p_err_m"] is not None else np.inf for r in rows])
+    r4 = np.array([r["rodas4_wall_s"] for r in rows])
+    r4_errs = np.array([r["rodas4_err_m"] for r in rows])
+    return dict(model=model, tol=tol, points=len(rows), auto_total_s=float(auto.sum()),
+                rodas4_total_s=float(r4.sum()), auto_or_rodas4_s=float(np.minimum(auto, r4).sum()),
+                rodas4_points_over_1nm=int((r4_errs > NM).sum()), rodas4_max_err_m=float(r4_errs.max()),
+                points_rodas4_faster=int((r4 < auto).sum()),
+                rodas5p_total_estimate_s=float(est.sum()), best_of_both_s=float(np.minimum(auto, est).sum()),
+                rodas5p_points_over_1nm=int((errs > NM).sum()), rodas5p_max_err_m=float(errs.max()),
+                points_rodas5p_faster=int((est < auto).sum()),
+                auto_steps_median=float(np.median([r["auto_steps"] for r in rows])),
+                rodas5p_steps_median=float(np.median([r["rodas5p_steps"] or 0 for r in rows])))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--models", default="lps")
@@ -472,6 +533,8 @@ def main() -> None:
                     "rodas4) in right-hand-side equivalents, and stop")
     ap.add_argument("--grid", type=int, default=0, help="Rodas5P at one tolerance (--tol) over "
                     "bench_auto_corners.py's corner grids of this size, rows appended to --out")
+    ap.add_argument("--sweep-grid", type=int, default=0, help="bench_sweep.py's grid of this size: the engine's "
+                    "auto and Rodas4 against the Rodas5P prototype at --tol, point by point, rows to --out")
     ap.add_argument("--tol", type=float, default=1e-5)
     ap.add_argument("--out", type=Path, default=Path("benches/results/proto_rodas5p_grids.jsonl"))
     ap.add_argument("--costs", action="store_true", help="print the C cost of a right-hand side and of an "
@@ -483,6 +546,10 @@ def main() -> None:
         sys.path.insert(0, str(Path(__file__).parent))
         for model in a.models.split(","):
             grid_run(model, a.grid, a.tol, "rodas5p", a.out)
+        return
+    if a.sweep_grid:
+        for model in a.models.split(","):
+            print(json.dumps(sweep_grid_run(model, a.sweep_grid, a.tol, a.out)), flush=True)
         return
     if a.costs:
         for model in a.models.split(","):
