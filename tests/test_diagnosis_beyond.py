@@ -587,6 +587,63 @@ def test_the_plain_words_for_two_effects_named_instead_of_a_triple():
     assert "0.98 × their noise" in lines[0] and "through incline" in lines[0] and "1.10 × noise" in lines[1]
 
 
+@pytest.mark.parametrize("exchange_names", [True, False])
+def test_a_triple_that_leaves_structure_is_rerun_without_the_member_that_paid_least(monkeypatch, exchange_names):
+    """bench_effect_sets device 16 (a Stribeck peak, a thermal drift and piezo hysteresis on the
+    LPS): drift led, piezo creep beside it, hysteresis third left 1.83 x noise, and the Stribeck
+    peak never had a place. The member of the pair that pays least beside the other two (creep)
+    is dropped, drift and hysteresis refitted from the triple's values, and a third round runs
+    from them (held-out check against the better pair); its answer is the verdict, and where it
+    names nothing both reasons are kept."""
+    from types import SimpleNamespace
+
+    import idm_rs.diagnosis.third_effect as third_effect
+    from idm_rs.diagnosis.case_model import ModelSpec, Structure
+    from idm_rs.diagnosis.catalogue import CATALOGUE
+    from idm_rs.diagnosis.fitting import FreeParam, set_effect, set_param
+    from idm_rs.diagnosis.results import ThirdSearch
+
+    sigma = 1.5e-9
+    by = {e.id: e for e in CATALOGUE}
+    drift, creep, hyst = ("thermal_drift", "piezo_creep", "piezo_hysteresis")
+    calibrated = [FreeParam("m1", 0.4, 0.2, 0.6, 0.01, set_param("m1"))]
+    own = {n: [p.name for p in by[n].params] for n in (drift, creep, hyst)}
+    free = calibrated + [FreeParam(q, 1e-3, -1.0, 1.0, 1e-4, set_effect(q)) for n in (drift, creep, hyst)
+                         for q in own[n]]
+    rounds = []
+
+    def third_round(pb, cal, names, base, free_, pair_heldout_rms, heldout, first_twins):
+        rounds.append((names, pair_heldout_rms, {f.name for f in free_}))
+        if names == (drift, creep):  # the first round: hysteresis third, a systematic residual left
+            return ThirdSearch(pair=names, pair_heldout_rms=pair_heldout_rms, reason="hysteresis leaves 1.83 x",
+                               third=SimpleNamespace(effect=hyst), over_without={drift: 5e4, creep: 40.0},
+                               free=free, base="triple")
+        return ThirdSearch(pair=names, pair_heldout_rms=pair_heldout_rms, named=exchange_names,
+                           reason="three effects" if exchange_names else "nothing beside them")
+
+    monkeypatch.setattr(third_effect, "third_round", third_round)
+    monkeypatch.setattr(third_effect, "look_alikes", lambda *a: [])
+    monkeypatch.setattr(third_effect, "fit", lambda obj, base, start, max_nfev, progress: SimpleNamespace(
+        values={f.name: f.x0 for f in start}, rms=1.4 * sigma))
+    spec = ModelSpec(Structure("lps", 1, False), {"m1": 0.4}, {})
+    cal = SimpleNamespace(fit=SimpleNamespace(spec=spec), free=calibrated)
+    pb = SimpleNamespace(obj=None, tick=None, sigma=sigma)
+    second = SimpleNamespace(first=SimpleNamespace(effect=drift), pair=SimpleNamespace(effect=creep),
+                             base=spec, free=free[:1 + len(own[drift]) + len(own[creep])], heldout_rms=3.0e-9)
+    heldout = SimpleNamespace(rms=lambda base, at: 2.5e-9)
+    out = third_effect.search_third_effect(pb, cal, second, heldout, [])
+    # the round from drift and hysteresis: creep's parameters gone, the better held-out kept
+    assert rounds[-1][:2] == ((drift, hyst), 2.5e-9)
+    assert rounds[-1][2] == {"m1", *own[drift], *own[hyst]}
+    if exchange_names:
+        assert out.named and out.pair == (drift, hyst) and out.exchanged == (creep, hyst)
+        assert out.first_path == "hysteresis leaves 1.83 x" and out.to_dict()["exchanged"] == [creep, hyst]
+        assert out.reason.startswith("piezo_hysteresis in place of piezo_creep (it paid least")
+    else:
+        assert not out.named and out.pair == (drift, creep) and out.exchanged is None
+        assert out.reason.endswith("; with piezo_hysteresis in place of piezo_creep: nothing beside them")
+
+
 @pytest.mark.parametrize("swap_names", [True, False])
 def test_a_triple_round_that_names_nothing_is_rerun_with_a_members_look_alike_in_its_place(monkeypatch, swap_names):
     """bench_effect_sets device 11 (friction asymmetry + thermal drift + Stribeck peak on the DPS

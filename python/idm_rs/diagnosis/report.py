@@ -416,6 +416,10 @@ def _discovery_and_second_lines(d: Diagnosis, sigma: float) -> list[str]:
             member, twin = third.swapped
             lines.append(f"  ({twin} in place of its look-alike {member}: from the pair as found the round named "
                          f"nothing — {third.first_path})")
+        if getattr(third, "exchanged", None):
+            member, kept = third.exchanged
+            lines.append(f"  ({member} dropped and {kept} kept in its place: the triple with {member} left a "
+                         f"systematic residual — {third.first_path})")
         rows = [[c.effect, format_params(c), ratio_words(c.rms_after, sigma),
                  f"{c.delta_bic:.1f}" if c.delta_bic >= 0 else "not supported", c.fit_label] for c in third.ranking]
         if rows:

@@ -221,10 +221,15 @@ class ThirdSearch:
     #: reason in `first_path`
     swapped: Optional[tuple[str, str]] = None
     first_path: str = ""
+    #: (the pair's member dropped, the third kept in its place) where this round ran from the
+    #: other member and the first round's third because the triple left a systematic residual;
+    #: that round's reason in `first_path`
+    exchanged: Optional[tuple[str, str]] = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"pair": list(self.pair), "third": self.third.effect if self.third else None, "named": self.named,
                 "swapped": list(self.swapped) if self.swapped else None, "first_path": self.first_path,
+                "exchanged": list(self.exchanged) if self.exchanged else None,
                 "instead": list(self.instead) if self.instead else None, "instead_rms": self.instead_rms,
                 "reason": self.reason, "heldout_rms": self.heldout_rms, "pair_heldout_rms": self.pair_heldout_rms,
                 "delta_bic_without": self.over_without, "triple": self.third.to_dict() if self.third else None,
