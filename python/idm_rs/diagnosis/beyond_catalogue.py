@@ -149,13 +149,13 @@ def _alone(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal: float, le
         found.tried.append(replace(best, refit=r0, rms_after=r0.rms, delta_bic=delta_bic, heldout_rms_after=ho,
                                    free=[f.at(r0.values[f.name]) for f in list(cal.free) + lib], tried=[]))
         return None
-    from .discovery.refit import _equation, describe
+    from .discovery.form_words import describe, equation
 
     out = replace(best, discovered=True, refit=r0, rms_after=r0.rms, delta_bic=delta_bic,
                   rms_before=cal.fit.rms, heldout_rms_before=ho_cal, heldout_rms_after=ho, tried=[])
     vals = {f.name: r0.values[f.name] for f in lib}
     out.values = {n: (x, r0.std.get(n)) for n, x in vals.items()}
-    out.equation = _equation(best.form, vals)
+    out.equation = equation(best.form, vals)
     if best.body in best.forces:
         out.description = describe(best.form, vals, best.forces[best.body])
     where = "main body" if best.body == "main" else "weight"

@@ -309,8 +309,8 @@ def _artefact_check(s: _State) -> None:
     fitted = [c for c in s.ranking if not c.screened_only and c.calibrated]
     leads = named or fitted
     learned = s.learned
-    drifting = [c for c in named if c.effect == COMMON_DRIFT_EFFECT and c.spec is not None]
-    if learned.drift and drifting and not drift_beside(s.pb, s.cal, s.nominal, s.noise, learned, drifting[0].spec):
+    drifting = [c.spec for c in named if c.effect == COMMON_DRIFT_EFFECT and c.spec is not None]
+    if learned.drift and drifting and not drift_beside(s.pb, s.cal, s.nominal, s.noise, learned, drifting[0]):
         # one rate for every file explains the slopes the per-file zeros took
         learned = replace(learned, drift=False)
         if not learned.weighable:

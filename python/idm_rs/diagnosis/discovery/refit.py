@@ -22,6 +22,7 @@ from ..thresholds import (
     PRUNE_ROUNDS,
     PRUNE_Z,
 )
+from .form_words import describe, equation
 from .infer import InferredForce, direct_force, infer_force
 from .library import QUADRATURE, Term
 from .linalg import NumericalFailure
@@ -102,55 +103,6 @@ def _free_library(form: FoundForm) -> list[FreeParam]:
         free.append(FreeParam("lib_wavelength", wl, wl / 1.6, wl * 1.6, 0.02, set_effect("lib_wavelength"), log=True,
                               unit="m"))
     return free
-
-
-def _equation(form: FoundForm, values: dict[str, float]) -> str:
-    lhs = "m1 x1'' +=" if form.body == "main" else "m2 x2'' +="
-    parts = []
-    for t in form.terms:
-        sym = t.symbol.replace("lambda", f"{values.get('lib_wavelength', form.wavelength) * 1e6:.3g} um")
-        unit = "" if t.unit == "1" else f" {t.unit}"
-        parts.append(f"{values[t.param]:+.4g}{unit} · {sym}")
-    return f"{lhs} " + " ".join(parts)
-
-
-def describe(form: FoundForm, values: dict[str, float], force: InferredForce) -> str:
-    """The found term in words, with its size along the recorded motion."""
-    wl = values.get("lib_wavelength", form.wavelength)
-    where = "on the main body" if form.body == "main" else "on the weight"
-    trs = force.trajectories
-    ff = np.concatenate([np.abs(t.ff) for t in trs]) if trs else np.zeros(1)
-    ff_level = float(np.percentile(ff, 90)) if ff.size else 0.0
-    words = []
-    names = {t.param for t in form.terms}
-    if names & {"lib_ff_sin", "lib_ff_cos"}:
-        amp = math.hypot(values.get("lib_ff_sin", 0.0), values.get("lib_ff_cos", 0.0))
-        words.append(f"friction varies with position: about ±{100 * amp:.2g} % with a period of {wl * 1e6:.3g} µm")
-    if names & {"lib_sin", "lib_cos"}:
-        amp = math.hypot(values.get("lib_sin", 0.0), values.get("lib_cos", 0.0))
-        words.append(f"a force periodic in position {where}: ±{amp * 1e3:.3g} mN with a period of {wl * 1e6:.3g} µm")
-    if "lib_vv" in names:
-        v = float(np.percentile(np.concatenate([np.abs(t.v1) for t in trs]), 99)) if trs else 0.0
-        words.append(f"quadratic drag {where}: F = {values['lib_vv']:.3g} N s²/m² · v1|v1| "
-                     f"({abs(values['lib_vv']) * v * v * 1e3:.3g} mN at {v * 1e3:.3g} mm/s)")
-    if "lib_x1cube" in names:
-        x = float(np.max(np.concatenate([np.abs(t.x1) for t in trs]))) if trs else 0.0
-        kind = "stiffening spring to ground" if values["lib_x1cube"] < 0 else "softening (negative) cubic force"
-        words.append(f"a cubic {kind} {where}: F = {values['lib_x1cube']:.3g} N/m³ · x1³ "
-                     f"({abs(values['lib_x1cube']) * x**3 * 1e3:.3g} mN at {x * 1e6:.3g} µm)")
-    if "lib_x1sq" in names:
-        words.append(f"a force quadratic in position {where} ({values['lib_x1sq']:.3g} N/m² · x1²)")
-    if "lib_x1" in names:
-        words.append(f"a linear spring to ground {where} (k = {-values['lib_x1']:.3g} N/m)")
-    if "lib_ff" in names:
-        words.append(f"friction {100 * values['lib_ff']:+.2g} % off its calibrated level")
-    rest = [t for t in form.terms if t.param not in {"lib_ff_sin", "lib_ff_cos", "lib_sin", "lib_cos", "lib_vv",
-                                                      "lib_x1cube", "lib_x1sq", "lib_x1", "lib_ff"}]
-    for t in rest:
-        words.append(f"a force {values[t.param]:+.3g} {t.unit} · {t.symbol} {where}")
-    if ff_level > 0 and not words:
-        words.append("no term")
-    return "; ".join(words)
 
 
 def _with_form(spec: ModelSpec, form: FoundForm) -> tuple[ModelSpec, list[FreeParam]]:
@@ -254,7 +206,7 @@ def linear_cost(r: FitResult, unit: frozenset[str]) -> float:
     if not (np.all(np.isfinite(cov)) and np.all(sd > 0)):
         return 0.0
     try:
-        return float(max(a @ np.linalg.solve(cov, a), 0.0))
+        return max(float(a @ np.linalg.solve(cov, a)), 0.0)
     except np.linalg.LinAlgError:
         return 0.0
 
@@ -594,7 +546,7 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
     trial.values = {n: (v, r.std.get(n)) for n, v in vals.items()}
     if cx.heldout is not None:
         trial.heldout_rms_after = cx.heldout.rms(r.spec, [f.at(r.values[f.name]) for f in list(start) + lib])
-    trial.equation = _equation(form, vals)
+    trial.equation = equation(form, vals)
     trial.description = describe(form, vals, force)
     improves = _predicts_better(trial.heldout_rms_after, heldout_rms_null)
     # "discovered" means the residual is explained, not merely lowered: the refit leaves noise and
