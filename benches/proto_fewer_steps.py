@@ -483,7 +483,7 @@ def sweep_grid_run(model: str, size: int, tol: float, out: Path) -> dict[str, An
             p = idm_rs.Params().replace(m2=float(ratio) * idm_rs.Params().m1)
             wv = idm_rs.Triangle(float(v), 0.5e-3, 9.5e-3)
 
-            def best(**kw: Any) -> tuple[float, Any]:
+            def best(p: idm_rs.Params = p, wv: Any = wv, **kw: Any) -> tuple[float, Any]:
                 runs = []
                 for _ in range(3):
                     t0 = time.perf_counter()
