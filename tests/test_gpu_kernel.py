@@ -184,7 +184,9 @@ def test_kernel_adaptive_is_within_a_nanometre_of_the_engines_rk4(p, w, model, h
     1 nm of the engine's RK4 at dt = 1e-8 s on the same drawn devices and inputs."""
     ref = _sweep(p, w, model, hysteresis, method="rk4", dt=1e-8)
     out = _sweep(p, w, model, hysteresis, method=method, backend="kernel-cpu")
-    assert ref.status.values[0] == 1
+    # a stiff drawn contact (presliding stiffness 1.5e10 with mu_k 0.625 and fric_n 1.25) takes
+    # RK4 past its stability at 1e-8 s: the sweep's retry at 5e-9 s is the reference then
+    assert ref.status.values[0] in (1, 2), ref.reason.values
     assert out.status.values[0] == 1, out.reason.values
     assert abs(out.final_position.values[0] - ref.final_position.values[0]) <= 1e-9
 
