@@ -314,8 +314,9 @@ DISCOVERY_REFIT_NFEV = 25
 #: backward elimination refits a unit away only where its linearised cost (the Wald chi^2 of
 #: its coefficients at zero, from the refit's covariance, less the BIC its parameters save) is
 #: within this factor of BIC_THRESHOLD: a refit re-optimises what the linearisation holds fixed
-#: and lowers the cost, by an order of magnitude at most (a strong unit's refit is ~25
-#: evaluations, a case's backward eliminations ~30 % of its time)
+#: and can only lower the cost, and the factor is the margin left for that (a margin, not a
+#: measured bound; a strong unit's refit is ~25 evaluations, and refitting every unit each round
+#: took ~30 % of a discovery case's time)
 ELIMINATION_LINEAR_FACTOR = 10.0
 #: forms that gain but stop short of noise, searched globally when no form stands (lowest RMS
 #: first): the calibrated parameters and the form's coefficients by the calibration's own
