@@ -314,7 +314,7 @@ DISCOVERY_REFIT_NFEV = 25
 #: backward elimination refits a unit away only where its linearised cost (the Wald chi^2 of
 #: its coefficients at zero, from the refit's covariance, less the BIC its parameters save) is
 #: within this factor of BIC_THRESHOLD: a refit re-optimises what the linearisation holds fixed
-#: and can only lower the cost, and the factor is the margin left for that (a margin, not a
+#: and its cost can come out below the linearised one; the factor is the margin left for that (not a
 #: measured bound; a strong unit's refit is ~25 evaluations, and refitting every unit each round
 #: took ~30 % of a discovery case's time)
 ELIMINATION_LINEAR_FACTOR = 10.0
