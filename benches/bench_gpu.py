@@ -12,6 +12,11 @@ kernels' registers / stack / occupancy as CuPy built them, and the points a stif
                                 [--stiff 200] [--ab 512] [--json PATH]
     python benches/bench_gpu.py --backend kernel-cpu --size 8 --cpu-points 64 --stiff 4   # the launch path, on the CPU
 
+Rows are ``model:method`` with model ``lps``, ``dps`` (4 elements) or ``dpsN`` (N elements);
+``--effect-rows`` runs rows again with ``--effects`` (JSON of Effects fields: by default a
+spring to ground, an incline and an amplifier lag) on every point, the kernel then running
+the right-hand side generated for those effects.
+
 Runs where CuPy finds a GPU; ``--backend kernel-cpu`` runs the same kernel source compiled for
 the CPU (to check the script and the launch code without a GPU; slow).
 """
@@ -19,6 +24,7 @@ the CPU (to check the script and the launch code without a GPU; slow).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -39,8 +45,16 @@ def _grid(size: int) -> dict[str, np.ndarray]:
     return {"mass_ratio": np.linspace(0.25, 2.0, size), "voltage": np.linspace(40.0, 120.0, size)}
 
 
+def _model(name: str) -> tuple[str, int]:
+    """``lps``, ``dps`` (4 elements) or ``dpsN`` (N elements) -> (model, elements)."""
+    if name == "lps":
+        return "lps", 1
+    return "dps", int(name[3:] or 4)
+
+
 def _kw(model: str) -> dict:
-    return dict(t_end=T_END, model=model, n_elements=4, progress=False)
+    m, n = _model(model)
+    return dict(t_end=T_END, model=m, n_elements=n, progress=False)
 
 
 def card() -> dict:
@@ -83,6 +97,9 @@ VARIANTS = {
     "default": (None, None, ""),
     "block 64": (64, 64, ""),
     "LPS block 256": (256, None, ""),
+    "block 32": (None, 32, ""),
+    "wave+metrics shared": (None, None, "#undef IDM_WAVE_SHARED\n#define IDM_WAVE_SHARED 1\n"
+                            "#undef IDM_METRICS_SHARED\n#define IDM_METRICS_SHARED 1\n"),
 }
 
 
@@ -108,7 +125,7 @@ def use_variant(label: str) -> None:
     backend._MODULES.clear()
 
 
-def kernel_ab(size: int) -> list[dict]:
+def kernel_ab(size: int, variants: list[str]) -> list[dict]:
     """The kernels alone (CUDA events, no host work) on size x size points of the grid, for the
     layout variants (VARIANTS) of both structures and methods: measured, not guessed."""
     from idm_rs import methods
@@ -119,11 +136,11 @@ def kernel_ab(size: int) -> list[dict]:
     rows = np.array([param_row(P.replace(m2=float(m) * P.m1)) for m in g["mass_ratio"]])
     idx = np.repeat(np.arange(size), size)
     wave = wave_columns("triangle", dict(amplitude=np.tile(g["voltage"], size), rise=0.5e-3, fall=9.5e-3, delay=0.0))
-    _, rtol, atol = methods.resolve("auto", 0.0, 0.0)
+    _, rtol, atol = methods.resolve("auto")
     out = []
-    for label in VARIANTS:
+    for label in variants:
         use_variant(label)
-        for model, nodes in (("lps", 2), ("dps", 5)):
+        for model, nodes in (("lps", 2), ("dps", 5), ("dps", 6)):
             cfg = Structure(model, nodes - 1 if model == "dps" else 1, True).config(method="rk4", dt=5e-8)
             for method, t_end in (("rk4", 2e-3), ("dopri5", T_END)):
                 kw = dict(method="dopri5", rtol=rtol, atol=atol, first_step=1e-8) if method == "dopri5" else {}
@@ -139,22 +156,22 @@ def kernel_ab(size: int) -> list[dict]:
     return out
 
 
-def reference(model: str, i: np.ndarray, j: np.ndarray, g: dict) -> np.ndarray:
+def reference(model: str, i: np.ndarray, j: np.ndarray, g: dict, effects=None) -> np.ndarray:
     """x1 [m] from the CPU engine's RK4 at dt = 1e-8 s on the sampled points."""
     from idm_rs.core.batch import Point, Structure, run
 
-    pts = [Point(P.replace(m2=float(g["mass_ratio"][a]) * P.m1),
+    e = effects or idm_rs.Effects()
+    pts = [Point(P.replace(m2=float(g["mass_ratio"][a]) * P.m1), effects=e,
                  waveform=idm_rs.Triangle(float(g["voltage"][b]), 0.5e-3, 9.5e-3)) for a, b in zip(i, j)]
-    return run(pts, Structure(model, 4 if model == "dps" else 1, True), t_end=T_END, method="rk4", dt=1e-8)[
-        "final_position"]
+    return run(pts, Structure(*_model(model), True), t_end=T_END, method="rk4", dt=1e-8)["final_position"]
 
 
-def cpu_rate(model: str, method: str, dt: float, points: int) -> float:
+def cpu_rate(model: str, method: str, dt: float, points: int, effects=None) -> float:
     """Points/s of the CPU engine (all cores, rayon) on a sub-grid of the same ranges."""
     side = max(2, int(round(points ** 0.5)))
     step = dict(dt=dt) if method == "rk4" else {}
     t0 = time.perf_counter()
-    idm_rs.sweep(P, W, _grid(side), backend="cpu", method=method, **step, **_kw(model))
+    idm_rs.sweep(P, W, _grid(side), backend="cpu", method=method, effects=effects, **step, **_kw(model))
     return side * side / (time.perf_counter() - t0)
 
 
@@ -199,7 +216,7 @@ class HostClock:
         return {k: round(v, 3) for k, v in self.t.items()}
 
 
-def gpu_row(backend: str, model: str, method: str, a) -> dict:
+def gpu_row(backend: str, model: str, method: str, a, effects=None) -> dict:
     g = _grid(a.size)
     n = a.size * a.size
     rng = np.random.default_rng(0)
@@ -207,21 +224,23 @@ def gpu_row(backend: str, model: str, method: str, a) -> dict:
     i, j = np.unravel_index(flat, (a.size, a.size))
     step = dict(dt=a.dt) if method == "rk4" else {}
     # warm-up: compiles the kernel (NVRTC) once
-    idm_rs.sweep(P, W, {"voltage": [80.0]}, backend=backend, method=method, **step, **_kw(model))
+    idm_rs.sweep(P, W, {"voltage": [80.0]}, backend=backend, method=method, effects=effects, **step, **_kw(model))
     clock = HostClock() if backend == "cuda" else None
     t0 = time.perf_counter()
-    ds = idm_rs.sweep(P, W, g, backend=backend, method=method, block_size=a.block, **step, **_kw(model))
+    ds = idm_rs.sweep(P, W, g, backend=backend, method=method, block_size=a.block, effects=effects, **step,
+                      **_kw(model))
     wall = time.perf_counter() - t0
     split = clock.close() if clock is not None else {}
     t1 = time.perf_counter()
-    ref = reference(model, i, j, g)
+    ref = reference(model, i, j, g, effects)
     ref_s = time.perf_counter() - t1
     err = np.abs(ds["final_position"].values[i, j] - ref)
     reasons = ds["reason"].values.ravel().astype(str)
     rerun = int(np.count_nonzero(np.char.startswith(reasons, "failed on the kernel")))
-    cpu_points = a.cpu_points // (4 if model == "dps" else 1)
-    cpu = cpu_rate(model, method, a.dt, cpu_points) if cpu_points else float("nan")
-    return dict(backend=backend, method=method, model=model, points=n, dt=a.dt if method == "rk4" else None,
+    cpu_points = a.cpu_points // (4 if model.startswith("dps") else 1)
+    cpu = cpu_rate(model, method, a.dt, cpu_points, effects) if cpu_points else float("nan")
+    return dict(backend=backend, method=method, model=model, points=n,
+                effects={k: v for k, v in dataclasses.asdict(effects).items() if v} if effects else {}, dt=a.dt if method == "rk4" else None,
                 rtol=ds.attrs["rtol"], wall_s=round(wall, 3), points_per_s=round(n / wall), **split,
                 steps_per_point=float(ds["steps"].values.mean()), rerun_on_cpu=rerun,
                 max_err_m_sampled=float(err.max()), beyond_1nm=int((err > 1e-9).sum()), sample=int(flat.size),
@@ -261,6 +280,10 @@ def main(argv=None) -> int:
     ap.add_argument("--block", type=int, default=1 << 18, help="points per streamed block")
     ap.add_argument("--ab", type=int, default=0, help="side of the grid for the kernel-only layout A/B (0: skip)")
     ap.add_argument("--variant-rows", default="", help="LABEL=rows: rows again with a layout variant (VARIANTS)")
+    ap.add_argument("--ab-variants", default=",".join(VARIANTS), help="comma-separated VARIANTS for --ab")
+    ap.add_argument("--effect-rows", default="", help="rows run with --effects on every point")
+    ap.add_argument("--effects", default='{"k_ground": 2e3, "theta_rad": 0.05, "tau_amp": 1e-5}',
+                    help="JSON of Effects fields for --effect-rows")
     ap.add_argument("--json", metavar="PATH")
     a = ap.parse_args(argv)
     out = {"card": card()}
@@ -279,13 +302,14 @@ def main(argv=None) -> int:
             Path(a.json).write_text(json.dumps(out, indent=2, default=str) + "\n")
         return out[name]
 
-    def rows(spec: str, variant: str = "default") -> None:
+    def rows(spec: str, variant: str = "default", effects=None) -> None:
         if a.backend == "cuda":
             use_variant(variant)
         for item in filter(None, spec.split(",")):
             model, method = item.split(":")
-            key = f"row_{model}_{method}" + ("" if variant == "default" else f" [{variant}]")
-            row = stage(key, lambda model=model, method=method: dict(gpu_row(a.backend, model, method, a),
+            key = (f"row_{model}_{method}" + ("" if variant == "default" else f" [{variant}]")
+                   + (" [effects]" if effects else ""))
+            row = stage(key, lambda model=model, method=method: dict(gpu_row(a.backend, model, method, a, effects),
                                                                      variant=variant))
             print(json.dumps(row), flush=True)
         if a.backend == "cuda":
@@ -299,10 +323,12 @@ def main(argv=None) -> int:
     if a.stiff:
         print(json.dumps(stage("stiff", lambda: stiff_row(a.backend, a.stiff))), flush=True)
     if a.backend == "cuda" and a.ab:
-        stage("ab", lambda: kernel_ab(a.ab))
+        stage("ab", lambda: kernel_ab(a.ab, a.ab_variants.split(",")))
     if a.backend == "cuda" and a.variant_rows:
         label, spec = a.variant_rows.split("=")
         rows(spec, label)
+    if a.effect_rows:
+        rows(a.effect_rows, effects=idm_rs.Effects(**json.loads(a.effects)))
     rows(a.late_rows)
     return 0
 
