@@ -240,7 +240,8 @@ def gpu_row(backend: str, model: str, method: str, a, effects=None) -> dict:
     cpu_points = a.cpu_points // (4 if model.startswith("dps") else 1)
     cpu = cpu_rate(model, method, a.dt, cpu_points, effects) if cpu_points else float("nan")
     return dict(backend=backend, method=method, model=model, points=n,
-                effects={k: v for k, v in dataclasses.asdict(effects).items() if v} if effects else {}, dt=a.dt if method == "rk4" else None,
+                effects={k: v for k, v in dataclasses.asdict(effects).items() if v} if effects else {},
+                dt=a.dt if method == "rk4" else None,
                 rtol=ds.attrs["rtol"], wall_s=round(wall, 3), points_per_s=round(n / wall), **split,
                 steps_per_point=float(ds["steps"].values.mean()), rerun_on_cpu=rerun,
                 max_err_m_sampled=float(err.max()), beyond_1nm=int((err > 1e-9).sum()), sample=int(flat.size),
