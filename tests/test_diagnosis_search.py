@@ -404,3 +404,19 @@ def test_a_pairs_look_alike_is_refitted_in_its_place_beside_the_other_effect(tmp
     assert ("amplifier_lowpass", "sensor_lowpass", 0.99) in judged
     assert not any("thermal_drift" in p for p in judged)
     assert {p[1] for p in judged if p[0] == "friction_asymmetry"} == {t.twin for t in twins if t.stands}
+
+
+def test_every_effects_starts_span_its_fit_range_inside_its_bounds():
+    """The candidates' start ladder reaches the top of each effect parameter's fit range (within
+    a half-decade: a decade for a log-scaled one) and never starts on a bound. It stopped at
+    30 x the fit scale before: a weight drag of 50 N s/m (ladder top 15) and an incline of
+    0.01 rad (ladder top 0.003) were never started near their values."""
+    for eff in CATALOGUE:
+        for ep in eff.params:
+            starts = diag_candidates.magnitudes(ep)
+            assert all(ep.lower < v < ep.upper or v == ep.none for v in starts), (eff.id, ep.name, starts)
+            reach = max(abs(v - ep.none) for v in starts)
+            span = max(ep.upper - ep.none, ep.none - ep.lower)
+            assert reach * (10.0 if ep.log else 3.4) >= span, (eff.id, ep.name, starts)
+    assert 50.0 in diag_candidates.magnitudes(by_id("weight_friction").params[0])
+    assert -0.01 in diag_candidates.magnitudes(by_id("incline").params[0])

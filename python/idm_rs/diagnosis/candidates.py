@@ -78,16 +78,25 @@ def calibrate_null(pb: Problem, nominal: Nominal) -> CalibratedNull:
 
 
 def magnitudes(ep: EffectParam) -> list[float]:
-    """An effect parameter's starting values: a log-scaled one (a time constant) at its
-    catalogue starts; any other at half-decade multiples of its fit scale (both signs where
-    "no effect" lies inside its bounds), and at "no effect"."""
+    """An effect parameter's starting values, spanning its whole fit range: a log-scaled one (a
+    time constant, the hysteresis loop's size) at its catalogue starts and a decade beyond the
+    largest where that is inside its bounds; any other at half-decade multiples of its fit scale
+    (CANDIDATE_MAGNITUDES, continued while inside its bounds; both signs where "no effect" lies
+    inside them), and at "no effect". A start ladder that stopped at 30 x the scale never
+    started a weight drag of 50 N s/m (scale 0.5) or an incline of 0.01 rad (scale 1e-4) near
+    its value, and the fits from the ladder's top ended in another basin."""
     if ep.log:
-        return list(ep.starts)
+        out = list(ep.starts)
+        beyond = 10.0 * max(out)
+        return out + ([beyond] if beyond < ep.upper else [])
+    ladder = list(CANDIDATE_MAGNITUDES)
+    while ladder[-1] * ep.scale < ep.upper - ep.lower:
+        ladder.append(10.0 * ladder[-2])
     out = [ep.none]
-    for m in CANDIDATE_MAGNITUDES:
+    for m in ladder:
         for sign in (1.0, -1.0):
             v = ep.none + sign * m * ep.scale
-            if ep.lower <= v <= ep.upper:
+            if ep.lower < v < ep.upper:  # a start on a bound would stay there
                 out.append(v)
     return out
 
