@@ -17,9 +17,9 @@ from .calibration import calibrate as global_calibration
 from .calibration import search
 from .case_model import ModelSpec
 from .catalogue import CATALOGUE, Effect, EffectParam
-from .fitting import FitResult, FreeParam, Objective, apply, fit, set_effect
+from .fitting import FitResult, FreeParam, Objective, apply, fit, fit_progressive, set_effect
 from .identifiability import assess
-from .multistart import Start, agree, multistart
+from .multistart import Start, agree, leaves_noise, multistart
 from .noise import NoiseEstimate
 from .problem import CalibratedNull, Nominal, Problem, Refit, calibration_params
 from .results import Candidate
@@ -32,6 +32,8 @@ from .thresholds import (
     CANDIDATE_HORIZONS,
     CANDIDATE_MAGNITUDES,
     CANDIDATE_NFEV,
+    CONTINUATION_HORIZONS,
+    CONTINUATION_NFEV,
     MIN_SCORE,
     POLISH_CLOSE,
     POLISH_NFEV,
@@ -344,12 +346,34 @@ def polish_leaders(pb: Problem, cal: CalibratedNull, refits: list[Refit]) -> Non
         assert spec is not None  # a fitted candidate has its model
         base = ModelSpec(r0.base.structure, dict(spec.params), dict(spec.effects))
         r = fit(pb.obj, base, r0.free, max_nfev=POLISH_NFEV, progress=pb.tick)
+        r = continued(pb, cal, base, r0.free, r)
         if r.chi2 < r0.candidate.chi2:
             c = make_candidate(pb, cal, eff, r, screened_only=False)
             c.delta_bic = cal.bic - c.bic
             c.score, c.multistart = r0.candidate.score, r0.candidate.multistart
             r0.candidate = c
             r0.free = [p.at(r.values[p.name]) for p in r0.free]
+
+
+def continued(pb: Problem, cal: CalibratedNull, base: ModelSpec, free: list[FreeParam], r: FitResult) -> FitResult:
+    """A leader's fit `r` that leaves structure, fitted again over CONTINUATION_HORIZONS (the
+    first drive cycle, then everything) from the nominal values as given and from the null fit,
+    its effect parameters at their fitted values; the best of them. Least squares over the whole
+    record at once can slide into a basin the first cycle alone does not have (RESULTS §39)."""
+    if leaves_noise(r):
+        return r
+    names = {f.name for f in cal.free}
+    best = r
+    for at in (cal.free, cal.at):
+        nominal = {f.name: f for f in at}
+        start = [nominal[p.name] if p.name in names else p.at(r.values[p.name]) for p in free]
+        r2 = fit_progressive(pb.obj, base, start, horizons=CONTINUATION_HORIZONS, max_nfev=CONTINUATION_NFEV,
+                             progress=pb.tick)
+        if r2.chi2 < best.chi2:
+            best = r2
+        if leaves_noise(best):
+            break
+    return best
 
 
 def structural_calibrations(pb: Problem, cal: CalibratedNull, nominal: Nominal, refits: list[Refit]

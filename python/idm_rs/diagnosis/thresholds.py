@@ -212,6 +212,13 @@ NULL_REFITS = 1
 #: SEPARATION of it, at most POLISH_CLOSE candidates in all)
 POLISH_NFEV = 12
 POLISH_CLOSE = 3
+#: a polished leader that leaves structure is fitted again over these horizons (drive cycles of
+#: every experiment; None: everything) from the nominal values as given and from the null fit,
+#: its effect at its fitted value: over the first cycle the basins are not yet mixed (§39 of
+#: benches/RESULTS.md: a weight drag fitted over everything at once slid into a second basin at
+#: 1.53 x noise from every start; the first cycle first led to the truth, 0.99 x)
+CONTINUATION_HORIZONS: tuple[Optional[int], ...] = (1, None)
+CONTINUATION_NFEV: tuple[int, ...] = (16, 16)
 #: multiples of an effect parameter's fit scale its multistart tries (both signs where signed)
 CANDIDATE_MAGNITUDES = (1.0, 3.0, 10.0, 30.0)
 #: the wider search: every candidate's population search (members per free parameter,
