@@ -362,11 +362,10 @@ def continued(pb: Problem, cal: CalibratedNull, base: ModelSpec, free: list[Free
     record at once can slide into a basin the first cycle alone does not have (RESULTS §39)."""
     if leaves_noise(r):
         return r
-    names = {f.name for f in cal.free}
     best = r
     for at in (cal.free, cal.at):
-        nominal = {f.name: f for f in at}
-        start = [nominal[p.name] if p.name in names else p.at(r.values[p.name]) for p in free]
+        calibrated = {f.name: f for f in at}
+        start = [calibrated.get(p.name) or p.at(r.values[p.name]) for p in free]
         r2 = fit_progressive(pb.obj, base, start, horizons=CONTINUATION_HORIZONS, max_nfev=CONTINUATION_NFEV,
                              progress=pb.tick)
         if r2.chi2 < best.chi2:
