@@ -463,9 +463,10 @@ def test_a_form_that_fails_only_the_held_out_check_gets_the_drive_that_would_dec
 def test_discovery_after_a_calibration_that_did_not_converge_starts_from_the_nominal_values():
     """After "not_converged" discovery starts from the nominal values as given (each of the
     calibration's basins compensates for the missing force its own way), with the calibrated
-    subset free around them and the calibrated null's held-out RMS as the bar, and beside no
-    first effect; after "unexplained", from the model with the first effect when one stands,
-    else from the calibrated null."""
+    subset free around them and the calibrated null's held-out RMS as the bar, then from the
+    model with the first effect when one stands; after "unexplained", from the model with the
+    first effect when one stands, then from the calibrated null (a first effect that leaves
+    structure does not steer the search alone)."""
     from types import SimpleNamespace
 
     from idm_rs.diagnosis.case_model import ModelSpec, Structure
@@ -475,14 +476,76 @@ def test_discovery_after_a_calibration_that_did_not_converge_starts_from_the_nom
     nominal = SimpleNamespace(spec=ModelSpec(Structure("lps", 1, False), p, {}))
     cal_spec = ModelSpec(Structure("lps", 1, False), dict(p, mu_k=0.3), {})
     cal = SimpleNamespace(free=free, at=[f.at(f.x0 * 0.9) for f in free], fit=SimpleNamespace(spec=cal_spec))
-    lead = SimpleNamespace(base=cal_spec, free=[f.at(f.x0 * 1.1) for f in free],
-                           candidate=SimpleNamespace(heldout_rms=3e-9))
-    spec, start, ho, first = diag_beyond_catalogue.discovery_start("not_converged", lead, cal, nominal, 5e-9)
-    assert spec is nominal.spec and [f.x0 for f in start] == [f.x0 for f in free] and ho == 5e-9 and first is None
-    spec, start, ho, first = diag_beyond_catalogue.discovery_start("unexplained", lead, cal, nominal, 5e-9)
-    assert first is lead and ho == 3e-9 and [f.x0 for f in start] == [f.x0 for f in lead.free]
-    spec, start, ho, first = diag_beyond_catalogue.discovery_start("unexplained", None, cal, nominal, 5e-9)
-    assert spec is cal_spec and first is None and [f.x0 for f in start] == [f.x0 for f in cal.at]
+    lead_spec = ModelSpec(Structure("lps", 1, False), dict(p, mu_k=0.35), {})
+    lead = SimpleNamespace(base=lead_spec, free=[f.at(f.x0 * 1.1) for f in free],
+                           candidate=SimpleNamespace(heldout_rms=3e-9, effect="weight_friction"))
+    paths = diag_beyond_catalogue.discovery_paths
+    nominal_path, beside = paths("not_converged", lead, cal, nominal, 5e-9)
+    assert nominal_path.spec is nominal.spec and nominal_path.from_nominal and nominal_path.lead is None
+    assert [f.x0 for f in nominal_path.free] == [f.x0 for f in free] and nominal_path.heldout_rms == 5e-9
+    assert beside.lead is lead and not beside.from_nominal and beside.heldout_rms == 3e-9
+    assert [f.x0 for f in beside.free] == [f.x0 for f in lead.free]
+    # the lead's model at its fit: its free parameters' values set on its base
+    assert beside.spec.params["mu_k"] == pytest.approx(_free_value(lead.free, "mu_k"))
+    assert [p_.origin for p_ in (nominal_path, beside)] == ["the nominal values as given",
+                                                             "the model with weight_friction"]
+    (alone,) = paths("not_converged", None, cal, nominal, 5e-9)
+    assert alone.from_nominal and alone.spec is nominal.spec
+    beside, calibrated = paths("unexplained", lead, cal, nominal, 5e-9)
+    assert beside.lead is lead and beside.heldout_rms == 3e-9
+    assert calibrated.spec is cal_spec and calibrated.lead is None and not calibrated.from_nominal
+    assert [f.x0 for f in calibrated.free] == [f.x0 for f in cal.at] and calibrated.heldout_rms == 5e-9
+    (calibrated,) = paths("unexplained", None, cal, nominal, 5e-9)
+    assert calibrated.spec is cal_spec and calibrated.origin == "the calibrated model"
+
+
+@pytest.mark.parametrize("first_names", [True, False])
+def test_discovery_takes_the_next_path_only_while_none_named_a_term(monkeypatch, first_names):
+    """The discovery stage runs its paths in turn: the second only while the first left the
+    verdict undecided, the first path's finding then kept as the other path (the JSON's
+    `discovery_other_path`) and its reason appended when neither names a term."""
+    import importlib
+    from types import SimpleNamespace
+
+    stage = importlib.import_module("idm_rs.diagnosis.diagnose")
+    paths = [SimpleNamespace(spec=f"spec{k}", free=[], heldout_rms=1e-9, lead=None, from_nominal=k == 0,
+                             origin=f"path {k}") for k in range(2)]
+    monkeypatch.setattr(stage, "discovery_paths", lambda *a: paths)
+    ran: list[str] = []
+
+    def run(rec, spec, *a, **k):
+        ran.append(spec)
+        return SimpleNamespace(spec=spec, reason=f"nothing stood on {spec}")
+
+    def settle(pb, cal, heldout, ho_cal, found, lead, from_nominal, verdict, reason, rms_after):
+        named = found.spec == "spec1" or first_names
+        return found, ("discovered" if named else verdict), (f"found on {found.spec}" if named else reason), rms_after
+
+    monkeypatch.setattr(stage, "run_discovery", run)
+    monkeypatch.setattr(stage, "settle_discovery", settle)
+    clock = SimpleNamespace(begin=lambda name: None, lap=lambda name: None)
+    s = SimpleNamespace(pb=SimpleNamespace(obj=None, tick=None), cal=object(), nominal=SimpleNamespace(spec="nominal"),
+                        heldout=object(), discover=True, verdict="not_converged", reason="calibration", rms_after=5e-9,
+                        clock=clock, ho_cal=2e-9, lead=None, rec=None, found=None, found_other=None)
+    stage._discovery_stage(s)
+    if first_names:
+        assert ran == ["spec0"] and s.verdict == "discovered" and s.found_other is None
+    else:
+        assert ran == ["spec0", "spec1"] and s.verdict == "discovered" and s.found.spec == "spec1"
+        assert s.found_other.spec == "spec0" and s.reason == "found on spec1"
+    # neither names a term: the verdict stands, both reasons told
+    monkeypatch.setattr(stage, "settle_discovery",
+                        lambda *a: (a[4], a[7], a[8] + f"; discovery: {a[4].reason}", a[9]))
+    ran.clear()
+    s.verdict, s.reason, s.found, s.found_other = "not_converged", "calibration", None, None
+    stage._discovery_stage(s)
+    assert ran == ["spec0", "spec1"] and s.verdict == "not_converged"
+    assert s.reason == ("calibration; discovery: nothing stood on spec1; discovery from path 0: "
+                        "nothing stood on spec0")
+
+
+def _free_value(free, name):
+    return next(f.x0 for f in free if f.name == name)
 
 
 @pytest.mark.parametrize("pays", [True, False, "all"])

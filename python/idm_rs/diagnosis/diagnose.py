@@ -23,7 +23,7 @@ from ..core.engine import DivergenceError
 from ..core.interrupted import interrupted
 from ..core.solver import Solver, resolve_solver
 from ..io.recording import Recording, load_case
-from .beyond_catalogue import discovery_start, settle_discovery
+from .beyond_catalogue import DiscoveryPath, discovery_paths, settle_discovery
 from .candidates import (
     calibrate_null,
     fit_candidates,
@@ -35,11 +35,11 @@ from .candidates import (
     structural_calibrations,
     wide_search,
 )
-from .case_model import CaseSimulator, ModelSpec
+from .case_model import CaseSimulator
 from .catalogue import Effect
 from .discovery import Discovery, NumericalFailure
 from .discovery import discover as run_discovery
-from .fitting import FreeParam, Objective
+from .fitting import Objective
 from .locate import Location, locate, merge_windows
 from .next_experiment import ParameterProposal, Proposal
 from .noise import NoiseEstimate, cross_check, estimate_noise
@@ -395,14 +395,14 @@ def _second_alone(s: _State, second: SecondSearch) -> None:
 
 
 def _discovery_stage(s: _State) -> None:
-    """Beyond the catalogue: only where every catalogue effect left a systematic residual; from
-    the model with the first effect when one stands (what it leaves is what is missing). After
-    "not_converged" from the nominal values as given: a missing force leaves the null several bad
-    basins, each compensating for it its own way, and the force inferred from the best of them is
-    bent by that compensation (a quadratic drag on the main body: from the calibration's best,
-    4.7 x noise, no form stood; from the nominal values, v1|v1| at the true coefficient, 1.00 x
-    noise, held out 1.04 x: benches/RESULTS.md 15d-e). The found term's gain is then taken
-    against the calibrated null too (:func:`.beyond_catalogue.found_against_null`)."""
+    """Beyond the catalogue: only where every catalogue effect left a systematic residual; along
+    the paths of :func:`.beyond_catalogue.discovery_paths` in turn until one names a term. After
+    "not_converged" from the nominal values as given first: a missing force leaves the null
+    several bad basins, each compensating for it its own way, and the force inferred from the
+    best of them is bent by that compensation (a quadratic drag on the main body: from the
+    calibration's best, 4.7 x noise, no form stood; from the nominal values, v1|v1| at the true
+    coefficient, 1.00 x noise, held out 1.04 x: benches/RESULTS.md 15d-e). The found term's gain
+    is then taken against the calibrated null too (:func:`.beyond_catalogue.found_against_null`)."""
     pb, cal, nominal, heldout = s.pb, s.cal, s.nominal, s.heldout
     assert pb is not None and cal is not None and nominal is not None and heldout is not None
     if not (s.discover and s.verdict in ("unexplained", "not_converged")):
@@ -410,30 +410,30 @@ def _discovery_stage(s: _State) -> None:
     s.clock.begin("discovery")
     if not is_finite(s.ho_cal):
         s.ho_cal = heldout.rms(cal.fit.spec, cal.at)
-    d_spec, d_free, d_ho, d_lead = discovery_start(s.verdict, s.lead, cal, nominal, s.ho_cal)
     was = (s.verdict, s.reason, s.rms_after)
-    _discover_from(s, d_spec, d_free, d_ho, d_lead, s.verdict == "not_converged")
-    if d_lead is not None and s.verdict in ("unexplained", "not_converged"):
-        # a first effect that leaves structure has not earned the right to shape the search:
-        # discovery from the calibrated model without it too, the data deciding (the path
-        # beside the first is kept in the JSON)
-        beside = s.found
+    first, *others = discovery_paths(s.verdict, s.lead, cal, nominal, s.ho_cal)
+    _discover_from(s, first)
+    for path in others:
+        if s.verdict not in ("unexplained", "not_converged"):
+            break
+        # the other start, the data deciding; the path before is kept in the JSON
+        before = s.found
         s.verdict, s.reason, s.rms_after = was
-        _discover_from(s, cal.fit.spec, list(cal.at), s.ho_cal, None, False)
-        s.found_other = beside
-        if beside is not None and s.verdict in ("unexplained", "not_converged"):
-            s.reason += f"; discovery from the model with {d_lead.candidate.effect}: {beside.reason}"
+        _discover_from(s, path)
+        s.found_other = before
+        if before is not None and s.verdict in ("unexplained", "not_converged"):
+            s.reason += f"; discovery from {first.origin}: {before.reason}"
     s.clock.lap("discovery")
 
 
-def _discover_from(s: _State, spec: ModelSpec, free: list[FreeParam], ho: float, lead: Optional[Refit],
-                   from_nominal: bool) -> None:
-    """Discovery from `spec` (free calibrated parameters `free`, the held-out RMS `ho` [m] a
-    found term must beat, beside the first effect `lead` or None), settled into the verdict."""
+def _discover_from(s: _State, path: DiscoveryPath) -> None:
+    """Discovery along `path` (its model, free calibrated parameters, the held-out RMS [m] a
+    found term must beat, the first effect beside it or None), settled into the verdict."""
     pb, cal, nominal, heldout = s.pb, s.cal, s.nominal, s.heldout
     assert pb is not None and cal is not None and nominal is not None and heldout is not None
     try:
-        found = run_discovery(s.rec, spec, free, pb.obj, heldout, ho, nominal=nominal.spec, progress=pb.tick)
+        found = run_discovery(s.rec, path.spec, path.free, pb.obj, heldout, path.heldout_rms, nominal=nominal.spec,
+                              progress=pb.tick)
     except DivergenceError as e:
         # a model the simulator cannot run through the inferred force: no discovery, said so
         s.reason += f"; discovery stopped: the simulator could not follow the inferred force ({e})"
@@ -441,7 +441,7 @@ def _discover_from(s: _State, spec: ModelSpec, free: list[FreeParam], ho: float,
         s.reason += f"; discovery stopped by a numerical failure, which says nothing about the physics: {e}"
     else:
         s.found, s.verdict, s.reason, s.rms_after = settle_discovery(
-            pb, cal, heldout, s.ho_cal, found, lead, from_nominal, s.verdict, s.reason, s.rms_after)
+            pb, cal, heldout, s.ho_cal, found, path.lead, path.from_nominal, s.verdict, s.reason, s.rms_after)
 
 
 def _next_experiment_stage(s: _State) -> None:
