@@ -439,6 +439,46 @@ def test_backward_elimination_keeps_the_units_that_pay_their_way(monkeypatch):
     assert rf.eliminated(objective, None, [], out, r2, lib2, None)[0] is out and not refits
 
 
+@pytest.mark.parametrize("rms_ratio, eliminated", [(3.0, False), (1.4, True), (1.0, True)])
+def test_a_form_far_from_noise_is_judged_without_elimination_refits(monkeypatch, rms_ratio, eliminated):
+    """Pruning and backward elimination refit nested forms from the form's optimum: they cannot
+    bring a refit far from noise back to it, so a form whose refit leaves more than
+    ELIMINATION_MAX_RATIO x noise is judged as refitted (not discovered, its figures those of its
+    refit), and only a form near noise gets them."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis.discovery import FoundForm
+    from idm_rs.diagnosis.discovery import refit as rf
+
+    sigma, n = 1e-9, 10_000
+    by = {t.param: t for t in MAIN_TERMS}
+    form = FoundForm("main", [by["lib_x1cube"], by["lib_v1"]], {"lib_x1cube": 1.0, "lib_v1": 0.1}, 0.0, 0.1, [1.0])
+    r = SimpleNamespace(chi2=rms_ratio**2 * n, rms=rms_ratio * sigma, spec="spec", std={},
+                        values={"lib_x1cube": 1.0, "lib_v1": 0.1})
+    lib = [SimpleNamespace(name=p_, at=lambda v, p_=p_: SimpleNamespace(name=p_, value=v))
+           for p_ in ("lib_x1cube", "lib_v1")]
+    calls: list[str] = []
+    monkeypatch.setattr(rf, "_refit_from", lambda objective, spec, starts, form_, progress: (r, lib, []))
+
+    def pruned(objective, spec, start, form_, r_, lib_, progress):
+        calls.append("pruned")
+        return form_, r_, lib_
+
+    def elim(objective, spec, start, form_, r_, lib_, progress):
+        calls.append("eliminated")
+        return form_, r_, lib_
+
+    monkeypatch.setattr(rf, "_pruned", pruned)
+    monkeypatch.setattr(rf, "eliminated", elim)
+    monkeypatch.setattr(rf, "describe", lambda *a: "a force")
+    cx = rf._Context(None, "spec", [], SimpleNamespace(sigma=sigma, n=n), None, 5e-9, None, None, 30.0 * n,
+                     5.5 * sigma, "")
+    trial = rf._judged(cx, "main", form, SimpleNamespace(parameters={}), {})
+    assert calls == (["pruned", "eliminated"] if eliminated else [])
+    assert trial.rms_after == rms_ratio * sigma and trial.form is form
+    assert trial.discovered == (rms_ratio <= 1.1)
+
+
 def test_the_next_experiment_is_sought_for_a_look_alike_the_data_do_not_choose(monkeypatch):
     """A discovered form with a look-alike that fits as well: the drive search of the catalogue's
     look-alikes runs on the two refitted models, named by their terms; nothing without one."""

@@ -325,6 +325,12 @@ DISCOVERY_REFIT_NFEV = 25
 #: measured bound; a strong unit's refit is ~25 evaluations, and refitting every unit each round
 #: took ~30 % of a discovery case's time)
 ELIMINATION_LINEAR_FACTOR = 10.0
+#: a form whose refit leaves more than this x noise is judged as refitted, without pruning or
+#: backward elimination: dropping terms refits a model nested in it from its optimum, which
+#: cannot come down to NOISE_RATIO_OK from this far (the margin over it is for a refit that
+#: stopped short of its optimum in its evaluations); the elimination refits of forms that
+#: could not stand took most of a discovery case's refits (benches/RESULTS.md §35, §40)
+ELIMINATION_MAX_RATIO = 1.5
 #: forms that gain but stop short of noise, searched globally when no form stands (lowest RMS
 #: first): the calibrated parameters and the form's coefficients by the calibration's own
 #: population search, 1-D scans and local fits. A missing force can hide the truth's basin from

@@ -18,6 +18,7 @@ from ..thresholds import (
     DISCOVERY_REFIT_NFEV,
     DISCOVERY_WIDE_FORMS,
     ELIMINATION_LINEAR_FACTOR,
+    ELIMINATION_MAX_RATIO,
     NOISE_RATIO_OK,
     PRUNE_ROUNDS,
     PRUNE_Z,
@@ -531,12 +532,13 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
         start = [f.at(r.values[f.name]) for f in cx.calibrated_free]
     else:
         r, lib, start = _refit_from(objective, cx.spec, starts, form, cx.progress)
-    for _ in range(PRUNE_ROUNDS):
-        smaller, r, lib = _pruned(objective, cx.spec, start, form, r, lib, cx.progress)
-        if smaller is form:
-            break
-        form = smaller
-    form, r, lib = eliminated(objective, cx.spec, start, form, r, lib, cx.progress)
+    if r.rms <= ELIMINATION_MAX_RATIO * sigma:
+        for _ in range(PRUNE_ROUNDS):
+            smaller, r, lib = _pruned(objective, cx.spec, start, form, r, lib, cx.progress)
+            if smaller is form:
+                break
+            form = smaller
+        form, r, lib = eliminated(objective, cx.spec, start, form, r, lib, cx.progress)
     trial = Discovery(False, "", body, form, forces, refit=r, rms_before=rms_null,
                       heldout_rms_before=heldout_rms_null, heldout_experiment=cx.heldout_experiment)
     trial.delta_bic = cx.null_chi2 - r.chi2 - len(lib) * math.log(objective.n)
