@@ -8,11 +8,12 @@
 //! sitting at 3.25 is limited by stability, not accuracy. 15 such accepted steps in a row make
 //! the run stiff; 6 below it in a row reset the count.
 //!
-//! `method="auto"` asks, when Dormand-Prince's run of a lane turns stiff, whether the
+//! `method="auto"` asks, when Dormand-Prince's run of a lane turns stiff (and every
+//! [`PROBE_EVERY`] accepted steps whatever the test says), whether the
 //! implicit method pays there (`integrate/switching.rs`): one Rodas4 step of [`TRIAL_FACTOR`] times the
 //! explicit step, then [`PROBATION_STEPS`] Rodas4 steps whose mean must be [`switch_gain`]
-//! times the explicit step. A Rodas4 step costs ~5 Dormand-Prince steps as a sweep runs them
-//! (Dormand-Prince on vector lanes, benches/RESULTS.md §4), so only a stiff phase where
+//! times the explicit step. A Rodas4 step costs ~4-6 Dormand-Prince steps as a sweep runs them
+//! (Dormand-Prince on vector lanes, benches/RESULTS.md §24), so only a phase where
 //! Rodas4's accuracy allows steps that much longer is worth the change. A single long trial step proves little (it can land
 //! where the solution is smooth for a moment); the probation's mean is the run's own measure.
 //! A failed trial or probation sends the lane back to Dormand-Prince, and the next trial needs
@@ -33,6 +34,14 @@ pub const STIFF_STEPS: u32 = 15;
 /// held at the limit for good, as a near-frictionless contact is, still changes within a few
 /// hundred steps).
 pub const TRY_IMPLICIT_AFTER: u32 = 256;
+/// Accepted explicit steps since a lane started or last came back from Rodas4 after which
+/// `method="auto"` tries Rodas4 whatever the stiffness test says (doubling with each failed
+/// trial, as the stiff steps a trial needs do). The explicit steps that resolve a lightly damped
+/// ringing are held by accuracy, not stability: at the light, fast corner only 4 % of them sit
+/// at the limit, the test never fired there, and the run ended on 34,443 explicit steps where
+/// Rodas4 alone takes 3,361 (benches/RESULTS.md §36). A probe every 1,024 steps brought `auto`
+/// within 0.96x of the cheaper single method in every corner; every 512 it cost more trials.
+pub const PROBE_EVERY: u32 = 1024;
 /// Accepted steps in a row below the limit that reset the count.
 pub const NONSTIFF_STEPS: u32 = 6;
 /// The trial Rodas4 step of a stiff lane, in units of its explicit step (see above).
@@ -40,12 +49,12 @@ pub const TRIAL_FACTOR: f64 = 20.0;
 /// Rodas4 steps on probation after an accepted trial (the trial among them).
 pub const PROBATION_STEPS: u32 = 8;
 /// A Rodas4 step's cost in Dormand-Prince steps for a state of `dim` components, as a sweep runs
-/// them (Dormand-Prince on the vector lanes): measured 5.0 for the LPS (7 components: 1,362
-/// points/s x 8,513 steps against 935 x 2,512 on the 256-point grid, benches/RESULTS.md §4) and
-/// 7.7 for the DPS with 4 elements (13: 885 x 8,790 against 439 x 2,290); the LU and the solves
-/// grow faster with the state than the right-hand side does. Linear through both, at least 3.
+/// them (Dormand-Prince on the vector lanes): 3.9 for the LPS (7 components) since Rodas4 runs
+/// over the lanes (benches/RESULTS.md §24; 5.0 before, §4) and 6.0 for the DPS with 4 elements
+/// (13), the earlier slope scaled alike; the LU and the solves grow faster with the state than
+/// the right-hand side does. Linear through both, at least 2.3.
 pub fn implicit_step_cost(dim: usize) -> f64 {
-    (5.0 + 0.45 * (dim as f64 - 7.0)).max(3.0)
+    (3.9 + 0.35 * (dim as f64 - 7.0)).max(2.3)
 }
 
 /// The mean Rodas4 step over the probation, in units of the explicit step, at which a lane of
@@ -67,13 +76,20 @@ pub const MAX_TRIAL_BACKOFF: u32 = 6;
 pub struct StiffnessTest {
     at_limit: u32,
     below: u32,
+    /// accepted steps observed since the test was made (a lane's start or its return from Rodas4)
+    since: u32,
 }
 
 impl StiffnessTest {
     /// Count one accepted step with estimate `h_lambda` = h|λ|; true once `needed` steps in a
-    /// row were at the limit ([`STIFF_STEPS`] for Hairer's test).
+    /// row were at the limit ([`STIFF_STEPS`] for Hairer's test), or once [`PROBE_EVERY`] steps
+    /// were observed in all, scaled as `needed` is beyond [`TRY_IMPLICIT_AFTER`] (the probe).
     #[inline(always)]
     pub fn observe(&mut self, h_lambda: f64, needed: u32) -> bool {
+        self.since += 1;
+        if self.since >= PROBE_EVERY.saturating_mul((needed / TRY_IMPLICIT_AFTER).max(1)) {
+            return true;
+        }
         if h_lambda > STIFF_H_LAMBDA {
             self.below = 0;
             self.at_limit += 1;
@@ -119,6 +135,21 @@ pub fn h_lambda(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_probe_fires_after_its_steps_whatever_the_test_says_and_later_after_failed_trials() {
+        let mut t = StiffnessTest::default();
+        for _ in 1..PROBE_EVERY {
+            assert!(!t.observe(1.0, TRY_IMPLICIT_AFTER));
+        }
+        assert!(t.observe(1.0, TRY_IMPLICIT_AFTER));
+        // two failed trials: the stiff steps a trial needs and the probe's steps both x4
+        let mut t = StiffnessTest::default();
+        for _ in 1..4 * PROBE_EVERY {
+            assert!(!t.observe(1.0, TRY_IMPLICIT_AFTER << 2));
+        }
+        assert!(t.observe(1.0, TRY_IMPLICIT_AFTER << 2));
+    }
 
     #[test]
     fn fifteen_steps_at_the_limit_make_a_run_stiff_and_six_below_reset_it() {
