@@ -39,8 +39,9 @@ pub const TRY_IMPLICIT_AFTER: u32 = 256;
 /// trial, as the stiff steps a trial needs do). The explicit steps that resolve a lightly damped
 /// ringing are held by accuracy, not stability: at the light, fast corner only 4 % of them sit
 /// at the limit, the test never fired there, and the run ended on 34,443 explicit steps where
-/// Rodas4 alone takes 3,361 (benches/RESULTS.md §36). A probe every 1,024 steps brought `auto`
-/// within 0.96x of the cheaper single method in every corner; every 512 it cost more trials.
+/// Rodas4 alone takes 3,361 (benches/RESULTS.md §36). Counted there, a probe every 1,024 steps
+/// brought `auto`'s work within 0.96x of the cheaper single method in every corner; every 512
+/// put a corner point 9.7 nm off; timed (§41), every 2,048 was no faster anywhere.
 pub const PROBE_EVERY: u32 = 1024;
 /// Accepted steps in a row below the limit that reset the count.
 pub const NONSTIFF_STEPS: u32 = 6;
