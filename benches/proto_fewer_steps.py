@@ -382,6 +382,11 @@ def run_rodas5p(rhs: Rhs, segs: list, tol: float, scales: np.ndarray) -> dict[st
                 rhs_analytic_jacobian=rhs.calls - jacs * m + jacs * 2)
 
 
+#: the prototypes written here (scipy's methods by name otherwise); proto_structured_steps.py adds its own
+RUNNERS: dict[str, Callable[[Rhs, list, float, np.ndarray], dict[str, Any]]] = {
+    "exprb32": run_exprb32, "rodas5p": run_rodas5p}
+
+
 def measure(name: str, point: dict[str, Any], model: str, methods: list[str]) -> list[dict[str, Any]]:
     p = idm_rs.Params()
     if point.get("mass_ratio") is not None:
@@ -405,10 +410,8 @@ def measure(name: str, point: dict[str, Any], model: str, methods: list[str]) ->
     for method in methods:
         for tol in LADDER:
             t0 = time.perf_counter()
-            if method == "exprb32":
-                r = run_exprb32(rhs, segs, tol, scales)
-            elif method == "rodas5p":
-                r = run_rodas5p(rhs, segs, tol, scales)
+            if method in RUNNERS:
+                r = RUNNERS[method](rhs, segs, tol, scales)
             else:
                 r = run_scipy(rhs, segs, method, tol, scales)
             if r["ok"] and abs(r["x1"] - ref) <= NM:
