@@ -60,7 +60,7 @@ def run_case(case: Path, key: dict[str, Any]) -> dict[str, Any]:
         "right": d["verdict"] == key["expected_verdict"], "before": d["rms_before"] / sigma,
         "calibrated": d["rms_calibrated"] / sigma, "after": d["rms_after"] / sigma, "key_parameter": text,
         "worst_parameter_error": worst, "seconds": seconds, "converged": d["calibration"]["converged"],
-        "reason": d["reason"], "timings": d["timings"],
+        "reason": d["reason"], "timings": d["timings"], "timings_parts": d.get("timings_parts", {}),
         # discovery ran (the catalogue left a systematic residual) and what it concluded
         "discovery_ran": d.get("discovery") is not None,
         "discovered": bool(d.get("discovery") and d["discovery"]["discovered"]),

@@ -109,7 +109,8 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
     return {**c, **info, "verdict": d.verdict, "alternatives": alts, "twins_separated": separated,
             **judged(c["effects"], d.verdict, alts, separated),
             "seconds": seconds, "calibrated_over_noise": d.rms_calibrated / d.noise.sigma,
-            "after_over_noise": d.rms_after / d.noise.sigma, "reason": d.reason, "timings": dict(d.timings)}
+            "after_over_noise": d.rms_after / d.noise.sigma, "reason": d.reason, "timings": dict(d.timings),
+            "timings_parts": dict(d.timings_parts)}
 
 
 def summary(rows: list[dict[str, Any]]) -> str:

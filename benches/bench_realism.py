@@ -169,7 +169,7 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
             "calibrated_over_noise": d.rms_calibrated / d.noise.sigma, "after_over_noise": d.rms_after / d.noise.sigma,
             "key_error": _key_error(d, c, info) if c["kind"] == "effect" else None,
             "reason": d.reason, "noise_truth": noise_truth({**c, **info}), "noise_reported": reported, **_margin(d),
-            "timings": dict(d.timings)}
+            "timings": dict(d.timings), "timings_parts": dict(d.timings_parts)}
 
 
 def wilson(k: int, n: int) -> tuple[float, float]:

@@ -221,6 +221,43 @@ def test_progress_advances_by_stage_to_the_end():
     assert p.bar.n == pytest.approx(100.0)
 
 
+def test_the_parts_of_stages_are_timed_with_their_runs_nested_under_their_names():
+    """`part` adds seconds, simulated runs and calls to the active clock under the names of the
+    parts it is in; with no clock active it times nothing."""
+    import time
+
+    from idm_rs.diagnosis.progress import Clock, part
+
+    runs = [0]
+    clock = Clock(None, lambda: runs[0])
+    with part("outside"):  # no clock active: nothing recorded anywhere
+        runs[0] += 5
+    with clock.active():
+        for _ in range(2):
+            with part("round"):
+                runs[0] += 10
+                with part("wide search"):
+                    runs[0] += 7
+                    time.sleep(0.01)
+    assert set(clock.parts) == {"round", "round / wide search"}
+    seconds, sims, calls = clock.parts["round / wide search"]
+    assert (sims, calls) == (14, 2) and seconds >= 0.02
+    assert clock.parts["round"][1:] == [34, 2] and clock.parts["round"][0] >= seconds
+    assert clock.timings == {}  # parts are not stages
+
+
+def test_a_diagnosis_reports_the_parts_of_its_stages(spring_diagnosis):
+    d = spring_diagnosis
+    assert d.to_dict()["timings_parts"] == d.timings_parts
+    for seconds, sims, calls in d.timings_parts.values():
+        assert seconds >= 0 and sims >= 0 and calls >= 1
+    # every part lies within the run, and a nested part within its parent
+    for name, (seconds, _, _) in d.timings_parts.items():
+        assert seconds <= d.seconds
+        if " / " in name:
+            assert seconds <= d.timings_parts[name.rsplit(" / ", 1)[0]][0] + 1e-9
+
+
 def test_ctrl_c_keeps_what_was_finished(spring_case, tmp_path, capsys, monkeypatch):
     """Ctrl-C during the calibration: the nominal model's misfit is kept, the result is marked
     incomplete, the report says so in plain words, the CLI writes the JSON and exits 130."""

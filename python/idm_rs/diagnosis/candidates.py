@@ -22,6 +22,7 @@ from .identifiability import assess
 from .multistart import Start, agree, leaves_noise, multistart
 from .noise import NoiseEstimate
 from .problem import CalibratedNull, Nominal, Problem, Refit, calibration_params
+from .progress import part
 from .results import Candidate
 from .rules import by_rank, is_eligible
 from .screening import Screened, screen
@@ -200,6 +201,13 @@ def fit_candidates(pb: Problem, cal: CalibratedNull, order: list[Effect], screen
 
 def wide_search(pb: Problem, cal: CalibratedNull, order: list[Effect], screened: dict[str, Screened],
                  first: list[Refit]) -> list[Refit]:
+    """:func:`_wide_search`, timed as the part "wide search"."""
+    with part("wide search"):
+        return _wide_search(pb, cal, order, screened, first)
+
+
+def _wide_search(pb: Problem, cal: CalibratedNull, order: list[Effect], screened: dict[str, Screened],
+                 first: list[Refit]) -> list[Refit]:
     """Every candidate's own population search over its first cycle (nominal subset within its
     plausible ranges and the effect within its fit bounds, the best null found so far with the
     effect's first start one member): a large missing effect can pull the null fit — and every
@@ -216,8 +224,9 @@ def wide_search(pb: Problem, cal: CalibratedNull, order: list[Effect], screened:
         # on the best null so far; the effect's first non-null start
         start = list(cal.at) + [ep.free(magnitudes(ep)[1 if not ep.log and len(magnitudes(ep)) > 1 else 0])
                                 for ep in eff.params]
-        picks, best, _ = search(pb.obj, base, start, cycles=1, population_per_param=WIDE_POPULATION,
-                                generations=WIDE_GENERATIONS, progress=pb.tick)
+        with part("population searches"):
+            picks, best, _ = search(pb.obj, base, start, cycles=1, population_per_param=WIDE_POPULATION,
+                                    generations=WIDE_GENERATIONS, progress=pb.tick)
         starts = [Start("population search best" if k == 0 else f"population search member {k + 1}",
                         [f.at(f.value(float(x))) for f, x in zip(start, u)], "population search best" if k == 0 else "")
                   for k, u in enumerate(picks)]
@@ -230,8 +239,9 @@ def wide_search(pb: Problem, cal: CalibratedNull, order: list[Effect], screened:
     out = {r.candidate.effect: r for r in first}
     for _, eff, starts in searched[:WIDE_FITS]:
         base = ModelSpec(eff.structure(cal.fit.spec.structure), dict(cal.fit.spec.params), dict(cal.fit.spec.effects))
-        ms = multistart(pb.obj, base, starts, local_fits=1, horizons=(2, None), max_nfev=(10, 10),
-                        always=("population search best", "null fit"), progress=pb.tick)
+        with part("multistart fits"):
+            ms = multistart(pb.obj, base, starts, local_fits=1, horizons=(2, None), max_nfev=(10, 10),
+                            always=("population search best", "null fit"), progress=pb.tick)
         r = ms.best
         old = out.get(eff.id)
         if old is not None and not old.candidate.screened_only and old.candidate.chi2 <= r.chi2:

@@ -46,7 +46,7 @@ from .noise import NoiseEstimate, cross_check, estimate_noise
 from .noise_model import Learned
 from .pair_twins import judged_pairs
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
-from .progress import Clock, Progress, progress_bar
+from .progress import Clock, Progress, part, progress_bar
 from .proposals import determining_experiment, look_alike_experiment, separating_experiment, travel_experiment
 from .remeasure import COMMON_DRIFT_EFFECT, artefacts_instead, drift_beside, relearned, remeasured, synced
 from .results import Alternative, Candidate, Diagnosis, SecondSearch, ThirdSearch
@@ -169,6 +169,7 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     sim = CaseSimulator(rec, dt=dt, threads=threads)
     bar = progress_bar(progress, rec.name, lambda: sim.evaluations)
     s = _State(rec, noise, sim, bar, refit_top, discover, t_start)
+    s.clock = Clock(bar, lambda: sim.evaluations)
     # numpy's BLAS on one thread: the engine's threads own the cores, and OpenBLAS's own threads
     # spin-wait after every small factorisation of the fits, taking cycles from them (measured on
     # 2 cores: dev14 84.6 -> 78.3 s, mean of three alternating pairs, every result identical)
@@ -176,8 +177,9 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
 
     try:
         with threadpool_limits(limits=1, user_api="blas"):
-            for s.stage, stage in PIPELINE:
-                stage(s)
+            with s.clock.active():
+                for s.stage, stage in PIPELINE:
+                    stage(s)
     except KeyboardInterrupt:
         if bar is not None:
             bar.close(done=False)
@@ -196,7 +198,7 @@ def _nominal_stage(s: _State) -> None:
     s.pb = Problem(s.rec, s.noise, s.sim, Objective(s.rec, s.sim, s.noise.sigma),
                    s.bar.update if s.bar is not None else None)
     s.nominal = nominal_model(s.pb)
-    s.clock = Clock(s.bar)
+    s.clock.restart()
 
 
 def _calibration_stage(s: _State) -> None:
@@ -341,11 +343,13 @@ def _second_effect_stage(s: _State) -> None:
         return
     s.clock.begin("second effect")
     first_twins = near_degenerate(list(s.screened.values()))
-    second = search_second_effect(s.pb, s.cal, s.lead, s.heldout, s.refits, first_twins)
+    with part("second round"):
+        second = search_second_effect(s.pb, s.cal, s.lead, s.heldout, s.refits, first_twins)
     if not second.named:
         # two effects that each mimic part of the other from the leader's optimum: the
         # supported candidates' pairs fitted together from their fits alone
-        joint = joint_pair(s.pb, s.cal, s.refits, s.heldout, first_twins)
+        with part("joint pair"):
+            joint = joint_pair(s.pb, s.cal, s.refits, s.heldout, first_twins)
         if joint is not None and joint.named:
             second = joint
         elif joint is not None:
@@ -365,7 +369,8 @@ def _second_effect_stage(s: _State) -> None:
     if wants_third(s.pb, second):
         # a pair both effects support that leaves structure: a third from the model with the two
         s.clock.begin("third effect")
-        third = search_third_effect(s.pb, s.cal, second, s.heldout, first_twins)
+        with part("third round"):
+            third = search_third_effect(s.pb, s.cal, second, s.heldout, first_twins)
         if third.named and third.third is not None:
             s.verdict, s.reason, s.rms_after = ("+".join((*third.pair, third.third.effect)), third.reason,
                                                 third.third.rms_after)
@@ -412,14 +417,16 @@ def _discovery_stage(s: _State) -> None:
         s.ho_cal = heldout.rms(cal.fit.spec, cal.at)
     was = (s.verdict, s.reason, s.rms_after)
     first, *others = discovery_paths(s.verdict, s.lead, cal, nominal, s.ho_cal)
-    _discover_from(s, first)
+    with part(f"discovery from {first.origin}"):
+        _discover_from(s, first)
     for path in others:
         if s.verdict not in ("unexplained", "not_converged"):
             break
         # the other start, the data deciding; the path before is kept in the JSON
         before = s.found
         s.verdict, s.reason, s.rms_after = was
-        _discover_from(s, path)
+        with part(f"discovery from {path.origin}"):
+            _discover_from(s, path)
         s.found_other = before
         if before is not None and s.verdict in ("unexplained", "not_converged"):
             s.reason += f"; discovery from {first.origin}: {before.reason}"
@@ -507,6 +514,7 @@ def _result(s: _State) -> Diagnosis:
         calibrated=cal.fit.values, calibrated_std=cal.fit.std, locations=s.locations, windows=s.spans,
         heldout_experiment=rec.experiments[heldout.index].name, heldout_rms_calibrated=s.ho_cal,
         whiteness_z_calibrated=cal.whiteness_z, seconds=time.perf_counter() - s.t_start, timings=s.clock.timings,
+        timings_parts=s.clock.parts,
         simulations=s.sim.evaluations, recording=rec, nominal_residuals=nominal.residuals,
         calibrated_residuals=cal.fit.residuals, nominal_spec=nominal.spec, calibrated_spec=cal.fit.spec,
         simulator=s.sim, calibration_converged=cal.search.converged, calibration_summary=cal.search.summary(),
@@ -545,7 +553,8 @@ def _interrupted(s: _State, noise: NoiseEstimate) -> Diagnosis:
         calibrated_std=dict(cal.fit.std) if cal is not None else {}, locations=locations, windows=[],
         heldout_experiment="", heldout_rms_calibrated=math.nan,
         whiteness_z_calibrated=cal.whiteness_z if cal is not None else math.nan,
-        seconds=time.perf_counter() - s.t_start, timings=s.clock.timings, simulations=s.sim.evaluations,
+        seconds=time.perf_counter() - s.t_start, timings=s.clock.timings, timings_parts=s.clock.parts,
+        simulations=s.sim.evaluations,
         recording=rec, nominal_residuals=nominal.residuals if nominal is not None else [],
         calibrated_residuals=cal.fit.residuals if cal is not None else [],
         nominal_spec=nominal.spec if nominal is not None else None,

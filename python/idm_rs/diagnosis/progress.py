@@ -4,17 +4,42 @@ and the clock that times the stages."""
 from __future__ import annotations
 
 import time
-from typing import Callable, Optional
+from contextlib import contextmanager
+from contextvars import ContextVar
+from typing import Callable, Iterator, Optional
+
+#: the clock of the diagnosis running in this context, and the names of the parts open in it
+_CLOCK: ContextVar[Optional["Clock"]] = ContextVar("idm_rs_diagnosis_clock", default=None)
+_OPEN: ContextVar[tuple[str, ...]] = ContextVar("idm_rs_diagnosis_parts", default=())
 
 
 class Clock:
     """Seconds per stage; a stage run twice (held-out) sums. Tells the progress bar, if any,
-    that the stage is done."""
+    that the stage is done. Within stages, :func:`part` adds the seconds, simulations and calls
+    of named parts to ``parts`` (a part inside another is named after both, "a / b", and is
+    counted in both)."""
 
-    def __init__(self, progress: Optional["Progress"] = None) -> None:
+    def __init__(self, progress: Optional["Progress"] = None,
+                 evaluations: Optional[Callable[[], int]] = None) -> None:
         self.timings: dict[str, float] = {}
+        #: part name -> [seconds, simulated runs, calls]
+        self.parts: dict[str, list[float]] = {}
         self._last = time.perf_counter()
         self._progress = progress
+        self._evaluations = evaluations
+
+    def restart(self) -> None:
+        """The next stage is timed from now (what ran before it is not a stage)."""
+        self._last = time.perf_counter()
+
+    @contextmanager
+    def active(self) -> Iterator["Clock"]:
+        """This clock receives the parts timed in the block (and in what it calls)."""
+        token = _CLOCK.set(self)
+        try:
+            yield self
+        finally:
+            _CLOCK.reset(token)
 
     def begin(self, name: str) -> None:
         """An optional stage starts: the progress bar, if any, grows by its share."""
@@ -27,6 +52,28 @@ class Clock:
         self._last = now
         if self._progress is not None:
             self._progress.stage_done(name)
+
+
+@contextmanager
+def part(name: str) -> Iterator[None]:
+    """Times a named part of a stage on the active clock (none: nothing is timed): its seconds,
+    the simulated runs it made and how often it ran, under the names of the parts it is in."""
+    clock = _CLOCK.get()
+    if clock is None:
+        yield
+        return
+    full = _OPEN.get() + (name,)
+    token = _OPEN.set(full)
+    runs = clock._evaluations
+    t0, n0 = time.perf_counter(), runs() if runs is not None else 0
+    try:
+        yield
+    finally:
+        _OPEN.reset(token)
+        row = clock.parts.setdefault(" / ".join(full), [0.0, 0.0, 0.0])
+        row[0] += time.perf_counter() - t0
+        row[1] += (runs() if runs is not None else 0) - n0
+        row[2] += 1
 
 
 #: the diagnosis's stages: (name, share of a typical run's time [%], typical simulations), from

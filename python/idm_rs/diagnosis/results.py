@@ -295,6 +295,9 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
     #: discovery beyond the catalogue (run when no catalogue effect explained the residual):
     #: verdict "discovered" when its found term stood; None when it did not run
     discovery: Optional["Discovery"] = None
+    #: seconds, simulated runs and calls of the named parts of the stages ("second effect /
+    #: round beside / wide search": a part inside another is counted in both)
+    timings_parts: dict[str, list[float]] = field(default_factory=dict)
     #: where discovery ran from the model with a first effect that left structure and then from
     #: the calibrated model without it: the path not taken (``discovery`` holds the other)
     discovery_other: Optional["Discovery"] = None
@@ -357,6 +360,7 @@ modelled and refitted, improves BIC by the threshold and the held-out prediction
             "whiteness_z_calibrated": self.whiteness_z_calibrated,
             "seconds": self.seconds,
             "timings": self.timings,
+            "timings_parts": self.timings_parts,
             "simulations": self.simulations,
             "calibration": {"converged": self.calibration_converged, "summary": self.calibration_summary,
                             "polish_chi2": self.calibration_chi2, "null_from": self.null_source,

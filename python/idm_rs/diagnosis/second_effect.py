@@ -15,6 +15,7 @@ from .catalogue import CATALOGUE, Effect
 from .fitting import FitResult, FreeParam, fit
 from .pair_twins import judge_set
 from .problem import CalibratedNull, HeldOut, Problem, Refit
+from .progress import part
 from .results import SecondSearch
 from .rules import by_rank, candidate_explains, is_eligible, is_finite
 from .screening import screen
@@ -51,7 +52,8 @@ def search_second_effect(pb: Problem, cal: CalibratedNull, lead: Refit, heldout:
     in place, :func:`judge_pair`)."""
     first = lead.candidate
     out = SecondSearch(first=first, first_heldout_rms=first.heldout_rms)
-    r1, with_first, ranked = round_beside(pb, cal, lead.base, lead.free, {first.effect}, wide=True)
+    with part("round"):
+        r1, with_first, ranked = round_beside(pb, cal, lead.base, lead.free, {first.effect}, wide=True)
     if ranked is None:
         out.reason = f"no other catalogue effect applies beside {first.effect}"
         return out
@@ -62,8 +64,10 @@ def search_second_effect(pb: Problem, cal: CalibratedNull, lead: Refit, heldout:
         out.reason = (f"no second effect is supported beside {first.effect}"
                       + (f" (best: {top.effect}, ΔBIC {top.delta_bic:.0f} over {first.effect} alone)" if top else ""))
         return out
-    best = rescanned(pb, with_first, next(e for e in CATALOGUE if e.id == best.candidate.effect), best)
-    return judge_pair(pb, cal, out, best, (r1, with_first.at), heldout, first_round, first_twins)
+    with part("rescan"):
+        best = rescanned(pb, with_first, next(e for e in CATALOGUE if e.id == best.candidate.effect), best)
+    with part("judge"):
+        return judge_pair(pb, cal, out, best, (r1, with_first.at), heldout, first_round, first_twins)
 
 
 def round_beside(pb: Problem, cal: CalibratedNull, base: ModelSpec, free: list[FreeParam], named: set[str],
@@ -75,7 +79,8 @@ def round_beside(pb: Problem, cal: CalibratedNull, base: ModelSpec, free: list[F
     candidate's own population search where none explains, as in the first round). Returns (the
     refitted model, the round's null, its candidates in rank order; None where no other effect
     applies)."""
-    r = fit(pb.obj, base, free, max_nfev=POLISH_NFEV, progress=pb.tick)
+    with part("null refit"):
+        r = fit(pb.obj, base, free, max_nfev=POLISH_NFEV, progress=pb.tick)
     at = [f.at(r.values[f.name]) for f in free]
     bic = r.chi2 + (len(at) + pb.n_offsets) * pb.ln_n
     # the round's starts: the named effects' optimum ("null fit") and, always fitted, the nominal
@@ -91,15 +96,19 @@ def round_beside(pb: Problem, cal: CalibratedNull, base: ModelSpec, free: list[F
     effects = [e for e in CATALOGUE if e.id not in named and e.applies(structure, r.spec.params)]
     if not effects:
         return r, null, None
-    screened = {s.effect.id: s for s in screen(pb.obj, r, at, effects, pb.sigma, pb.tick)}
+    with part("screening"):
+        screened = {s.effect.id: s for s in screen(pb.obj, r, at, effects, pb.sigma, pb.tick)}
     order = sorted(effects, key=lambda e: -screened[e.id].delta_chi2)
-    refits = fit_candidates(pb, null, order, screened, SECOND_TOP)
-    polish_leaders(pb, null, refits)
+    with part("candidate fits"):
+        refits = fit_candidates(pb, null, order, screened, SECOND_TOP)
+    with part("polish"):
+        polish_leaders(pb, null, refits)
     if wide and not any(candidate_explains(pb, r.candidate) for r in refits):
         # as in the first round: every candidate's own population search (over the named
         # effects' parameters too) before the answer may be "no further effect"
         refits = wide_search(pb, null, order, screened, refits)
-        polish_leaders(pb, null, refits)
+        with part("polish"):
+            polish_leaders(pb, null, refits)
     return r, null, by_rank(refits)
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from ...io.recording import Recording
 from ..case_model import ModelSpec
 from ..fitting import FitResult, FreeParam, Objective, fit, set_effect
+from ..progress import part
 from ..thresholds import (
     BIC_THRESHOLD,
     DISCOVERY_REFIT_NFEV,
@@ -293,8 +294,9 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
     failures: list[str] = []
     for body in bodies:
         try:
-            forces[body] = infer_force(rec, spec, sigma, body, simulator=objective.sim, nuisance=calibrated_free,
-                                       progress=progress)
+            with part("force inference"):
+                forces[body] = infer_force(rec, spec, sigma, body, simulator=objective.sim,
+                                           nuisance=calibrated_free, progress=progress)
         except NumericalFailure as e:
             failures.append(f"the force on the {body}: {e}")
     null_chi2 = float(sum(np.sum(r * r) for r in objective.profiled(objective.predict([spec])[0])[0])) / sigma**2
@@ -528,17 +530,20 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
     searched = ""
     start: Sequence[FreeParam]
     if wide:
-        r, lib, searched = _searched(objective, cx.spec, cx.calibrated_free, form, cx.progress)
+        with part("form global search"):
+            r, lib, searched = _searched(objective, cx.spec, cx.calibrated_free, form, cx.progress)
         start = [f.at(r.values[f.name]) for f in cx.calibrated_free]
     else:
-        r, lib, start = _refit_from(objective, cx.spec, starts, form, cx.progress)
+        with part("form refit"):
+            r, lib, start = _refit_from(objective, cx.spec, starts, form, cx.progress)
     if r.rms <= ELIMINATION_MAX_RATIO * sigma:
-        for _ in range(PRUNE_ROUNDS):
-            smaller, r, lib = _pruned(objective, cx.spec, start, form, r, lib, cx.progress)
-            if smaller is form:
-                break
-            form = smaller
-        form, r, lib = eliminated(objective, cx.spec, start, form, r, lib, cx.progress)
+        with part("form pruning and elimination"):
+            for _ in range(PRUNE_ROUNDS):
+                smaller, r, lib = _pruned(objective, cx.spec, start, form, r, lib, cx.progress)
+                if smaller is form:
+                    break
+                form = smaller
+            form, r, lib = eliminated(objective, cx.spec, start, form, r, lib, cx.progress)
     trial = Discovery(False, "", body, form, forces, refit=r, rms_before=rms_null,
                       heldout_rms_before=heldout_rms_null, heldout_experiment=cx.heldout_experiment)
     trial.delta_bic = cx.null_chi2 - r.chi2 - len(lib) * math.log(objective.n)
