@@ -58,6 +58,11 @@ class InferredForce:
     nuisance: list[NDArray[np.float64]] = field(repr=False, default_factory=list)
     #: the calibrated parameters as fitted jointly with the force
     parameters: dict[str, float] = field(default_factory=dict)
+    #: their move from their centres [fit units], the columns of `nuisance`
+    nuisance_u: Optional[NDArray[np.float64]] = field(default=None, repr=False, compare=False)
+    #: the form reproduces the total correction, the force's effect plus the calibrated
+    #: parameters' move (`nuisance` @ `nuisance_u`), instead of the force's alone
+    with_nuisance: bool = False
     #: per experiment, the least-squares projector of samples onto the knots (made once)
     _projectors: dict[int, NDArray[np.float64]] = field(default_factory=dict, repr=False, compare=False)
     #: the library terms' exact effect on the readings at the inferred force's run:
@@ -268,6 +273,7 @@ def infer_force(rec: Recording, spec: ModelSpec, sigma: float, body: str = "main
     force = InferredForce(body, knots, values, lam_rel, chi2_0, chi2, dof, res, A, [tr for _, tr in runs],
                           time.perf_counter() - t0, S if free else [],
                           {f.name: f.value(float(x)) for f, x in zip(free, u)})
+    force.nuisance_u = np.asarray(u, dtype=float) if free else None
     force.library_view = _LibraryView(problem, apply(spec, free, u) if free else spec, values, force, threads)
     return force
 

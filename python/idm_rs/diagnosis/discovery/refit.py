@@ -477,7 +477,8 @@ def _best_standing(standing: list[Discovery]) -> Discovery:
 def _forms(cx: _Context, body: str, force: InferredForce, phase: str, reasons: list[str], failures: list[str]
            ) -> list[FoundForm]:
     """The distinct forms found for the force on `body` in `phase`: "inferred", from the inferred
-    force's effect (plain, and in the complement of the calibrated parameters); "direct", from
+    force's effect (plain, in the complement of the calibrated parameters, and with the
+    parameters' own moves added back); "direct", from
     the calibrated residual itself by the library's exact sensitivities (no knots between the
     force and the library; it costs a second library scan, so it is taken only when no form from
     the inferred force stood). Why nothing was found goes to `reasons`, numerical failures to
@@ -485,7 +486,10 @@ def _forms(cx: _Context, body: str, force: InferredForce, phase: str, reasons: l
     views: list[tuple[InferredForce, bool]] = []
     if phase == "inferred":
         if force.gain > BIC_THRESHOLD:
-            views += [(force, False)] + ([(force, True)] if force.nuisance else [])
+            # the force's effect; the same in the complement of what the calibrated parameters
+            # can move; and the force with what those parameters took while it was inferred
+            views += [(force, False)] + ([(force, True), (replace(force, with_nuisance=True), False)]
+                                         if force.nuisance else [])
         else:
             reasons.append(f"no force on the {body} explains the residual (it lowers chi² by "
                            f"{force.chi2_before - force.chi2_after:.0f} with {force.dof:.1f} effective "
