@@ -170,6 +170,14 @@ def test_gcv_chooses_a_smoothing_between_the_extremes():
     assert 3 < dof < 40
 
 
+def _slip_pulses(rng: np.random.Generator, n: int) -> np.ndarray:
+    """Stick-slip: the main body at rest but for slip pulses of different heights and signs."""
+    v1 = np.zeros(n)
+    for start in range(10, n - 20, 40):
+        v1[start:start + 12] = rng.uniform(-0.02, 0.03) * np.sin(np.pi * np.arange(12) / 12)
+    return v1
+
+
 def test_the_regression_names_the_term_the_force_is_made_of():
     """An inferred force that is exactly -2e4 N/m x (x1 - x2) plus 3 % of the friction force, seen through
     random derivatives, on stick-slip motion (slip pulses of different heights): the
@@ -180,10 +188,7 @@ def test_the_regression_names_the_term_the_force_is_made_of():
         n, k = 400, 40
         t = np.linspace(0, 0.04, n)
         knots = np.linspace(0, 0.04, k)
-        # stick-slip: the main body at rest but for slip pulses of different heights and signs
-        v1 = np.zeros(n)
-        for start in range(10, n - 20, 40):
-            v1[start:start + 12] = rng.uniform(-0.02, 0.03) * np.sin(np.pi * np.arange(12) / 12)
+        v1 = _slip_pulses(rng, n)
         v2 = np.roll(v1, 5) * rng.uniform(0.5, 2.0, n)
         ff = 3.0 * np.tanh(v1 / 1e-3) + 1.5 * np.sin(2 * np.pi * t / 0.013 + j)  # sliding, and presliding in stick
         tr = Trajectory(t, np.cumsum(v1) * 1e-4, v1, np.cumsum(v2) * 1e-4, v2, ff,
@@ -220,9 +225,7 @@ def test_what_the_calibrated_parameters_took_goes_back_into_the_form():
         n, k = 400, 40
         t = np.linspace(0, 0.04, n)
         knots = np.linspace(0, 0.04, k)
-        v1 = np.zeros(n)
-        for start in range(10, n - 20, 40):
-            v1[start:start + 12] = rng.uniform(-0.02, 0.03) * np.sin(np.pi * np.arange(12) / 12)
+        v1 = _slip_pulses(rng, n)
         ff = 3.0 * np.tanh(v1 / 1e-3)
         tr = Trajectory(t, np.cumsum(v1) * 1e-4, v1, np.cumsum(v1) * 1e-4, v1, ff,
                         80 * np.abs(np.sin(2 * np.pi * t / 0.01)),
