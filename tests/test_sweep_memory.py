@@ -112,7 +112,10 @@ def test_a_1e8_grid_runs_into_a_store_in_bounded_memory_and_stops_on_ctrl_c(tmp_
     proc.returncode = os.waitstatus_to_exitcode(status)  # reaped here: Popen must not wait again
     peak_mb = usage.ru_maxrss / 1024
     assert proc.returncode == 130, err[-2000:]
-    assert took < 5.0, f"{took:.1f} s from Ctrl-C to the end"
+    # 5 s on a machine with a core per runnable process; a loaded one (benches beside the suite)
+    # stretches every wall-clock figure by its load per core
+    stretch = max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1))
+    assert took < 5.0 * stretch, f"{took:.1f} s from Ctrl-C to the end (load {os.getloadavg()[0]:.1f})"
     assert peak_mb < 800, f"the sweep process peaked at {peak_mb:.0f} MB"
     ds = xr.open_zarr(store, consolidated=False, chunks=None)
     assert ds.attrs["complete"] == 0 and ds["status"].shape == (10_000, 10_000)
