@@ -58,20 +58,33 @@ class Spec:
         return int(re.search(r"#define IDM_N (\d+)", self.layout).group(1))  # type: ignore[union-attr]
 
     @property
+    def dim(self) -> int:
+        """Numbers in the state (positions, velocities, friction, hysteresis, the effects' own)."""
+        return int(re.search(r"#define IDM_DIM (\d+)", self.layout).group(1))  # type: ignore[union-attr]
+
+    @property
     def block(self) -> int:
         """Threads per CUDA block: 64 where the middle stages live in shared memory (DPS), 32 from
-        6 nodes on (ptxas for sm_90 gave the DPS 5 with hysteresis 254 registers and an 8-byte
-        spill in blocks of 64, 170 registers and none in blocks of 32: same code, a smaller
-        launch bound)."""
-        return BLOCK if self.nodes == 2 else 64 if self.nodes < 6 else 32
+        a state of 15 numbers on (ptxas for sm_90 gave the DPS 5 with hysteresis, 15 numbers, 254
+        registers and an 8-byte spill in blocks of 64, 170 registers and none in blocks of 32:
+        same code, a smaller launch bound; and the stage output of ``shared_stages`` 2 fits the
+        48 KB of static shared memory only so)."""
+        return BLOCK if self.nodes == 2 else 64 if self.dim < 15 else 32
+
+    @property
+    def shared_stages(self) -> int:
+        """Where the Dormand-Prince stages live: 0 in registers (the LPS); 1 the middle stages
+        k2..k7 in shared memory (the DPS: in registers they spilled from 3 nodes on); 2 the
+        stage's output too, from a state of 16 numbers on (the DPS 4 with every effect on: 254
+        registers and an 8-byte spill for sm_90 at 1, 252 registers and none at 2)."""
+        return 0 if self.nodes == 2 else 1 if self.dim < 16 else 2
 
     def defines(self) -> str:
-        """The compile-time constants besides the layout. Beyond the LPS the middle
-        Dormand-Prince stages live in shared memory (in registers they spilled from 3 nodes on).
+        """The compile-time constants besides the layout: the block and where the stages live.
         The wave's numbers and the step loop's metrics stay in registers (IDM_WAVE_SHARED and
         IDM_METRICS_SHARED 0: with the generated right-hand side the LPS's RK4 needs 124
         registers without them, and with them ptxas spilled 8 bytes for sm_90)."""
-        return (f"#define IDM_BLOCK {self.block}\n#define IDM_SHARED_STAGES {int(self.nodes > 2)}\n"
+        return (f"#define IDM_BLOCK {self.block}\n#define IDM_SHARED_STAGES {self.shared_stages}\n"
                 "#define IDM_WAVE_SHARED 0\n#define IDM_METRICS_SHARED 0\n")
 
 
@@ -100,8 +113,8 @@ def spec_of(model: Literal["lps", "dps"] = "lps", n_elements: int = 1, piezo_hys
 
 def all_specs() -> list[Spec]:
     """The specialisations the NVRTC test compiles: every node count with and without piezo
-    hysteresis and no effect, and the LPS and the DPS 4 with every catalogue effect on at once
-    (the largest right-hand sides)."""
+    hysteresis and no effect, and the LPS, the DPS 4 and the largest DPS with every catalogue
+    effect on at once (the largest right-hand sides and states)."""
     from ..core.effects import Effects
 
     max_dof = engine.kernel_accepts()["max_dof"]
@@ -109,7 +122,7 @@ def all_specs() -> list[Spec]:
              for n in range(2, max_dof + 1) for h in (True, False)]
     # every effect parameter on (1e-3 in SI: in every domain; its size does not change the code)
     every = Effects(**{name: 1e-3 for name in engine.effect_names()})
-    largest: list[tuple[Literal["lps", "dps"], int]] = [("lps", 1), ("dps", 4)]
+    largest: list[tuple[Literal["lps", "dps"], int]] = [("lps", 1), ("dps", 4), ("dps", max_dof - 1)]
     specs += [spec_of(m, k, True, every) for m, k in largest]
     return specs
 

@@ -278,9 +278,17 @@ IDM_HD void idm_dopri5_point(const double *c, const double *wc, double t_end, do
     const int n = IDM_N;
     /* the state, a stage's input and output and the first stage in registers; the later stages
      * k2..k7 too with IDM_SHARED_STAGES 0, else in shared memory (each thread its own column:
-     * conflict-free), where many nodes would not fit beside them */
+     * conflict-free), where many nodes would not fit beside them; with IDM_SHARED_STAGES 2 the
+     * stage's output too (each thread its own row, padded to an odd length: conflict-free), where
+     * the largest right-hand sides crowd it out beside the state */
     /* tmp holds each stage's input, then the next state (its last use: one vector fewer) */
+#if IDM_SHARED_STAGES >= 2
+    double y[IDM_DIM], tmp[IDM_DIM], k1[IDM_DIM];
+    __shared__ double idm_kt[IDM_BLOCK][IDM_DIM | 1];
+    double *kt = idm_kt[threadIdx.x];
+#else
     double y[IDM_DIM], tmp[IDM_DIM], kt[IDM_DIM], k1[IDM_DIM];
+#endif
 #if IDM_SHARED_STAGES
     __shared__ double idm_ks[6][IDM_DIM][IDM_BLOCK];
 #define KS(s, i) idm_ks[(s) - 2][i][threadIdx.x]
