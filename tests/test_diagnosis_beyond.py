@@ -466,7 +466,8 @@ def test_discovery_after_a_calibration_that_did_not_converge_starts_from_the_nom
     subset free around them and the calibrated null's held-out RMS as the bar, then from the
     model with the first effect when one stands; after "unexplained", from the model with the
     first effect when one stands, then from the calibrated null (a first effect that leaves
-    structure does not steer the search alone)."""
+    structure does not steer the search alone), then from the nominal values as given (a
+    calibration that converged may have absorbed the missing force in a basin of its own)."""
     from types import SimpleNamespace
 
     from idm_rs.diagnosis.case_model import ModelSpec, Structure
@@ -491,12 +492,14 @@ def test_discovery_after_a_calibration_that_did_not_converge_starts_from_the_nom
                                                              "the model with weight_friction"]
     (alone,) = paths("not_converged", None, cal, nominal, 5e-9)
     assert alone.from_nominal and alone.spec is nominal.spec
-    beside, calibrated = paths("unexplained", lead, cal, nominal, 5e-9)
+    beside, calibrated, last = paths("unexplained", lead, cal, nominal, 5e-9)
     assert beside.lead is lead and beside.heldout_rms == 3e-9
     assert calibrated.spec is cal_spec and calibrated.lead is None and not calibrated.from_nominal
     assert [f.x0 for f in calibrated.free] == [f.x0 for f in cal.at] and calibrated.heldout_rms == 5e-9
-    (calibrated,) = paths("unexplained", None, cal, nominal, 5e-9)
+    assert last.spec is nominal.spec and last.from_nominal and last.heldout_rms == 5e-9
+    calibrated, last = paths("unexplained", None, cal, nominal, 5e-9)
     assert calibrated.spec is cal_spec and calibrated.origin == "the calibrated model"
+    assert last.origin == "the nominal values as given"
 
 
 @pytest.mark.parametrize("first_names", [True, False])

@@ -419,17 +419,22 @@ def _discovery_stage(s: _State) -> None:
     first, *others = discovery_paths(s.verdict, s.lead, cal, nominal, s.ho_cal)
     with part(f"discovery from {first.origin}"):
         _discover_from(s, first)
+    earlier = ""  # what the paths before found, in words
+    before_origin = first.origin
     for path in others:
         if s.verdict not in ("unexplained", "not_converged"):
             break
         # the other start, the data deciding; the path before is kept in the JSON
         before = s.found
+        if before is not None:
+            earlier += f"; discovery from {before_origin}: {before.reason}"
         s.verdict, s.reason, s.rms_after = was
         with part(f"discovery from {path.origin}"):
             _discover_from(s, path)
         s.found_other = before
-        if before is not None and s.verdict in ("unexplained", "not_converged"):
-            s.reason += f"; discovery from {first.origin}: {before.reason}"
+        if s.verdict in ("unexplained", "not_converged"):
+            s.reason += earlier
+        before_origin = path.origin
     s.clock.lap("discovery")
 
 
