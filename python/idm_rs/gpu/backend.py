@@ -52,15 +52,19 @@ class Spec:
     layout: str
     rhs: str
 
+    def _layout_number(self, name: str) -> int:
+        """The generated layout's ``#define name N``."""
+        return int(re.search(rf"#define {name} (\d+)", self.layout).group(1))  # type: ignore[union-attr]
+
     @property
     def nodes(self) -> int:
         """Number of nodes (2 for the LPS, n + 1 for the DPS with n elements)."""
-        return int(re.search(r"#define IDM_N (\d+)", self.layout).group(1))  # type: ignore[union-attr]
+        return self._layout_number("IDM_N")
 
     @property
     def dim(self) -> int:
         """Numbers in the state (positions, velocities, friction, hysteresis, the effects' own)."""
-        return int(re.search(r"#define IDM_DIM (\d+)", self.layout).group(1))  # type: ignore[union-attr]
+        return self._layout_number("IDM_DIM")
 
     @property
     def block(self) -> int:
