@@ -205,7 +205,8 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int, diagnose: bool = True) -> 
             "calibrated_over_noise": d.rms_calibrated / d.noise.sigma, "after_over_noise": d.rms_after / d.noise.sigma,
             "terms": [t.symbol for t in found.form.terms] if found is not None and found.form is not None else [],
             "reason": d.reason, "timings": out.get("timings", {}), "timings_parts": out.get("timings_parts", {}),
-            "discovery_seconds": found.seconds if found is not None else 0.0}
+            "discovery_seconds": found.seconds if found is not None else 0.0,
+            "whiteness_z_after": found.whiteness_z if found is not None else math.nan}
 
 
 def summary(rows: list[dict[str, Any]]) -> str:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import idm_rs
@@ -216,9 +217,13 @@ def test_a_form_spoilt_by_a_spurious_first_effect_is_refitted_alone(monkeypatch)
     lead = SimpleNamespace(candidate=SimpleNamespace(effect="friction_asymmetry"))
     lib = [param("lib_ff_sin"), param("lib_wavelength")]
 
-    def alone(rms: float):
+    def alone(rms: float, white: bool = True):
+        # white noise of that RMS, or a smooth residual of the same RMS
+        res = (np.random.default_rng(5).normal(0.0, rms, n) if white
+               else math.sqrt(2) * rms * np.sin(np.linspace(0, 20 * np.pi, n)))
         r0 = SimpleNamespace(chi2=(rms / sigma) ** 2 * n, rms=rms, spec="spec", std={},
-                             values={"lib_ff_sin": 0.021, "lib_wavelength": 11.8e-6, "mu_k": 0.2})
+                             values={"lib_ff_sin": 0.021, "lib_wavelength": 11.8e-6, "mu_k": 0.2},
+                             residuals=[res])
         monkeypatch.setattr(diag_beyond_catalogue, "term_alone", lambda pb_, cal_, found: (r0, lib))
 
     class HeldOut:
@@ -241,6 +246,11 @@ def test_a_form_spoilt_by_a_spurious_first_effect_is_refitted_alone(monkeypatch)
     found = _tried(1.04 * sigma, 5000.0)
     d = diag_beyond_catalogue.alone_explains(pb, cal, HeldOut(4.0 * sigma), 7.5 * sigma, lead, found)
     assert d is None and "held out 4.00 x noise" in found.reason
+    # alone at noise RMS but its residual still smooth: nothing claimed, the z in the reason
+    alone(1.0 * sigma, white=False)
+    found = _tried(1.04 * sigma, 5000.0)
+    assert diag_beyond_catalogue.alone_explains(pb, cal, HeldOut(1.0 * sigma), 7.5 * sigma, lead, found) is None
+    assert "whiteness z = " in found.reason
     # alone it leaves more than noise: nothing claimed
     alone(1.3 * sigma)
     explains = diag_beyond_catalogue.alone_explains

@@ -484,12 +484,14 @@ def test_backward_elimination_keeps_the_units_that_pay_their_way(monkeypatch):
     assert rf.eliminated(objective, None, [], out, r2, lib2, None)[0] is out and not refits
 
 
-@pytest.mark.parametrize("rms_ratio, eliminated", [(3.0, False), (1.4, True), (1.0, True)])
-def test_a_form_far_from_noise_is_judged_without_elimination_refits(monkeypatch, rms_ratio, eliminated):
+@pytest.mark.parametrize("rms_ratio, eliminated, white", [(3.0, False, True), (1.4, True, True), (1.0, True, True),
+                                                         (1.0, True, False)])
+def test_a_form_far_from_noise_is_judged_without_elimination_refits(monkeypatch, rms_ratio, eliminated, white):
     """Pruning and backward elimination refit nested forms from the form's optimum: they cannot
     bring a refit far from noise back to it, so a form whose refit leaves more than
     ELIMINATION_MAX_RATIO x noise is judged as refitted (not discovered, its figures those of its
-    refit), and only a form near noise gets them."""
+    refit), and only a form near noise gets them. A refit at noise RMS whose residual is still
+    smooth (whiteness z above WHITENESS_Z) does not explain it: not discovered, z in the reason."""
     from types import SimpleNamespace
 
     from idm_rs.diagnosis.discovery import FoundForm
@@ -498,8 +500,11 @@ def test_a_form_far_from_noise_is_judged_without_elimination_refits(monkeypatch,
     sigma, n = 1e-9, 10_000
     by = {t.param: t for t in MAIN_TERMS}
     form = FoundForm("main", [by["lib_x1cube"], by["lib_v1"]], {"lib_x1cube": 1.0, "lib_v1": 0.1}, 0.0, 0.1, [1.0])
+    rng = np.random.default_rng(3)
+    # white noise, or a smooth residual of the same RMS (a slow sine: lag-1 correlation ~1)
+    res = rng.normal(0.0, sigma, n) if white else math.sqrt(2) * sigma * np.sin(np.linspace(0, 20 * np.pi, n))
     r = SimpleNamespace(chi2=rms_ratio**2 * n, rms=rms_ratio * sigma, spec="spec", std={},
-                        values={"lib_x1cube": 1.0, "lib_v1": 0.1})
+                        values={"lib_x1cube": 1.0, "lib_v1": 0.1}, residuals=[res])
     lib = [SimpleNamespace(name=p_, at=lambda v, p_=p_: SimpleNamespace(name=p_, value=v))
            for p_ in ("lib_x1cube", "lib_v1")]
     calls: list[str] = []
@@ -521,7 +526,10 @@ def test_a_form_far_from_noise_is_judged_without_elimination_refits(monkeypatch,
     trial = rf._judged(cx, "main", form, SimpleNamespace(parameters={}), {})
     assert calls == (["pruned", "eliminated"] if eliminated else [])
     assert trial.rms_after == rms_ratio * sigma and trial.form is form
-    assert trial.discovered == (rms_ratio <= 1.1)
+    assert trial.discovered == (rms_ratio <= 1.1 and white)
+    assert (abs(trial.whiteness_z) < 4) == white
+    if rms_ratio <= 1.1 and not white:
+        assert "does not explain the residual" in trial.reason and "whiteness z = " in trial.reason
 
 
 def test_the_next_experiment_is_sought_for_a_look_alike_the_data_do_not_choose(monkeypatch):

@@ -18,7 +18,9 @@ from .thresholds import (
     ALONE_FORMS,
     BIC_THRESHOLD,
     NOISE_RATIO_OK,
+    WHITENESS_Z,
 )
+from .whiteness import whiteness_z
 
 
 def found_against_null(pb: Problem, cal: CalibratedNull, found: Discovery) -> None:
@@ -63,7 +65,7 @@ def term_alone(pb: Problem, cal: CalibratedNull, found: Discovery) -> tuple[FitR
 def _take_alone(pb: Problem, cal: CalibratedNull, d: Discovery, r: FitResult, lib: list[FreeParam]) -> None:
     """`d`'s figures from its form's refit `r` alone from the calibrated null (library
     parameters `lib`): the refit, its RMS, free parameters, library values and ΔBIC."""
-    d.refit, d.rms_after = r, r.rms
+    d.refit, d.rms_after, d.whiteness_z = r, r.rms, whiteness_z(r.residuals)
     d.free = [f.at(r.values[f.name]) for f in list(cal.free) + lib]
     d.values = {f.name: (r.values[f.name], r.std.get(f.name)) for f in lib}
     d.delta_bic = cal.fit.chi2 - r.chi2 - len(lib) * pb.ln_n
@@ -141,17 +143,21 @@ def _alone(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal: float, le
     ho = heldout.rms(r0.spec, [f.at(r0.values[f.name]) for f in list(cal.free) + lib])
     sigma = pb.sigma
     terms = ", ".join(t.symbol for t in best.form.terms)
+    # alone, the form must leave noise as discovery's own rule asks: RMS and a white residual
+    wz = whiteness_z(r0.residuals)
     if not (delta_bic >= BIC_THRESHOLD and r0.rms <= NOISE_RATIO_OK * sigma and ho <= NOISE_RATIO_OK * sigma
-            and ho < ho_cal):
+            and ho < ho_cal and wz <= WHITENESS_Z):
         found.reason += (f"; without {lead.candidate.effect}, the form {terms} alone leaves RMS "
-                         f"{r0.rms / sigma:.2f} x noise, held out {ho / sigma:.2f} x noise (ΔBIC {delta_bic:.0f})")
+                         f"{r0.rms / sigma:.2f} x noise, held out {ho / sigma:.2f} x noise, whiteness z = "
+                         f"{wz:.1f} (ΔBIC {delta_bic:.0f})")
         # kept among the forms tried (the experiment that would decide it is looked for there)
-        found.tried.append(replace(best, refit=r0, rms_after=r0.rms, delta_bic=delta_bic, heldout_rms_after=ho,
+        found.tried.append(replace(best, refit=r0, rms_after=r0.rms, whiteness_z=wz, delta_bic=delta_bic,
+                                   heldout_rms_after=ho,
                                    free=[f.at(r0.values[f.name]) for f in list(cal.free) + lib], tried=[]))
         return None
     from .discovery.form_words import describe, equation
 
-    out = replace(best, discovered=True, refit=r0, rms_after=r0.rms, delta_bic=delta_bic,
+    out = replace(best, discovered=True, refit=r0, rms_after=r0.rms, whiteness_z=wz, delta_bic=delta_bic,
                   rms_before=cal.fit.rms, heldout_rms_before=ho_cal, heldout_rms_after=ho, tried=[])
     vals = {f.name: r0.values[f.name] for f in lib}
     out.values = {n: (x, r0.std.get(n)) for n, x in vals.items()}

@@ -23,7 +23,9 @@ from ..thresholds import (
     NOISE_RATIO_OK,
     PRUNE_ROUNDS,
     PRUNE_Z,
+    WHITENESS_Z,
 )
+from ..whiteness import whiteness_z
 from .form_words import describe, equation
 from .infer import InferredForce, direct_force, infer_force
 from .library import QUADRATURE, Term
@@ -46,6 +48,8 @@ class Discovery:
     delta_bic: float = math.nan
     rms_before: float = math.nan  #: the calibrated null's residual RMS [m]
     rms_after: float = math.nan
+    #: the refit's residual whiteness (lag-1 z; noise gives |z| < 3)
+    whiteness_z: float = math.nan
     heldout_rms_before: float = math.nan
     heldout_rms_after: float = math.nan
     heldout_experiment: str = ""
@@ -76,6 +80,7 @@ class Discovery:
             "form_source": self.form.source if self.form else "",
             "values": {k: list(v) for k, v in self.values.items()},
             "delta_bic": self.delta_bic, "rms_before": self.rms_before, "rms_after": self.rms_after,
+            "whiteness_z": self.whiteness_z,
             "heldout_rms_before": self.heldout_rms_before, "heldout_rms_after": self.heldout_rms_after,
             "heldout_experiment": self.heldout_experiment, "description": self.description,
             "equation": self.equation, "seconds": self.seconds, "failures": self.failures,
@@ -553,6 +558,7 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
     trial.delta_bic = cx.null_chi2 - r.chi2 - len(lib) * math.log(objective.n)
     trial.free = [f.at(r.values[f.name]) for f in list(start) + lib]
     trial.rms_after = r.rms
+    trial.whiteness_z = whiteness_z(r.residuals)
     vals = {f.name: r.values[f.name] for f in lib}
     trial.values = {n: (v, r.std.get(n)) for n, v in vals.items()}
     if cx.heldout is not None:
@@ -564,7 +570,10 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
     # so does the held-out experiment's prediction (a floor vibration, which no library term
     # represents, was "explained" by sgn v1 and a periodic term at 2.16 x noise, held out 3.2 x,
     # before this rule)
-    explains = (trial.rms_after <= NOISE_RATIO_OK * sigma
+    # ... and the refit's residual is white: a wrong form can bring the RMS to noise on a small
+    # residual while leaving it smooth (a compliant base on the LPS was "explained" by x1, sin
+    # and cos at 1.07 x noise with the residual still systematic before this rule)
+    explains = (trial.rms_after <= NOISE_RATIO_OK * sigma and trial.whiteness_z <= WHITENESS_Z
                 and not (math.isfinite(trial.heldout_rms_after) and trial.heldout_rms_after > NOISE_RATIO_OK * sigma))
     trial.discovered = trial.delta_bic >= BIC_THRESHOLD and improves and explains
     if trial.discovered:
@@ -583,8 +592,9 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
     else:
         trial.reason = (f"it improves BIC by {trial.delta_bic:.0f} but does not explain the residual: RMS "
                         f"{rms_null / sigma:.2f} → {trial.rms_after / sigma:.2f} x noise, held out "
-                        f"{heldout_rms_null / sigma:.2f} → {trial.heldout_rms_after / sigma:.2f} x noise "
-                        f"(both must reach {NOISE_RATIO_OK:g})")
+                        f"{heldout_rms_null / sigma:.2f} → {trial.heldout_rms_after / sigma:.2f} x noise, "
+                        f"whiteness z = {trial.whiteness_z:.1f} (both RMS must reach {NOISE_RATIO_OK:g}, "
+                        f"z at most {WHITENESS_Z:g})")
     if searched:
         trial.searched = searched
         trial.reason += f" (refitted from a global search: {searched})"
