@@ -570,9 +570,7 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
     # so does the held-out experiment's prediction (a floor vibration, which no library term
     # represents, was "explained" by sgn v1 and a periodic term at 2.16 x noise, held out 3.2 x,
     # before this rule)
-    # ... and the refit's residual is white: a wrong form can bring the RMS to noise on a small
-    # residual while leaving it smooth (a compliant base on the LPS was "explained" by x1, sin
-    # and cos at 1.07 x noise with the residual still systematic before this rule)
+    # ... and white: a wrong form brought a compliant base's small residual to 1.07 x noise, z 16.9
     explains = (trial.rms_after <= NOISE_RATIO_OK * sigma and trial.whiteness_z <= WHITENESS_Z
                 and not (math.isfinite(trial.heldout_rms_after) and trial.heldout_rms_after > NOISE_RATIO_OK * sigma))
     trial.discovered = trial.delta_bic >= BIC_THRESHOLD and improves and explains
