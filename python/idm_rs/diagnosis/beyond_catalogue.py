@@ -14,11 +14,11 @@ from .discovery import Discovery
 from .discovery.refit import eliminated, look_alike_note
 from .fitting import FitResult, FreeParam, apply, fit
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
+from .rules import leaves_noise
 from .thresholds import (
     ALONE_FORMS,
     BIC_THRESHOLD,
     NOISE_RATIO_OK,
-    WHITENESS_Z,
 )
 from .whiteness import whiteness_z
 
@@ -145,8 +145,8 @@ def _alone(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal: float, le
     terms = ", ".join(t.symbol for t in best.form.terms)
     # alone, the form must leave noise as discovery's own rule asks: RMS and a white residual
     wz = whiteness_z(r0.residuals)
-    if not (delta_bic >= BIC_THRESHOLD and r0.rms <= NOISE_RATIO_OK * sigma and ho <= NOISE_RATIO_OK * sigma
-            and ho < ho_cal and wz <= WHITENESS_Z):
+    if not (delta_bic >= BIC_THRESHOLD and leaves_noise(r0.rms, wz, sigma) and ho <= NOISE_RATIO_OK * sigma
+            and ho < ho_cal):
         found.reason += (f"; without {lead.candidate.effect}, the form {terms} alone leaves RMS "
                          f"{r0.rms / sigma:.2f} x noise, held out {ho / sigma:.2f} x noise, whiteness z = "
                          f"{wz:.1f} (ΔBIC {delta_bic:.0f})")

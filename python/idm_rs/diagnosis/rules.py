@@ -14,10 +14,16 @@ from .thresholds import (
 )
 
 
+def leaves_noise(rms: float, wz: float, sigma: float) -> bool:
+    """A residual of RMS `rms` [m] and lag-1 whiteness z `wz` is noise of level `sigma` [m]: at
+    most NOISE_RATIO_OK x sigma and white (z at most WHITENESS_Z)."""
+    return rms <= NOISE_RATIO_OK * sigma and wz <= WHITENESS_Z
+
+
 def null_leaves_noise(pb: Problem, cal: CalibratedNull) -> bool:
     """The calibrated null's residual is noise: nothing large is compensated by far-off nominal
     values, so a candidate's least squares from the null it contains needs no global search."""
-    return cal.fit.rms <= NOISE_RATIO_OK * pb.sigma and cal.whiteness_z <= WHITENESS_Z
+    return leaves_noise(cal.fit.rms, cal.whiteness_z, pb.sigma)
 
 
 def better_of(a: list[Refit], b: list[Refit]) -> list[Refit]:
@@ -33,7 +39,7 @@ def better_of(a: list[Refit], b: list[Refit]) -> list[Refit]:
 
 def candidate_explains(pb: Problem, c: Candidate) -> bool:
     """A supported candidate whose fit leaves noise (as the verdict requires)."""
-    return is_eligible(c) and c.rms_after <= NOISE_RATIO_OK * pb.sigma and c.whiteness_z <= WHITENESS_Z
+    return is_eligible(c) and leaves_noise(c.rms_after, c.whiteness_z, pb.sigma)
 
 
 def is_finite(x: float) -> bool:

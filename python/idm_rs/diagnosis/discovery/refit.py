@@ -14,6 +14,7 @@ from ...io.recording import Recording
 from ..case_model import ModelSpec
 from ..fitting import FitResult, FreeParam, Objective, fit, set_effect
 from ..progress import part
+from ..rules import leaves_noise
 from ..thresholds import (
     BIC_THRESHOLD,
     DISCOVERY_REFIT_NFEV,
@@ -571,7 +572,7 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
     # represents, was "explained" by sgn v1 and a periodic term at 2.16 x noise, held out 3.2 x,
     # before this rule)
     # ... and white: a wrong form brought a compliant base's small residual to 1.07 x noise, z 16.9
-    explains = (trial.rms_after <= NOISE_RATIO_OK * sigma and trial.whiteness_z <= WHITENESS_Z
+    explains = (leaves_noise(trial.rms_after, trial.whiteness_z, sigma)
                 and not (math.isfinite(trial.heldout_rms_after) and trial.heldout_rms_after > NOISE_RATIO_OK * sigma))
     trial.discovered = trial.delta_bic >= BIC_THRESHOLD and improves and explains
     if trial.discovered:
