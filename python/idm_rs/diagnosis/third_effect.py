@@ -15,9 +15,9 @@ from .fitting import FitResult, FreeParam, fit
 from .pair_twins import first_round_twins, in_place, judge_set, look_alikes
 from .problem import CalibratedNull, HeldOut, Problem, Refit
 from .results import SecondSearch, ThirdSearch
-from .rules import candidate_explains, is_eligible, is_finite
+from .rules import candidate_explains, is_eligible, is_finite, leaves_noise
 from .second_effect import round_beside
-from .thresholds import BIC_THRESHOLD, NOISE_RATIO_OK, POLISH_NFEV, RETRIED_TWINS, WHITENESS_Z
+from .thresholds import BIC_THRESHOLD, POLISH_NFEV, RETRIED_TWINS
 from .whiteness import whiteness_z
 
 
@@ -199,7 +199,7 @@ def _the_other_two(pb: Problem, cal: CalibratedNull, out: ThirdSearch, kept: lis
     r, base, free = refit
     sigma = pb.sigma
     names = f"{kept[0].id} and {kept[1].id}"
-    if not (r.rms <= NOISE_RATIO_OK * sigma and whiteness_z(r.residuals) <= WHITENESS_Z):
+    if not leaves_noise(r.rms, whiteness_z(r.residuals), sigma):
         out.reason += f"; {names} alone leave a systematic residual (RMS {r.rms / sigma:.2f} x noise)"
         return
     at = [f.at(r.values[f.name]) for f in free]

@@ -6,13 +6,11 @@ from __future__ import annotations
 from .noise import NoiseEstimate
 from .problem import CalibratedNull, HeldOut, Refit
 from .results import Alternative, Candidate
-from .rules import by_rank, is_eligible, is_finite
+from .rules import by_rank, is_eligible, is_finite, leaves_noise
 from .thresholds import (
     BIC_THRESHOLD,
     LR_ALPHA,
-    NOISE_RATIO_OK,
     SEPARATION,
-    WHITENESS_Z,
 )
 
 
@@ -83,7 +81,7 @@ def decide_verdict(ranking: list[Candidate], cal: CalibratedNull, noise: NoiseEs
     sigma = noise.sigma
     fit, wz_cal = cal.fit, cal.whiteness_z
     cal_ratio = fit.rms / sigma
-    cal_is_noise = cal_ratio <= NOISE_RATIO_OK and wz_cal <= WHITENESS_Z
+    cal_is_noise = leaves_noise(fit.rms, wz_cal, sigma)
     eligible = [c for c in ranking if is_eligible(c)]
     best = eligible[0] if eligible else None
     residual = f"RMS {cal_ratio:.2f} x noise, whiteness z = {wz_cal:.1f}"
@@ -99,7 +97,7 @@ def decide_verdict(ranking: list[Candidate], cal: CalibratedNull, noise: NoiseEs
         return ("unexplained", f"a systematic residual remains after a converged calibration ({residual}) and "
                 f"no catalogue effect explains it{wide}", fit.rms)
     ratio = best.rms_after / sigma
-    explained = ratio <= NOISE_RATIO_OK and best.whiteness_z <= WHITENESS_Z
+    explained = leaves_noise(best.rms_after, best.whiteness_z, sigma)
     if not explained:
         if not cal.search.converged:
             return ("not_converged", f"the calibration did not converge ({cal.search.summary()}); the best effect "
