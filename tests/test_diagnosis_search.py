@@ -14,6 +14,7 @@ import pytest
 
 import idm_rs
 import idm_rs.diagnosis.candidates as diag_candidates
+import idm_rs.diagnosis.fitting as diag_fitting
 import idm_rs.diagnosis.problem as diag_problem
 import idm_rs.diagnosis.rules as diag_rules
 import idm_rs.diagnosis.second_effect as diag_second_effect
@@ -64,6 +65,42 @@ def test_a_jacobian_remembers_nothing_between_calls(long_rec):
     assert runs_d == 1 + len(free) and not np.array_equal(Jd, J0)
     _, J1, runs1 = obj.jacobian(SPEC, free, np.zeros(1))
     assert np.array_equal(J1, J0) and runs1 == runs0
+
+
+def test_difference_columns_from_the_fits_last_evaluation_are_the_same_to_the_bit(long_rec, monkeypatch):
+    """A fit's Jacobian at the point it has just evaluated takes its differences' base from that
+    evaluation (`at`) instead of running it again: the same residual and Jacobian to the bit
+    (a lane of a batch computes exactly what a run alone does), one simulated model fewer per
+    Jacobian, and the fit's own result unchanged."""
+    sim = CaseSimulator(long_rec)
+    obj = Objective(long_rec, sim, NOISE).with_cycles(2)
+    free = [_m2(1.02), FreeParam("mu_k", 0.55, 0.3, 0.7, 0.01, diag_problem.set_tied_friction)]
+    u = np.array([0.1, -0.2])
+    at = obj.predict([apply(SPEC, free, u)])[0]
+    models: list[int] = []
+    predict = sim.predict
+    monkeypatch.setattr(sim, "predict", lambda specs, *a, **k: models.append(len(specs)) or predict(specs, *a, **k))
+    r0, J0, _ = obj.jacobian(SPEC, free, u, unbounded={0, 1})
+    r1, J1, _ = obj.jacobian(SPEC, free, u, unbounded={0, 1}, at=at)
+    assert models == [len(free) + 1, len(free)]
+    assert np.array_equal(r0, r1) and np.array_equal(J0, J1)
+    models.clear()
+    # every experiment by differences in the fits below, as after a blow-up
+    monkeypatch.setattr(diag_fitting, "usable_derivative", lambda d, p: False)
+    a = fit(obj, SPEC, free, max_nfev=4)
+    assert len(free) in models and len(free) + 1 not in models, "difference batches without their base run"
+    monkeypatch.setattr(sim, "predict", predict)
+    monkeypatch.setattr(Objective, "jacobian", lambda self, *x, at=None, **k: _no_at(self, *x, **k))
+    b = fit(obj, SPEC, free, max_nfev=4)
+    assert a.chi2 == b.chi2 and a.values == b.values and np.array_equal(a.jac, b.jac)
+
+
+_jacobian = Objective.jacobian
+
+
+def _no_at(self, *args, **kwargs):
+    """Objective.jacobian as it was before `at`: the differences run their own base."""
+    return _jacobian(self, *args, **kwargs)
 
 
 def test_the_fit_jacobian_is_the_engines_exact_one(long_rec):

@@ -244,7 +244,8 @@ class Objective:
         return cast("NDArray[np.float64]", -np.concatenate(blocks, axis=1).T / self.sigma)
 
     def jacobian(self, base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64],
-                 fd_step: float = 1e-3, unbounded: Optional[set[int]] = None
+                 fd_step: float = 1e-3, unbounded: Optional[set[int]] = None,
+                 at: Optional[Sequence[NDArray[np.float64]]] = None
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
         """(residual vector, its exact Jacobian in the fit units, simulations run) at `u`. An
         experiment whose derivatives could not be taken (the engine reports why: e.g. a fast
@@ -254,7 +255,8 @@ class Objective:
         them without trying the engine's derivative (a fit passes one set for all its
         Jacobians). Nothing is remembered beyond the set the caller passes: a blow-up at one
         model says nothing about another (kept on the simulator, it once made a fit's path
-        depend on every fit run before it — RESULTS 15e)."""
+        depend on every fit run before it — RESULTS 15e). `at`: the plain predictions at `u`
+        when the caller has them (a fit's last evaluation), so the differences need no base run."""
         names, D = engine_chain(base, free, u)
         spec = apply(base, free, u)
         skip = unbounded if unbounded is not None else set()
@@ -273,7 +275,7 @@ class Objective:
             dpred[j] = d
         runs = 1
         if bad:
-            base_preds, cols = difference_columns(self, base, free, u, bad, fd_step, with_base=True)
+            base_preds, cols = difference_columns(self, base, free, u, bad, fd_step, with_base=at is None, preds=at)
             runs += len(free)
             for j in bad:
                 preds[j], dpred[j] = base_preds[j], cols[j]
@@ -309,23 +311,27 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     from scipy.optimize import least_squares  # lazily: it is most of `import idm_rs`'s time
 
     free = inside_bounds(free)
-    cache: dict[bytes, NDArray[np.float64]] = {}
+    # the last evaluation's residual vector and predictions: the Jacobian at that point takes
+    # its differences' base from them, and the result its residuals
+    cache: dict[bytes, tuple[NDArray[np.float64], list[NDArray[np.float64]]]] = {}
     unbounded: set[int] = set()  # experiments whose derivatives blew up in this fit (see Objective.jacobian)
 
     def fun(u: NDArray[np.float64]) -> NDArray[np.float64]:
         key = u.tobytes()
         if key not in cache:
             cache.clear()
-            cache[key] = objective.vector(objective.predict([apply(base, free, u)])[0])
+            preds = objective.predict([apply(base, free, u)])[0]
+            cache[key] = (objective.vector(preds), preds)
         if progress:
             progress()
-        return cache[key]
+        return cache[key][0]
 
     lo = np.array([f.u_bounds()[0] for f in free])
     hi = np.array([f.u_bounds()[1] for f in free])
 
     def jac(u: NDArray[np.float64]) -> NDArray[np.float64]:
-        _, J, _ = objective.jacobian(base, free, u, fd_step, unbounded)
+        hit = cache.get(u.tobytes())
+        _, J, _ = objective.jacobian(base, free, u, fd_step, unbounded, at=hit[1] if hit else None)
         if progress:
             progress()
         return J
@@ -338,7 +344,8 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     sol = least_squares(fun, u0, jac=jac, bounds=(lo, hi), method="trf", x_scale=1.0, max_nfev=max_nfev,
                         xtol=1e-6, ftol=FTOL_CHI2 / max(objective.n, 1), gtol=1e-8)
     spec = apply(base, free, sol.x)
-    preds = objective.predict([spec])[0]
+    hit = cache.get(np.asarray(sol.x).tobytes())
+    preds = hit[1] if hit else objective.predict([spec])[0]
     res, offs = objective.profiled(preds)
     chi2 = float(sum(np.sum(r * r) for r in res)) / objective.sigma**2
     # parameter uncertainty from the Jacobian at the optimum, scaled by the residual variance
