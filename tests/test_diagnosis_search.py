@@ -23,7 +23,7 @@ from idm_rs.core.batch import Structure
 from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec
 from idm_rs.diagnosis.catalogue import CATALOGUE, by_id
 from idm_rs.diagnosis.fitting import FreeParam, Objective, apply, fit, set_param
-from idm_rs.diagnosis.multistart import Start, leaves_noise, multistart
+from idm_rs.diagnosis.multistart import Start, fit_at_noise, multistart
 from idm_rs.diagnosis.noise import cross_check, estimate_noise, residual_sigma
 from idm_rs.diagnosis.results import Candidate
 from idm_rs.diagnosis.screening import Screened, near_degenerate, screen
@@ -197,13 +197,13 @@ def test_a_fit_leaves_noise_only_when_its_residual_is_white_and_its_chi2_is_the_
     def ended(residual: np.ndarray, sigma: float = 1.0) -> FitResult:
         return FitResult({}, {}, float(residual @ residual) / sigma**2, n, [residual], [], SPEC, 0, True, "")
 
-    assert leaves_noise(ended(noise))
-    assert not leaves_noise(ended(1.05 * noise)), "chi^2 = 1.1 n is 10 sigma above pure noise's"
+    assert fit_at_noise(ended(noise))
+    assert not fit_at_noise(ended(1.05 * noise)), "chi^2 = 1.1 n is 10 sigma above pure noise's"
     # a noise level estimated 5 % high: a basin that misses a smooth effect worth 900 chi^2
     # units passes the chi^2 test (0.95 n), and its residual's autocorrelation gives it away
     smooth = np.sin(np.linspace(0.0, 6 * np.pi, n))
     missed = noise + smooth * math.sqrt(900.0 / (smooth @ smooth))
-    assert ended(missed, sigma=1.05).chi2 < n and not leaves_noise(ended(missed, sigma=1.05))
+    assert ended(missed, sigma=1.05).chi2 < n and not fit_at_noise(ended(missed, sigma=1.05))
 
 
 def test_multistart_stops_once_a_fit_leaves_noise(long_rec):
@@ -212,9 +212,9 @@ def test_multistart_stops_once_a_fit_leaves_noise(long_rec):
     full = multistart(obj, SPEC, starts, local_fits=2, horizons=(2, None), max_nfev=(10, 10))
     short = multistart(obj, SPEC, starts, local_fits=2, horizons=(2, None), max_nfev=(10, 10), stop_at_noise=True)
     # the fits run in ranked order up to the first that leaves noise; the rest are counted
-    assert leaves_noise(short.best) and len(short.fits) + short.skipped == len(full.fits)
+    assert fit_at_noise(short.best) and len(short.fits) + short.skipped == len(full.fits)
     assert short.skipped == 1, "the best-ranked start (m2 x 1.12) reaches the noise floor alone"
-    assert sum(leaves_noise(f.fit) for f in short.fits) == 1
+    assert sum(fit_at_noise(f.fit) for f in short.fits) == 1
     assert short.best.values["m2"] == pytest.approx(full.best.values["m2"], rel=1e-3)
     assert ("not run" in short.summary()) == (short.skipped > 0)
 
@@ -482,7 +482,7 @@ def test_a_leader_that_leaves_structure_is_fitted_again_first_cycle_first(monkey
     monkeypatch.setattr(diag_candidates, "fit_progressive", progressive)
     stuck = result({"m2": 0.4, "c_weight": 54.0}, 1.5)
     out = diag_candidates.continued(pb, cal, SPEC, free, stuck)
-    assert out.values == {"m2": 0.3, "c_weight": 50.0} and leaves_noise(out)
+    assert out.values == {"m2": 0.3, "c_weight": 50.0} and fit_at_noise(out)
     # from the nominal values as given, the effect where the leader's fit put it; first cycle first
     assert calls == [({"m2": 0.3, "c_weight": 54.0}, (1, None))]
     calls.clear()

@@ -19,7 +19,7 @@ from .case_model import ModelSpec
 from .catalogue import CATALOGUE, Effect, EffectParam
 from .fitting import FitResult, FreeParam, Objective, apply, fit, fit_progressive, set_effect
 from .identifiability import assess
-from .multistart import Start, agree, leaves_noise, multistart
+from .multistart import Start, agree, fit_at_noise, multistart
 from .noise import NoiseEstimate
 from .problem import CalibratedNull, Nominal, Problem, Refit, calibration_params
 from .progress import part
@@ -370,7 +370,7 @@ def continued(pb: Problem, cal: CalibratedNull, base: ModelSpec, free: list[Free
     first drive cycle, then everything) from the nominal values as given and from the null fit,
     its effect parameters at their fitted values; the best of them. Least squares over the whole
     record at once can slide into a basin the first cycle alone does not have (RESULTS §39)."""
-    if leaves_noise(r):
+    if fit_at_noise(r):
         return r
     best = r
     for at in (cal.free, cal.at):
@@ -380,7 +380,7 @@ def continued(pb: Problem, cal: CalibratedNull, base: ModelSpec, free: list[Free
                              progress=pb.tick)
         if r2.chi2 < best.chi2:
             best = r2
-        if leaves_noise(best):
+        if fit_at_noise(best):
             break
     return best
 

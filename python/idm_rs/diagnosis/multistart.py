@@ -81,8 +81,10 @@ def agree(best: FitResult, chi2: float) -> bool:
     return chi2 - best.chi2 <= AGREE_CHI2 * max(1.0, best.chi2 / max(best.n, 1))
 
 
-def leaves_noise(fit: FitResult) -> bool:
-    """The fit's residual is indistinguishable from the noise (see NOISE_CHI2_Z)."""
+def fit_at_noise(fit: FitResult) -> bool:
+    """The fit's residual is indistinguishable from the noise by its chi^2 (within NOISE_CHI2_Z
+    of n) and white (NOISE_WHITENESS_Z): a multistart's stopping rule, stricter than the
+    verdict's :func:`.rules.leaves_noise` (RMS within 1.1 sigma)."""
     n = max(fit.n, 1)
     return (fit.chi2 <= n + NOISE_CHI2_Z * math.sqrt(2.0 * n)
             and abs(whiteness_z(fit.residuals)) <= NOISE_WHITENESS_Z)
@@ -128,7 +130,7 @@ def multistart(objective: Objective, base: ModelSpec, starts: Sequence[Start], *
     start of every group in `always` (a start's misfit is not its basin: the nominal values
     as given, with a large effect in place, can start far up a slope that leads to the truth),
     over each horizon in turn, in that order; with `stop_at_noise`, no more once one fit
-    leaves noise (`leaves_noise`). The fits best first."""
+    leaves noise (`fit_at_noise`). The fits best first."""
     chis = rank(objective, base, starts, horizons[0], progress)
     order = sorted(range(len(starts)), key=lambda i: chis[i] if math.isfinite(chis[i]) else math.inf)
     promising = [i for i in order if chis[i] <= PROMISING * chis[order[0]]]
@@ -142,7 +144,7 @@ def multistart(objective: Objective, base: ModelSpec, starts: Sequence[Start], *
         s = starts[i]
         r = fit_progressive(objective, base, s.free, horizons=horizons, max_nfev=max_nfev, progress=progress)
         fits.append(LocalFit(s.label, {f.name: f.x0 for f in s.free}, chis[i], r))
-        if stop_at_noise and leaves_noise(r):
+        if stop_at_noise and fit_at_noise(r):
             break
     fits.sort(key=lambda f: f.fit.chi2)
     return MultiStart(fits, len(starts), horizons[0], len(picks) - len(fits))
