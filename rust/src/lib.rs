@@ -8,6 +8,7 @@
 //! - [`lanes`]: the same integrators over `L` runs at once on vector lanes;
 //! - [`drive`]: the one driver every run goes through (groups runs onto lanes or runs them one by one);
 //! - [`simulate`], [`sensitivity`], [`batch`]: one saved run, exact derivatives, many points in parallel;
+//! - [`watch`]: a run on its own thread while the caller looks for Ctrl-C;
 //! - [`gpu`] (the CUDA kernel's constants) and `python` (the PyO3 binding, `python` feature).
 
 pub mod batch;
@@ -21,6 +22,7 @@ pub mod numbers;
 pub mod physics;
 pub mod sensitivity;
 pub mod simulate;
+pub mod watch;
 
 #[cfg(test)]
 mod paper_case_tests;

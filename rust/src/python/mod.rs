@@ -9,7 +9,7 @@
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
@@ -31,6 +31,7 @@ use crate::physics::rig::RigDrive;
 use crate::physics::waveform::PiecewiseLinear;
 use crate::sensitivity::parse_seeds;
 use crate::simulate::simulate_with_derivatives;
+use crate::watch::{run_watched, wait_done};
 
 mod batch;
 mod declarations;
@@ -355,43 +356,21 @@ fn check_run(
 /// `work` run on a worker thread while this one looks for Ctrl-C (Python's signal handlers run
 /// only here) and sets `cancel` on it, so the run stops and keeps what it saved so far; a panic
 /// in `work` becomes a Python RuntimeError, never a crash. Also returns whether a Ctrl-C came
-/// in the last look, as the work ended: it is taken here (else Python would raise it the moment
-/// this returns, and the finished run would be lost) and the caller says so.
+/// while it ran: each look takes the signal (else Python would raise it the moment this
+/// returns, and the finished run would be lost), so a run that ended before it saw `cancel`
+/// is whole and the caller says it was interrupted.
 fn watching_for_ctrl_c<T: Send>(
     py: Python<'_>,
     cancel: &AtomicBool,
     work: impl FnOnce() -> T + Send,
 ) -> PyResult<(T, bool)> {
-    // the worker says when it is done: the wait ends then, not at the next poll (a poll every 2 ms
-    // put a floor of ~2 ms under every call, twice a 10 ms LPS run's own time)
-    let done = (std::sync::Mutex::new(false), std::sync::Condvar::new());
-    std::thread::scope(|scope| -> PyResult<(T, bool)> {
-        let worker = scope.spawn(|| {
-            let r = catch_unwind(AssertUnwindSafe(work));
-            *done.0.lock().unwrap_or_else(|e| e.into_inner()) = true;
-            done.1.notify_all();
-            r
-        });
-        while !py.detach(|| {
-            let guard = done.0.lock().unwrap_or_else(|e| e.into_inner());
-            let (guard, _) = done
-                .1
-                .wait_timeout_while(guard, Duration::from_millis(50), |finished| !*finished)
-                .unwrap_or_else(|e| e.into_inner());
-            *guard
-        }) {
-            if py.check_signals().is_err() {
-                cancel.store(true, Ordering::Relaxed);
-            }
-        }
-        let late = py.check_signals().is_err();
-        worker
-            .join()
-            .ok()
-            .and_then(|r| r.ok())
-            .map(|t| (t, late))
-            .ok_or_else(|| PyRuntimeError::new_err("internal error in idm-rs core (please report)"))
-    })
+    run_watched(
+        cancel,
+        work,
+        |done| py.detach(|| wait_done(done, Duration::from_millis(50))),
+        || py.check_signals().is_err(),
+    )
+    .ok_or_else(|| PyRuntimeError::new_err("internal error in idm-rs core (please report)"))
 }
 
 /// Simulate one run; returns a dict of numpy arrays (see `idm_rs.simulate`). With
