@@ -23,7 +23,7 @@ PYTHON = ROOT / "python" / "idm_rs"
 #: files of its own layer and of the layers before it
 RUST_LAYERS: tuple[tuple[str, ...], ...] = (
     ("error",), ("numbers",), ("physics",), ("model",), ("integrate",), ("lanes",), ("drive",),
-    ("sensitivity",), ("simulate",), ("batch",), ("gpu",), ("python",),
+    ("sensitivity",), ("simulate",), ("batch",), ("gpu",), ("watch",), ("python",),
 )
 
 
