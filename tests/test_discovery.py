@@ -15,7 +15,7 @@ import pytest
 from idm_rs.diagnosis import plot_diagnosis
 from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
 from idm_rs.diagnosis.discovery import MAIN_TERMS, InferredForce, Trajectory, discover, find_terms
-from idm_rs.diagnosis.discovery.infer import _gcv_solve, _second_differences
+from idm_rs.diagnosis.discovery.infer import _gcv_solve, _repair_columns, _second_differences
 from idm_rs.diagnosis.discovery.regress import _choose
 from idm_rs.diagnosis.fitting import Objective
 from idm_rs.diagnosis.noise import estimate_noise
@@ -168,6 +168,40 @@ def test_gcv_chooses_a_smoothing_between_the_extremes():
     assert err < 0.5 * np.sqrt(np.mean((b - truth) ** 2))
     assert err < 0.5 * np.sqrt(np.mean((line - truth) ** 2))
     assert 3 < dof < 40
+
+
+def test_a_knot_derivative_blown_up_short_of_the_bound_is_replaced_by_a_difference():
+    """A tangent pass through a fast slip can stay finite at 1e4 times what the runs move:
+    below the absolute bound (BLOWN_UP x the travel per newton) yet dominating the inference's
+    normal equations (a periodic friction on the LPS + h: columns 1e7-5e7 against differences of
+    10-5,000, every damped step rejected). The columns that stand out are checked against a
+    difference, largest first, until one agrees; the sound ones stay as they are."""
+    rng = np.random.default_rng(7)
+    samples, knots = 400, 30
+    M = rng.normal(0.0, 1e-8, (samples, knots))  # the runs' true response [m/N]
+    pred = np.linspace(0.0, 20e-6, samples) + rng.normal(0.0, 1e-9, samples)  # 20 um of travel
+    values = np.full(knots, 1e-6)
+    calls = []
+
+    def reading(v):
+        calls.append(1)
+        return pred + M @ (v - values)
+
+    S = M.copy()
+    S[:, 4] *= 3e4  # blown up, yet its largest entry is far under the absolute bound
+    S[:, 11] *= 2e3
+    S[:, 20] = np.nan  # blown up to non-finite: replaced by the absolute test
+    assert np.max(np.abs(S[:, [4, 11]])) < 1e3 * (np.ptp(pred) + 1e-6)
+    out = {"sensitivities": S, "reading": pred}
+    assert _repair_columns(out, reading, values) == 3
+    np.testing.assert_allclose(out["sensitivities"], M, rtol=1e-6, atol=1e-12)
+    # one difference per column replaced and one for the column that agreed
+    assert len(calls) == 4
+    # sound columns alone: one check, nothing replaced
+    calls.clear()
+    out = {"sensitivities": M.copy(), "reading": pred}
+    assert _repair_columns(out, reading, values) == 0 and len(calls) == 1
+    assert np.array_equal(out["sensitivities"], M)
 
 
 def _slip_pulses(rng: np.random.Generator, n: int) -> np.ndarray:

@@ -124,6 +124,10 @@ FIT_DT = 2e-7
 #: motion (+1 um) has blown up: one fit unit is a few percent of a parameter, which cannot move
 #: the reading by more than a few times its whole range
 BLOWN_UP = 1e3
+#: a knot's derivative column larger than this many times the forward difference of runs at
+#: the same knot (norms) has blown up short of BLOWN_UP (discovery.infer._repair_columns): the
+#: blown-up columns measured were 1e3-1e5 times the difference, the sound ones within 30 %
+KNOT_DERIVATIVE_AGREE = 10.0
 #: a fit stops when an accepted step gains less than this many chi^2 units times max(1, chi^2/n)
 #: (scipy's `ftol`, relative to the cost, set to FTOL_CHI2 / n). Every decision the diagnosis
 #: takes is 100 times coarser (AGREE_CHI2 = 25, the BIC threshold); at scipy's default (1e-8
