@@ -450,8 +450,6 @@ def _repair_columns(out: dict[str, Any], reading: Callable[[NDArray[np.float64]]
 
     for k in bad:
         S[:, k] = difference(k)
-    if S.shape[1] == 0:
-        return 0
     for k in np.argsort(-np.max(np.abs(S), axis=0), kind="stable"):
         if k in bad:
             continue
