@@ -186,9 +186,9 @@ def _noise_only_lines(rec, noise: SensorNoise, seed: int) -> tuple[tuple[float, 
 
 def test_a_line_is_judged_against_the_noise_floor_near_it(tmp_path: Path) -> None:
     # 1/f noise over records of one mains period: a colour fitted to the 2 ms rests leaves its
-    # excess at 50 Hz, where every frequency then gains far beyond the line test's critical value.
-    # Without the floor a line is reported on 6 of these 10 readings without hum, and a real hum
-    # beside it comes with a harmonic that is not there on 5 of 10
+    # excess at 50 Hz, where every frequency then gains far beyond the line test's critical value,
+    # and a line was reported on 6 of these 10 readings without hum (13 of 20, with harmonics);
+    # a real hum beside it came with a harmonic that was not there on 5 of 10
     from idm_rs.io.recording import load_case
 
     rec = load_case(make_case(tmp_path / "a", nominal_params=idm_rs.Params(), experiments=EXPERIMENTS, seed=1,
