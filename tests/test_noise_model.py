@@ -172,37 +172,6 @@ def test_hum_and_a_drifting_zero_are_told_apart_on_records_of_one_or_two_mains_p
         assert abs(drift - truth) < max(0.2 * abs(truth), 2e-9), (drift, truth)
 
 
-def _noise_only_lines(rec, noise: SensorNoise, seed: int) -> tuple[tuple[float, float], ...]:
-    """The hum lines the noise model reports on a reading that is `noise` alone (prediction 0)."""
-    import dataclasses
-
-    from idm_rs.diagnosis.noise_model import learn
-
-    rng = np.random.default_rng(seed)
-    exps = [dataclasses.replace(e, x=noise.random(e.t.size, rec.sample_step, rng) + noise.artefacts(e.t, rng))
-            for e in rec.experiments]
-    return learn(dataclasses.replace(rec, experiments=exps), [np.zeros(e.t.size) for e in exps], noise.rms).model.lines
-
-
-def test_a_line_is_judged_against_the_noise_floor_near_it(tmp_path: Path) -> None:
-    # 1/f noise over records of one mains period: a colour fitted to the 2 ms rests leaves its
-    # excess at 50 Hz, where every frequency then gains far beyond the line test's critical value,
-    # and a line was reported on 6 of these 10 readings without hum (13 of 20, with harmonics);
-    # a real hum beside it came with a harmonic that was not there on 5 of 10
-    from idm_rs.io.recording import load_case
-
-    rec = load_case(make_case(tmp_path / "a", nominal_params=idm_rs.Params(), experiments=EXPERIMENTS, seed=1,
-                              dt=1e-7, noise=SensorNoise(rms=0.0), resolution=0.0))
-    pink = [_noise_only_lines(rec, SensorNoise(rms=1.5e-9, pink=0.8), s) for s in range(10)]
-    assert sum(1 for lines in pink if lines) <= 1, pink
-    hum = SensorNoise(rms=1.5e-9, pink=0.8, hum=((60.0, 2.2e-9),))
-    found = [_noise_only_lines(rec, hum, s) for s in range(10)]
-    assert sum(1 for lines in found if lines) >= 8, found
-    assert all(len(lines) <= 1 for lines in found), found  # no harmonic that is not there
-    amplitudes = [lines[0][1] for lines in found if lines]
-    assert abs(float(np.median(amplitudes)) / 2.2e-9 - 1.0) < 0.2, amplitudes
-
-
 def test_a_hum_is_found_through_a_delay_read_slightly_short(tmp_path: Path) -> None:
     # the delay is estimated in turn with the null, and each round's estimate is a little short
     # (12.1 us read 11.9): the motion read at the wrong time leaves each file a residual of its

@@ -28,9 +28,6 @@ from .thresholds import (
     DELAY_RANGE_S,
     DELAY_STEP_S,
     DRIFT_REST_ALPHA,
-    LINE_CLEAR_FLOOR,
-    LINE_FLOOR_GAP_HZ,
-    LINE_FLOOR_RATIOS,
     LINE_SPREAD_ALPHA,
     MAINS_HARMONICS,
     MAINS_HZ,
@@ -325,42 +322,18 @@ def find_lines(res: Residuals, m: Measurement, sigma: float) -> tuple[tuple[floa
 
 
 def _line(res: Residuals, m: Measurement, f: float, sigma: float) -> Optional[tuple[float, float]]:
-    """(chi^2 gained, the amplitude [m]) of a line at `f` that lowers chi^2 significantly, also
-    against the noise floor near `f` (:func:`_floor`: where the metric leaves low-frequency
-    noise, every sinusoid gains that much more), with amplitudes alike in every file; None where
-    there is none. A line LINE_CLEAR_FLOOR x clear of the floor has its amplitudes' errors
-    widened by it too."""
+    """(chi^2 gained, the amplitude [m]) of a line at `f` that lowers chi^2 significantly with
+    amplitudes alike in every file; None where there is none."""
     from scipy.stats import chi2 as chi2_dist
 
     nf = len(res.rec.experiments)
     gain, amps, se = _line_test(res, m, f, sigma)
-    critical = chi2_dist.isf(MEASUREMENT_ALPHA, 2 * nf)
-    if gain <= critical:
+    if gain <= chi2_dist.isf(MEASUREMENT_ALPHA, 2 * nf):
         return None
-    floor = _floor(res, m, f, sigma)
-    if gain <= critical * floor:
-        return None
-    if gain > LINE_CLEAR_FLOOR * critical * floor:
-        se = se * math.sqrt(floor)  # a line far above the floor: its amplitudes vary as the floor does
     mean = float(np.average(amps, weights=se**-2))
     if nf > 1 and float(np.sum(((amps - mean) / se) ** 2)) > chi2_dist.isf(LINE_SPREAD_ALPHA, nf - 1):
         return None
     return gain, mean
-
-
-def _floor(res: Residuals, m: Measurement, f: float, sigma: float) -> float:
-    """How much more than noise of the metric `m` a sinusoid gains near `f` where there is no
-    mains (at LINE_FLOOR_RATIOS x `f`, each fitted beside a line at `f` so a real hum's leakage
-    is not counted): the median gain over the chi^2 median of its degrees of freedom, at least 1.
-    A colour fitted to a 2 ms rest cannot see 1/f noise's excess at 50 Hz; there every
-    frequency gains alike (60-600 where 28 is significant) and a line is not told from it."""
-    from scipy.stats import chi2 as chi2_dist
-
-    mains = [k * b for b in MAINS_HZ for k in range(1, 8)]
-    refs = [r * f for r in LINE_FLOOR_RATIOS if min(abs(r * f - h) for h in mains) > LINE_FLOOR_GAP_HZ]
-    beside = replace(m, lines_Hz=(*m.lines_Hz, f))
-    gains = [_line_test(res, beside, g, sigma)[0] for g in refs]
-    return max(1.0, float(np.median(gains)) / float(chi2_dist.median(2 * len(res.rec.experiments))))
 
 
 def line_values(rec: Recording, res: Residuals, m: Measurement, sigma: float) -> list[NDArray[np.float64]]:

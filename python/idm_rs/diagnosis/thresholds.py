@@ -86,17 +86,6 @@ OUTLIER_ISOLATION = 0.35
 #: a significant fundamental
 MAINS_HZ = (50.0, 60.0)
 MAINS_HARMONICS = (2, 3)
-#: where a line's noise floor is read (:func:`.noise_model._floor`): these multiples of its
-#: frequency, each farther than LINE_FLOOR_GAP_HZ from every mains harmonic. A 1/f noise's excess
-#: falls with frequency, so they lie on both sides of the line
-LINE_FLOOR_RATIOS = (0.5, 0.6, 0.7, 0.8, 1.3, 1.4, 1.5, 1.7, 1.9)
-LINE_FLOOR_GAP_HZ = 4.0
-#: a line whose gain is this many times the floor's critical value has each file's amplitude
-#: judged against errors widened by the floor (1/f noise moves each file's amplitude as much as
-#: it lifts the gain; a hum of 0.5-2 sigma under pink noise stands 6-20 x clear). Below it the
-#: errors stay those of the metric: a coarse reading of a drifting zero is a staircase, a
-#: narrow-band tone of its own in each file that passes the floor 1.2-1.4 x and differs by file
-LINE_CLEAR_FLOOR = 4.0
 #: the channel delays scanned [s] (both signs), and the scan's step
 DELAY_RANGE_S = 40e-6
 DELAY_STEP_S = 1e-6
