@@ -15,8 +15,8 @@ from .thresholds import OUTLIER_ISOLATION, OUTLIER_Z
 
 
 def spikes(r: NDArray[np.float64], resolution: float = 0.0) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """Isolated spikes of a residual: (indices, deviation from the median of the six
-    neighbours [m]). See OUTLIER_Z. The deviation's robust scale is held at least at the
+    """Isolated spikes of a residual, alone or two side by side: (indices, deviation from the
+    median of the six neighbours [m]). See OUTLIER_Z. The deviation's robust scale is held at least at the
     rounding error of the reading's `resolution` [m] (a reading coarser than its noise sits
     on one level for long stretches: a scale of zero, and every step of one level a "spike")."""
     from scipy.ndimage import median_filter
@@ -34,7 +34,14 @@ def spikes(r: NDArray[np.float64], resolution: float = 0.0) -> tuple[NDArray[np.
     # slip, where the residual itself moves fast, still stands out of it)
     nb = np.maximum(np.r_[0.0, a[:-1]], np.r_[a[1:], 0.0])
     calm = nb < np.maximum(0.5 * OUTLIER_Z * scale, OUTLIER_ISOLATION * a)
-    idx = np.flatnonzero(big & calm)
+    # two spikes side by side (each the other's neighbour, so neither is isolated alone): the
+    # pair is one when the samples either side of it are calm beside the smaller of the two
+    pair = big[:-1] & big[1:]
+    low = np.minimum(a[:-1], a[1:])
+    before, after = np.r_[0.0, a[:-2]], np.r_[a[2:], 0.0]
+    pair &= np.maximum(before, after) < np.maximum(0.5 * OUTLIER_Z * scale, OUTLIER_ISOLATION * low)
+    first = np.flatnonzero(pair)
+    idx = np.union1d(np.flatnonzero(big & calm), np.r_[first, first + 1]).astype(np.int64)
     return idx, m[idx]
 
 
