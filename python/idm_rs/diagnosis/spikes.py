@@ -16,9 +16,10 @@ from .thresholds import OUTLIER_ISOLATION, OUTLIER_Z
 
 def spikes(r: NDArray[np.float64], resolution: float = 0.0) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Isolated spikes of a residual, alone or two side by side: (indices, deviation from the
-    median of the six neighbours [m]). See OUTLIER_Z. The deviation's robust scale is held at least at the
-    rounding error of the reading's `resolution` [m] (a reading coarser than its noise sits
-    on one level for long stretches: a scale of zero, and every step of one level a "spike")."""
+    median of the six neighbours [m]). See OUTLIER_Z. The deviation's robust scale is held at
+    least at the rounding error of the reading's `resolution` [m] (a reading coarser than its
+    noise sits on one level for long stretches: a scale of zero, and every step of one level a
+    "spike")."""
     from scipy.ndimage import median_filter
 
     if r.size < 16:
