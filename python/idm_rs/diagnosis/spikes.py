@@ -33,14 +33,15 @@ def spikes(r: NDArray[np.float64], resolution: float = 0.0) -> tuple[NDArray[np.
     big = a > OUTLIER_Z * scale
     # isolated: each neighbour's deviation small, or small beside this one's (a spike beside a
     # slip, where the residual itself moves fast, still stands out of it)
+    quiet = 0.5 * OUTLIER_Z * scale
     nb = np.maximum(np.r_[0.0, a[:-1]], np.r_[a[1:], 0.0])
-    calm = nb < np.maximum(0.5 * OUTLIER_Z * scale, OUTLIER_ISOLATION * a)
+    calm = nb < np.maximum(quiet, OUTLIER_ISOLATION * a)
     # two spikes side by side (each the other's neighbour, so neither is isolated alone): the
     # pair is one when the samples either side of it are calm beside the smaller of the two
     pair = big[:-1] & big[1:]
     low = np.minimum(a[:-1], a[1:])
     before, after = np.r_[0.0, a[:-2]], np.r_[a[2:], 0.0]
-    pair &= np.maximum(before, after) < np.maximum(0.5 * OUTLIER_Z * scale, OUTLIER_ISOLATION * low)
+    pair &= np.maximum(before, after) < np.maximum(quiet, OUTLIER_ISOLATION * low)
     first = np.flatnonzero(pair)
     idx = np.union1d(np.flatnonzero(big & calm), np.r_[first, first + 1]).astype(np.int64)
     return idx, m[idx]
