@@ -1,0 +1,119 @@
+"""Probe: can the fit step (2e-7 s) keep usable derivatives through fast slips if the presliding
+force Fh is split off and sub-cycled at its own stable step?
+
+    python benches/probe_friction_split.py
+
+At the fit step RK4 over the whole state is beyond the stability limit of Fh in every fast slip
+(stiffness |v1| (a/S + b + |c|), ~1e8 1/s at 10 mm/s): the diagnosis then takes forward
+differences for its Jacobians (n + 1 runs each; benches/RESULTS.md §47). This script integrates
+the LPS of the paper's Table 1 (piezo hysteresis on, a triangle drive) in plain Python, by
+Strang splitting: Fh alone over dt/2 at the frozen main-body velocity (RK4 sub-steps at Fh's
+stable step), the mechanics by one RK4 step with Fh frozen, Fh again over dt/2. It prints x1 at
+10 ms and dx1/dmu_k by forward differences of three sizes (a derivative of a smooth discrete map
+agrees across them), against the engine's RK4 at 1e-8 s and at the fit step. A probe, not a
+method of the package: second order, Python speed.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "python"))
+
+import idm_rs  # noqa: E402
+
+#: Table 1 [SI]; fn = (m1 + m2 + mPE) g
+P = dict(m1=0.4, m2=0.3, kp=2.77e7, bc=5e-7, d33=1.24e-7, a=2e10, b=2e9, c=3e9, s1=100.0, s2=0.4,
+         mu_k=0.5, mu_s=0.6, vs=1e-3, fn=0.704 * 9.81, ha=0.4297, hb=0.03438, hc=-0.002865)
+T_END = 10e-3
+
+
+def volt(t: float, amp: float, rise: float) -> tuple[float, float]:
+    """The triangle's voltage [V] and its rate [V/s]: 0 -> amp over `rise`, back to 0 at T_END."""
+    if t < rise:
+        return amp * t / rise, amp / rise
+    return max(0.0, amp * (1 - (t - rise) / (T_END - rise))), -amp / (T_END - rise)
+
+
+def stribeck(v: float, p: dict[str, float]) -> float:
+    return p["mu_k"] * p["fn"] + (p["mu_s"] - p["mu_k"]) * p["fn"] * math.exp(-min((v / p["vs"]) ** 2, 700.0))
+
+
+def fh_rate(fh: float, v: float, s: float, p: dict[str, float]) -> float:
+    gd = v - abs(v) * fh / s
+    return p["a"] * gd - p["b"] * abs(gd) * fh - p["c"] * gd * abs(fh)
+
+
+def mechanics(t: float, y: np.ndarray, p: dict[str, float], amp: float, rise: float) -> np.ndarray:
+    """d/dt of (x1, v1, x2, v2, h) with Fh = y[4] held."""
+    x1, v1, x2, v2, fh, h = (float(u) for u in y)
+    volts, dv = volt(t, amp, rise)
+    gd = v1 - abs(v1) * fh / stribeck(v1, p)
+    ff = fh + p["s1"] * gd + p["s2"] * v1
+    fp = p["kp"] * (p["d33"] * volts - h - (x1 - x2)) - p["bc"] * p["kp"] * (v1 - v2)
+    hd = p["ha"] * p["d33"] * dv - p["hb"] * abs(dv) * h - p["hc"] * dv * abs(h)
+    return np.array([v1, (fp - ff) / p["m1"], v2, -fp / p["m2"], 0.0, hd])
+
+
+def fh_advance(fh: float, v: float, p: dict[str, float], span: float) -> tuple[float, int]:
+    """Fh over `span` [s] at frozen v: RK4 sub-steps within RK4's limit (lambda h <= 2)."""
+    s = stribeck(v, p)
+    m = max(1, math.ceil(abs(v) * (p["a"] / s + p["b"] + abs(p["c"])) * span / 2.0))
+    h = span / m
+    for _ in range(m):
+        k1 = fh_rate(fh, v, s, p)
+        k2 = fh_rate(fh + h / 2 * k1, v, s, p)
+        k3 = fh_rate(fh + h / 2 * k2, v, s, p)
+        k4 = fh_rate(fh + h * k3, v, s, p)
+        fh += h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return fh, m
+
+
+def split_run(p: dict[str, float], dt: float, amp: float, rise: float) -> tuple[float, float]:
+    """(x1 at T_END [m], mean Fh sub-steps per half step)."""
+    y = np.zeros(6)
+    n, subs = int(round(T_END / dt)), 0
+    for i in range(n):
+        t = i * dt
+        y[4], m1 = fh_advance(y[4], y[1], p, dt / 2)
+        k1 = mechanics(t, y, p, amp, rise)
+        k2 = mechanics(t + dt / 2, y + dt / 2 * k1, p, amp, rise)
+        k3 = mechanics(t + dt / 2, y + dt / 2 * k2, p, amp, rise)
+        k4 = mechanics(t + dt, y + dt * k3, p, amp, rise)
+        y = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        y[4], m2 = fh_advance(y[4], y[1], p, dt / 2)
+        subs += m1 + m2
+    return float(y[0]), subs / (2 * n)
+
+
+def engine_x1(mu_k: float, dt: float, amp: float, rise: float) -> float:
+    w = idm_rs.Triangle(amplitude=amp, rise=rise, fall=T_END - rise, delay=0.0)
+    return idm_rs.simulate(idm_rs.Params(mu_k=mu_k), w, t_end=T_END, dt=dt, model="lps").final_position
+
+
+def main() -> None:
+    for amp, rise in ((80.0, 0.5e-3), (150.0, 0.1e-3)):
+        ref = engine_x1(P["mu_k"], 1e-8, amp, rise)
+        dref = (engine_x1(P["mu_k"] * (1 + 1e-6), 1e-8, amp, rise) - ref) / (P["mu_k"] * 1e-6)
+        try:
+            fit = f"{engine_x1(P['mu_k'], 2e-7, amp, rise) * 1e6:.5f} um"
+        except idm_rs.DivergenceError:
+            fit = "diverges"
+        print(f"{amp:.0f} V, rise {rise * 1e3:.1f} ms: engine RK4 1e-8 s x1 = {ref * 1e6:.5f} um, "
+              f"dx1/dmu_k = {dref:.4e} m; engine RK4 2e-7 s: {fit}")
+        for dt in (2e-7, 1e-7):
+            x, subs = split_run(P, dt, amp, rise)
+            ds = []
+            for h in (1e-3, 1e-6, 1e-9):
+                q = dict(P, mu_k=P["mu_k"] * (1 + h))
+                ds.append(f"{(split_run(q, dt, amp, rise)[0] - x) / (P['mu_k'] * h):.4e}")
+            print(f"  split {dt:.0e} s: x1 = {x * 1e6:.5f} um (Fh sub-steps {subs:.1f} per half step), "
+                  f"dx1/dmu_k at h = 1e-3, 1e-6, 1e-9: {', '.join(ds)}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
