@@ -17,14 +17,10 @@ method of the package: second order, Python speed.
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "python"))
-
-import idm_rs  # noqa: E402
+import idm_rs
 
 #: Table 1 [SI]; fn = (m1 + m2 + mPE) g
 P = dict(m1=0.4, m2=0.3, kp=2.77e7, bc=5e-7, d33=1.24e-7, a=2e10, b=2e9, c=3e9, s1=100.0, s2=0.4,
