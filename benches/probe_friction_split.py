@@ -22,9 +22,16 @@ import numpy as np
 
 import idm_rs
 
-#: Table 1 [SI]; fn = (m1 + m2 + mPE) g
-P = dict(m1=0.4, m2=0.3, kp=2.77e7, bc=5e-7, d33=1.24e-7, a=2e10, b=2e9, c=3e9, s1=100.0, s2=0.4,
-         mu_k=0.5, mu_s=0.6, vs=1e-3, fn=0.704 * 9.81, ha=0.4297, hb=0.03438, hc=-0.002865)
+
+def table1() -> dict[str, float]:
+    """The package's defaults (the paper's Table 1) under this script's short names [SI]."""
+    q = idm_rs.Params()
+    return dict(m1=q.m1, m2=q.m2, kp=q.kp, bc=q.rayleigh_beta, d33=q.d33, a=q.fric_alpha, b=q.fric_beta,
+                c=q.fric_gamma, s1=q.sigma1, s2=q.sigma2, mu_k=q.mu_k, mu_s=q.mu_s, vs=q.stribeck_velocity,
+                fn=q.effective_normal_force, ha=q.hyst_alpha, hb=q.hyst_beta, hc=q.hyst_gamma)
+
+
+P = table1()
 T_END = 10e-3
 
 
