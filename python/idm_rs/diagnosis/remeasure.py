@@ -3,7 +3,8 @@ recording and the calibrated prediction (:func:`.noise_model.learn`); the record
 its spikes and every fit made in the noise colour's whitened metric (the null refitted there from
 its optimum, its other optima re-scored). At the verdict: hum lines, a zero drifting in each file
 and a late channel are measurement properties where the calibrated null with them leaves noise
-as well as the verdict's model does (:func:`artefacts_instead`) — a missing effect can put a
+as well as the verdict's model does (:func:`artefacts_instead`; a delay against its look-alike
+lag by Vuong's test, :mod:`.closer`) — a missing effect can put a
 sinusoid's share, a trend or a lag into a residual too, so they are weighed against the physics
 rather than taken before it."""
 
@@ -18,6 +19,7 @@ from numpy.typing import NDArray
 
 from ..io.recording import Recording
 from .case_model import ModelSpec
+from .closer import closer_z
 from .fitting import Objective, apply, fit
 from .measurement import Measurement, Whitener
 from .noise import NoiseEstimate
@@ -36,6 +38,8 @@ from .noise_model import (
 from .problem import CalibratedNull, Nominal, Problem
 from .rules import null_leaves_noise
 from .thresholds import (
+    CLOSER_LAGS,
+    CLOSER_Z,
     DELAY_PROGRESS,
     DELAY_ROUNDS,
     DELAY_TOL_S,
@@ -94,7 +98,9 @@ def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise:
                       lead_spec: Optional[ModelSpec] = None) -> Optional[tuple[Problem, CalibratedNull, NoiseEstimate]]:
     """Where hum lines, a drifting zero or a channel delay were found and the calibrated null with
     them (the delay and the null estimated in turn) leaves noise within SEPARATION of the chi^2 of
-    the verdict's model (`lead_chi2`; inf for a verdict without one), they explain what the
+    the verdict's model (`lead_chi2`; inf for a verdict without one), or with a delay where the
+    verdict's model is no closer than the noise's spread allows (:func:`_lead_closer`; a delay
+    and a sensor lag have as many parameters), they explain what the
     verdict blamed on physics: (problem, null, noise) with them; else None (the noise model keeps
     them as found, not taken). `lead`: the leading candidate's nominal values, a second start
     (a lag candidate's fit bent them as the delay needs; the calibration bent them the other
@@ -111,7 +117,8 @@ def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise:
     else:
         tau = 0.0
         pb2, cal2 = _refit(pb, start, nominal, noise, pb.rec, base)
-    explains = null_leaves_noise(pb2, cal2) and cal2.fit.chi2 <= lead_chi2 + SEPARATION
+    explains = null_leaves_noise(pb2, cal2) and (cal2.fit.chi2 <= lead_chi2 + SEPARATION or (
+        delay and lead_spec is not None and not _lead_closer(pb, pb2, cal2, lead_spec)))
     if not explains and pb2.rec.measurement is not None and pb2.rec.measurement.whiten.order > 0:
         # in the rest's colour the null does not explain it; the colour read off the null's
         # residual may (a short rest misreads a strong colour). Where that colour disagrees with
@@ -142,6 +149,19 @@ def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise:
         model = replace(model, delay_s=tau if delay else model.delay_s, delay_applied=delay,
                         artefacts_applied=True, notes=tuple(notes))
     return pb2, cal2, replace(noise, model=model)
+
+
+def _lead_closer(pb: Problem, pb2: Problem, cal2: CalibratedNull, lead_spec: ModelSpec) -> bool:
+    """Whether the verdict's model (`lead_spec`, fitted over `pb`) is closer to the data than the
+    null with the delay (`cal2` over `pb2`) by more than the noise explains (CLOSER_Z): a delay
+    and a first-order lag of the same size differ only in the ringing, and a coarse reading's
+    rounding error can favour either by tens of chi^2."""
+    v_lead = pb.obj.vector(pb.obj.predict([lead_spec])[0])
+    v_null = pb2.obj.vector(pb2.obj.predict([cal2.fit.spec])[0])
+    if v_lead.shape != v_null.shape or not (np.all(np.isfinite(v_lead)) and np.all(np.isfinite(v_null))):
+        return True
+    gain = float(v_null @ v_null - v_lead @ v_lead)
+    return gain > SEPARATION and not closer_z(v_null, v_lead, CLOSER_LAGS) <= CLOSER_Z
 
 
 def _recoloured(pb: Problem, pb2: Problem, cal2: CalibratedNull, noise: NoiseEstimate,

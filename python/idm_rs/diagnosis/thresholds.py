@@ -21,6 +21,16 @@ import numpy as np
 BIC_THRESHOLD = 10.0
 #: BIC [chi^2 units] by which an effect must beat the runner-up to be named alone
 SEPARATION = 10.0
+#: a measurement property (a channel delay) that leaves noise stands in for the verdict's effect
+#: unless the effect's fit is closer by more than SEPARATION and by this many standard deviations
+#: of the chi^2 difference under the noise (:func:`.closer.closer_z`, one-sided 1.3e-3): a delay
+#: of 3.3 us read at a resolution of 4.9 x the noise let a sensor lag of 3.3 us fit 12.7 closer,
+#: z = 0.5; the development devices' true sensor lags (5.5 and 10 us) fit 517 and 2,497
+#: closer, z = 12 and 25
+CLOSER_Z = 3.0
+#: autocovariance lags (samples) the spread of that difference counts: the rounding error of a
+#: coarse reading stays while the body sticks
+CLOSER_LAGS = 20
 #: residual RMS / noise RMS below which what is left counts as noise
 NOISE_RATIO_OK = 1.1
 #: lag-1 autocorrelation z-score above which a residual counts as systematic (about N(0, 1) for
