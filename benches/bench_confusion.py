@@ -200,9 +200,10 @@ def _nominal_of(effects: list[str], p: Any, true0: Any, given: dict[str, float])
 
 
 def effect_case(directory: Path, c: dict[str, Any], rng: np.random.Generator,
-                sensor: Any = None) -> dict[str, Any]:
+                sensor: Any = None, resolution: Any = None) -> dict[str, Any]:
     """Write one effect case with its size tuned; returns what was set. `sensor`: a function of
-    the drawn white-noise RMS giving the reading's ``SensorNoise`` (None: white noise)."""
+    the drawn white-noise RMS giving the reading's ``SensorNoise`` (None: white noise);
+    `resolution`: one of that RMS giving the reading's resolution [m] (None: make_case's)."""
     import idm_rs
     from idm_rs.io.synthetic import make_case
 
@@ -219,7 +220,8 @@ def effect_case(directory: Path, c: dict[str, Any], rng: np.random.Generator,
     make_case(directory, nominal_params=nominal.replace(normal_force=true.normal_force), true_params=true,
               model=nominal_model, n_elements=4, piezo_hysteresis=False, true_model=model,
               true_piezo_hysteresis=effect == "piezo_hysteresis", effects=eff, experiments=EXPERIMENTS,
-              noise_rms=noise, seed=seed, dt=2e-8, noise=sensor(noise) if sensor is not None else None)
+              noise_rms=noise, seed=seed, dt=2e-8, noise=sensor(noise) if sensor is not None else None,
+              **({"resolution": resolution(noise)} if resolution is not None else {}))
     return {"misset": misset, "magnitude": {name: magnitude} if name else {}, "size_after_refit": size,
             "noise_rms": noise}
 

@@ -84,7 +84,11 @@ def draw_artefacts(rng: np.random.Generator, sigma: float, names: list[str]) -> 
     return kw, resolution
 
 
-def healthy_case(directory: Path, rng: np.random.Generator) -> dict[str, Any]:
+def healthy_case(directory: Path, rng: np.random.Generator, artefacts: Optional[list[str]] = None,
+                 structure: Optional[tuple[str, bool]] = None) -> dict[str, Any]:
+    """A healthy device with mis-set nominal values and one or two artefacts, all drawn from
+    `rng`; `artefacts` and `structure` ((model, piezo hysteresis)) replace the drawn ones (the
+    draws are made all the same, so a seed's other devices do not change)."""
     import idm_rs
     from idm_rs.io.sensor_noise import SensorNoise
     from idm_rs.io.synthetic import make_case
@@ -105,6 +109,8 @@ def healthy_case(directory: Path, rng: np.random.Generator) -> dict[str, Any]:
     if rng.uniform() < 0.5:
         rest = [a for a in pool if a != first and {a, first} != {"ar1", "pink"}]
         arts.append(str(rng.choice(rest)))
+    arts = arts if artefacts is None else list(artefacts)
+    model, hyst = (model, hyst) if structure is None else structure
     kw, resolution = draw_artefacts(rng, sigma, arts)
     make_case(directory, nominal_params=nominal, true_params=true.replace(normal_force=true.effective_normal_force),
               model=model, n_elements=4, piezo_hysteresis=hyst, experiments=EXPERIMENTS,
