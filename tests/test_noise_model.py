@@ -150,6 +150,29 @@ def test_a_late_simulator_is_the_recording_of_a_late_channel(tmp_path: Path) -> 
         assert np.max(np.abs(on_time[j] - b.experiments[j].x)) > 1e-8  # the delay matters
 
 
+def test_a_delay_between_two_fit_steps_is_simulated_as_the_mix_of_both(tmp_path: Path) -> None:
+    # 3.35 us at a 0.1 us fit step: run at 3.3 and 3.4 us and mixed half and half, the reading is
+    # the late recording's to the integration error; either step alone is off by the motion's
+    # velocity times 0.05 us
+    from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec, Structure
+    from idm_rs.io.recording import load_case
+
+    p = idm_rs.Params()
+    b = load_case(make_case(tmp_path / "b", nominal_params=p, experiments=EXPERIMENTS[:2],
+                            noise=SensorNoise(rms=0.0, delay_s=3.35e-6), resolution=0.0, offsets=[0.0, 0.0], dt=1e-8))
+    spec = ModelSpec(Structure("lps", 1, False), p.to_dict(resolved=False), {})
+    sim = CaseSimulator(b, dt=1e-7)
+    mixed = sim.late(3.35e-6).predict([spec])[0]
+    early, later = (sim.late(d).predict([spec])[0] for d in (3.3e-6, 3.4e-6))
+    for j in range(2):
+        err = np.max(np.abs(mixed[j] - b.experiments[j].x))
+        np.testing.assert_allclose(mixed[j], 0.5 * (early[j] + later[j]), rtol=0, atol=1e-18)
+        assert err < 2e-10
+        assert min(np.max(np.abs(x[j] - b.experiments[j].x)) for x in (early, later)) > 5 * err
+    # a whole number of steps runs once, bit for bit as before
+    assert sim.late(3.4e-6)._later is None
+
+
 def test_white_noise_draws_as_before(tmp_path: Path) -> None:
     from idm_rs.io.recording import load_case
 

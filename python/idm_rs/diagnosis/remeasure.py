@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from ..io.recording import Recording
 from .case_model import ModelSpec
-from .closer import closer_z
+from .closer import contest
 from .fitting import Objective, apply, fit
 from .measurement import Measurement, Whitener
 from .noise import NoiseEstimate
@@ -38,6 +38,7 @@ from .noise_model import (
 from .problem import CalibratedNull, Nominal, Problem
 from .rules import null_leaves_noise
 from .thresholds import (
+    CLOSER_FITS_Z,
     CLOSER_LAGS,
     CLOSER_Z,
     DELAY_PROGRESS,
@@ -152,16 +153,16 @@ def artefacts_instead(pb: Problem, cal: CalibratedNull, nominal: Nominal, noise:
 
 
 def _lead_closer(pb: Problem, pb2: Problem, cal2: CalibratedNull, lead_spec: ModelSpec) -> bool:
-    """Whether the verdict's model (`lead_spec`, fitted over `pb`) is closer to the data than the
-    null with the delay (`cal2` over `pb2`) by more than the noise explains (CLOSER_Z): a delay
-    and a first-order lag of the same size differ only in the ringing, and a coarse reading's
-    rounding error can favour either by tens of chi^2."""
+    """Whether the data choose the verdict's model (`lead_spec`, fitted over `pb`) over the null
+    with the delay (`cal2` over `pb2`) beyond the noise (:meth:`.closer.Contest.b_stands`): a
+    delay and a first-order lag of the same size differ only in the ringing, and a coarse
+    reading's rounding error can favour either by tens of chi^2."""
     v_lead = pb.obj.vector(pb.obj.predict([lead_spec])[0])
     v_null = pb2.obj.vector(pb2.obj.predict([cal2.fit.spec])[0])
     if v_lead.shape != v_null.shape or not (np.all(np.isfinite(v_lead)) and np.all(np.isfinite(v_null))):
         return True
-    gain = float(v_null @ v_null - v_lead @ v_lead)
-    return gain > SEPARATION and not closer_z(v_null, v_lead, CLOSER_LAGS) <= CLOSER_Z
+    c = contest(v_null, v_lead, CLOSER_LAGS)
+    return c.gain > SEPARATION and (not math.isfinite(c.spread) or c.b_stands(CLOSER_Z, CLOSER_FITS_Z))
 
 
 def _recoloured(pb: Problem, pb2: Problem, cal2: CalibratedNull, noise: NoiseEstimate,

@@ -22,12 +22,19 @@ BIC_THRESHOLD = 10.0
 #: BIC [chi^2 units] by which an effect must beat the runner-up to be named alone
 SEPARATION = 10.0
 #: a measurement property (a channel delay) that leaves noise stands in for the verdict's effect
-#: unless the effect's fit is closer by more than SEPARATION and by this many standard deviations
-#: of the chi^2 difference under the noise (:func:`.closer.closer_z`, one-sided 1.3e-3): a delay
-#: of 3.3 us read at a resolution of 4.9 x the noise let a sensor lag of 3.3 us fit 12.7 closer,
-#: z = 0.5; the development devices' true sensor lags (5.5 and 10 us) fit 517 and 2,497
-#: closer, z = 12 and 25
+#: unless the effect's fit is closer by more than SEPARATION and the data choose it beyond this
+#: many standard deviations of the chi^2 difference under the noise (:mod:`.closer`: the
+#: delay's null rejected and the effect's fit within CLOSER_FITS_Z, or the effect closer where
+#: both are rejected; one-sided 1.3e-3). A delay of 3.3 us read at a resolution of 4.9 x the
+#: noise let a sensor lag of 3.3 us fit 12.7 closer, D = 109: both rejected (z 4.8 and -3.8),
+#: closer by z = 0.5, the delay taken. The development devices' true lags: sensor 5.5 and 10 us
+#: closer by z = 12 and 25; an amplifier lag of 3.9 us under 2.5 nm of noise closer by 41.6 of
+#: D = 48.7 (z = 2.9), the delay's null rejected (z = 6.3), the lag's fit within (z = -0.5)
 CLOSER_Z = 3.0
+#: how far (standard deviations) the effect's own fit may sit from the data for Cox's choice of
+#: it: 97.7 % of true lags; data between the two fits, 5 noise units from each, choose the
+#: effect by chance 0.2 % of the time (3.2 % at CLOSER_Z)
+CLOSER_FITS_Z = 2.0
 #: autocovariance lags (samples) the spread of that difference counts: the rounding error of a
 #: coarse reading stays while the body sticks
 CLOSER_LAGS = 20
@@ -130,6 +137,10 @@ REMEASURE_NFEV = 8
 #: noise is ~1e-9 m); divides the 5 and 10 us sample steps and the 0.5 ms edges; a point that
 #: diverges is retried at dt/2
 FIT_DT = 2e-7
+#: a channel delay within this fraction of a fit step of a whole number of steps is run at that
+#: number alone (:meth:`.case_model.CaseSimulator.late`; 3.8 us / 0.2 us is 18.999999999999996
+#: in floating point), else at the two around it, mixed
+LATE_SNAP = 1e-6
 #: a derivative of the readings [m per fit unit] beyond this many times the experiment's range of
 #: motion (+1 um) has blown up: one fit unit is a few percent of a parameter, which cannot move
 #: the reading by more than a few times its whole range
