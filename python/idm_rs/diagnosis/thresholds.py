@@ -27,9 +27,10 @@ SEPARATION = 10.0
 #: delay's null rejected and the effect's fit within CLOSER_FITS_Z, or the effect closer where
 #: both are rejected; one-sided 1.3e-3). A delay of 3.3 us read at a resolution of 4.9 x the
 #: noise and simulated rounded to a fit step let a sensor lag of 3.3 us fit 12.7 closer,
-#: D = 109: both rejected (z 4.8 and -3.8), closer by z = 0.5: neither chosen. The development devices' true lags: sensor 5.5 and 10 us
-#: closer by z = 12 and 25; an amplifier lag of 3.9 us under 2.5 nm of noise closer by 41.6 of
-#: D = 48.7 (z = 2.9), the delay's null rejected (z = 6.3), the lag's fit within (z = -0.5)
+#: D = 109: both rejected (z 4.8 and -3.8), closer by z = 0.5: neither chosen. The development
+#: devices' true lags: sensor 5.5 and 10 us closer by z = 12 and 25; an amplifier lag of 3.9 us
+#: under 2.5 nm of noise closer by 41.6 of D = 48.7 (z = 2.9), the delay's null rejected
+#: (z = 6.3), the lag's fit within (z = -0.5)
 CLOSER_Z = 3.0
 #: how far (standard deviations) the effect's own fit may sit from the data for Cox's choice of
 #: it: 97.7 % of true lags; data between the two fits, 5 noise units from each, choose the
