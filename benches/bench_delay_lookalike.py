@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_confusion import _key_error, diagnosed, effect_case
-from bench_realism import healthy_case, wilson
+from bench_realism import false_alarms_line, healthy_case, wilson
 from bench_rows import append, finished
 
 STRUCTURES = (("lps", False), ("lps", True), ("dps", False), ("dps", True))
@@ -75,10 +75,7 @@ def _lookalike(r: dict[str, Any]) -> bool:
 def summary(rows: list[dict[str, Any]]) -> str:
     healthy = [r for r in rows if r["kind"] == "healthy"]
     effects = [r for r in rows if r["kind"] == "effect"]
-    fa = sum(1 for r in healthy if r["verdict"] != "none")
-    lo, hi = wilson(fa, len(healthy))
-    out = [f"healthy, a late channel read coarsely: {len(healthy)}; false alarms {fa} "
-           f"(95 % bounds {100 * lo:.1f}-{100 * hi:.1f} %)", "",
+    out = [false_alarms_line("healthy, a late channel read coarsely", healthy), "",
            "| id | structure | delay [us] | resolution / noise | verdict | delay taken (estimate) | s |",
            "|---|---|---|---|---|---|---|"]
     for r in healthy:

@@ -189,6 +189,13 @@ def wilson(k: int, n: int) -> tuple[float, float]:
     return max(0.0, c - h), min(1.0, c + h)
 
 
+def false_alarms_line(what: str, healthy: list[dict[str, Any]]) -> str:
+    """'`what`: n; false alarms k (95 % bounds ...)': any verdict but none on a healthy device."""
+    fa = sum(1 for r in healthy if r["verdict"] != "none")
+    lo, hi = wilson(fa, len(healthy))
+    return f"{what}: {len(healthy)}; false alarms {fa} (95 % bounds {100 * lo:.1f}-{100 * hi:.1f} %)"
+
+
 def _within(rep: Optional[float], true: Optional[float], tol: float = 0.2) -> Optional[bool]:
     if true is None or not true:
         return None
@@ -202,10 +209,7 @@ def summary(rows: list[dict[str, Any]]) -> str:
     rows = [{**r, "noise_truth": noise_truth(r)} for r in rows]
     healthy = [r for r in rows if r["kind"] == "healthy"]
     effects = [r for r in rows if r["kind"] == "effect"]
-    fa = sum(1 for r in healthy if r["verdict"] != "none")
-    lo, hi = wilson(fa, len(healthy))
-    out = [f"healthy devices with artefacts: {len(healthy)}; false alarms {fa} "
-           f"(95 % bounds {100 * lo:.1f}-{100 * hi:.1f} %)", "",
+    out = [false_alarms_line("healthy devices with artefacts", healthy), "",
            "| artefact | cases | none | other verdicts | noise model within 20 % (level / lag-1 / line / delay) |",
            "|---|---|---|---|---|"]
     for a in ARTEFACTS:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from idm_rs.diagnosis.closer import closer_z, contest
+from idm_rs.diagnosis.closer import contest
 
 N = 4000
 T = np.linspace(0.0, 1.0, N)
@@ -23,7 +23,7 @@ def _zs(noise: np.ndarray, truth_is_b: bool, lags: int) -> np.ndarray:
     for e in noise:
         # residual = data - prediction; a and b sit at +-delta/2 about the truth, or b on it
         r_a, r_b = (e - DELTA, e) if truth_is_b else (e - DELTA / 2, e + DELTA / 2)
-        out.append(closer_z(r_a, r_b, lags))
+        out.append(contest(r_a, r_b, lags).z)
     return np.array(out)
 
 
@@ -50,7 +50,7 @@ def test_correlated_noise_is_counted_in_the_spread() -> None:
 
 def test_residuals_over_different_samples_are_refused() -> None:
     with pytest.raises(ValueError, match="same samples"):
-        closer_z(np.zeros(10), np.zeros(11), 5)
+        contest(np.zeros(10), np.zeros(11), 5)
 
 
 def _contests(d_norm: float, truth_at: float, n_draws: int, seed: int) -> list:

@@ -70,8 +70,3 @@ def contest(r_a: NDArray[np.float64], r_b: NDArray[np.float64], lags: int) -> Co
     var = 4.0 * float(gamma[0] * cd[0] + 2.0 * np.sum(w[1:] * gamma[1:] * cd[1:]))
     return Contest(float(r_a @ r_a - r_b @ r_b), math.sqrt(var) if var > 0.0 else math.nan, float(cd[0]))
 
-
-def closer_z(r_a: NDArray[np.float64], r_b: NDArray[np.float64], lags: int) -> float:
-    """Vuong's z of model b being closer than model a (:meth:`Contest.z`); NaN where they are
-    equal."""
-    return contest(r_a, r_b, lags).z
