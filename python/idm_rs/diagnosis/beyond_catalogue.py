@@ -65,7 +65,7 @@ def term_alone(pb: Problem, cal: CalibratedNull, found: Discovery) -> tuple[FitR
 def _take_alone(pb: Problem, cal: CalibratedNull, d: Discovery, r: FitResult, lib: list[FreeParam]) -> None:
     """`d`'s figures from its form's refit `r` alone from the calibrated null (library
     parameters `lib`): the refit, its RMS, free parameters, library values and ΔBIC."""
-    d.refit, d.rms_after, d.whiteness_z = r, r.rms, whiteness_z(r.residuals)
+    d.refit, d.rms_after, d.whiteness_z = r, r.rms, whiteness_z(r.residuals, pb.obj)
     d.free = [f.at(r.values[f.name]) for f in list(cal.free) + lib]
     d.values = {f.name: (r.values[f.name], r.std.get(f.name)) for f in lib}
     d.delta_bic = cal.fit.chi2 - r.chi2 - len(lib) * pb.ln_n
@@ -144,7 +144,7 @@ def _alone(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal: float, le
     sigma = pb.sigma
     terms = ", ".join(t.symbol for t in best.form.terms)
     # alone, the form must leave noise as discovery's own rule asks: RMS and a white residual
-    wz = whiteness_z(r0.residuals)
+    wz = whiteness_z(r0.residuals, pb.obj)
     if not (delta_bic >= BIC_THRESHOLD and leaves_noise(r0.rms, wz, sigma) and ho <= NOISE_RATIO_OK * sigma
             and ho < ho_cal):
         found.reason += (f"; without {lead.candidate.effect}, the form {terms} alone leaves RMS "

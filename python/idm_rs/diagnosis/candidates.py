@@ -77,7 +77,7 @@ def calibrate_null(pb: Problem, nominal: Nominal) -> CalibratedNull:
     one = FitResult({f.name: f.value(float(x)) for f, x in zip(free, u)}, dict(cal.std), g.search_best,
                     pb.obj.with_cycles(1).n, [], [], one_spec, g.evaluations, True, "population search, one cycle")
     scan_at = [f.at(f.value(float(x))) for f, x in zip(free, g.scan_u)] if g.scan_u is not None else None
-    return CalibratedNull(free, one, one_at, cal, at, bic, whiteness_z(cal.residuals), g, scan_at)
+    return CalibratedNull(free, one, one_at, cal, at, bic, whiteness_z(cal.residuals, pb.obj), g, scan_at)
 
 
 def magnitudes(ep: EffectParam) -> list[float]:
@@ -270,7 +270,7 @@ def make_candidate(pb: Problem, cal: CalibratedNull, eff: Effect, r: FitResult, 
         eff.id, eff.description, {n: v for n, (v, _) in reported.items()},
         {ep.name: r.std[ep.name] for ep in eff.params},
         {n: r.values[n] for n in CALIBRATED}, r.chi2, k, bic, cal.bic - bic, r.rms, math.nan,
-        whiteness_z(r.residuals), screened_only, r.residuals, r.spec,
+        whiteness_z(r.residuals, pb.obj), screened_only, r.residuals, r.spec,
         reported_std={n: s for n, (_, s) in reported.items() if s is not None},
         significance=significance, correlation=corr, at_null=at_null, lr_chi2=cal.fit.chi2 - r.chi2,
         identifiability=assess(r.values, r.std, r.corr, names + [n for n in cal.fit.values if n not in names]),
@@ -311,7 +311,8 @@ def refit_nulls(pb: Problem, nominal: Nominal, cal: CalibratedNull, refits: list
         if n0.chi2 < best.fit.chi2 - 1e-6:
             at = [f.at(n0.values[f.name]) for f in cal.free]
             bic = n0.chi2 + (len(cal.free) + pb.n_offsets) * pb.ln_n
-            best = CalibratedNull(cal.free, n0, at, n0, at, bic, whiteness_z(n0.residuals), cal.search, cal.scan_at)
+            best = CalibratedNull(cal.free, n0, at, n0, at, bic, whiteness_z(n0.residuals, pb.obj), cal.search,
+                                  cal.scan_at)
             source = f"nominal refit from the {c.effect} fit"
     for r in refits:
         against_null(pb, best, r)

@@ -91,7 +91,7 @@ def round_beside(pb: Problem, cal: CalibratedNull, base: ModelSpec, free: list[F
     calibrated_names = {f.name for f in cal.free}
     nominal_start = list(cal.free) + [f for f in at if f.name not in calibrated_names]
     # ignore: no population search behind this null (search None, which candidate_starts handles)
-    null = CalibratedNull(nominal_start, r, at, r, at, bic, whiteness_z(r.residuals), None)  # type: ignore[arg-type]
+    null = CalibratedNull(nominal_start, r, at, r, at, bic, whiteness_z(r.residuals, pb.obj), None)  # type: ignore[arg-type]
     structure = r.spec.structure
     effects = [e for e in CATALOGUE if e.id not in named and e.applies(structure, r.spec.params)]
     if not effects:

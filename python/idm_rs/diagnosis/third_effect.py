@@ -199,7 +199,7 @@ def _the_other_two(pb: Problem, cal: CalibratedNull, out: ThirdSearch, kept: lis
     r, base, free = refit
     sigma = pb.sigma
     names = f"{kept[0].id} and {kept[1].id}"
-    if not leaves_noise(r.rms, whiteness_z(r.residuals), sigma):
+    if not leaves_noise(r.rms, whiteness_z(r.residuals, pb.obj), sigma):
         out.reason += f"; {names} alone leave a systematic residual (RMS {r.rms / sigma:.2f} x noise)"
         return
     at = [f.at(r.values[f.name]) for f in free]

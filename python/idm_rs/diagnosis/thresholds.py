@@ -45,6 +45,15 @@ NOISE_RATIO_OK = 1.1
 #: white noise: one-sided 3e-5 beyond 4; every healthy development device's calibrated residual
 #: was within 1.4, devices with an effect mostly beyond 4.4)
 WHITENESS_Z = 4.0
+#: a reading whose resolution step is at least this many times the residual's RMS has its
+#: rounding's mean error taken out before the whiteness test (noise below ~0.4 of a step leaves
+#: the rounding undithered: its mean error's first harmonic is exp(-2 pi^2 (sigma/step)^2) of
+#: step / pi, 4 % at 0.4 of a step, 29 % at a quarter; a residual's RMS counts the rounding's
+#: own error, so noise of 0.4 step reads 0.5 step)
+ROUNDING_COARSE = 2.0
+#: harmonics of the rounding's mean error fitted (the second's amplitude is the first's to the
+#: fourth power: 0.7 % of step / 2 pi at a quarter step of noise)
+ROUNDING_HARMONICS = 2
 #: candidates refitted over everything after the one-cycle fits of all of them
 REFIT_TOP = 3
 #: significance level of the likelihood-ratio test of an effect against the null model it

@@ -559,7 +559,7 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
     trial.delta_bic = cx.null_chi2 - r.chi2 - len(lib) * math.log(objective.n)
     trial.free = [f.at(r.values[f.name]) for f in list(start) + lib]
     trial.rms_after = r.rms
-    trial.whiteness_z = whiteness_z(r.residuals)
+    trial.whiteness_z = whiteness_z(r.residuals, objective)
     vals = {f.name: r.values[f.name] for f in lib}
     trial.values = {n: (v, r.std.get(n)) for n, v in vals.items()}
     if cx.heldout is not None:
