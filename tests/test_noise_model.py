@@ -384,3 +384,24 @@ def test_a_thermal_drift_is_not_taken_for_a_zero_drifting_in_each_file(tmp_path:
     assert d.verdict == "thermal_drift", d.reason
     cand = next(c for c in d.ranking if c.effect == "thermal_drift")
     assert abs(cand.params["drift_rate"] / -5e-6 - 1.0) < 0.05
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("misset,noise,delay,resolution", [
+    # the calibration bends to the delay (17.4 x noise), the rounds from it stopped at 13.6 us
+    ({"m1": 0.062, "m2": -0.051, "fric_alpha": -0.099}, 1.50e-9, 19.2e-6, 4.12e-9),
+    # read at 4 x its noise: the undithered rounding read whiteness z 4.7 on the null with the delay
+    ({"m1": 0.101, "d33": 0.092, "fric_alpha": -0.050}, 1.97e-9, 5.46e-6, 7.90e-9),
+])
+def test_a_late_channel_under_a_bent_calibration_and_a_coarse_reading_is_healthy(
+        tmp_path: Path, misset: dict, noise: float, delay: float, resolution: float) -> None:
+    true = idm_rs.Params()
+    nominal = true.replace(**{n: getattr(true, n) * (1 + f) for n, f in misset.items()},
+                           normal_force=true.effective_normal_force)
+    case = make_case(tmp_path / "late", nominal_params=nominal,
+                     true_params=true.replace(normal_force=true.effective_normal_force), experiments=EXPERIMENTS,
+                     noise=SensorNoise(rms=noise, delay_s=delay), resolution=resolution, seed=5, dt=2e-8)
+    d = idm_rs.diagnose(case, progress=False)
+    assert d.verdict == "none", d.reason
+    m = d.noise.model
+    assert m is not None and m.delay_applied and abs(m.delay_s - delay) < 0.2e-6
