@@ -598,7 +598,7 @@ def test_a_triple_whose_first_effect_is_a_look_alike_of_the_third_names_the_othe
                                values={f.name: f.x0 for f in start})
 
     monkeypatch.setattr(third_effect, "fit", fit)
-    monkeypatch.setattr(third_effect, "whiteness_z", lambda res: 0.5)
+    monkeypatch.setattr(third_effect, "whiteness_z", lambda res, of=None: 0.5)
     monkeypatch.setattr(third_effect, "make_candidate",
                         lambda pb, cal, eff, r, screened_only: SimpleNamespace(effect=eff.id, rms_after=r.rms,
                                                                                heldout_rms=math.nan))

@@ -30,7 +30,7 @@ def _fit(chi2: float, n: int, values: dict[str, float], spec: ModelSpec) -> FitR
 
 def test_a_candidate_above_a_refitted_null_is_reported_at_that_null():
     n = 1000
-    pb = SimpleNamespace(ln_n=math.log(n), n_offsets=1, sigma=1.0)
+    pb = SimpleNamespace(ln_n=math.log(n), n_offsets=1, sigma=1.0, obj=None)
     spec = ModelSpec(Structure("lps", 1), {"mu_k": 0.5, "m2": 0.3}, {})
     eff = next(e for e in CATALOGUE if e.id == "incline")
     free = [SimpleNamespace(name=k) for k in CALIBRATED]

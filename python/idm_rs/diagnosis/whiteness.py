@@ -42,10 +42,13 @@ def rounding_removed(residuals: Sequence[NDArray[np.float64]], of: "Objective") 
     ROUNDING_HARMONICS sines are fitted by least squares over every file; the residuals
     unchanged where the reading is not that coarse, or the objective whitens them (a
     measurement model: they are no longer the reading less its expectation)."""
-    step = of.recording.resolution_m
     res = list(residuals)
-    files = [of.recording.experiments[j] for j in of.experiments]
-    if (step <= 0.0 or of.measurement is not None or len(res) != len(files)
+    rec = getattr(of, "recording", None)  # None: no reading to take the rounding from
+    if rec is None or rec.resolution_m <= 0.0:
+        return res
+    step = rec.resolution_m
+    files = [rec.experiments[j] for j in of.experiments]
+    if (of.measurement is not None or len(res) != len(files)
             or any(r.size > e.x.size or not np.all(np.isfinite(r)) for r, e in zip(res, files))):
         return res
     pooled = np.concatenate(res) if res else np.zeros(0)
