@@ -38,7 +38,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 from bench_confusion import _misset, diagnosed  # noqa: E402
 from bench_confusion_beyond import _bound, _look_alike_right, right  # noqa: E402
-from bench_rows import append, finished, shard  # noqa: E402
+from bench_rows import append, finished, shard, stage_shares  # noqa: E402
 
 #: (name, model, piezo hysteresis)
 STRUCTURES: tuple[tuple[str, str, bool], ...] = (
@@ -229,7 +229,7 @@ def summary(rows: list[dict[str, Any]]) -> str:
             lines.append(f"| {r['id']} | {r['structure']} | {r['mechanism']} | {r['size_after_refit']:.1f} | "
                          f"{r['verdict']} | {'✓' if r['right'] else '✗'} | {', '.join(r['terms']) or '–'} | "
                          f"{r['seconds']:.0f} |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n\n" + stage_shares(rows)
 
 
 def main(argv: Optional[list[str]] = None) -> int:
