@@ -116,7 +116,8 @@ def engine_samples(dt: float, amp: float, rise: float) -> np.ndarray:
 
 
 def trajectory() -> None:
-    print("| drive | integrator | step [s] | max |x1 - reference| [nm] | x1 at 10 ms [um] | Fh sub-steps per half step |")
+    print("| drive | integrator | step [s] | max |x1 - reference| [nm] | x1 at 10 ms [um] "
+          "| Fh sub-steps per half step |")
     print("|---|---|---|---|---|---|")
     for amp, rise in ((80.0, 0.5e-3), (150.0, 0.1e-3)):
         ref = engine_samples(1e-8, amp, rise)
