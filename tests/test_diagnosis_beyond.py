@@ -170,6 +170,34 @@ def test_a_third_effect_is_searched_only_after_a_supported_pair_that_leaves_stru
     assert not wants_third(pb, second(None))
 
 
+def test_a_third_effect_is_searched_beside_the_closer_pair():
+    """Where the round from the leader and the pair fitted jointly both leave structure, the
+    third is searched beside the one with the lower chi^2 (seed-1 triple 14: weight friction +
+    hysteresis from the leader, drift + sensor lag jointly, the joint pair the closer); the same
+    pair found both ways is taken from the leader's round; a pair that leaves noise is no base."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis.diagnose import third_base
+    from idm_rs.diagnosis.results import SecondSearch
+
+    pb = SimpleNamespace(sigma=1.0)
+
+    def search(first, second, chi2, rms=1.3, z=15.0):
+        pair = _candidate(second, 300.0, rms, z)
+        pair.chi2 = chi2
+        return SecondSearch(first=_candidate(first, 500.0, 1.5, 20.0), pair=pair, over_second_alone=50.0,
+                            base=object())
+
+    leader = search("weight_friction", "piezo_hysteresis", 9000.0)
+    joint = search("thermal_drift", "sensor_lowpass", 4000.0)
+    assert third_base(pb, leader, joint) is joint
+    assert third_base(pb, leader, search("thermal_drift", "sensor_lowpass", 9500.0)) is leader
+    assert third_base(pb, leader, search("piezo_hysteresis", "weight_friction", 100.0)) is leader
+    assert third_base(pb, leader, search("thermal_drift", "sensor_lowpass", 10.0, rms=1.0, z=1.0)) is leader
+    assert third_base(pb, leader, None) is leader
+    assert third_base(pb, search("incline", "stribeck", 10.0, rms=1.0, z=1.0), None) is None
+
+
 @pytest.mark.slow
 def test_three_catalogue_effects_are_named_together(tmp_path):
     """Issue 51's device: an incline, a sensor lag and a thermal drift, each clear alone: the
