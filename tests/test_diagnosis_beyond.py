@@ -198,6 +198,44 @@ def test_a_third_effect_is_searched_beside_the_closer_pair():
     assert third_base(pb, search("incline", "stribeck", 10.0, rms=1.0, z=1.0), None) is None
 
 
+def test_a_third_that_leaves_structure_is_rescanned_before_it_is_judged(monkeypatch):
+    """A third round whose best triple leaves structure refits each supported third from its own
+    1-D scans (as a pair is) until one explains the residual, and judges the best of them
+    (seed-1 triple 15: weight drag, incline and creep on the DPS 4, the calibration compensating
+    all three; the triples from the pair's optimum stopped at 1.08 and 1.30 x noise)."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis import third_effect
+
+    pb = SimpleNamespace(sigma=1.0)
+    refit = lambda c: SimpleNamespace(candidate=c)  # noqa: E731
+    twin = refit(_candidate("friction_asymmetry", 900.0, 1.08, 14.8))
+    truth = refit(_candidate("incline", 800.0, 1.3, 33.6))
+    screened = refit(_candidate("thermal_drift", 100.0, 2.9, 66.0))
+    screened.candidate.screened_only = True
+    monkeypatch.setattr(third_effect, "round_beside", lambda *a, **k: (None, "null", [twin, truth, screened]))
+    rescans: list[str] = []
+
+    def rescanned(pb_, null, eff, r):
+        assert null == "null"
+        rescans.append(eff.id)
+        return refit(_candidate("incline", 1200.0, 1.01, 0.5)) if eff.id == "incline" else r
+
+    judged: list[object] = []
+    monkeypatch.setattr(third_effect, "rescanned", rescanned)
+    monkeypatch.setattr(third_effect, "judge_triple", lambda pb_, cal, out, best, *a: judged.append(best) or out)
+    out = third_effect.third_round(pb, None, ("weight_friction", "piezo_creep"), None, [], 1.0, None, [])
+    assert rescans == ["friction_asymmetry", "incline"]  # the screened-only candidate is not refitted
+    assert judged[0].candidate.effect == "incline" and judged[0].candidate.rms_after == 1.01
+    assert [c.effect for c in out.ranking] == ["incline", "friction_asymmetry", "thermal_drift"]
+    # a best third that explains is judged as fitted, with no rescan
+    rescans.clear()
+    monkeypatch.setattr(third_effect, "round_beside",
+                        lambda *a, **k: (None, "null", [refit(_candidate("incline", 900.0, 1.0, 0.3))]))
+    third_effect.third_round(pb, None, ("weight_friction", "piezo_creep"), None, [], 1.0, None, [])
+    assert rescans == []
+
+
 @pytest.mark.slow
 def test_three_catalogue_effects_are_named_together(tmp_path):
     """Issue 51's device: an incline, a sensor lag and a thermal drift, each clear alone: the
