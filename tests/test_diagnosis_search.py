@@ -345,6 +345,25 @@ def test_the_noise_floor_is_cross_checked_against_the_residual(long_rec):
     assert cross_check(type(noise)(2 * NOISE, NOISE, NOISE, 400, 0.0, source="given"), res).sigma == 2 * NOISE
 
 
+def test_the_residual_noise_is_not_read_from_the_slips_bends():
+    # a stick-slip residual bends sharply at every slip: here a step of 400 x the noise over 3
+    # samples every 500 (a 200 Hz drive read at 100 kHz), 1 % of the second differences at 20-110 x
+    # the noise. A trim of the largest 0.1 % read this residual's noise 2.7 x high; the clip at
+    # RESIDUAL_CLIP robust scales reads the noise alone, and white noise alone as before
+    rng = np.random.default_rng(1)
+    n = 200_000
+    noise = rng.normal(0.0, NOISE, n)
+    slip = np.zeros(n)
+    for k in range(0, n, 500):
+        slip[k:k + 3] += np.array([100.0, 250.0, 380.0]) * NOISE
+        slip[k + 3:] += 400.0 * NOISE
+    res = [noise + slip]
+    s, rel = residual_sigma(res)
+    assert s == pytest.approx(NOISE, rel=0.01)
+    s0, _ = residual_sigma([noise])
+    assert s0 == pytest.approx(float(np.std(noise)), rel=3 * rel)
+
+
 def test_a_diverged_experiment_leaves_a_finite_jacobian(long_rec, monkeypatch):
     # the engine returns NaN readings (and derivatives) for an experiment whose run diverged: its
     # residual is a constant penalty and its columns zero, never NaN (least squares would fail)

@@ -67,6 +67,10 @@ LR_ALPHA = 1e-3
 #: the rest and residual noise estimates disagree when they differ by more than this many
 #: combined standard deviations
 DISAGREE_SIGMAS = 3.0
+#: second differences of a fitted residual farther than this many robust scales from their median
+#: are a slip's or a stick's bend, not noise, and are left out of the residual's noise estimate
+#: (a Gaussian loses 5.7e-7 of its samples there; :func:`.noise.residual_sigma`)
+RESIDUAL_CLIP = 5.0
 #: window length of the time localisation [s]: a tenth of a 100 Hz drive cycle, two fast edges
 WINDOW_S = 1e-3
 #: z-score above which a window's or a phase's residual energy counts as systematic
