@@ -47,8 +47,10 @@ def one(case: str, nfev: int) -> str:
     blew: set[int] = set()
     pb.obj.jacobian(nom.spec, free, np.zeros(len(free)), unbounded=blew)
     s = {"plain": 0.0, "sensitivities": 0.0, "differences": 0.0}
-    plain, sens, diff = sim.predict, sim.predict_with_sensitivities, fitting.difference_columns
+    plain, checked, sens, diff = (sim.predict, sim.predict_checked, sim.predict_with_sensitivities,
+                                  fitting.difference_columns)
     sim.predict = _timed(s, "plain", plain)  # type: ignore[method-assign]
+    sim.predict_checked = _timed(s, "plain", checked)  # type: ignore[method-assign]
     sim.predict_with_sensitivities = _timed(s, "sensitivities", sens)  # type: ignore[method-assign]
     fitting.difference_columns = _timed(s, "differences", diff)  # type: ignore[assignment]
     try:
@@ -56,7 +58,8 @@ def one(case: str, nfev: int) -> str:
         r = fit(pb.obj, nom.spec, free, max_nfev=nfev)
         total, runs = time.perf_counter() - t0, sim.evaluations - e0
     finally:
-        sim.predict, sim.predict_with_sensitivities, fitting.difference_columns = plain, sens, diff  # type: ignore
+        sim.predict, sim.predict_checked, sim.predict_with_sensitivities, fitting.difference_columns = (  # type: ignore
+            plain, checked, sens, diff)
     s["plain"] -= s["differences"]  # the differences' batches go through `predict` too
     name = case.rstrip("/").split("/")[-1]
     return (f"| {name} | {len(rec.experiments)} | {len(blew)} | {len(free)} | {r.nfev} | {runs} | {total:.1f} | "

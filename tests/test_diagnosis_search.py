@@ -14,6 +14,7 @@ import pytest
 
 import idm_rs
 import idm_rs.diagnosis.candidates as diag_candidates
+import idm_rs.diagnosis.case_model as diag_case_model
 import idm_rs.diagnosis.fitting as diag_fitting
 import idm_rs.diagnosis.problem as diag_problem
 import idm_rs.diagnosis.rules as diag_rules
@@ -95,6 +96,54 @@ def test_difference_columns_from_the_fits_last_evaluation_are_the_same_to_the_bi
     monkeypatch.setattr(Objective, "jacobian", lambda self, *x, at=None, **k: jacobian(self, *x, **k))
     b = fit(obj, SPEC, free, max_nfev=4)
     assert a.chi2 == b.chi2 and a.values == b.values and np.array_equal(a.jac, b.jac)
+
+
+def test_a_jacobian_where_the_fit_just_ran_takes_the_derivative_passes_alone(long_rec, monkeypatch):
+    """A fit's Jacobian at the model its last evaluation ran (readings that finished at the fit
+    step) asks the engine for the derivative passes alone, not the run again: the same residual
+    and Jacobian to the bit, and the fit's own result unchanged; readings from a run that did
+    not finish at the fit step are never reused."""
+    sim = CaseSimulator(long_rec)
+    obj = Objective(long_rec, sim, NOISE)
+    free = [_m2(1.02), FreeParam("mu_k", 0.55, 0.3, 0.7, 0.01, diag_problem.set_tied_friction)]
+    u = np.array([0.1, -0.2])
+    at, clean = obj.predict_checked(apply(SPEC, free, u))
+    assert clean
+    alone: list[bool] = []
+    batch = diag_case_model.run_batch
+    monkeypatch.setattr(diag_case_model, "run_batch",
+                        lambda *a, **k: alone.append(bool(k.get("derivatives_only"))) or batch(*a, **k))
+    r0, J0, _ = obj.jacobian(SPEC, free, u)
+    assert alone and not any(alone)
+    alone.clear()
+    r1, J1, _ = obj.jacobian(SPEC, free, u, at=at, at_clean=True)
+    assert alone[0], "the derivative passes alone"
+    alone.clear()
+    r2, J2, _ = obj.jacobian(SPEC, free, u, at=at)
+    assert not any(alone), "readings not known to be clean are not reused"
+    assert np.array_equal(r0, r1) and np.array_equal(J0, J1) and np.array_equal(J0, J2)
+    alone.clear()
+    a = fit(obj.with_cycles(2), SPEC, free, max_nfev=5)
+    assert True in alone, "the fit's Jacobians took the derivative passes alone"
+    jacobian = Objective.jacobian
+    monkeypatch.setattr(Objective, "jacobian",
+                        lambda self, *x, at_clean=False, **k: jacobian(self, *x, **k))
+    b = fit(obj.with_cycles(2), SPEC, free, max_nfev=5)
+    assert a.chi2 == b.chi2 and a.values == b.values and np.array_equal(a.jac, b.jac)
+    # a run the engine had to retry at a finer step is not clean: its readings are never reused
+    def retried(*a, **k):
+        res = batch(*a, **k)
+        res["reasons"] = [r or "diverged at t = 1e-3 s with dt = 2e-7 s; finished at dt = 1e-7 s"
+                          for r in res["reasons"]]
+        return res
+
+    monkeypatch.setattr(diag_case_model, "run_batch", retried)
+    assert obj.predict_checked(apply(SPEC, free, u))[1] is False
+    monkeypatch.setattr(diag_case_model, "run_batch",
+                        lambda *a, **k: alone.append(bool(k.get("derivatives_only"))) or retried(*a, **k))
+    alone.clear()
+    fit(obj.with_cycles(2), SPEC, free, max_nfev=3)
+    assert alone and True not in alone
 
 
 def test_the_fit_jacobian_is_the_engines_exact_one(long_rec):

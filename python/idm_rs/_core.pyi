@@ -189,6 +189,7 @@ def start_batch(
     t_starts: Optional[NDArray[np.float64]] = None,
     initial_states: Optional[NDArray[np.float64]] = None,
     sensitivities: Optional[list[str]] = None,
+    derivatives_only: bool = False,
 ) -> BatchRun:
     """Start a batch on a background thread. One row per point: ``params`` (P, 24) in
     ``param_names()`` order (NaN ``normal_force`` = derived from the masses), ``effects``
@@ -199,7 +200,9 @@ def start_batch(
     A row that is not a valid point gets status 4 (the others run); tables of the wrong shape
     raise ValueError. ``sensitivities`` (names: Table 1 and effect parameters, initial-state
     components) adds to the result ``sensitivities`` (one (names x samples) array per point:
-    d trace / d name) and ``sensitivity_names``; needs recorded readings (``record_every``)."""
+    d trace / d name) and ``sensitivity_names``; needs recorded readings (``record_every``).
+    ``derivatives_only``: the derivative passes alone, for points whose plain run the caller
+    already has (finished at the configured step): traces come back empty."""
 
 def check_run(
     params: dict[str, float],

@@ -93,6 +93,7 @@ fn rk4_batch_outputs_are_pinned_to_the_bit() {
             final_states: false,
             skip_cycles: 0,
             sensitivities: Vec::new(),
+            derivatives_only: false,
         };
         let r = run_batch(&cfg, &specs, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
         for o in &r {

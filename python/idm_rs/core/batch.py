@@ -178,7 +178,7 @@ def start(tables: Tables, structure: Structure, *, t_end: float, method: str = "
           rtol: float = 1e-7, atol: float = 1e-7, first_step: Optional[float] = None, retries: int = 2,
           threads: Optional[int] = None, record_every: int = 0, final_states: bool = False,
           skip_cycles: int = STARTUP_CYCLES, sensitivities: Optional[Sequence[str]] = None,
-          solver: Optional[Solver] = None) -> Any:
+          derivatives_only: bool = False, solver: Optional[Solver] = None) -> Any:
     """Start the batch on a background thread; returns an ``engine.BatchRun`` (``progress()``,
     ``wait(timeout)``, ``cancel()``, ``result()``). Settings as in :func:`run`; ``solver`` (an
     :class:`idm_rs.Solver`) gives the method's settings as one object."""
@@ -196,7 +196,8 @@ def start(tables: Tables, structure: Structure, *, t_end: float, method: str = "
         t_ends = np.where(np.isnan(t_ends), float(t_end), t_ends)
     return engine.start_batch(config, float(t_end), _c(tables.params), _c(tables.effects), tables.wave_kind,
                               _c(tables.wave_fields), tables.sampled, _c(t_ends), _c(tables.t_starts),
-                              _c(tables.initial_states), sensitivity_names(sensitivities) or None)
+                              _c(tables.initial_states), sensitivity_names(sensitivities) or None,
+                              bool(derivatives_only))
 
 
 def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: float, **how: Any) -> dict[str, Any]:
@@ -216,8 +217,10 @@ def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: 
     ``sensitivities`` (names, as for :func:`idm_rs.simulate`; needs ``record_every``): then
     ``sensitivities`` is an array (points x names x samples) of d trace / d name (NaN where a
     point did not finish or its derivatives could not be taken, with the reason in ``reasons``), and
-    ``sensitivity_names``; ``solver`` (an :class:`idm_rs.Solver`) for the method's settings as
-    one object."""
+    ``sensitivity_names``; ``derivatives_only`` (with ``sensitivities``, RK4): the caller has
+    every point's readings from a run of the same points that finished at ``dt``, so only the
+    derivative passes run (their numbers bit for bit those after the run) and ``traces`` come
+    back empty; ``solver`` (an :class:`idm_rs.Solver`) for the method's settings as one object."""
     tables = points if isinstance(points, Tables) else Tables.from_points(points)
     handle = start(tables, structure, t_end=t_end, **how)
     try:

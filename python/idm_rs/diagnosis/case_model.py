@@ -103,25 +103,42 @@ class CaseSimulator:
         `experiments`: only these are simulated (the others come back as empty arrays)."""
         return self._run(specs, cycles, retries, [], experiments)[0]
 
+    def predict_checked(self, specs: Sequence[ModelSpec], cycles: Optional[int] = None
+                        ) -> tuple[list[list[NDArray[np.float64]]], list[bool]]:
+        """``predict``, and per spec whether every experiment's run finished at the fit step
+        (no retry at a finer one, nothing diverged): its readings can then stand for the run a
+        derivative request would repeat (``predict_with_sensitivities``'s `readings`)."""
+        out, _, why = self._run(specs, cycles, 2, [], None)
+        return out, [all(not w for w in row) and all(np.all(np.isfinite(p)) for p in r)
+                     for row, r in zip(why, out)]
+
     def predict_with_sensitivities(self, specs: Sequence[ModelSpec], names: Sequence[str],
                                    cycles: Optional[int] = None, retries: int = 2,
-                                   experiments: Optional[Sequence[int]] = None
+                                   experiments: Optional[Sequence[int]] = None,
+                                   readings: Optional[Sequence[Sequence[NDArray[np.float64]]]] = None
                                    ) -> tuple[list[list[NDArray[np.float64]]], list[list[NDArray[np.float64]]],
                                               list[list[str]]]:
         """``predict`` plus, per spec and experiment, the readings' derivatives with respect to
         ``names`` (Table 1 or effect parameters, from the engine: exact for the discrete run),
         shape (names, samples), NaN where they could not be taken, and the engine's reasons
-        per spec and experiment (empty when all is well); `experiments` as for ``predict``."""
-        return self._run(specs, cycles, retries, list(names), experiments)
+        per spec and experiment (empty when all is well); `experiments` as for ``predict``.
+        `readings`: per spec, every experiment's readings from a run of the same model that
+        finished at the fit step (``predict_checked``): that run is not repeated, the engine
+        takes only the derivative passes (the same numbers bit for bit), and these come back
+        as the predictions."""
+        return self._run(specs, cycles, retries, list(names), experiments, readings)
 
     def _run(self, specs: Sequence[ModelSpec], cycles: Optional[int], retries: int, names: list[str],
-             experiments: Optional[Sequence[int]] = None
+             experiments: Optional[Sequence[int]] = None,
+             readings: Optional[Sequence[Sequence[NDArray[np.float64]]]] = None
              ) -> tuple[list[list[NDArray[np.float64]]], list[list[NDArray[np.float64]]], list[list[str]]]:
         n = len(self.recording.experiments)
         out: list[list[NDArray[np.float64]]] = [[np.zeros(0)] * n for _ in specs]
         sens: list[list[NDArray[np.float64]]] = [[np.zeros((len(names), 0))] * n for _ in specs]
         why: list[list[str]] = [[""] * n for _ in specs]
-        extra = {"sensitivities": names} if names else {}
+        extra: dict[str, Any] = {"sensitivities": names} if names else {}
+        if readings is not None and names:
+            extra["derivatives_only"] = True
         by_structure: dict[Structure, list[int]] = {}
         for i, s in enumerate(specs):
             by_structure.setdefault(s.structure, []).append(i)
@@ -139,7 +156,7 @@ class CaseSimulator:
             for j in wanted:
                 if self._wave_rows[j] is None:
                     self._predict_sampled(j, structure, idx, prows, erows, horizons[j], retries, out, sens, why,
-                                          names)
+                                          names, derivatives_only=readings is not None)
             if not sawtooth:
                 continue
             # experiment-major: neighbouring points share a duration, so the engine's lanes of
@@ -166,6 +183,12 @@ class CaseSimulator:
                     if self._later is not None:
                         self._mix_later(res, traces, block + k * len(idx) + a, horizons[j][1], i, j, out, sens, why,
                                         names)
+        if readings is not None and names:
+            # the derivative passes alone came back without traces: the caller's readings stand
+            wanted = range(n_exp) if experiments is None else sorted(set(experiments))
+            for i in range(len(specs)):
+                for j in wanted:
+                    out[i][j] = np.asarray(readings[i][j])
         return out, sens, why
 
     def _mix_later(self, res: dict[str, Any], traces: Sequence[NDArray[np.float64]], point: int, samples: int,
@@ -212,13 +235,16 @@ class CaseSimulator:
     def _predict_sampled(self, j: int, structure: Structure, idx: list[int], prows: list[list[float]],
                          erows: dict[bool, list[list[float]]], horizon: tuple[float, int], retries: int,
                          out: list[list[NDArray[np.float64]]], sens: list[list[NDArray[np.float64]]],
-                         why: list[list[str]], names: list[str]) -> None:
-        """Experiment j (a sampled drive) for the specs `idx`: one batch with its samples."""
+                         why: list[list[str]], names: list[str], derivatives_only: bool = False) -> None:
+        """Experiment j (a sampled drive) for the specs `idx`: one batch with its samples (with
+        `derivatives_only`, its derivative passes alone: see ``predict_with_sensitivities``)."""
         e = self.recording.experiments[j]
         tables = Tables(np.asarray(prows), np.asarray(erows[self._reversed[j]]), "sampled", np.ones((len(idx), 1)),
                         sampled=(np.ascontiguousarray(e.t), np.ascontiguousarray(e.voltage)),
                         t_ends=np.full(len(idx), horizon[0]))
-        extra = {"sensitivities": names} if names else {}
+        extra: dict[str, Any] = {"sensitivities": names} if names else {}
+        if names and derivatives_only:
+            extra["derivatives_only"] = True
         res = run_batch(tables, structure, t_end=horizon[0], method="rk4", dt=self.dt, retries=retries,
                         threads=self.threads, record_every=self.record_every, **extra)
         self.evaluations += len(idx)

@@ -190,6 +190,13 @@ class Objective:
     def predict(self, specs: Sequence[ModelSpec], retries: int = 2) -> list[list[NDArray[np.float64]]]:
         return self.sim.predict(specs, self.cycles, retries)
 
+    def predict_checked(self, spec: ModelSpec) -> tuple[list[NDArray[np.float64]], bool]:
+        """One model's readings and whether its runs finished at the fit step everywhere
+        (:meth:`CaseSimulator.predict_checked`): then they stand for the run a Jacobian at the
+        same model would repeat (:meth:`jacobian`'s `at_clean`)."""
+        preds, clean = self.sim.predict_checked([spec], self.cycles)
+        return preds[0], clean[0]
+
     def profiled(self, preds: Sequence[NDArray[np.float64]]) -> tuple[list[NDArray[np.float64]], list[float]]:
         """Residuals [m] with the best offset removed, and those offsets [m]."""
         res, offs = [], []
@@ -245,7 +252,7 @@ class Objective:
 
     def jacobian(self, base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64],
                  fd_step: float = 1e-3, unbounded: Optional[set[int]] = None,
-                 at: Optional[Sequence[NDArray[np.float64]]] = None
+                 at: Optional[Sequence[NDArray[np.float64]]] = None, at_clean: bool = False
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
         """(residual vector, its exact Jacobian in the fit units, simulations run) at `u`. An
         experiment whose derivatives could not be taken (the engine reports why: e.g. a fast
@@ -256,12 +263,17 @@ class Objective:
         Jacobians). Nothing is remembered beyond the set the caller passes: a blow-up at one
         model says nothing about another (kept on the simulator, it once made a fit's path
         depend on every fit run before it — RESULTS 15e). `at`: the plain predictions at `u`
-        when the caller has them (a fit's last evaluation), so the differences need no base run."""
+        when the caller has them (a fit's last evaluation), so the differences need no base run;
+        with `at_clean` (its runs finished at the fit step, :meth:`predict_checked`) the engine
+        does not repeat that run either and takes only the derivative passes (a fit's Jacobian
+        is always taken where its last evaluation ran: a fifth of the Jacobian's cost)."""
         names, D = engine_chain(base, free, u)
         spec = apply(base, free, u)
         skip = unbounded if unbounded is not None else set()
         exact = [j for j in self.experiments if j not in skip]
-        pred_sets, sens_sets, _ = self.sim.predict_with_sensitivities([spec], names, self.cycles, experiments=exact)
+        given = [list(at)] if at is not None and at_clean and names else None
+        pred_sets, sens_sets, _ = self.sim.predict_with_sensitivities([spec], names, self.cycles, experiments=exact,
+                                                                      readings=given)
         preds, sens = list(pred_sets[0]), sens_sets[0]
         dpred: list[NDArray[np.float64]] = [np.zeros((len(free), 0))] * len(preds)
         bad = [j for j in self.experiments if j in skip]
@@ -313,15 +325,15 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     free = inside_bounds(free)
     # the last evaluation's residual vector and predictions: the Jacobian at that point takes
     # its differences' base from them, and the result its residuals
-    cache: dict[bytes, tuple[NDArray[np.float64], list[NDArray[np.float64]]]] = {}
+    cache: dict[bytes, tuple[NDArray[np.float64], list[NDArray[np.float64]], bool]] = {}
     unbounded: set[int] = set()  # experiments whose derivatives blew up in this fit (see Objective.jacobian)
 
     def fun(u: NDArray[np.float64]) -> NDArray[np.float64]:
         key = u.tobytes()
         if key not in cache:
             cache.clear()
-            preds = objective.predict([apply(base, free, u)])[0]
-            cache[key] = (objective.vector(preds), preds)
+            preds, clean = objective.predict_checked(apply(base, free, u))
+            cache[key] = (objective.vector(preds), preds, clean)
         if progress:
             progress()
         return cache[key][0]
@@ -331,7 +343,8 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
 
     def jac(u: NDArray[np.float64]) -> NDArray[np.float64]:
         hit = cache.get(u.tobytes())
-        _, J, _ = objective.jacobian(base, free, u, fd_step, unbounded, at=hit[1] if hit else None)
+        _, J, _ = objective.jacobian(base, free, u, fd_step, unbounded, at=hit[1] if hit else None,
+                                     at_clean=hit[2] if hit else False)
         if progress:
             progress()
         return J

@@ -45,6 +45,11 @@ pub struct BatchConfig {
     /// names whose derivatives of the recorded readings each point returns (Table 1 and
     /// effect parameters, initial-state components; see `sensitivity/`); empty for none
     pub sensitivities: Vec<String>,
+    /// only the derivative passes: the caller already has every point's readings from a plain
+    /// run of the same points that finished at the configured step (a fit's Jacobian is taken
+    /// where its last evaluation ran), so that run is not repeated; traces come back empty and
+    /// the metrics carry only `status` Ok and `dt_used`. Needs `sensitivities` and RK4.
+    pub derivatives_only: bool,
 }
 
 impl BatchConfig {
@@ -54,6 +59,9 @@ impl BatchConfig {
         self.method.validate()?;
         if !self.method.is_fixed() && self.record_every > 0 {
             return Err("recording readings needs method 'rk4'".into());
+        }
+        if self.derivatives_only && self.sensitivities.is_empty() {
+            return Err("derivatives_only runs the derivative passes alone: name the sensitivities".into());
         }
         if !self.sensitivities.is_empty() && self.record_every == 0 {
             return Err(
@@ -172,6 +180,7 @@ mod tests {
             final_states: false,
             skip_cycles: 0,
             sensitivities: Vec::new(),
+            derivatives_only: false,
         }
     }
 
@@ -407,6 +416,43 @@ mod tests {
         assert!(r[0].reason.contains("'tau_amp'"), "{}", r[0].reason);
         c.record_every = 0;
         assert!(c.validate().unwrap_err().contains("record_every"));
+    }
+
+    #[test]
+    fn derivatives_alone_equal_those_taken_after_the_run_bitwise() {
+        let mut c = cfg(Method::Rk4 { dt: 5e-9 }, Structure::Lps);
+        c.record_every = 200;
+        c.t_end = 1e-3;
+        c.sensitivities = ["mu_k", "m2", "k_ground"].iter().map(|s| s.to_string()).collect();
+        let mut sp = specs(3);
+        sp[1].effects.k_ground = 500.0;
+        let full = run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        let mut alone = c.clone();
+        alone.derivatives_only = true;
+        let r = run_batch(&alone, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        for (a, f) in r.iter().zip(&full) {
+            assert_eq!(a.metrics.status, Status::Ok);
+            assert!(a.trace.is_empty(), "the plain run is not repeated");
+            assert_eq!(a.metrics.dt_used, 5e-9);
+            assert!(!f.sensitivities.is_empty());
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&a.sensitivities), bits(&f.sensitivities));
+        }
+        // a pass that fails says why, its derivatives empty (the caller's readings stand)
+        let mut coarse = alone.clone();
+        coarse.method = RK4;
+        coarse.record_every = 50;
+        coarse.t_end = 2e-3;
+        let r = run_batch(&coarse, &sp[2..], &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        assert!(
+            r[0].reason.contains("stability limit of the friction state"),
+            "{}",
+            r[0].reason
+        );
+        assert!(r[0].sensitivities.is_empty());
+        // nothing to differentiate is refused
+        alone.sensitivities.clear();
+        assert!(alone.validate().unwrap_err().contains("derivatives_only"));
     }
 
     #[test]

@@ -255,6 +255,40 @@ fn add_sensitivities(
     }
 }
 
+/// The derivative passes of `valid` points whose plain run the caller already has
+/// (`BatchConfig::derivatives_only`): each as [`add_sensitivities`] takes them after a run that
+/// finished at the configured step, without that run. A pass that fails leaves its point's
+/// derivatives NaN with the reason, as after a run.
+fn derivatives_alone(
+    cfg: &BatchConfig,
+    valid: &[Ready],
+    cancel: &AtomicBool,
+    done: &AtomicUsize,
+    out: &mut [Option<PointOutput>],
+) {
+    let Some(dt) = cfg.method.fixed_step() else {
+        return; // refused by BatchConfig::validate
+    };
+    for r in valid {
+        if cancel.load(Ordering::Relaxed) {
+            break;
+        }
+        let ran = PointOutput {
+            metrics: PointMetrics {
+                dt_used: dt,
+                steps: r.steps as u64,
+                ..PointMetrics::with_status(Status::Ok)
+            },
+            ..PointOutput::with_status(Status::Ok)
+        };
+        let res = add_sensitivities(cfg, r, ran, cancel);
+        if res.is_some() {
+            done.fetch_add(1, Ordering::Relaxed);
+        }
+        out[r.index] = res;
+    }
+}
+
 /// End of the lane group starting at `start`: up to CHUNK points sharing one state layout.
 fn lane_group_end(valid: &[Ready], start: usize) -> usize {
     let dim = valid[start].model.layout.dim;
@@ -283,6 +317,10 @@ fn run_chunk(
                 done.fetch_add(1, Ordering::Relaxed);
             }
         }
+    }
+    if cfg.derivatives_only {
+        derivatives_alone(cfg, &valid, cancel, done, &mut out);
+        return out;
     }
     let mut start = 0;
     while start < valid.len() {

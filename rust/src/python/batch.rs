@@ -97,7 +97,7 @@ impl BatchRun {
 /// `wave_fields(wave_kind)` order; optional per-point `t_ends`, `t_starts` [s] and
 /// `initial_states` (P, state size).
 #[pyfunction]
-#[pyo3(signature = (config, t_end, params, effects, wave_kind, wave_fields, sampled=None, t_ends=None, t_starts=None, initial_states=None, sensitivities=None))]
+#[pyo3(signature = (config, t_end, params, effects, wave_kind, wave_fields, sampled=None, t_ends=None, t_starts=None, initial_states=None, sensitivities=None, derivatives_only=false))]
 #[allow(clippy::too_many_arguments)]
 fn start_batch(
     py: Python<'_>,
@@ -112,6 +112,7 @@ fn start_batch(
     t_starts: Option<PyReadonlyArray1<'_, f64>>,
     initial_states: Option<PyReadonlyArray2<'_, f64>>,
     sensitivities: Option<Vec<String>>,
+    derivatives_only: bool,
 ) -> PyResult<BatchRun> {
     let samples = sampled
         .as_ref()
@@ -127,6 +128,7 @@ fn start_batch(
         final_states: config.final_states,
         skip_cycles: config.skip_cycles,
         sensitivities: sensitivities.unwrap_or_default(),
+        derivatives_only,
     };
     let (p, e, w) = (slice2(&params), slice2(&effects), slice2(&wave_fields));
     let (te, ts) = (t_ends.as_ref().map(slice1), t_starts.as_ref().map(slice1));

@@ -1,0 +1,98 @@
+"""Probe: where a diagnosis's fits go, by call site, and what each bought.
+
+    python benches/probe_fit_sites.py CASE_DIR [--jsonl OUT]
+
+Wraps the diagnosis's `fit` (in every module that imported it), runs `idm_rs.diagnose` on the
+recording in CASE_DIR, and prints per call site (the chain of diagnosis functions that called
+it, and the stage's open parts): the fits, their seconds, the evaluations used against the
+budget, how many stopped on the budget, and what the last half of each budget-stopped fit's
+evaluations took off chi^2 (a fit that moves chi^2 by less than the noise in its last
+iterations bought nothing with them). With --jsonl, every fit as one line. A probe, not a test:
+the wrapped diagnosis is the package's, unchanged.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import importlib
+import json
+import pkgutil
+import time
+import traceback
+from typing import Any
+
+import numpy as np
+
+import idm_rs
+import idm_rs.diagnosis as diagnosis
+from idm_rs.diagnosis import fitting, progress
+
+
+def _site() -> str:
+    """The diagnosis functions on the stack (outermost first), without the probe and `fit`."""
+    names = [f"{f.filename.rsplit('/', 1)[-1][:-3]}.{f.name}" for f in traceback.extract_stack()
+             if "/idm_rs/diagnosis/" in f.filename]
+    keep = [n for n in names if not n.startswith(("diagnose.diagnose", "fitting.fit"))]
+    return " > ".join(keep[-4:])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("case")
+    ap.add_argument("--jsonl")
+    a = ap.parse_args()
+    modules = [importlib.import_module(m.name) for m in pkgutil.walk_packages(diagnosis.__path__, "idm_rs.diagnosis.")]
+    plain_fit = fitting.fit
+    rows: list[dict[str, Any]] = []
+
+    def fit(objective: fitting.Objective, base: Any, free: Any, **kw: Any) -> Any:
+        trace: list[float] = []
+        plain_vector = objective.vector
+
+        def vector(preds: Any) -> Any:
+            v = plain_vector(preds)
+            trace.append(float(v @ v))
+            return v
+
+        objective.vector = vector  # type: ignore[method-assign]
+        t = time.perf_counter()
+        try:
+            out = plain_fit(objective, base, free, **kw)
+        finally:
+            del objective.vector
+        budget = kw.get("max_nfev", 40)
+        half = trace[len(trace) // 2] if trace else np.nan
+        rows.append(dict(site=_site(), parts=" / ".join(progress._OPEN.get()), seconds=time.perf_counter() - t,
+                         nfev=out.nfev, budget=budget, free=len(free), cycles=objective.cycles, n=objective.n,
+                         chi2_first=trace[0] if trace else np.nan, chi2=out.chi2,
+                         gain_last_half=(half - min(trace[len(trace) // 2:])) if trace else np.nan,
+                         message=out.message))
+        return out
+
+    for m in modules + [fitting]:
+        if getattr(m, "fit", None) is plain_fit:
+            m.fit = fit  # type: ignore[attr-defined]
+    t0 = time.perf_counter()
+    d = idm_rs.diagnose(a.case, progress=False)
+    total = time.perf_counter() - t0
+    print(f"verdict {d.verdict} in {total:.1f} s; {len(rows)} fits, {sum(r['seconds'] for r in rows):.1f} s in fits")
+    by: dict[str, list[dict[str, Any]]] = collections.defaultdict(list)
+    for r in rows:
+        by[r["site"]].append(r)
+    print("| site | fits | s | nfev used / budget | on budget | chi2 gain, last half of budget-stopped (median) |")
+    print("|---|---|---|---|---|---|")
+    for site, rs in sorted(by.items(), key=lambda kv: -sum(r["seconds"] for r in kv[1])):
+        capped = [r for r in rs if r["nfev"] >= r["budget"]]
+        gains = [r["gain_last_half"] for r in capped]
+        print(f"| {site} | {len(rs)} | {sum(r['seconds'] for r in rs):.1f} | {sum(r['nfev'] for r in rs)} / "
+              f"{sum(r['budget'] for r in rs)} | {len(capped)} | {np.median(gains) if gains else float('nan'):.3g} |")
+    print(json.dumps({k: round(v, 1) for k, v in d.timings.items()}))
+    if a.jsonl:
+        with open(a.jsonl, "w") as fh:
+            for r in rows:
+                fh.write(json.dumps(r) + "\n")
+
+
+if __name__ == "__main__":
+    main()
