@@ -325,6 +325,28 @@ mod tests {
     }
 
     #[test]
+    fn a_small_batch_balanced_over_threads_returns_every_point_in_its_place() {
+        // four points of different spans (a fit's experiments) run lane by lane in tasks
+        // balanced by span on two threads: the same bits, in the same order, as on one
+        let mut c = cfg(RK4, Structure::Lps);
+        c.record_every = 50;
+        let mut sp = specs(4);
+        for (s, t) in sp.iter_mut().zip([0.9e-3, 0.4e-3, 1.1e-3, 2e-3]) {
+            s.t_end = Some(t);
+        }
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| run_batch(&c, &sp, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap())
+        };
+        let (one, two) = (run(1), run(2));
+        for (k, (a, b)) in one.iter().zip(&two).enumerate() {
+            assert_eq!(a.trace, b.trace, "point {k}");
+            assert_eq!(a.metrics.final_position.to_bits(), b.metrics.final_position.to_bits());
+            assert_eq!(a.trace.len(), (sp[k].t_end.unwrap() / 2e-8 / 50.0).round() as usize + 1);
+        }
+    }
+
+    #[test]
     fn recorded_traces_equal_simulate_readings_for_mixed_durations() {
         let mut c = cfg(RK4, Structure::Dps(4));
         c.record_every = 50;
