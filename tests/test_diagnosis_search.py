@@ -122,6 +122,14 @@ def test_a_jacobian_where_the_fit_just_ran_takes_the_derivative_passes_alone(lon
     r2, J2, _ = obj.jacobian(SPEC, free, u, at=at)
     assert not any(alone), "readings not known to be clean are not reused"
     assert np.array_equal(r0, r1) and np.array_equal(J0, J1) and np.array_equal(J0, J2)
+    # a channel read between two fit steps (two runs mixed per experiment): the same
+    late = Objective(long_rec, sim.late(0.3e-6), NOISE).with_cycles(2)
+    at_late, clean_late = late.predict_checked(apply(SPEC, free, u))
+    assert clean_late
+    r3, J3, _ = late.jacobian(SPEC, free, u)
+    r4, J4, _ = late.jacobian(SPEC, free, u, at=at_late, at_clean=True)
+    assert np.array_equal(r3, r4) and np.array_equal(J3, J4)
+    assert not np.array_equal(J3, obj.with_cycles(2).jacobian(SPEC, free, u)[1]), "the delay is in the Jacobian"
     alone.clear()
     a = fit(obj.with_cycles(2), SPEC, free, max_nfev=5)
     assert True in alone, "the fit's Jacobians took the derivative passes alone"
