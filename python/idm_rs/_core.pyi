@@ -202,7 +202,7 @@ def start_batch(
     components) adds to the result ``sensitivities`` (one (names x samples) array per point:
     d trace / d name) and ``sensitivity_names``; needs recorded readings (``record_every``).
     ``derivatives_only``: the derivative passes alone, for points whose plain run the caller
-    already has (finished at the configured step): traces come back empty."""
+    already has (finished at the configured step): no traces come back."""
 
 def check_run(
     params: dict[str, float],

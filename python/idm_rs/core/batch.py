@@ -219,8 +219,8 @@ def run(points: Union[Sequence[Point], Tables], structure: Structure, *, t_end: 
     point did not finish or its derivatives could not be taken, with the reason in ``reasons``), and
     ``sensitivity_names``; ``derivatives_only`` (with ``sensitivities``, RK4): the caller has
     every point's readings from a run of the same points that finished at ``dt``, so only the
-    derivative passes run (their numbers bit for bit those after the run) and ``traces`` come
-    back empty; ``solver`` (an :class:`idm_rs.Solver`) for the method's settings as one object."""
+    derivative passes run (their numbers bit for bit those after the run) and no ``traces``
+    come back; ``solver`` (an :class:`idm_rs.Solver`) for the method's settings as one object."""
     tables = points if isinstance(points, Tables) else Tables.from_points(points)
     handle = start(tables, structure, t_end=t_end, **how)
     try:

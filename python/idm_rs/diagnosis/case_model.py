@@ -136,9 +136,8 @@ class CaseSimulator:
         out: list[list[NDArray[np.float64]]] = [[np.zeros(0)] * n for _ in specs]
         sens: list[list[NDArray[np.float64]]] = [[np.zeros((len(names), 0))] * n for _ in specs]
         why: list[list[str]] = [[""] * n for _ in specs]
-        extra: dict[str, Any] = {"sensitivities": names} if names else {}
-        if readings is not None and names:
-            extra["derivatives_only"] = True
+        alone = readings is not None and bool(names)  # the derivative passes alone
+        extra: dict[str, Any] = {"sensitivities": names, "derivatives_only": alone} if names else {}
         by_structure: dict[Structure, list[int]] = {}
         for i, s in enumerate(specs):
             by_structure.setdefault(s.structure, []).append(i)
@@ -156,7 +155,7 @@ class CaseSimulator:
             for j in wanted:
                 if self._wave_rows[j] is None:
                     self._predict_sampled(j, structure, idx, prows, erows, horizons[j], retries, out, sens, why,
-                                          names, derivatives_only=readings is not None)
+                                          names, derivatives_only=alone)
             if not sawtooth:
                 continue
             # experiment-major: neighbouring points share a duration, so the engine's lanes of
@@ -183,7 +182,8 @@ class CaseSimulator:
                     if self._later is not None:
                         self._mix_later(res, traces, block + k * len(idx) + a, horizons[j][1], i, j, out, sens, why,
                                         names)
-        if readings is not None and names:
+        if alone:
+            assert readings is not None
             # the derivative passes alone came back without traces: the caller's readings stand
             wanted = range(n_exp) if experiments is None else sorted(set(experiments))
             for i in range(len(specs)):
@@ -242,9 +242,7 @@ class CaseSimulator:
         tables = Tables(np.asarray(prows), np.asarray(erows[self._reversed[j]]), "sampled", np.ones((len(idx), 1)),
                         sampled=(np.ascontiguousarray(e.t), np.ascontiguousarray(e.voltage)),
                         t_ends=np.full(len(idx), horizon[0]))
-        extra: dict[str, Any] = {"sensitivities": names} if names else {}
-        if names and derivatives_only:
-            extra["derivatives_only"] = True
+        extra: dict[str, Any] = {"sensitivities": names, "derivatives_only": derivatives_only} if names else {}
         res = run_batch(tables, structure, t_end=horizon[0], method="rk4", dt=self.dt, retries=retries,
                         threads=self.threads, record_every=self.record_every, **extra)
         self.evaluations += len(idx)

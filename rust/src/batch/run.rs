@@ -257,8 +257,8 @@ fn add_sensitivities(
 
 /// The derivative passes of `valid` points whose plain run the caller already has
 /// (`BatchConfig::derivatives_only`): each as [`add_sensitivities`] takes them after a run that
-/// finished at the configured step, without that run. A pass that fails leaves its point's
-/// derivatives NaN with the reason, as after a run.
+/// finished at the configured step, without that run. A pass that fails leaves its point
+/// without derivatives (empty: there is no trace to size them by) and says why in its reason.
 fn derivatives_alone(
     cfg: &BatchConfig,
     valid: &[Ready],
