@@ -7,7 +7,7 @@ recording in CASE_DIR, and prints per call site (the chain of diagnosis function
 it, and the stage's open parts): the fits, their seconds, the evaluations used against the
 budget, how many stopped on the budget, and what the last half of each budget-stopped fit's
 evaluations took off chi^2 (a fit that moves chi^2 by less than the noise in its last
-iterations bought nothing with them). With --jsonl, every fit as one line. A probe, not a test:
+iterations bought nothing with them). With --jsonl, every fit as one line, written as it finishes. A probe, not a test:
 the wrapped diagnosis is the package's, unchanged.
 """
 
@@ -44,6 +44,9 @@ def main() -> None:
     a = ap.parse_args()
     modules = [importlib.import_module(m.name) for m in pkgutil.walk_packages(diagnosis.__path__, "idm_rs.diagnosis.")]
     plain_fit = fitting.fit
+    t0 = time.perf_counter()
+    # every fit as it finishes, so a long case can be read while it runs
+    sink = open(a.jsonl, "w") if a.jsonl else None
     rows: list[dict[str, Any]] = []
 
     def fit(objective: fitting.Objective, base: Any, free: Any, **kw: Any) -> Any:
@@ -67,13 +70,16 @@ def main() -> None:
                          nfev=out.nfev, budget=budget, free=len(free), cycles=objective.cycles, n=objective.n,
                          chi2_first=trace[0] if trace else np.nan, chi2=out.chi2,
                          gain_last_half=(half - min(trace[len(trace) // 2:])) if trace else np.nan,
-                         message=out.message))
+                         message=out.message, effects=sorted(getattr(base, "effects", {}) or {}),
+                         names=[f.name for f in free], t_end=time.perf_counter() - t0))
+        if sink is not None:
+            sink.write(json.dumps(rows[-1], default=str) + "\n")
+            sink.flush()
         return out
 
     for m in modules + [fitting]:
         if getattr(m, "fit", None) is plain_fit:
             m.fit = fit  # type: ignore[attr-defined]
-    t0 = time.perf_counter()
     d = idm_rs.diagnose(a.case, progress=False)
     total = time.perf_counter() - t0
     print(f"verdict {d.verdict} in {total:.1f} s; {len(rows)} fits, {sum(r['seconds'] for r in rows):.1f} s in fits")
@@ -88,10 +94,8 @@ def main() -> None:
         print(f"| {site} | {len(rs)} | {sum(r['seconds'] for r in rs):.1f} | {sum(r['nfev'] for r in rs)} / "
               f"{sum(r['budget'] for r in rs)} | {len(capped)} | {np.median(gains) if gains else float('nan'):.3g} |")
     print(json.dumps({k: round(v, 1) for k, v in d.timings.items()}))
-    if a.jsonl:
-        with open(a.jsonl, "w") as fh:
-            for r in rows:
-                fh.write(json.dumps(r) + "\n")
+    if sink is not None:
+        sink.close()
 
 
 if __name__ == "__main__":

@@ -180,7 +180,8 @@ def test_a_third_effect_is_searched_beside_the_closer_pair():
     from idm_rs.diagnosis.diagnose import third_base
     from idm_rs.diagnosis.results import SecondSearch
 
-    pb = SimpleNamespace(sigma=1.0)
+    pb = SimpleNamespace(sigma=1.0, obj=SimpleNamespace(n=100))
+    cal = SimpleNamespace(fit=SimpleNamespace(chi2=20000.0))  # 19,900 above noise: every pair here took >= 52 %
 
     def search(first, second, chi2, rms=1.3, z=15.0):
         pair = _candidate(second, 300.0, rms, z)
@@ -190,12 +191,48 @@ def test_a_third_effect_is_searched_beside_the_closer_pair():
 
     leader = search("weight_friction", "piezo_hysteresis", 9000.0)
     joint = search("thermal_drift", "sensor_lowpass", 4000.0)
-    assert third_base(pb, leader, joint) is joint
-    assert third_base(pb, leader, search("thermal_drift", "sensor_lowpass", 9500.0)) is leader
-    assert third_base(pb, leader, search("piezo_hysteresis", "weight_friction", 100.0)) is leader
-    assert third_base(pb, leader, search("thermal_drift", "sensor_lowpass", 10.0, rms=1.0, z=1.0)) is leader
-    assert third_base(pb, leader, None) is leader
-    assert third_base(pb, search("incline", "stribeck", 10.0, rms=1.0, z=1.0), None) is None
+    assert third_base(pb, cal, leader, joint) == (joint, None)
+    assert third_base(pb, cal, leader, search("thermal_drift", "sensor_lowpass", 9500.0)) == (leader, None)
+    assert third_base(pb, cal, leader, search("piezo_hysteresis", "weight_friction", 100.0)) == (leader, None)
+    at_noise = search("thermal_drift", "sensor_lowpass", 10.0, rms=1.0, z=1.0)
+    assert third_base(pb, cal, leader, at_noise) == (leader, None)
+    assert third_base(pb, cal, leader, None) == (leader, None)
+    assert third_base(pb, cal, search("incline", "stribeck", 10.0, rms=1.0, z=1.0), None) == (None, None)
+
+
+def test_no_third_effect_is_searched_beside_a_pair_that_took_a_small_share_of_the_misfit():
+    """The third round's gate: the share of the chi^2 the calibrated null leaves above noise that
+    the pair took (the named triples' pairs of the effect-set bench took 0.58-0.99; a pair that
+    took a tenth of it, incline + weight friction beside a friction periodic in position, only
+    mimics part of something else). Below a third no third is searched and the pair is returned
+    as the one passed over; the share is 1 where the null leaves nothing above noise."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis.diagnose import third_base
+    from idm_rs.diagnosis.results import SecondSearch
+    from idm_rs.diagnosis.third_effect import pair_share
+
+    pb = SimpleNamespace(sigma=1.0, obj=SimpleNamespace(n=18804))
+
+    def search(chi2):
+        pair = _candidate("weight_friction", 300.0, 11.0, 70.0)
+        pair.chi2 = chi2
+        return SecondSearch(first=_candidate("incline", 500.0, 11.6, 70.0), pair=pair, over_second_alone=50.0,
+                            base=object())
+
+    cal = SimpleNamespace(fit=SimpleNamespace(chi2=11.62**2 * 18804))  # row 21: 11.62 x noise
+    weak = search(11.00**2 * 18804)  # the pair at 11.00 x noise: 10 % of the excess
+    assert pair_share(pb, cal, weak) == pytest.approx((11.62**2 - 11.0**2) / (11.62**2 - 1.0))
+    assert third_base(pb, cal, weak, None) == (None, weak)
+    strong = search(6.07**2 * 18804)  # seed-0 triple 10's pair: 58 %
+    assert pair_share(pb, cal, strong) > 0.7
+    assert third_base(pb, cal, strong, weak) == (strong, None)
+    # just either side of a third
+    excess = cal.fit.chi2 - 18804
+    assert third_base(pb, cal, search(cal.fit.chi2 - 0.34 * excess), None)[0] is not None
+    assert third_base(pb, cal, search(cal.fit.chi2 - 0.32 * excess), None)[0] is None
+    # a null at noise leaves nothing to share: the gate does not apply
+    assert pair_share(pb, SimpleNamespace(fit=SimpleNamespace(chi2=18000.0)), weak) == 1.0
 
 
 def test_a_third_that_leaves_structure_is_rescanned_before_it_is_judged(monkeypatch):

@@ -53,12 +53,13 @@ from .results import Alternative, Candidate, Diagnosis, SecondSearch, ThirdSearc
 from .rules import better_of, by_rank, candidate_explains, is_finite, null_leaves_noise
 from .screening import Screened, near_degenerate
 from .second_effect import joint_pair, partial_leader, search_second_effect
-from .third_effect import search_third_effect, wants_third
+from .third_effect import pair_share, search_third_effect, wants_third
 from .thresholds import (
     FIT_DT,
     NULL_REFITS,
     REFIT_TOP,
     SEPARATION,
+    THIRD_PAIR_SHARE,
 )
 from .verdict import alternatives_to, decide_verdict, rank_with_heldout
 
@@ -366,8 +367,17 @@ def _second_effect_stage(s: _State) -> None:
     else:
         s.reason += f"; second effect: {second.reason}"
     s.second = second
+    for search in (second, joint):
+        if search is not None and search.pair is not None:
+            search.misfit_share = pair_share(s.pb, s.cal, search)
     s.clock.lap("second effect")
-    base = third_base(s.pb, second, joint)
+    base, small = third_base(s.pb, s.cal, second, joint)
+    if small is not None:
+        s.reason += (f"; no third effect searched: {small.first.effect} with "
+                     f"{small.pair.effect if small.pair else '-'} took {pair_share(s.pb, s.cal, small):.0%} of the "
+                     f"misfit the calibrated model leaves above noise (a third is searched beside a pair that "
+                     f"took at least {THIRD_PAIR_SHARE:.0%}: of three effects missing, the two that explain "
+                     f"most take about two thirds)")
     if base is not None:
         # a pair both effects support that leaves structure: a third from the model with the two
         s.clock.begin("third effect")
@@ -385,19 +395,26 @@ def _second_effect_stage(s: _State) -> None:
         s.clock.lap("third effect")
 
 
-def third_base(pb: Problem, second: SecondSearch, joint: Optional[SecondSearch]) -> Optional[SecondSearch]:
+def third_base(pb: Problem, cal: CalibratedNull, second: SecondSearch, joint: Optional[SecondSearch]
+               ) -> tuple[Optional[SecondSearch], Optional[SecondSearch]]:
     """The pair a third effect is searched beside: of the round from the leader's optimum
     (`second`) and the pair fitted jointly (`joint`), those both of whose effects pay their way
-    but that leave structure (:func:`.third_effect.wants_third`), the one with the lower chi^2.
+    but that leave structure (:func:`.third_effect.wants_third`), the one with the lower chi^2,
+    where it took at least THIRD_PAIR_SHARE of what the calibrated null `cal` leaves above noise
+    (:func:`.third_effect.pair_share`). Returns (that pair or None, the pair passed over for its
+    small share or None).
     Both can stand short of noise, the joint one the closer (a sensor lag, piezo hysteresis and a
     thermal drift on the LPS: weight friction led, hysteresis beside it left 8.64 x noise, drift
     and sensor lag fitted jointly 5.26 x; searched beside the first pair only, the third named
-    nothing). The same pair found both ways is taken from the leader's round. None: no third."""
+    nothing). The same pair found both ways is taken from the leader's round."""
     pairs = [second]
     if joint is not None and joint is not second and _effects(joint) != _effects(second):
         pairs.append(joint)
     pairs = [p for p in pairs if not p.named and wants_third(pb, p)]
-    return min(pairs, key=lambda p: p.pair.chi2 if p.pair is not None else math.inf, default=None)
+    best = min(pairs, key=lambda p: p.pair.chi2 if p.pair is not None else math.inf, default=None)
+    if best is not None and pair_share(pb, cal, best) < THIRD_PAIR_SHARE:
+        return None, best
+    return best, None
 
 
 def _effects(search: SecondSearch) -> set[str]:

@@ -173,10 +173,14 @@ class SecondSearch:
     #: the effects so judged
     twins: list[Any] = field(default_factory=list)
     twins_judged: list[str] = field(default_factory=list)
+    #: the share of the chi^2 the calibrated null leaves above noise that the pair took
+    #: (:func:`.third_effect.pair_share`; a third is searched only beside a pair with a third of it)
+    misfit_share: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "first": self.first.effect, "joint": self.joint, "twins": [t.to_dict() for t in self.twins],
+            "first": self.first.effect, "joint": self.joint, "misfit_share": self.misfit_share,
+            "twins": [t.to_dict() for t in self.twins],
             "second": self.pair.effect if self.pair else None,
             "named": self.named,
             "reason": self.reason, "shares": self.shares, "heldout_rms": self.heldout_rms,

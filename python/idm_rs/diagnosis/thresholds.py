@@ -294,6 +294,13 @@ SECOND_TOP = 2
 #: 2.06 x noise)
 JOINT_TOP = 3
 JOINT_NFEV = 30
+#: a third effect is searched beside a pair only where the pair took at least this share of the
+#: chi^2 the calibrated null leaves above noise: of three effects missing, the two that explain
+#: most alone take about two thirds of it where their signatures are orthogonal. Measured
+#: (benches/RESULTS.md §59): the pairs of the named triples of the effect-set bench took 0.58-0.99
+#: of it; the pairs of discovery devices (a force outside the catalogue) 0.08-0.93, each third
+#: round from those below a third naming nothing after 2-7 minutes of fits
+THIRD_PAIR_SHARE = 1.0 / 3.0
 
 # --- discovery: the inferred force ------------------------------------------------------------
 
