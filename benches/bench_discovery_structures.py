@@ -206,7 +206,11 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int, diagnose: bool = True) -> 
             "terms": [t.symbol for t in found.form.terms] if found is not None and found.form is not None else [],
             "reason": d.reason, "timings": out.get("timings", {}), "timings_parts": out.get("timings_parts", {}),
             "discovery_seconds": found.seconds if found is not None else 0.0,
-            "whiteness_z_after": found.whiteness_z if found is not None else math.nan}
+            "whiteness_z_after": found.whiteness_z if found is not None else math.nan,
+            # the share of the calibrated null's misfit above noise the second round's pair took
+            # (a third effect is searched only beside a pair with a third of it)
+            "pair_misfit_share": d.second.misfit_share if d.second is not None else math.nan,
+            "third_searched": d.third is not None}
 
 
 def summary(rows: list[dict[str, Any]]) -> str:

@@ -110,7 +110,11 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int) -> dict[str, Any]:
             **judged(c["effects"], d.verdict, alts, separated),
             "seconds": seconds, "calibrated_over_noise": d.rms_calibrated / d.noise.sigma,
             "after_over_noise": d.rms_after / d.noise.sigma, "reason": d.reason, "timings": dict(d.timings),
-            "timings_parts": dict(d.timings_parts)}
+            "timings_parts": dict(d.timings_parts),
+            # the share of the calibrated null's misfit above noise the second round's pair took
+            # (a third effect is searched only beside a pair with a third of it)
+            "pair_misfit_share": d.second.misfit_share if d.second is not None else float("nan"),
+            "third_searched": d.third is not None}
 
 
 def summary(rows: list[dict[str, Any]]) -> str:
