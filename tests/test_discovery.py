@@ -566,6 +566,46 @@ def test_a_form_far_from_noise_is_judged_without_elimination_refits(monkeypatch,
         assert "does not explain the residual" in trial.reason and "whiteness z = " in trial.reason
 
 
+def test_a_form_is_refitted_once_from_each_distinct_start(monkeypatch):
+    """The refit starts at the calibrated values, the nominal values and where the force's fit
+    left them; from the nominal values as given (discovery's path after "not_converged") the
+    first two are the same start, and the same fit twice would leave the same result (16-22 s
+    each on the discovery bench): each distinct start once, in their order."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis.discovery import FoundForm
+    from idm_rs.diagnosis.discovery import refit as rf
+    from idm_rs.diagnosis.fitting import FreeParam
+
+    def param(name, x0):
+        return FreeParam(name, x0, 0.5 * x0, 2.0 * x0, 0.05 * x0, lambda p, e, v: None)
+
+    nominal_free = [param("m1", 0.4), param("mu_k", 0.5)]
+    by = {t.param: t for t in MAIN_TERMS}
+    form = FoundForm("main", [by["lib_volt"]], {"lib_volt": 1e-3}, 0.0, 0.1, [1.0])
+    seen: list[list[float]] = []
+
+    class Stop(Exception):
+        pass
+
+    def refit_from(objective, spec, starts, form_, progress):
+        seen.extend([[f.x0 for f in st] for st in starts])
+        raise Stop
+
+    monkeypatch.setattr(rf, "_refit_from", refit_from)
+    nominal = SimpleNamespace(params={"m1": 0.4, "mu_k": 0.5})
+    for calibrated, force, expected in [
+            (nominal_free, {}, [[0.4, 0.5]]),  # from the nominal values as given: one start
+            (nominal_free, {"m1": 0.41}, [[0.4, 0.5], [0.41, 0.5]]),
+            ([param("m1", 0.44), param("mu_k", 0.5)], {"m1": 0.44}, [[0.44, 0.5], [0.4, 0.5]])]:
+        seen.clear()
+        cx = rf._Context(None, "spec", calibrated, SimpleNamespace(sigma=1e-9, n=100), None, 5e-9, nominal, None,
+                         1e4, 1e-8, "")
+        with pytest.raises(Stop):
+            rf._judged(cx, "main", form, SimpleNamespace(parameters=force), {})
+        assert seen == expected
+
+
 def test_the_next_experiment_is_sought_for_a_look_alike_the_data_do_not_choose(monkeypatch):
     """A discovered form with a look-alike that fits as well: the drive search of the catalogue's
     look-alikes runs on the two refitted models, named by their terms; nothing without one."""
