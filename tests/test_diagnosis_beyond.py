@@ -177,8 +177,8 @@ def test_a_third_effect_is_searched_beside_the_closer_pair():
     pair found both ways is taken from the leader's round; a pair that leaves noise is no base."""
     from types import SimpleNamespace
 
-    from idm_rs.diagnosis.diagnose import third_base
     from idm_rs.diagnosis.results import SecondSearch
+    from idm_rs.diagnosis.third_effect import third_base
 
     pb = SimpleNamespace(sigma=1.0, obj=SimpleNamespace(n=100))
     cal = SimpleNamespace(fit=SimpleNamespace(chi2=20000.0))  # 19,900 above noise: every pair here took >= 52 %
@@ -208,9 +208,8 @@ def test_no_third_effect_is_searched_beside_a_pair_that_took_a_small_share_of_th
     as the one passed over; the share is 1 where the null leaves nothing above noise."""
     from types import SimpleNamespace
 
-    from idm_rs.diagnosis.diagnose import third_base
     from idm_rs.diagnosis.results import SecondSearch
-    from idm_rs.diagnosis.third_effect import pair_share
+    from idm_rs.diagnosis.third_effect import pair_share, third_base
 
     pb = SimpleNamespace(sigma=1.0, obj=SimpleNamespace(n=18804))
 

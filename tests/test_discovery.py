@@ -318,7 +318,7 @@ def test_a_term_with_a_look_alike_in_the_library_is_reported_with_it():
     coef = {"V": 5e-4, "x1 - x2": -5e-4 / d33}
     term = other.terms[0]
     assert abs(other.coefficients[term.param] / coef[b] - 1) < 0.02
-    from idm_rs.diagnosis.discovery.refit import look_alike_note
+    from idm_rs.diagnosis.discovery.form_words import look_alike_note
 
     assert "cannot be told apart from" in look_alike_note(form)
 
@@ -444,6 +444,7 @@ def test_a_look_alike_is_refitted_in_the_found_terms_place_and_the_data_choose(m
     and x1 - x2, ΔBIC +0 on the off-catalogue voltage-force device)."""
     from idm_rs.diagnosis.discovery import FoundForm
     from idm_rs.diagnosis.discovery import refit as rf
+    from idm_rs.diagnosis.discovery.form_words import look_alike_note
 
     dx = next(t for t in MAIN_TERMS if t.param == "lib_dx")
     volt = next(t for t in MAIN_TERMS if t.param == "lib_volt")
@@ -460,7 +461,7 @@ def test_a_look_alike_is_refitted_in_the_found_terms_place_and_the_data_choose(m
     out = rf._separated(cx, best, {"main": None})
     assert [t.symbol for t in out.form.terms] == [kept]
     assert (out.look_alike.form.terms[0].symbol if out.look_alike is not None else None) == named
-    note = rf.look_alike_note(out.form) + out.separation
+    note = look_alike_note(out.form) + out.separation
     if named:
         assert "cannot be told apart from V" in note and "the data do not choose" in note
     elif kept == "V":

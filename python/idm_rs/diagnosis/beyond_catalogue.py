@@ -11,7 +11,8 @@ import numpy as np
 
 from .case_model import ModelSpec
 from .discovery import Discovery
-from .discovery.refit import eliminated, look_alike_note
+from .discovery.form_words import look_alike_note
+from .discovery.refit import eliminated
 from .fitting import FitResult, FreeParam, apply, fit
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .rules import leaves_noise

@@ -53,7 +53,7 @@ from .results import Alternative, Candidate, Diagnosis, SecondSearch, ThirdSearc
 from .rules import better_of, by_rank, candidate_explains, is_finite, null_leaves_noise
 from .screening import Screened, near_degenerate
 from .second_effect import joint_pair, partial_leader, search_second_effect
-from .third_effect import pair_share, search_third_effect, wants_third
+from .third_effect import pair_share, search_third_effect, third_base
 from .thresholds import (
     FIT_DT,
     NULL_REFITS,
@@ -393,32 +393,6 @@ def _second_effect_stage(s: _State) -> None:
             s.reason += f"; third effect: {third.reason}"
         s.third = third
         s.clock.lap("third effect")
-
-
-def third_base(pb: Problem, cal: CalibratedNull, second: SecondSearch, joint: Optional[SecondSearch]
-               ) -> tuple[Optional[SecondSearch], Optional[SecondSearch]]:
-    """The pair a third effect is searched beside: of the round from the leader's optimum
-    (`second`) and the pair fitted jointly (`joint`), those both of whose effects pay their way
-    but that leave structure (:func:`.third_effect.wants_third`), the one with the lower chi^2,
-    where it took at least THIRD_PAIR_SHARE of what the calibrated null `cal` leaves above noise
-    (:func:`.third_effect.pair_share`). Returns (that pair or None, the pair passed over for its
-    small share or None).
-    Both can stand short of noise, the joint one the closer (a sensor lag, piezo hysteresis and a
-    thermal drift on the LPS: weight friction led, hysteresis beside it left 8.64 x noise, drift
-    and sensor lag fitted jointly 5.26 x; searched beside the first pair only, the third named
-    nothing). The same pair found both ways is taken from the leader's round."""
-    pairs = [second]
-    if joint is not None and joint is not second and _effects(joint) != _effects(second):
-        pairs.append(joint)
-    pairs = [p for p in pairs if not p.named and wants_third(pb, p)]
-    best = min(pairs, key=lambda p: p.pair.chi2 if p.pair is not None else math.inf, default=None)
-    if best is not None and pair_share(pb, cal, best) < THIRD_PAIR_SHARE:
-        return None, best
-    return best, None
-
-
-def _effects(search: SecondSearch) -> set[str]:
-    return {search.first.effect, search.pair.effect if search.pair is not None else ""}
 
 
 def _second_alone(s: _State, second: SecondSearch) -> None:

@@ -18,7 +18,7 @@ from .progress import part
 from .results import SecondSearch, ThirdSearch
 from .rules import by_rank, candidate_explains, is_eligible, is_finite, leaves_noise
 from .second_effect import rescanned, round_beside
-from .thresholds import BIC_THRESHOLD, POLISH_NFEV, RETRIED_TWINS
+from .thresholds import BIC_THRESHOLD, POLISH_NFEV, RETRIED_TWINS, THIRD_PAIR_SHARE
 from .whiteness import whiteness_z
 
 
@@ -45,6 +45,32 @@ def pair_share(pb: Problem, cal: CalibratedNull, second: SecondSearch) -> float:
     if pair is None or not excess > 0.0:
         return 1.0
     return (cal.fit.chi2 - pair.chi2) / excess
+
+
+def third_base(pb: Problem, cal: CalibratedNull, second: SecondSearch, joint: Optional[SecondSearch]
+               ) -> tuple[Optional[SecondSearch], Optional[SecondSearch]]:
+    """The pair a third effect is searched beside: of the round from the leader's optimum
+    (`second`) and the pair fitted jointly (`joint`), those both of whose effects pay their way
+    but that leave structure (:func:`wants_third`), the one with the lower chi^2, where it took
+    at least THIRD_PAIR_SHARE of what the calibrated null `cal` leaves above noise
+    (:func:`pair_share`). Both can stand short of noise, the joint one the closer (a sensor lag,
+    piezo hysteresis and a thermal drift on the LPS: weight friction led, hysteresis beside it
+    left 8.64 x noise, drift and sensor lag fitted jointly 5.26 x; searched beside the first
+    pair only, the third named nothing). The same pair found both ways is taken from the
+    leader's round. Returns (that pair or None, the pair passed over for its small share or
+    None)."""
+    pairs = [second]
+    if joint is not None and joint is not second and _effects(joint) != _effects(second):
+        pairs.append(joint)
+    pairs = [p for p in pairs if not p.named and wants_third(pb, p)]
+    best = min(pairs, key=lambda p: p.pair.chi2 if p.pair is not None else math.inf, default=None)
+    if best is not None and pair_share(pb, cal, best) < THIRD_PAIR_SHARE:
+        return None, best
+    return best, None
+
+
+def _effects(search: SecondSearch) -> set[str]:
+    return {search.first.effect, search.pair.effect if search.pair is not None else ""}
 
 
 def search_third_effect(pb: Problem, cal: CalibratedNull, second: SecondSearch, heldout: HeldOut,

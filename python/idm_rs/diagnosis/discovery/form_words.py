@@ -4,6 +4,7 @@ recorded motion (a friction varying with position, a drag at the highest velocit
 from __future__ import annotations
 
 import math
+from typing import Optional
 
 import numpy as np
 
@@ -59,3 +60,16 @@ def describe(form: FoundForm, values: dict[str, float], force: InferredForce) ->
     if ff_level > 0 and not words:
         words.append("no term")
     return "; ".join(words)
+
+
+def look_alike_note(form: Optional[FoundForm]) -> str:
+    """'; on these experiments x1 - x2 cannot be told apart from V (...)' for the form's terms
+    that have a look-alike in the library (:attr:`FoundForm.look_alikes`), else ''."""
+    if form is None:
+        return ""
+    kept = {t.symbol for t in form.terms}
+    alike = [a for a in form.look_alikes if a[0] in kept]
+    if not alike:
+        return ""
+    return "; on these experiments " + "; ".join(
+        f"{a} cannot be told apart from {b} (|cos| = {c:.3f} of their effects on the readings)" for a, b, c in alike)

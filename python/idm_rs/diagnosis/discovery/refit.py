@@ -27,7 +27,7 @@ from ..thresholds import (
     WHITENESS_Z,
 )
 from ..whiteness import whiteness_z
-from .form_words import describe, equation
+from .form_words import describe, equation, look_alike_note
 from .infer import InferredForce, direct_force, infer_force
 from .library import QUADRATURE, Term
 from .linalg import NumericalFailure
@@ -416,19 +416,6 @@ def _not_standing(body: str, trial: Discovery) -> str:
 def _predicts_better(heldout_rms: float, heldout_rms_null: float) -> bool:
     """Better than the null's held-out prediction (or one of them could not be taken)."""
     return not (math.isfinite(heldout_rms) and math.isfinite(heldout_rms_null) and heldout_rms >= heldout_rms_null)
-
-
-def look_alike_note(form: Optional[FoundForm]) -> str:
-    """'; on these experiments x1 - x2 cannot be told apart from V (...)' for the form's terms
-    that have a look-alike in the library (:attr:`FoundForm.look_alikes`), else ''."""
-    if form is None:
-        return ""
-    kept = {t.symbol for t in form.terms}
-    alike = [a for a in form.look_alikes if a[0] in kept]
-    if not alike:
-        return ""
-    return "; on these experiments " + "; ".join(
-        f"{a} cannot be told apart from {b} (|cos| = {c:.3f} of their effects on the readings)" for a, b, c in alike)
 
 
 def _separated(cx: _Context, best: Discovery, forces: dict[str, InferredForce]) -> Discovery:
