@@ -374,7 +374,7 @@ def _second_effect_stage(s: _State) -> None:
     base, small = third_base(s.pb, s.cal, second, joint)
     if small is not None:
         s.reason += (f"; no third effect searched: {small.first.effect} with "
-                     f"{small.pair.effect if small.pair else '-'} took {pair_share(s.pb, s.cal, small):.0%} of the "
+                     f"{small.pair.effect if small.pair else '-'} took {small.misfit_share:.0%} of the "
                      f"misfit the calibrated model leaves above noise (a third is searched beside a pair that "
                      f"took at least {THIRD_PAIR_SHARE:.0%}: of three effects missing, the two that explain "
                      f"most take about two thirds)")
