@@ -26,7 +26,7 @@ import numpy as np
 
 import idm_rs
 import idm_rs.diagnosis as diagnosis
-from idm_rs.diagnosis import fitting, progress
+from idm_rs.diagnosis import case_model, fitting, progress
 
 
 def _site() -> str:
@@ -48,6 +48,27 @@ def main() -> None:
     # every fit as it finishes, so a long case can be read while it runs
     sink = open(a.jsonl, "w") if a.jsonl else None
     rows: list[dict[str, Any]] = []
+    # the engine's batches inside the fit now running: seconds, points, the derivative passes'
+    # seconds, and points that finished only at a finer step than the fit step (retried)
+    engine: list[dict[str, float]] = []
+    plain_run = case_model.run_batch
+
+    def run_batch(tables: Any, structure: Any, **kw: Any) -> Any:
+        t = time.perf_counter()
+        res = plain_run(tables, structure, **kw)
+        if engine:
+            e = engine[-1]
+            dt = time.perf_counter() - t
+            e["engine_s"] += dt
+            e["points"] += len(res.get("reasons", []))
+            if kw.get("sensitivities"):
+                e["derivative_s"] += dt
+            used = np.asarray(res.get("dt_used", []), dtype=float)
+            e["retried"] += int(np.sum(np.isfinite(used) & (used < 0.99 * kw.get("dt", 0.0))))
+            e["diverged"] += int(np.sum(~np.isfinite(used)))
+        return res
+
+    case_model.run_batch = run_batch  # type: ignore[attr-defined]
 
     def fit(objective: fitting.Objective, base: Any, free: Any, **kw: Any) -> Any:
         trace: list[float] = []
@@ -60,17 +81,22 @@ def main() -> None:
 
         objective.vector = vector  # type: ignore[method-assign]
         t = time.perf_counter()
+        engine.append(dict(engine_s=0.0, points=0, derivative_s=0.0, retried=0, diverged=0))
         try:
             out = plain_fit(objective, base, free, **kw)
         finally:
             del objective.vector
+            spent = engine.pop()
+            if engine:  # a fit inside a fit: its batches are the outer one's too
+                for k, v in spent.items():
+                    engine[-1][k] += v
         budget = kw.get("max_nfev", 40)
         half = trace[len(trace) // 2] if trace else np.nan
         rows.append(dict(site=_site(), parts=" / ".join(progress._OPEN.get()), seconds=time.perf_counter() - t,
                          nfev=out.nfev, budget=budget, free=len(free), cycles=objective.cycles, n=objective.n,
                          chi2_first=trace[0] if trace else np.nan, chi2=out.chi2,
                          gain_last_half=(half - min(trace[len(trace) // 2:])) if trace else np.nan,
-                         message=out.message, effects=sorted(getattr(base, "effects", {}) or {}),
+                         message=out.message, **spent, effects=sorted(getattr(base, "effects", {}) or {}),
                          names=[f.name for f in free], t_end=time.perf_counter() - t0))
         if sink is not None:
             sink.write(json.dumps(rows[-1], default=str) + "\n")

@@ -100,15 +100,15 @@ def test_difference_columns_from_the_fits_last_evaluation_are_the_same_to_the_bi
 
 def test_a_jacobian_where_the_fit_just_ran_takes_the_derivative_passes_alone(long_rec, monkeypatch):
     """A fit's Jacobian at the model its last evaluation ran (readings that finished at the fit
-    step) asks the engine for the derivative passes alone, not the run again: the same residual
-    and Jacobian to the bit, and the fit's own result unchanged; readings from a run that did
-    not finish at the fit step are never reused."""
+    step, or at the finer step of the engine's retry) asks the engine for the derivative passes
+    alone, at that step, not the run again: the same residual and Jacobian to the bit, and the
+    fit's own result unchanged; readings from a run that diverged are never reused."""
     sim = CaseSimulator(long_rec)
     obj = Objective(long_rec, sim, NOISE)
     free = [_m2(1.02), FreeParam("mu_k", 0.55, 0.3, 0.7, 0.01, diag_problem.set_tied_friction)]
     u = np.array([0.1, -0.2])
-    at, clean = obj.predict_checked(apply(SPEC, free, u))
-    assert clean
+    at, steps = obj.predict_checked(apply(SPEC, free, u))
+    assert steps == [2e-7, 2e-7]
     alone: list[bool] = []
     batch = diag_case_model.run_batch
     monkeypatch.setattr(diag_case_model, "run_batch",
@@ -116,7 +116,7 @@ def test_a_jacobian_where_the_fit_just_ran_takes_the_derivative_passes_alone(lon
     r0, J0, _ = obj.jacobian(SPEC, free, u)
     assert alone and not any(alone)
     alone.clear()
-    r1, J1, _ = obj.jacobian(SPEC, free, u, at=at, at_clean=True)
+    r1, J1, _ = obj.jacobian(SPEC, free, u, at=at, at_steps=steps)
     assert alone[0], "the derivative passes alone"
     alone.clear()
     r2, J2, _ = obj.jacobian(SPEC, free, u, at=at)
@@ -124,10 +124,10 @@ def test_a_jacobian_where_the_fit_just_ran_takes_the_derivative_passes_alone(lon
     assert np.array_equal(r0, r1) and np.array_equal(J0, J1) and np.array_equal(J0, J2)
     # a channel read between two fit steps (two runs mixed per experiment): the same
     late = Objective(long_rec, sim.late(0.3e-6), NOISE).with_cycles(2)
-    at_late, clean_late = late.predict_checked(apply(SPEC, free, u))
-    assert clean_late
+    at_late, steps_late = late.predict_checked(apply(SPEC, free, u))
+    assert steps_late == [2e-7, 2e-7]
     r3, J3, _ = late.jacobian(SPEC, free, u)
-    r4, J4, _ = late.jacobian(SPEC, free, u, at=at_late, at_clean=True)
+    r4, J4, _ = late.jacobian(SPEC, free, u, at=at_late, at_steps=steps_late)
     assert np.array_equal(r3, r4) and np.array_equal(J3, J4)
     assert not np.array_equal(J3, obj.with_cycles(2).jacobian(SPEC, free, u)[1]), "the delay is in the Jacobian"
     alone.clear()
@@ -135,23 +135,35 @@ def test_a_jacobian_where_the_fit_just_ran_takes_the_derivative_passes_alone(lon
     assert True in alone, "the fit's Jacobians took the derivative passes alone"
     jacobian = Objective.jacobian
     monkeypatch.setattr(Objective, "jacobian",
-                        lambda self, *x, at_clean=False, **k: jacobian(self, *x, **k))
+                        lambda self, *x, at_steps=None, **k: jacobian(self, *x, **k))
     b = fit(obj.with_cycles(2), SPEC, free, max_nfev=5)
     assert a.chi2 == b.chi2 and a.values == b.values and np.array_equal(a.jac, b.jac)
-    # a run the engine had to retry at a finer step is not clean: its readings are never reused
-    def retried(*a, **k):
-        res = batch(*a, **k)
-        res["reasons"] = [r or "diverged at t = 1e-3 s with dt = 2e-7 s; finished at dt = 1e-7 s"
-                          for r in res["reasons"]]
-        return res
+    # runs the engine had to retry at a finer step (a presliding law too stiff for the fit step:
+    # at 1.6 x fric_beta both experiments at dt/2; at 1.6 x fric_gamma one at dt/2, one at
+    # dt/4): their passes alone at those steps (a batch per step), the same bits as the retry's
+    # own passes after the run at the fit step diverged
+    monkeypatch.setattr(Objective, "jacobian", jacobian)
+    for name, scale, at_steps in (("fric_beta", 1.6, [1e-7, 1e-7]), ("fric_gamma", 1.6, [1e-7, 5e-8])):
+        stiff = ModelSpec(SPEC.structure, {**SPEC.params, name: SPEC.params[name] * scale}, {})
+        at_s, steps_s = obj.predict_checked(apply(stiff, free, u))
+        assert steps_s == at_steps
+        asked: list[tuple[bool, float]] = []
 
-    monkeypatch.setattr(diag_case_model, "run_batch", retried)
-    assert obj.predict_checked(apply(SPEC, free, u))[1] is False
-    monkeypatch.setattr(diag_case_model, "run_batch",
-                        lambda *a, **k: alone.append(bool(k.get("derivatives_only"))) or retried(*a, **k))
-    alone.clear()
-    fit(obj.with_cycles(2), SPEC, free, max_nfev=3)
-    assert alone and True not in alone
+        def noted(*a, asked=asked, **k):
+            asked.append((bool(k.get("derivatives_only")), k["dt"]))
+            return batch(*a, **k)
+
+        monkeypatch.setattr(diag_case_model, "run_batch", noted)
+        r5, J5, _ = obj.jacobian(stiff, free, u)
+        assert asked == [(False, 2e-7)]
+        asked.clear()
+        r6, J6, _ = obj.jacobian(stiff, free, u, at=at_s, at_steps=steps_s)
+        assert asked == [(True, dt) for dt in dict.fromkeys(at_steps)], "the passes alone, at the retries' steps"
+        assert np.array_equal(r5, r6) and np.array_equal(J5, J6) and np.any(J5 != 0.0)
+    # a run that diverged has no readings to reuse
+    monkeypatch.setattr(diag_case_model, "run_batch", batch)
+    broken = ModelSpec(SPEC.structure, {**SPEC.params, "fric_beta": SPEC.params["fric_beta"] * 3}, {})
+    assert obj.predict_checked(apply(broken, free, u))[1] is None
 
 
 def test_the_fit_jacobian_is_the_engines_exact_one(long_rec):

@@ -104,18 +104,20 @@ class CaseSimulator:
         return self._run(specs, cycles, retries, [], experiments)[0]
 
     def predict_checked(self, specs: Sequence[ModelSpec], cycles: Optional[int] = None
-                        ) -> tuple[list[list[NDArray[np.float64]]], list[bool]]:
-        """``predict``, and per spec whether every experiment's run finished at the fit step
-        (no retry at a finer one, nothing diverged): its readings can then stand for the run a
-        derivative request would repeat (``predict_with_sensitivities``'s `readings`)."""
-        out, _, why = self._run(specs, cycles, 2, [], None)
-        return out, [all(not w for w in row) and all(np.all(np.isfinite(p)) for p in r)
-                     for row, r in zip(why, out)]
+                        ) -> tuple[list[list[NDArray[np.float64]]], list[Optional[list[float]]]]:
+        """``predict``, and per spec the RK4 step [s] each experiment's run finished at (the fit
+        step, or a retry's dt/2, dt/4), or None where a run diverged (or a delay's two runs
+        finished at different steps): its readings can then stand for the run a derivative
+        request would repeat (``predict_with_sensitivities``'s `readings` and `steps`)."""
+        out, _, _, used = self._run(specs, cycles, 2, [], None)
+        return out, [list(u) if all(math.isfinite(x) for x in u) and all(np.all(np.isfinite(p)) for p in r) else None
+                     for u, r in zip(used, out)]
 
     def predict_with_sensitivities(self, specs: Sequence[ModelSpec], names: Sequence[str],
                                    cycles: Optional[int] = None, retries: int = 2,
                                    experiments: Optional[Sequence[int]] = None,
-                                   readings: Optional[Sequence[Sequence[NDArray[np.float64]]]] = None
+                                   readings: Optional[Sequence[Sequence[NDArray[np.float64]]]] = None,
+                                   steps: Optional[Sequence[Sequence[float]]] = None
                                    ) -> tuple[list[list[NDArray[np.float64]]], list[list[NDArray[np.float64]]],
                                               list[list[str]]]:
         """``predict`` plus, per spec and experiment, the readings' derivatives with respect to
@@ -125,18 +127,32 @@ class CaseSimulator:
         `readings`: per spec, every experiment's readings from a run of the same model that
         finished at the fit step (``predict_checked``): that run is not repeated, the engine
         takes only the derivative passes (the same numbers bit for bit), and these come back
-        as the predictions."""
-        return self._run(specs, cycles, retries, list(names), experiments, readings)
+        as the predictions. `steps`: with `readings`, per spec the RK4 step each experiment's run
+        finished at (``predict_checked``): a run the engine had to retry at dt/2 gets its passes
+        at dt/2 at once, as the retry of a full request would (the run at the fit step that
+        diverged and the retried run are not repeated)."""
+        return self._run(specs, cycles, retries, list(names), experiments, readings, steps)[:3]
 
     def _run(self, specs: Sequence[ModelSpec], cycles: Optional[int], retries: int, names: list[str],
              experiments: Optional[Sequence[int]] = None,
-             readings: Optional[Sequence[Sequence[NDArray[np.float64]]]] = None
-             ) -> tuple[list[list[NDArray[np.float64]]], list[list[NDArray[np.float64]]], list[list[str]]]:
+             readings: Optional[Sequence[Sequence[NDArray[np.float64]]]] = None,
+             steps: Optional[Sequence[Sequence[float]]] = None
+             ) -> tuple[list[list[NDArray[np.float64]]], list[list[NDArray[np.float64]]], list[list[str]],
+                        list[list[float]]]:
         n = len(self.recording.experiments)
         out: list[list[NDArray[np.float64]]] = [[np.zeros(0)] * n for _ in specs]
         sens: list[list[NDArray[np.float64]]] = [[np.zeros((len(names), 0))] * n for _ in specs]
         why: list[list[str]] = [[""] * n for _ in specs]
+        used: list[list[float]] = [[self.dt] * n for _ in specs]  # the step each run finished at [s]
         alone = readings is not None and bool(names)  # the derivative passes alone
+        # the step each (spec, experiment) runs at: the fit step, or where the derivative passes
+        # alone follow a run that finished at a finer one, that step
+        given = steps if alone else None
+
+        def step_of(i: int, j: int) -> float:
+            return float(given[i][j]) if given is not None else self.dt
+
+        slots = (out, sens, why, used)
         extra: dict[str, Any] = {"sensitivities": names, "derivatives_only": alone} if names else {}
         by_structure: dict[Structure, list[int]] = {}
         for i, s in enumerate(specs):
@@ -145,7 +161,6 @@ class CaseSimulator:
         horizons = [self.horizon(j, cycles) for j in range(n_exp)]
         enames = engine.effect_names()
         for structure, idx in by_structure.items():
-            rows_p, rows_e, rows_w, t_ends = [], [], [], []
             prows = [param_row(specs[i].params) for i in idx]
             # each spec's effects row as the rig stood (False) and turned end for end (True)
             erows = {turned: [[float(oriented(specs[i].effects, turned).get(n, 0.0)) for n in enames] for i in idx]
@@ -154,34 +169,19 @@ class CaseSimulator:
             sawtooth = [j for j in wanted if self._wave_rows[j] is not None]
             for j in wanted:
                 if self._wave_rows[j] is None:
-                    self._predict_sampled(j, structure, idx, prows, erows, horizons[j], retries, out, sens, why,
-                                          names, derivatives_only=alone)
-            if not sawtooth:
-                continue
+                    for dt in dict.fromkeys(step_of(i, j) for i in idx):
+                        self._predict_sampled(j, structure, [a for a, i in enumerate(idx) if step_of(i, j) == dt],
+                                              idx, prows, erows, horizons[j], retries, slots, names, dt,
+                                              derivatives_only=alone)
             # experiment-major: neighbouring points share a duration, so the engine's lanes of
-            # points (which advance together) all stay busy to the end; a delay between two fit
-            # steps runs every point at both in the same batch (:meth:`late`)
-            waves = [self._wave_rows] + ([self._later[0]] if self._later is not None else [])
-            for rows in waves:
-                for j in sawtooth:
-                    for a in range(len(idx)):
-                        rows_p.append(prows[a])
-                        rows_e.append(erows[self._reversed[j]][a])
-                        rows_w.append(rows[j])
-                        t_ends.append(horizons[j][0])
-            tables = Tables(np.asarray(rows_p), np.asarray(rows_e), Sawtooth.batch_kind, np.asarray(rows_w),
-                            t_ends=np.asarray(t_ends))
-            res = run_batch(tables, structure, t_end=max(t_ends), method="rk4", dt=self.dt, retries=retries,
-                            threads=self.threads, record_every=self.record_every, **extra)
-            self.evaluations += len(t_ends)
-            traces = res.get("traces", [np.zeros(0)] * len(t_ends))
-            block = len(sawtooth) * len(idx)
-            for a, i in enumerate(idx):
-                for k, j in enumerate(sawtooth):
-                    self._store(res, traces, k * len(idx) + a, horizons[j][1], i, j, out, sens, why, names)
-                    if self._later is not None:
-                        self._mix_later(res, traces, block + k * len(idx) + a, horizons[j][1], i, j, out, sens, why,
-                                        names)
+            # points (which advance together) all stay busy to the end; one batch per step (the
+            # fit step, unless derivative passes alone follow retried runs)
+            groups: dict[float, list[tuple[int, int]]] = {}
+            for j in sawtooth:
+                for a, i in enumerate(idx):
+                    groups.setdefault(step_of(i, j), []).append((a, j))
+            for dt, pairs in groups.items():
+                self._sawtooth_batch(structure, idx, pairs, prows, erows, horizons, retries, slots, names, dt, extra)
         if alone:
             assert readings is not None
             # the derivative passes alone came back without traces: the caller's readings stand
@@ -189,35 +189,66 @@ class CaseSimulator:
             for i in range(len(specs)):
                 for j in wanted:
                     out[i][j] = np.asarray(readings[i][j])
-        return out, sens, why
+        return out, sens, why, used
+
+    def _sawtooth_batch(self, structure: Structure, idx: list[int], pairs: list[tuple[int, int]],
+                        prows: list[list[float]], erows: dict[bool, list[list[float]]],
+                        horizons: list[tuple[float, int]], retries: int, slots: tuple[Any, ...], names: list[str],
+                        dt: float, extra: dict[str, Any]) -> None:
+        """One batch of sawtooth runs, (spec `idx[a]`, experiment j) for each (a, j) of `pairs`,
+        at RK4 step `dt` [s] (readings every sample step all the same), stored into `slots`
+        (out, sens, why, used). A delay between two fit steps runs every point at both in the
+        same batch (:meth:`late`)."""
+        rows_p, rows_e, rows_w, t_ends = [], [], [], []
+        waves = [self._wave_rows] + ([self._later[0]] if self._later is not None else [])
+        for rows in waves:
+            for a, j in pairs:
+                rows_p.append(prows[a])
+                rows_e.append(erows[self._reversed[j]][a])
+                rows_w.append(rows[j])
+                t_ends.append(horizons[j][0])
+        tables = Tables(np.asarray(rows_p), np.asarray(rows_e), Sawtooth.batch_kind, np.asarray(rows_w),
+                        t_ends=np.asarray(t_ends))
+        res = run_batch(tables, structure, t_end=max(t_ends), method="rk4", dt=dt, retries=retries,
+                        threads=self.threads, record_every=self.record_every * int(round(self.dt / dt)), **extra)
+        self.evaluations += len(t_ends)
+        traces = res.get("traces", [np.zeros(0)] * len(t_ends))
+        for p, (a, j) in enumerate(pairs):
+            self._store(res, traces, p, horizons[j][1], idx[a], j, slots, names)
+            if self._later is not None:
+                self._mix_later(res, traces, len(pairs) + p, horizons[j][1], idx[a], j, slots, names)
 
     def _mix_later(self, res: dict[str, Any], traces: Sequence[NDArray[np.float64]], point: int, samples: int,
-                   i: int, j: int, out: list[list[NDArray[np.float64]]], sens: list[list[NDArray[np.float64]]],
-                   why: list[list[str]], names: list[str]) -> None:
+                   i: int, j: int, slots: tuple[Any, ...], names: list[str]) -> None:
         """Spec i's experiment j read at a delay between two fit steps: the stored run (the
-        earlier step) mixed with batch point `point` (the later) by the later one's weight."""
+        earlier step) mixed with batch point `point` (the later) by the later one's weight; the
+        step it finished at is NaN where the two runs finished at different steps."""
         assert self._later is not None
+        out, sens, why, used = slots
         w = self._later[1]
-        o2: list[list[NDArray[np.float64]]] = [[]]
-        s2: list[list[NDArray[np.float64]]] = [[]]
-        y2: list[list[str]] = [[]]
-        self._store(res, traces, point, samples, 0, j, o2, s2, y2, names)
-        out[i][j] = (1.0 - w) * out[i][j] + w * o2[0][j]
+        later: tuple[list[list[Any]], ...] = ([[]], [[]], [[]], [[]])
+        self._store(res, traces, point, samples, 0, j, later, names)
+        out[i][j] = (1.0 - w) * out[i][j] + w * later[0][0][j]
         if names:
-            sens[i][j] = (1.0 - w) * sens[i][j] + w * s2[0][j]
-        why[i][j] = why[i][j] or y2[0][j]
+            sens[i][j] = (1.0 - w) * sens[i][j] + w * later[1][0][j]
+        why[i][j] = why[i][j] or later[2][0][j]
+        if used[i][j] != later[3][0][j]:
+            used[i][j] = math.nan
 
     def _store(self, res: dict[str, Any], traces: Sequence[NDArray[np.float64]], point: int, samples: int, i: int,
-               j: int, out: list[list[NDArray[np.float64]]], sens: list[list[NDArray[np.float64]]],
-               why: list[list[str]], names: list[str]) -> None:
-        """Point `point` of a batch result as spec i's experiment j (NaN where it did not run)."""
+               j: int, slots: tuple[Any, ...], names: list[str]) -> None:
+        """Point `point` of a batch result as spec i's experiment j (NaN where it did not run)
+        into `slots` (out, sens, why, used: the readings, their derivatives, the engine's reason
+        and the RK4 step the run finished at [s])."""
+        out, sens, why, used = slots
         tr = np.asarray(traces[point])
         if tr.size != samples:  # diverged or invalid point
             tr = np.full(samples, np.nan)
-        for row in (out[i], sens[i], why[i]):
+        for row in (out[i], sens[i], why[i], used[i]):
             self._sawtooth_slot(row, j)
         out[i][j] = tr
         why[i][j] = res["reasons"][point]
+        used[i][j] = float(res["dt_used"][point])
         if names:
             s = res["sensitivities"][point][:, :samples]
             sens[i][j] = s if s.shape[1] == samples else np.full((len(names), samples), np.nan)
@@ -232,20 +263,23 @@ class CaseSimulator:
         while len(row) <= j:
             row.append(None)
 
-    def _predict_sampled(self, j: int, structure: Structure, idx: list[int], prows: list[list[float]],
-                         erows: dict[bool, list[list[float]]], horizon: tuple[float, int], retries: int,
-                         out: list[list[NDArray[np.float64]]], sens: list[list[NDArray[np.float64]]],
-                         why: list[list[str]], names: list[str], derivatives_only: bool = False) -> None:
-        """Experiment j (a sampled drive) for the specs `idx`: one batch with its samples (with
-        `derivatives_only`, its derivative passes alone: see ``predict_with_sensitivities``)."""
+    def _predict_sampled(self, j: int, structure: Structure, members: list[int], idx: list[int],
+                         prows: list[list[float]], erows: dict[bool, list[list[float]]], horizon: tuple[float, int],
+                         retries: int, slots: tuple[Any, ...], names: list[str], dt: float,
+                         derivatives_only: bool = False) -> None:
+        """Experiment j (a sampled drive) for the specs `idx[a]`, a in `members`: one batch with its
+        samples at RK4 step `dt` [s] (with `derivatives_only`, its derivative passes alone: see
+        ``predict_with_sensitivities``)."""
         e = self.recording.experiments[j]
-        tables = Tables(np.asarray(prows), np.asarray(erows[self._reversed[j]]), "sampled", np.ones((len(idx), 1)),
+        turned = erows[self._reversed[j]]
+        tables = Tables(np.asarray([prows[a] for a in members]), np.asarray([turned[a] for a in members]), "sampled",
+                        np.ones((len(members), 1)),
                         sampled=(np.ascontiguousarray(e.t), np.ascontiguousarray(e.voltage)),
-                        t_ends=np.full(len(idx), horizon[0]))
+                        t_ends=np.full(len(members), horizon[0]))
         extra: dict[str, Any] = {"sensitivities": names, "derivatives_only": derivatives_only} if names else {}
-        res = run_batch(tables, structure, t_end=horizon[0], method="rk4", dt=self.dt, retries=retries,
-                        threads=self.threads, record_every=self.record_every, **extra)
-        self.evaluations += len(idx)
-        traces = res.get("traces", [np.zeros(0)] * len(idx))
-        for a, i in enumerate(idx):
-            self._store(res, traces, a, horizon[1], i, j, out, sens, why, names)
+        res = run_batch(tables, structure, t_end=horizon[0], method="rk4", dt=dt, retries=retries,
+                        threads=self.threads, record_every=self.record_every * int(round(self.dt / dt)), **extra)
+        self.evaluations += len(members)
+        traces = res.get("traces", [np.zeros(0)] * len(members))
+        for p, a in enumerate(members):
+            self._store(res, traces, p, horizon[1], idx[a], j, slots, names)

@@ -190,12 +190,12 @@ class Objective:
     def predict(self, specs: Sequence[ModelSpec], retries: int = 2) -> list[list[NDArray[np.float64]]]:
         return self.sim.predict(specs, self.cycles, retries)
 
-    def predict_checked(self, spec: ModelSpec) -> tuple[list[NDArray[np.float64]], bool]:
-        """One model's readings and whether its runs finished at the fit step everywhere
-        (:meth:`CaseSimulator.predict_checked`): then they stand for the run a Jacobian at the
-        same model would repeat (:meth:`jacobian`'s `at_clean`)."""
-        preds, clean = self.sim.predict_checked([spec], self.cycles)
-        return preds[0], clean[0]
+    def predict_checked(self, spec: ModelSpec) -> tuple[list[NDArray[np.float64]], Optional[list[float]]]:
+        """One model's readings and the RK4 step [s] each experiment's run finished at, None
+        where one diverged (:meth:`CaseSimulator.predict_checked`): the readings then stand for
+        the run a Jacobian at the same model would repeat (:meth:`jacobian`'s `at_steps`)."""
+        preds, steps = self.sim.predict_checked([spec], self.cycles)
+        return preds[0], steps[0]
 
     def profiled(self, preds: Sequence[NDArray[np.float64]]) -> tuple[list[NDArray[np.float64]], list[float]]:
         """Residuals [m] with the best offset removed, and those offsets [m]."""
@@ -252,7 +252,7 @@ class Objective:
 
     def jacobian(self, base: ModelSpec, free: Sequence[FreeParam], u: NDArray[np.float64],
                  fd_step: float = 1e-3, unbounded: Optional[set[int]] = None,
-                 at: Optional[Sequence[NDArray[np.float64]]] = None, at_clean: bool = False
+                 at: Optional[Sequence[NDArray[np.float64]]] = None, at_steps: Optional[Sequence[float]] = None
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
         """(residual vector, its exact Jacobian in the fit units, simulations run) at `u`. An
         experiment whose derivatives could not be taken (the engine reports why: e.g. a fast
@@ -264,16 +264,20 @@ class Objective:
         model says nothing about another (kept on the simulator, it once made a fit's path
         depend on every fit run before it — RESULTS 15e). `at`: the plain predictions at `u`
         when the caller has them (a fit's last evaluation), so the differences need no base run;
-        with `at_clean` (its runs finished at the fit step, :meth:`predict_checked`) the engine
-        does not repeat that run either and takes only the derivative passes (a fit's Jacobian
-        is always taken where its last evaluation ran: a fifth of the Jacobian's cost)."""
+        with `at_steps` (the RK4 step each of its runs finished at, :meth:`predict_checked`) the
+        engine does not repeat that run either and takes only the derivative passes, each at its
+        run's step (a fit's Jacobian is always taken where its last evaluation ran: a fifth of the
+        Jacobian's cost, and for a run the engine had to retry at dt/2 also the run at the fit
+        step that diverged)."""
         names, D = engine_chain(base, free, u)
         spec = apply(base, free, u)
         skip = unbounded if unbounded is not None else set()
         exact = [j for j in self.experiments if j not in skip]
-        given = [list(at)] if at is not None and at_clean and names else None
+        reuse = at is not None and at_steps is not None and bool(names)
+        given = [list(at)] if reuse and at is not None else None
+        steps = [list(at_steps)] if reuse and at_steps is not None else None
         pred_sets, sens_sets, _ = self.sim.predict_with_sensitivities([spec], names, self.cycles, experiments=exact,
-                                                                      readings=given)
+                                                                      readings=given, steps=steps)
         preds, sens = list(pred_sets[0]), sens_sets[0]
         dpred: list[NDArray[np.float64]] = [np.zeros((len(free), 0))] * len(preds)
         bad = [j for j in self.experiments if j in skip]
@@ -325,15 +329,15 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     free = inside_bounds(free)
     # the last evaluation's residual vector and predictions: the Jacobian at that point takes
     # its differences' base from them, and the result its residuals
-    cache: dict[bytes, tuple[NDArray[np.float64], list[NDArray[np.float64]], bool]] = {}
+    cache: dict[bytes, tuple[NDArray[np.float64], list[NDArray[np.float64]], Optional[list[float]]]] = {}
     unbounded: set[int] = set()  # experiments whose derivatives blew up in this fit (see Objective.jacobian)
 
     def fun(u: NDArray[np.float64]) -> NDArray[np.float64]:
         key = u.tobytes()
         if key not in cache:
             cache.clear()
-            preds, clean = objective.predict_checked(apply(base, free, u))
-            cache[key] = (objective.vector(preds), preds, clean)
+            preds, steps = objective.predict_checked(apply(base, free, u))
+            cache[key] = (objective.vector(preds), preds, steps)
         if progress:
             progress()
         return cache[key][0]
@@ -344,7 +348,7 @@ def fit(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, max
     def jac(u: NDArray[np.float64]) -> NDArray[np.float64]:
         hit = cache.get(u.tobytes())
         _, J, _ = objective.jacobian(base, free, u, fd_step, unbounded, at=hit[1] if hit else None,
-                                     at_clean=hit[2] if hit else False)
+                                     at_steps=hit[2] if hit else None)
         if progress:
             progress()
         return J
