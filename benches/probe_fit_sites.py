@@ -121,6 +121,8 @@ def main() -> None:
               f"{sum(r['budget'] for r in rs)} | {len(capped)} | {np.median(gains) if gains else float('nan'):.3g} |")
     print(json.dumps({k: round(v, 1) for k, v in d.timings.items()}))
     if sink is not None:
+        # the diagnosis itself, to compare with a bench row of the same device
+        sink.write(json.dumps({"diagnosis": d.to_dict()}, default=str) + "\n")
         sink.close()
 
 

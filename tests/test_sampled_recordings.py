@@ -74,3 +74,27 @@ def test_diagnosis_on_sampled_drives(tmp_path, kind, verdict):
     dg = idm_rs.diagnose(d, progress=False)
     assert dg.verdict == verdict, text_report(dg)
     assert dg.rms_after <= 1.1 * dg.noise.sigma
+
+
+def test_a_sampled_drive_jacobian_after_a_retried_run_takes_the_passes_alone_at_its_step(tmp_path):
+    """A sampled experiment whose run the engine retried at dt/2 (a presliding law too stiff for
+    the fit step: 1.8 x fric_beta) gets its Jacobian from the derivative passes alone at dt/2,
+    the same bits as the whole request (the run at the fit step, its retry, the passes)."""
+    from idm_rs.core.batch import Structure
+    from idm_rs.diagnosis.case_model import CaseSimulator, ModelSpec
+    from idm_rs.diagnosis.fitting import FreeParam, Objective, apply, set_param
+    from idm_rs.io.recording import load_case
+
+    w = _drive()
+    rec = load_case(make_case(tmp_path / "c", nominal_params=P, model="lps", experiments=[{"sampled": w}] * 2,
+                              noise_rms=1e-9))
+    obj = Objective(rec, CaseSimulator(rec), 1e-9)
+    params = P.to_dict(resolved=False)
+    stiff = ModelSpec(Structure("lps", 1, False), {**params, "fric_beta": 1.8 * params["fric_beta"]}, {})
+    free = [FreeParam("m2", P.m2, 0.5 * P.m2, 1.6 * P.m2, 0.05 * P.m2, set_param("m2"))]
+    u = np.array([0.1])
+    at, steps = obj.predict_checked(apply(stiff, free, u))
+    assert steps == [1e-7, 1e-7]
+    r0, J0, _ = obj.jacobian(stiff, free, u)
+    r1, J1, _ = obj.jacobian(stiff, free, u, at=at, at_steps=steps)
+    assert np.array_equal(r0, r1) and np.array_equal(J0, J1) and np.any(J0 != 0.0)
