@@ -7,7 +7,10 @@ recording in CASE_DIR, and prints per call site (the chain of diagnosis function
 it, and the stage's open parts): the fits, their seconds, the evaluations used against the
 budget, how many stopped on the budget, and what the last half of each budget-stopped fit's
 evaluations took off chi^2 (a fit that moves chi^2 by less than the noise in its last
-iterations bought nothing with them). With --jsonl, every fit as one line, written as it finishes. A probe, not a test:
+iterations bought nothing with them). With --jsonl, every fit as one line, written as it finishes
+(with the engine's seconds in it, the derivative requests' share, and the points that finished
+only at a finer step than the fit step, `retried`, or not at all, `diverged`), and the diagnosis
+as the last line. A probe, not a test:
 the wrapped diagnosis is the package's, unchanged.
 """
 
