@@ -191,6 +191,11 @@ class CaseSimulator:
                     out[i][j] = np.asarray(readings[i][j])
         return out, sens, why, used
 
+    def _every(self, dt: float) -> int:
+        """RK4 steps of `dt` [s] between recorded readings: a sample step's worth (a retry's
+        dt/2 records every 2 x as many steps as the fit step)."""
+        return self.record_every * int(round(self.dt / dt))
+
     def _sawtooth_batch(self, structure: Structure, idx: list[int], pairs: list[tuple[int, int]],
                         prows: list[list[float]], erows: dict[bool, list[list[float]]],
                         horizons: list[tuple[float, int]], retries: int, slots: tuple[Any, ...], names: list[str],
@@ -210,7 +215,7 @@ class CaseSimulator:
         tables = Tables(np.asarray(rows_p), np.asarray(rows_e), Sawtooth.batch_kind, np.asarray(rows_w),
                         t_ends=np.asarray(t_ends))
         res = run_batch(tables, structure, t_end=max(t_ends), method="rk4", dt=dt, retries=retries,
-                        threads=self.threads, record_every=self.record_every * int(round(self.dt / dt)), **extra)
+                        threads=self.threads, record_every=self._every(dt), **extra)
         self.evaluations += len(t_ends)
         traces = res.get("traces", [np.zeros(0)] * len(t_ends))
         for p, (a, j) in enumerate(pairs):
@@ -278,7 +283,7 @@ class CaseSimulator:
                         t_ends=np.full(len(members), horizon[0]))
         extra: dict[str, Any] = {"sensitivities": names, "derivatives_only": derivatives_only} if names else {}
         res = run_batch(tables, structure, t_end=horizon[0], method="rk4", dt=dt, retries=retries,
-                        threads=self.threads, record_every=self.record_every * int(round(self.dt / dt)), **extra)
+                        threads=self.threads, record_every=self._every(dt), **extra)
         self.evaluations += len(members)
         traces = res.get("traces", [np.zeros(0)] * len(members))
         for p, a in enumerate(members):
