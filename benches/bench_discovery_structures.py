@@ -206,6 +206,11 @@ def run_case(c: dict[str, Any], tmp: Path, seed: int, diagnose: bool = True) -> 
             "terms": [t.symbol for t in found.form.terms] if found is not None and found.form is not None else [],
             "reason": d.reason, "timings": out.get("timings", {}), "timings_parts": out.get("timings_parts", {}),
             "discovery_seconds": found.seconds if found is not None else 0.0,
+            # every refit of every form discovery tried (start, RMS over noise, evaluations, seconds),
+            # the path taken and the one before it
+            "discovery_forms": [x.summary() for x in ([found, *found.tried] if found is not None else [])],
+            "discovery_other_forms": [x.summary() for x in ([d.discovery_other, *d.discovery_other.tried]
+                                                            if d.discovery_other is not None else [])],
             "whiteness_z_after": found.whiteness_z if found is not None else math.nan,
             # the share of the calibrated null's misfit above noise the second round's pair took
             # (a third effect is searched only beside a pair with a third of it)

@@ -543,7 +543,7 @@ def test_a_form_far_from_noise_is_judged_without_elimination_refits(monkeypatch,
     lib = [SimpleNamespace(name=p_, at=lambda v, p_=p_: SimpleNamespace(name=p_, value=v))
            for p_ in ("lib_x1cube", "lib_v1")]
     calls: list[str] = []
-    monkeypatch.setattr(rf, "_refit_from", lambda objective, spec, starts, form_, progress: (r, lib, []))
+    monkeypatch.setattr(rf, "_refit_from", lambda objective, spec, starts, form_, progress, *rest: (r, lib, []))
 
     def pruned(objective, spec, start, form_, r_, lib_, progress):
         calls.append("pruned")
@@ -585,26 +585,69 @@ def test_a_form_is_refitted_once_from_each_distinct_start(monkeypatch):
     by = {t.param: t for t in MAIN_TERMS}
     form = FoundForm("main", [by["lib_volt"]], {"lib_volt": 1e-3}, 0.0, 0.1, [1.0])
     seen: list[list[float]] = []
+    names: list[list[str]] = []
 
     class Stop(Exception):
         pass
 
-    def refit_from(objective, spec, starts, form_, progress):
+    def refit_from(objective, spec, starts, form_, progress, record, labels):
         seen.extend([[f.x0 for f in st] for st in starts])
+        names.append(list(labels))
         raise Stop
 
     monkeypatch.setattr(rf, "_refit_from", refit_from)
     nominal = SimpleNamespace(params={"m1": 0.4, "mu_k": 0.5})
-    for calibrated, force, expected in [
-            (nominal_free, {}, [[0.4, 0.5]]),  # from the nominal values as given: one start
-            (nominal_free, {"m1": 0.41}, [[0.4, 0.5], [0.41, 0.5]]),
-            ([param("m1", 0.44), param("mu_k", 0.5)], {"m1": 0.44}, [[0.44, 0.5], [0.4, 0.5]])]:
+    for calibrated, force, expected, labels in [
+            (nominal_free, {}, [[0.4, 0.5]], ["calibrated"]),  # from the nominal values as given: one start
+            (nominal_free, {"m1": 0.41}, [[0.4, 0.5], [0.41, 0.5]], ["calibrated", "the force's fit"]),
+            ([param("m1", 0.44), param("mu_k", 0.5)], {"m1": 0.44}, [[0.44, 0.5], [0.4, 0.5]],
+             ["calibrated", "nominal"])]:
         seen.clear()
+        names.clear()
         cx = rf._Context(None, "spec", calibrated, SimpleNamespace(sigma=1e-9, n=100), None, 5e-9, nominal, None,
                          1e4, 1e-8, "")
         with pytest.raises(Stop):
             rf._judged(cx, "main", form, SimpleNamespace(parameters=force), {})
-        assert seen == expected
+        assert seen == expected and names == [labels]
+
+
+def test_each_refit_of_a_form_is_recorded_with_its_start_and_the_first_at_noise_ends_them(monkeypatch):
+    """`_refit_from` refits from each start until one leaves noise and records every refit (its
+    start, RMS over noise, evaluations); the form's JSON carries them, and the forms tried
+    beside the answer in short."""
+    import json
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis.discovery import Discovery, FoundForm
+    from idm_rs.diagnosis.discovery import refit as rf
+
+    sigma = 1e-9
+    rms = iter([3.0, 1.05, 0.9])  # the second start leaves noise (<= 1.1): the third never runs
+    calls: list[int] = []
+
+    def refit(objective, spec, start, form, progress):
+        calls.append(1)
+        k = next(rms)
+        return SimpleNamespace(rms=k * sigma, chi2=k * k * 100, nfev=10 + len(calls)), []
+
+    monkeypatch.setattr(rf, "_refit", refit)
+    record: list[dict] = []
+    r, _, start = rf._refit_from(SimpleNamespace(sigma=sigma), "spec", [["a"], ["b"], ["c"]], None, None, record,
+                                 ["calibrated", "nominal", "the force's fit"])
+    assert len(calls) == 2 and start == ["b"] and r.rms == 1.05 * sigma
+    assert [(x["start"], round(x["rms_over_noise"], 6), x["nfev"]) for x in record] == [
+        ("calibrated", 3.0, 11), ("nominal", 1.05, 12)]
+    by = {t.param: t for t in MAIN_TERMS}
+    form = FoundForm("main", [by["lib_volt"]], {"lib_volt": 1e-3}, 0.0, 0.1, [1.0])
+    other = Discovery(False, "", "weight", form, {}, rms_after=2e-9, starts=record[:1])
+    d = Discovery(True, "", "main", form, {}, rms_after=1e-9, starts=record, tried=[other])
+    out = json.loads(json.dumps(d.to_dict()))
+    assert [x["start"] for x in out["starts"]] == ["calibrated", "nominal"]
+    (t,) = out["tried"]
+    assert {k: t[k] for k in ("body", "terms", "discovered", "rms_after", "searched", "starts")} == {
+        "body": "weight", "terms": ["V"], "discovered": False, "rms_after": 2e-9, "searched": False,
+        "starts": out["starts"][:1]}
+    assert math.isnan(t["delta_bic"]) and math.isnan(t["heldout_rms_after"])
 
 
 def test_the_next_experiment_is_sought_for_a_look_alike_the_data_do_not_choose(monkeypatch):

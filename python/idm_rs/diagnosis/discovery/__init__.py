@@ -27,12 +27,14 @@ When no catalogue effect explains a systematic residual, three steps (docs/DIAGN
    threshold and the held-out experiment's prediction improves.
 
 The stages, one module each: :mod:`.infer` (step 1), :mod:`.library` and :mod:`.regress`
-(step 2), :mod:`.refit` (step 3); :mod:`.linalg` names numerical failures."""
+(step 2), :mod:`.refit` (step 3) with what it found in :mod:`.found`; :mod:`.linalg` names
+numerical failures."""
 
+from .found import Discovery
 from .infer import InferredForce, direct_force, infer_force
 from .library import MAIN_TERMS, WEIGHT_TERMS, Term, Trajectory, library_columns
 from .linalg import NumericalFailure
-from .refit import Discovery, discover
+from .refit import discover
 from .regress import FoundForm, find_terms
 
 __all__ = ["MAIN_TERMS", "WEIGHT_TERMS", "Discovery", "FoundForm", "InferredForce", "NumericalFailure", "Term",

@@ -5,7 +5,8 @@ only when the refit explains the residual, held-out experiment included (:func:`
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+import time
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
@@ -28,69 +29,11 @@ from ..thresholds import (
 )
 from ..whiteness import whiteness_z
 from .form_words import describe, equation, look_alike_note
+from .found import Discovery
 from .infer import InferredForce, direct_force, infer_force
 from .library import QUADRATURE, Term
 from .linalg import NumericalFailure
 from .regress import FoundForm, find_terms, with_quadrature
-
-
-@dataclass
-class Discovery:
-    """What discovery found, with the evidence; `discovered` is the verdict's test."""
-
-    discovered: bool
-    reason: str
-    body: str
-    form: Optional[FoundForm]
-    forces: dict[str, InferredForce]  #: per body tried
-    refit: Optional[FitResult] = None
-    #: the refitted library coefficients and their 1-sigma, engine parameter -> (value, std)
-    values: dict[str, tuple[float, Optional[float]]] = field(default_factory=dict)
-    delta_bic: float = math.nan
-    rms_before: float = math.nan  #: the calibrated null's residual RMS [m]
-    rms_after: float = math.nan
-    #: the refit's residual whiteness (lag-1 z; noise gives |z| < 3)
-    whiteness_z: float = math.nan
-    heldout_rms_before: float = math.nan
-    heldout_rms_after: float = math.nan
-    heldout_experiment: str = ""
-    description: str = ""  #: the term in words
-    equation: str = ""  #: the term in symbols
-    seconds: float = 0.0
-    #: numerical failures that stopped a step (named, never a verdict)
-    failures: list[str] = field(default_factory=list)
-    #: the refitted forms that did not stand (each with its evidence), in the order tried
-    tried: list["Discovery"] = field(default_factory=list)
-    #: the refit's free parameters (the calibrated subset and the library's), centred on its optimum
-    free: list[FreeParam] = field(default_factory=list, repr=False)
-    #: what refitting each look-alike in the found term's place showed (:func:`_separated`)
-    separation: str = ""
-    #: a look-alike refitted in the found term's place that fits as well (within BIC_THRESHOLD):
-    #: the two the next experiment must tell apart
-    look_alike: Optional["Discovery"] = field(default=None, repr=False)
-    #: the global search the refit came from (:func:`_searched`'s summary), or ""
-    searched: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "discovered": self.discovered, "reason": self.reason, "body": self.body,
-            "terms": [t.symbol for t in self.form.terms] if self.form else [],
-            "variables": self.form.variables if self.form else [],
-            "wavelength_m": self.form.wavelength if self.form else 0.0,
-            "cv_error": self.form.cv_error if self.form else math.nan,
-            "form_source": self.form.source if self.form else "",
-            "values": {k: list(v) for k, v in self.values.items()},
-            "delta_bic": self.delta_bic, "rms_before": self.rms_before, "rms_after": self.rms_after,
-            "whiteness_z": self.whiteness_z,
-            "heldout_rms_before": self.heldout_rms_before, "heldout_rms_after": self.heldout_rms_after,
-            "heldout_experiment": self.heldout_experiment, "description": self.description,
-            "equation": self.equation, "seconds": self.seconds, "failures": self.failures,
-            "notes": self.form.notes if self.form else [],
-            "look_alikes": [list(a) for a in self.form.look_alikes] if self.form else [],
-            "separation": self.separation, "searched": self.searched,
-            "inferred_force": {b: {"chi2_before": f.chi2_before, "chi2_after": f.chi2_after, "dof": f.dof,
-                                   "smoothing": f.smoothing} for b, f in self.forces.items()},
-        }
 
 
 def _free_library(form: FoundForm) -> list[FreeParam]:
@@ -142,21 +85,32 @@ def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[F
 
 
 def _refit_from(objective: Objective, spec: ModelSpec, starts: Sequence[Sequence[FreeParam]], form: FoundForm,
-                progress: Optional[Callable[..., Any]]) -> tuple[FitResult, list[FreeParam], Sequence[FreeParam]]:
+                progress: Optional[Callable[..., Any]], record: Optional[list[dict[str, Any]]] = None,
+                labels: Sequence[str] = ()) -> tuple[FitResult, list[FreeParam], Sequence[FreeParam]]:
     """:func:`_refit` from each start of the calibrated parameters in turn, until one leaves
     noise (RMS within NOISE_RATIO_OK of sigma); the lowest chi^2, its library parameters and
     its start. The calibration's optimum mimics the missing term and the force's joint fit
     bends the parameters toward what a smooth force cannot do: either may leave the refit
-    short of its basin in the evaluations it has."""
+    short of its basin in the evaluations it has. Each refit is appended to `record` (its
+    start's name from `labels`, :func:`_start_record`)."""
     best: Optional[tuple[FitResult, list[FreeParam], Sequence[FreeParam]]] = None
-    for start in starts:
+    for k, start in enumerate(starts):
+        t0 = time.perf_counter()
         r, lib = _refit(objective, spec, start, form, progress)
+        if record is not None:
+            record.append(_start_record(labels[k] if k < len(labels) else f"start {k + 1}", r, objective.sigma,
+                                        time.perf_counter() - t0))
         if best is None or r.chi2 < best[0].chi2:
             best = (r, lib, start)
         if r.rms <= NOISE_RATIO_OK * objective.sigma:
             break
     assert best is not None
     return best
+
+
+def _start_record(start: str, r: FitResult, sigma: float, seconds: float) -> dict[str, Any]:
+    """One refit of a form, as :attr:`Discovery.starts` lists it."""
+    return {"start": start, "rms_over_noise": r.rms / sigma, "nfev": r.nfev, "seconds": seconds}
 
 
 def _pruned(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[FreeParam], form: FoundForm,
@@ -292,7 +246,6 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
     explains; once a standing form leaves noise the others are not tried), and of those that
     stand the one with the lowest BIC is the answer (a force on the wrong body may explain the
     residual as well, and its form stand, while leaving more of it)."""
-    import time
 
     t0 = time.perf_counter()
     sigma = objective.sigma
@@ -520,22 +473,29 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
     # the drag, and the refit from there stopped short of noise) and where the force's own fit
     # left the calibrated parameters
     starts = [list(cx.calibrated_free)]
+    labels = ["calibrated"]
     if cx.nominal is not None:
         starts.append([f.at(float(cx.nominal.params.get(f.name) or f.x0)) for f in cx.calibrated_free])
+        labels.append("nominal")
     if force.parameters:
         starts.append([f.at(force.parameters.get(f.name, f.x0)) for f in cx.calibrated_free])
+        labels.append("the force's fit")
     # from the nominal values as given the first two coincide: the same fit twice (16-22 s each
     # on the discovery bench's devices) would leave the same result
-    starts = [st for k, st in enumerate(starts) if st not in starts[:k]]
+    distinct = [k for k, st in enumerate(starts) if st not in starts[:k]]
+    starts, labels = [starts[k] for k in distinct], [labels[k] for k in distinct]
     searched = ""
     start: Sequence[FreeParam]
+    record: list[dict[str, Any]] = []
     if wide:
+        t0 = time.perf_counter()
         with part("form global search"):
             r, lib, searched = _searched(objective, cx.spec, cx.calibrated_free, form, cx.progress)
+        record.append(_start_record("global search", r, sigma, time.perf_counter() - t0))
         start = [f.at(r.values[f.name]) for f in cx.calibrated_free]
     else:
         with part("form refit"):
-            r, lib, start = _refit_from(objective, cx.spec, starts, form, cx.progress)
+            r, lib, start = _refit_from(objective, cx.spec, starts, form, cx.progress, record, labels)
     if r.rms <= ELIMINATION_MAX_RATIO * sigma:
         with part("form pruning and elimination"):
             for _ in range(PRUNE_ROUNDS):
@@ -545,7 +505,7 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
                 form = smaller
             form, r, lib = eliminated(objective, cx.spec, start, form, r, lib, cx.progress)
     trial = Discovery(False, "", body, form, forces, refit=r, rms_before=rms_null,
-                      heldout_rms_before=heldout_rms_null, heldout_experiment=cx.heldout_experiment)
+                      heldout_rms_before=heldout_rms_null, heldout_experiment=cx.heldout_experiment, starts=record)
     trial.delta_bic = cx.null_chi2 - r.chi2 - len(lib) * math.log(objective.n)
     trial.free = [f.at(r.values[f.name]) for f in list(start) + lib]
     trial.rms_after = r.rms
