@@ -349,6 +349,7 @@ def _searched_forms(cx: _Context, attempts: list[tuple[Discovery, str, FoundForm
             continue
         seen.add(key)
         trial = _judged(cx, body, form, force, forces, wide=True)
+        trial.starts = trial0.starts + trial.starts  # the local refits it follows, then its own
         if trial.discovered:
             standing.append(trial)
             if trial.rms_after <= NOISE_RATIO_OK * cx.sigma:
