@@ -4,6 +4,7 @@ found term (or was spurious)."""
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 from typing import NamedTuple, Optional
 
@@ -12,7 +13,7 @@ import numpy as np
 from .case_model import ModelSpec
 from .discovery import Discovery
 from .discovery.form_words import look_alike_note
-from .discovery.refit import eliminated
+from .discovery.refit import eliminated, start_record
 from .fitting import FitResult, FreeParam, apply, fit
 from .problem import CalibratedNull, HeldOut, Nominal, Problem, Refit
 from .rules import leaves_noise
@@ -131,9 +132,11 @@ def _alone(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal: float, le
     """:func:`alone_explains` for one form `best` (skipped when its eliminated form was judged
     already, `done`)."""
     assert best.form is not None  # tried keeps found forms only
+    t0 = time.perf_counter()
     r0, lib = term_alone(pb, cal, best)
     # alone, a unit of the form may no longer pay its way (it mopped up what the first effect did)
     form, r0, lib = eliminated(pb.obj, cal.fit.spec, cal.free, best.form, r0, lib, pb.tick)
+    starts = [start_record("alone, calibrated", r0, pb.sigma, time.perf_counter() - t0)]
     key = frozenset(t.param for t in form.terms)
     if key in done:
         return None
@@ -153,13 +156,13 @@ def _alone(pb: Problem, cal: CalibratedNull, heldout: HeldOut, ho_cal: float, le
                          f"{wz:.1f} (ΔBIC {delta_bic:.0f})")
         # kept among the forms tried (the experiment that would decide it is looked for there)
         found.tried.append(replace(best, refit=r0, rms_after=r0.rms, whiteness_z=wz, delta_bic=delta_bic,
-                                   heldout_rms_after=ho,
+                                   heldout_rms_after=ho, starts=starts,
                                    free=[f.at(r0.values[f.name]) for f in list(cal.free) + lib], tried=[]))
         return None
     from .discovery.form_words import describe, equation
 
     out = replace(best, discovered=True, refit=r0, rms_after=r0.rms, whiteness_z=wz, delta_bic=delta_bic,
-                  rms_before=cal.fit.rms, heldout_rms_before=ho_cal, heldout_rms_after=ho, tried=[])
+                  rms_before=cal.fit.rms, heldout_rms_before=ho_cal, heldout_rms_after=ho, tried=[], starts=starts)
     vals = {f.name: r0.values[f.name] for f in lib}
     out.values = {n: (x, r0.std.get(n)) for n, x in vals.items()}
     out.equation = equation(best.form, vals)

@@ -92,13 +92,13 @@ def _refit_from(objective: Objective, spec: ModelSpec, starts: Sequence[Sequence
     its start. The calibration's optimum mimics the missing term and the force's joint fit
     bends the parameters toward what a smooth force cannot do: either may leave the refit
     short of its basin in the evaluations it has. Each refit is appended to `record` (its
-    start's name from `labels`, :func:`_start_record`)."""
+    start's name from `labels`, :func:`start_record`)."""
     best: Optional[tuple[FitResult, list[FreeParam], Sequence[FreeParam]]] = None
     for k, start in enumerate(starts):
         t0 = time.perf_counter()
         r, lib = _refit(objective, spec, start, form, progress)
         if record is not None:
-            record.append(_start_record(labels[k] if k < len(labels) else f"start {k + 1}", r, objective.sigma,
+            record.append(start_record(labels[k] if k < len(labels) else f"start {k + 1}", r, objective.sigma,
                                         time.perf_counter() - t0))
         if best is None or r.chi2 < best[0].chi2:
             best = (r, lib, start)
@@ -108,7 +108,7 @@ def _refit_from(objective: Objective, spec: ModelSpec, starts: Sequence[Sequence
     return best
 
 
-def _start_record(start: str, r: FitResult, sigma: float, seconds: float) -> dict[str, Any]:
+def start_record(start: str, r: FitResult, sigma: float, seconds: float) -> dict[str, Any]:
     """One refit of a form, as :attr:`Discovery.starts` lists it."""
     return {"start": start, "rms_over_noise": r.rms / sigma, "nfev": r.nfev, "seconds": seconds}
 
@@ -492,7 +492,7 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
         t0 = time.perf_counter()
         with part("form global search"):
             r, lib, searched = _searched(objective, cx.spec, cx.calibrated_free, form, cx.progress)
-        record.append(_start_record("global search", r, sigma, time.perf_counter() - t0))
+        record.append(start_record("global search", r, sigma, time.perf_counter() - t0))
         start = [f.at(r.values[f.name]) for f in cx.calibrated_free]
     else:
         with part("form refit"):
