@@ -323,7 +323,7 @@ def test_a_form_spoilt_by_a_spurious_first_effect_is_refitted_alone(monkeypatch)
         # white noise of that RMS, or a smooth residual of the same RMS
         res = (np.random.default_rng(5).normal(0.0, rms, n) if white
                else math.sqrt(2) * rms * np.sin(np.linspace(0, 20 * np.pi, n)))
-        r0 = SimpleNamespace(chi2=(rms / sigma) ** 2 * n, rms=rms, spec="spec", std={},
+        r0 = SimpleNamespace(chi2=(rms / sigma) ** 2 * n, rms=rms, spec="spec", std={}, nfev=12,
                              values={"lib_ff_sin": 0.021, "lib_wavelength": 11.8e-6, "mu_k": 0.2},
                              residuals=[res])
         monkeypatch.setattr(diag_beyond_catalogue, "term_alone", lambda pb_, cal_, found: (r0, lib))
@@ -344,6 +344,8 @@ def test_a_form_spoilt_by_a_spurious_first_effect_is_refitted_alone(monkeypatch)
     assert d.values["lib_ff_sin"][0] == 0.021 and d.heldout_rms_after == 1.05 * sigma
     assert "refitted without it" in d.reason and "friction_asymmetry had mimicked" in d.reason
     assert d.delta_bic > 1000
+    # its refit alone is recorded as such
+    assert [(x["start"], x["rms_over_noise"], x["nfev"]) for x in d.starts] == [("alone, calibrated", 1.0, 12)]
     # the held-out experiment still not predicted: nothing claimed, the figures in the reason
     found = _tried(1.04 * sigma, 5000.0)
     d = diag_beyond_catalogue.alone_explains(pb, cal, HeldOut(4.0 * sigma), 7.5 * sigma, lead, found)
