@@ -190,6 +190,43 @@ def test_cli_diagnose_end_to_end(tmp_path):
     assert (tmp_path / "plots" / "ranking.png").exists()
 
 
+def test_every_blas_runs_on_one_thread_whatever_the_caller_imported_before(spring_case):
+    """threadpoolctl limits only the libraries loaded when the limit is set; scipy.linalg loads
+    its own OpenBLAS, which the first fit used to load inside the limit, on every core: the
+    fits' numbers then depended on what the caller had imported and on the machine's core
+    count. In a fresh process that has not imported it, every BLAS the stages see runs on one
+    thread."""
+    import subprocess
+    import sys
+
+    script = f"""
+import importlib
+import sys
+import idm_rs
+dg = importlib.import_module("idm_rs.diagnosis.diagnose")
+assert "scipy.linalg" not in sys.modules  # what made the bug: loaded only later, inside the limit
+seen = []
+
+class Stop(Exception):
+    pass
+
+def stage(s):
+    from threadpoolctl import threadpool_info
+    seen.extend((i["filepath"], i["num_threads"]) for i in threadpool_info() if i["user_api"] == "blas")
+    raise Stop
+
+dg.PIPELINE = (("probe", stage),)
+try:
+    idm_rs.diagnose({str(spring_case)!r}, progress=False)
+except Stop:
+    pass
+print(seen)
+assert any("scipy_openblas-" in f for f, _ in seen) and all(n == 1 for _, n in seen), seen
+"""
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
 def test_report_shows_unsupported_candidates_as_such(spring_diagnosis):
     """A candidate no better than the nominal model it contains is "not supported", not a huge
     negative ΔBIC."""

@@ -171,9 +171,14 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     bar = progress_bar(progress, rec.name, lambda: sim.evaluations)
     s = _State(rec, noise, sim, bar, refit_top, discover, t_start)
     s.clock = Clock(bar, lambda: sim.evaluations)
-    # numpy's BLAS on one thread: the engine's threads own the cores, and OpenBLAS's own threads
+    # every BLAS on one thread: the engine's threads own the cores, and OpenBLAS's own threads
     # spin-wait after every small factorisation of the fits, taking cycles from them (measured on
-    # 2 cores: dev14 84.6 -> 78.3 s, mean of three alternating pairs, every result identical)
+    # 2 cores: dev14 84.6 -> 78.3 s, mean of three alternating pairs). threadpoolctl limits only
+    # the libraries loaded when it is called, and scipy.linalg loads its own OpenBLAS: where the
+    # caller had not imported it, the first fit loaded it inside the limit and it ran on every
+    # core, so the fits' numbers depended on what the caller had imported before and on the
+    # machine's core count (a discovery device took another path, RESULTS §61)
+    _load_every_blas()
     from threadpoolctl import threadpool_limits  # with scikit-learn; lazily, as scipy
 
     try:
@@ -190,6 +195,15 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     if bar is not None:
         bar.close()
     return _result(s)
+
+
+def _load_every_blas() -> None:
+    """Load every BLAS and LAPACK the diagnosis calls (numpy's is loaded with numpy; scipy's
+    with scipy.linalg, which scikit-learn uses too), so that one thread limit holds them all
+    whatever the caller imported."""
+    import importlib
+
+    importlib.import_module("scipy.linalg")
 
 
 # --- the stages, in order: each reads what the ones before it left in the state -------------------
