@@ -192,9 +192,9 @@ def test_cli_diagnose_end_to_end(tmp_path):
 
 def test_every_blas_runs_on_one_thread_whatever_the_caller_imported_before(spring_case):
     """threadpoolctl limits only the libraries loaded when the limit is set; scipy.linalg loads
-    its own OpenBLAS, which the first fit used to load inside the limit, on every core: the
-    fits' numbers then depended on what the caller had imported and on the machine's core
-    count. In a fresh process that has not imported it, every BLAS the stages see runs on one
+    its own OpenBLAS, which the first fit used to load inside the limit, on every core:
+    discovery's large least squares then depended on what the caller had imported and on the
+    machine's core count. In a fresh process that has not imported it, every BLAS the stages see runs on one
     thread."""
     import subprocess
     import sys

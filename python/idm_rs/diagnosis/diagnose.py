@@ -176,8 +176,8 @@ def diagnose(case: Union[str, Path, Recording], *, progress: bool = True, dt: fl
     # 2 cores: dev14 84.6 -> 78.3 s, mean of three alternating pairs). threadpoolctl limits only
     # the libraries loaded when it is called, and scipy.linalg loads its own OpenBLAS: where the
     # caller had not imported it, the first fit loaded it inside the limit and it ran on every
-    # core, so the fits' numbers depended on what the caller had imported before and on the
-    # machine's core count (a discovery device took another path, RESULTS §61)
+    # core, so discovery's large least squares depended on what the caller had imported before
+    # and on the machine's core count (a discovery device took other paths, RESULTS §61)
     _load_every_blas()
     from threadpoolctl import threadpool_limits  # with scikit-learn; lazily, as scipy
 
