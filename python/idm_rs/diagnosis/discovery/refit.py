@@ -85,21 +85,19 @@ def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[F
 
 
 def _refit_from(objective: Objective, spec: ModelSpec, starts: Sequence[Sequence[FreeParam]], form: FoundForm,
-                progress: Optional[Callable[..., Any]], record: Optional[list[dict[str, Any]]] = None,
-                labels: Sequence[str] = ()) -> tuple[FitResult, list[FreeParam], Sequence[FreeParam]]:
+                progress: Optional[Callable[..., Any]], record: list[dict[str, Any]],
+                labels: Sequence[str]) -> tuple[FitResult, list[FreeParam], Sequence[FreeParam]]:
     """:func:`_refit` from each start of the calibrated parameters in turn, until one leaves
     noise (RMS within NOISE_RATIO_OK of sigma); the lowest chi^2, its library parameters and
     its start. The calibration's optimum mimics the missing term and the force's joint fit
     bends the parameters toward what a smooth force cannot do: either may leave the refit
     short of its basin in the evaluations it has. Each refit is appended to `record` (its
-    start's name from `labels`, :func:`start_record`)."""
+    start named by `labels`, one per start; :func:`start_record`)."""
     best: Optional[tuple[FitResult, list[FreeParam], Sequence[FreeParam]]] = None
-    for k, start in enumerate(starts):
+    for start, label in zip(starts, labels, strict=True):
         t0 = time.perf_counter()
         r, lib = _refit(objective, spec, start, form, progress)
-        if record is not None:
-            record.append(start_record(labels[k] if k < len(labels) else f"start {k + 1}", r, objective.sigma,
-                                        time.perf_counter() - t0))
+        record.append(start_record(label, r, objective.sigma, time.perf_counter() - t0))
         if best is None or r.chi2 < best[0].chi2:
             best = (r, lib, start)
         if r.rms <= NOISE_RATIO_OK * objective.sigma:
@@ -246,7 +244,6 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
     explains; once a standing form leaves noise the others are not tried), and of those that
     stand the one with the lowest BIC is the answer (a force on the wrong body may explain the
     residual as well, and its form stand, while leaving more of it)."""
-
     t0 = time.perf_counter()
     sigma = objective.sigma
     forces: dict[str, InferredForce] = {}
