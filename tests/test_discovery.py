@@ -728,6 +728,37 @@ def test_forms_that_gain_are_searched_globally_when_none_stands(monkeypatch, fir
         assert len(tried) == 2 and all(r.startswith("searched globally") for r in reasons)
 
 
+def test_a_forms_global_search_does_not_refit_from_its_first_local_start_again(monkeypatch):
+    """A form is searched globally after its local refits; the search's point at the centre of
+    its ranges ("nominal values" in :func:`.calibration.calibrate`) is the calibrated values with
+    the regression's coefficients — the first local refit's start —, so the search fits locally
+    always from its population's best member and the 1-D scans' best (and from the best-ranked
+    distinct start), not always from the centre: on the bench devices a search discovered, the
+    answer came from the scan or the population every time (benches/RESULTS.md §62)."""
+    from types import SimpleNamespace
+
+    from idm_rs.diagnosis import calibration
+    from idm_rs.diagnosis.discovery import FoundForm
+    from idm_rs.diagnosis.discovery import refit as rf
+    from idm_rs.diagnosis.fitting import FreeParam
+
+    seen = {}
+
+    def calibrate(objective, base, free, **kwargs):
+        seen.update(kwargs, names=[f.name for f in free])
+        return SimpleNamespace(fit="the search's best", summary=lambda: "searched")
+
+    monkeypatch.setattr(calibration, "calibrate", calibrate)
+    by = {t.param: t for t in MAIN_TERMS}
+    form = FoundForm("main", [by["lib_volt"]], {"lib_volt": 1e-3}, 0.0, 0.1, [1.0])
+    spec = SimpleNamespace(structure="lps", params={}, effects={})
+    r, lib, summary = rf._searched("objective", spec, [FreeParam("m1", 0.4, 0.2, 0.8, 0.02, lambda p, e, v: None)],
+                                   form, None)
+    assert r == "the search's best" and summary == "searched" and [f.name for f in lib] == ["lib_volt"]
+    assert seen["names"] == ["m1", "lib_volt"]
+    assert tuple(seen["always"]) == ("population search best", "1-D scan")
+
+
 def test_a_library_derivative_that_blew_up_is_seen_through_the_knots(monkeypatch):
     """The library's exact derivatives at the inferred force's run can blow up where the run
     crosses a fast slip (from the nominal values of a DPS 4 with a quadratic spring every term's

@@ -146,9 +146,12 @@ def scan_starts(objective: Objective, base: ModelSpec, free: Sequence[FreeParam]
 
 
 def calibrate(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, seed: int = 0,
+              always: Sequence[str] = ("population search best", "nominal values", "1-D scan"),
               progress: Optional[Callable[..., Any]] = None) -> Calibration:
     """Search, then multistart: the search's distinct good members, the nominal point and
-    Latin-hypercube points over the ranges, ranked together; local fits from the best distinct."""
+    Latin-hypercube points over the ranges, ranked together; local fits from the best distinct
+    and from the best start of each group in `always` (a caller that has fitted from the nominal
+    point already leaves "nominal values" out)."""
     picks, best, evaluations = search(objective, base, free, seed=seed, progress=progress)
     bounds = np.array([f.u_bounds() for f in free])
     lhs = bounds[:, 0] + (bounds[:, 1] - bounds[:, 0]) * _spread_points(LHS_STARTS, len(free),
@@ -165,7 +168,7 @@ def calibrate(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], 
     # differently; on a healthy device the nominal values are 5-15 % from the truth, in its
     # basin, however they compare; a scan finds a side basin's way out (see `scan_starts`)
     ms = multistart(objective, base, starts, local_fits=CALIBRATION_LOCAL_FITS, horizons=(2, None), max_nfev=(10, 12),
-                    always=("population search best", "nominal values", "1-D scan"), progress=progress)
+                    always=always, progress=progress)
     top = ms.best
     # converged: the best optimum was reached from more than one start (or the best local fit
     # ends at the noise floor)

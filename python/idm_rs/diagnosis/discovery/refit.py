@@ -80,7 +80,10 @@ def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[F
     from ..calibration import calibrate
 
     base, lib = _with_form(spec, form)
-    g = calibrate(objective, base, list(calibrated_free) + lib, progress=progress)
+    # the search's "nominal values" (the centre of its ranges) are the calibrated values with the
+    # regression's coefficients: the form's first local start, refitted already
+    g = calibrate(objective, base, list(calibrated_free) + lib, always=("population search best", "1-D scan"),
+                  progress=progress)
     return g.fit, lib, g.summary()
 
 
