@@ -1,7 +1,7 @@
 """Probe: discovery alone, replayed from where a diagnosis entered it.
 
     python benches/probe_discovery_replay.py save CASE_DIR OUT_DIR [--calls K]
-    python benches/probe_discovery_replay.py replay OUT_DIR/call0.pkl [--jsonl FILE]
+    python benches/probe_discovery_replay.py replay OUT_DIR/call0.pkl [--label L] [--jsonl FILE]
 
 ``save`` runs ``idm_rs.diagnose`` on a written device (``bench_discovery_structures.py --only N
 --write-only DIR``) and pickles every call of discovery it makes (the recording, the model
@@ -11,7 +11,8 @@ seconds. ``replay`` runs discovery on one pickled call, BLAS held to one thread 
 diagnosis holds it, and prints (or appends to ``--jsonl``) its outcome: verdict, the form, RMS
 over noise, seconds, and every refit with its start. The pre-discovery stages (most of a
 discovery case's time) are paid once per device; a change to discovery is then compared on
-the same inputs, in seconds rather than the case's hour.
+the same inputs (the same pickle replayed from two installs side by side, each run under
+`--label`; cloudpickle, which dask brings, writes the closures of the fit's setters).
 """
 
 from __future__ import annotations
