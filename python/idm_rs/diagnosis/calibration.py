@@ -145,8 +145,12 @@ def scan_starts(objective: Objective, base: ModelSpec, free: Sequence[FreeParam]
     return out
 
 
+#: the start groups a calibration always fits from locally (besides the best-ranked distinct start)
+ALWAYS_FITTED: tuple[str, ...] = ("population search best", "nominal values", "1-D scan")
+
+
 def calibrate(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, seed: int = 0,
-              always: Sequence[str] = ("population search best", "nominal values", "1-D scan"),
+              always: Sequence[str] = ALWAYS_FITTED,
               progress: Optional[Callable[..., Any]] = None) -> Calibration:
     """Search, then multistart: the search's distinct good members, the nominal point and
     Latin-hypercube points over the ranges, ranked together; local fits from the best distinct

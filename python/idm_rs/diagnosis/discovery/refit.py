@@ -77,13 +77,13 @@ def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[F
     """The refit's global search: the model with the form's terms calibrated as the null is
     (:func:`.calibration.calibrate` over the calibrated parameters and the coefficients). Returns
     (the best local fit, the library's free parameters, the search's summary)."""
-    from ..calibration import calibrate
+    from ..calibration import ALWAYS_FITTED, calibrate
 
     base, lib = _with_form(spec, form)
     # the search's "nominal values" (the centre of its ranges) are the calibrated values with the
     # regression's coefficients: the form's first local start, refitted already
-    g = calibrate(objective, base, list(calibrated_free) + lib, always=("population search best", "1-D scan"),
-                  progress=progress)
+    always = tuple(g for g in ALWAYS_FITTED if g != "nominal values")
+    g = calibrate(objective, base, list(calibrated_free) + lib, always=always, progress=progress)
     return g.fit, lib, g.summary()
 
 
