@@ -4,7 +4,11 @@ LPS, the LPS with piezo hysteresis, the DPS of 4 elements and the DPS 4 with hys
 
     python benches/bench_discovery_structures.py --jsonl benches/discovery_structures_runs.jsonl \
         [--repeats 1] [--limit N] [--only ID ...] [--shard K/N] [--code COMMIT] [--write-only DIR]
-    python benches/bench_discovery_structures.py --jsonl ... --summary
+    python benches/bench_discovery_structures.py --summary --jsonl FILE [FILE ...]
+
+`--summary` takes several files (the rows of both seeds, say) and counts them together; each
+row is told apart by its seed (kept in every row; older rows without one take it from the file
+name, ``..._seed1_...``, else 0).
 
 Each device: dev10's parameters on one structure, 1-3 calibrated parameters mis-set by 5-15 % in
 meta.json, white noise of 1-2 nm, and one force at a size drawn uniformly in 6-12 x noise
@@ -26,6 +30,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import re
 import sys
 import tempfile
 from pathlib import Path
@@ -231,19 +236,30 @@ def summary(rows: list[dict[str, Any]]) -> str:
                      f"{_bound(sum(r['right_with_look_alike'] for r in inlib), len(inlib))} | "
                      f"{_bound(wrong, len(offlib))} | "
                      f"{f'{np.median(secs):.0f} / {max(secs):.0f}' if secs else '-'} |")
-    lines += ["", "| id | structure | force | size (x noise) | verdict | right | terms | s |",
-              "|---|---|---|---|---|---|---|---|"]
-    for r in sorted(rows, key=lambda r: r["id"]):
+    lines += ["", "| seed | id | structure | force | size (x noise) | verdict | right | terms | s |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for r in sorted(rows, key=lambda r: (r.get("seed", 0), r["id"])):
         if "verdict" in r:
-            lines.append(f"| {r['id']} | {r['structure']} | {r['mechanism']} | {r['size_after_refit']:.1f} | "
+            lines.append(f"| {r.get('seed', 0)} | {r['id']} | {r['structure']} | {r['mechanism']} | "
+                         f"{r['size_after_refit']:.1f} | "
                          f"{r['verdict']} | {'✓' if r['right'] else '✗'} | {', '.join(r['terms']) or '–'} | "
                          f"{r['seconds']:.0f} |")
     return "\n".join(lines) + "\n\n" + stage_shares(rows)
 
 
+def seeded_rows(paths: list[Path]) -> list[dict[str, Any]]:
+    """The finished rows of every file, each with its seed (a row's own, else the file name's)."""
+    out = []
+    for path in paths:
+        m = re.search(r"seed(\d+)", path.name)
+        out += [{"seed": int(m.group(1)) if m else 0, **r} for r in finished(path)]
+    return out
+
+
 def main(argv: Optional[list[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--jsonl", type=Path, required=True)
+    ap.add_argument("--jsonl", type=Path, nargs="+", required=True,
+                    help="the rows' file (several only with --summary)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--limit", type=int)
@@ -256,10 +272,13 @@ def main(argv: Optional[list[str]] = None) -> int:
     a = ap.parse_args(argv)
 
     if a.summary:
-        print(summary(finished(a.jsonl)))
+        print(summary(seeded_rows(a.jsonl)))
         return 0
+    if len(a.jsonl) > 1:
+        ap.error("--jsonl takes one file when running cases (several only with --summary)")
+    jsonl: Path = a.jsonl[0]
     k, n = a.shard
-    done = {r["id"] for r in finished(a.jsonl)}
+    done = {r["id"] for r in finished(jsonl)}
     todo = [c for c in plan(a.repeats) if c["id"] % n == k and (a.write_only or c["id"] not in done)
             and (a.only is None or c["id"] in a.only)][: a.limit]
     if a.write_only:
@@ -270,8 +289,8 @@ def main(argv: Optional[list[str]] = None) -> int:
         return 0
     with tempfile.TemporaryDirectory() as tmp:
         for c in todo:
-            row = {**run_case(c, Path(tmp), a.seed), "code": a.code}
-            append(a.jsonl, row)
+            row = {**run_case(c, Path(tmp), a.seed), "code": a.code, "seed": a.seed}
+            append(jsonl, row)
             print(f"{c['id']:3d} {c['structure']:7s} {c['mechanism']:24s} -> {row['verdict']:<22s} "
                   f"{'right' if row['right'] else 'WRONG'} {row['seconds']:5.0f} s", flush=True)
     return 0
