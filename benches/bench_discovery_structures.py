@@ -8,7 +8,8 @@ LPS, the LPS with piezo hysteresis, the DPS of 4 elements and the DPS 4 with hys
 
 `--summary` takes several files (the rows of both seeds, say) and counts them together; each
 row is told apart by its seed (kept in every row; older rows without one take it from the file
-name, ``..._seed1_...``, else 0).
+name, ``..._seed1_...``, else 0), and a device run again counts once, as the file named later
+has it (list the re-runs after the first runs).
 
 Each device: dev10's parameters on one structure, 1-3 calibrated parameters mis-set by 5-15 % in
 meta.json, white noise of 1-2 nm, and one force at a size drawn uniformly in 6-12 x noise
@@ -248,12 +249,15 @@ def summary(rows: list[dict[str, Any]]) -> str:
 
 
 def seeded_rows(paths: list[Path]) -> list[dict[str, Any]]:
-    """The finished rows of every file, each with its seed (a row's own, else the file name's)."""
-    out = []
+    """The finished rows of every file, each with its seed (a row's own, else the file name's);
+    a device run again (the same seed and id) counts once, as the later file (or line) has it."""
+    out: dict[tuple[int, int], dict[str, Any]] = {}
     for path in paths:
         m = re.search(r"seed(\d+)", path.name)
-        out += [{"seed": int(m.group(1)) if m else 0, **r} for r in finished(path)]
-    return out
+        for r in finished(path):
+            row = {"seed": int(m.group(1)) if m else 0, **r}
+            out[(row["seed"], row["id"])] = row
+    return list(out.values())
 
 
 def main(argv: Optional[list[str]] = None) -> int:
