@@ -11,7 +11,8 @@ import pytest
 
 import idm_rs
 from idm_rs.diagnosis.case_model import ModelSpec, Structure
-from idm_rs.diagnosis.next_experiment import Drive, drives, separation, virtual_recording
+from idm_rs.diagnosis.discovery.library import MAIN_TERMS, WEIGHT_TERMS
+from idm_rs.diagnosis.next_experiment import Drive, drives, not_by_drive, separation, virtual_recording
 from idm_rs.diagnosis.problem import calibration_params
 from idm_rs.io.recording import load_case
 from idm_rs.io.synthetic import make_case
@@ -212,3 +213,17 @@ def test_the_drive_that_lets_a_found_periodic_form_pass_the_held_out_check(rec, 
     assert pp.std_with < pp.std_now
     assert pp.scored[-1][0].cycles == 16 and pp.scored[-1][1] > pp.heldout_with
     assert "held-out check" in pp.words() and "to determine lib_wavelength" in pp.words()
+
+
+def test_the_pes_extension_against_the_voltage_is_explained_on_either_body():
+    """A force c V and a force of the PE's extension are look-alikes no drive separates on the
+    main body and on the weight alike (the weight's term reads x2 - x1, the main body's x1 - x2):
+    the proposal says so, and what does separate them, in either order of the pair."""
+    extension = [t.symbol for t in MAIN_TERMS + WEIGHT_TERMS if t.variable in ("x1 - x2", "x2 - x1")]
+    assert sorted(extension) == ["x1 - x2", "x2 - x1"]
+    for sym in extension:
+        for names in ((sym, "V"), ("V", sym)):
+            hint = not_by_drive(names)
+            assert "extension" in hint and "strain gauge" in hint, names
+            assert sym in hint
+    assert not_by_drive(("v1", "dV/dt")) == ""  # a pair a drive can separate gets no such note

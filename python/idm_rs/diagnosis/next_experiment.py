@@ -55,7 +55,20 @@ NOT_BY_DRIVE: dict[tuple[str, str], str] = {
         "between the bodies differ by ~1 % of themselves, below the noise on every sawtooth of the rig's limits; "
         "a reading of the PE's own extension (a strain gauge or a second position sensor on the weight) "
         "beside the body's tells them apart"),
+    # the same pair on the weight: a force there of the PE's extension, or of the voltage
+    ("x2 - x1", "V"): (
+        "the PE's extension x2 - x1 is d33 V less its compression by the force it carries (F / k_pe: ~0.1 um "
+        "under a 3 N friction force against ~10 um of stroke), so a force c V on the weight and a force "
+        "(c / d33) (x2 - x1) on it differ by ~1 % of themselves, below the noise on every sawtooth of the rig's "
+        "limits; a reading of the PE's own extension (a strain gauge or a second position sensor on the weight) "
+        "beside the body's tells them apart"),
 }
+
+
+def not_by_drive(names: tuple[str, str]) -> str:
+    """Why no drive separates the look-alikes `names` (either order) and what does; "" when a
+    drive can."""
+    return NOT_BY_DRIVE.get(names) or NOT_BY_DRIVE.get((names[1], names[0]), "")
 
 
 @dataclass(frozen=True)
@@ -269,8 +282,7 @@ def propose(rec: Recording, sigma: float, names: tuple[str, str], a: tuple[Model
     scored = [(d, x if math.isfinite(x) else -math.inf) for d, x in scored]
     recorded = separation(rec, sigma, a, b, dt)
     best, score = scored[0]
-    hint = NOT_BY_DRIVE.get(names) or NOT_BY_DRIVE.get((names[1], names[0]), "")
-    return Proposal(f"tell {names[0]} from {names[1]}", names, best, score, recorded, scored, hint)
+    return Proposal(f"tell {names[0]} from {names[1]}", names, best, score, recorded, scored, not_by_drive(names))
 
 
 @dataclass
