@@ -757,6 +757,18 @@ def test_a_forms_global_search_does_not_refit_from_its_first_local_start_again(m
     assert r == "the search's best" and summary == "searched" and [f.name for f in lib] == ["lib_volt"]
     assert seen["names"] == ["m1", "lib_volt"]
     assert tuple(seen["always"]) == ("population search best", "1-D scan")
+    # the population over the first cycle, as a calibration's; with FORM_SEARCH_CYCLES = None the
+    # search, the ranking and the local fits over the whole record (a cubic spring on the DPS 4
+    # hardly acts in the first cycle: 2.34 x noise over it, 0.996 x over the whole record,
+    # benches/RESULTS.md §64)
+    from idm_rs.diagnosis.thresholds import DISCOVERY_REFIT_NFEV
+
+    assert seen["cycles"] == 1 and tuple(seen["horizons"]) == (2, None) and tuple(seen["max_nfev"]) == (10, 12)
+    seen.clear()
+    monkeypatch.setattr(rf, "FORM_SEARCH_CYCLES", None)
+    rf._searched("objective", spec, [FreeParam("m1", 0.4, 0.2, 0.8, 0.02, lambda p, e, v: None)], form, None)
+    assert seen["cycles"] is None and tuple(seen["horizons"]) == (None,)
+    assert tuple(seen["max_nfev"]) == (DISCOVERY_REFIT_NFEV,)
 
 
 def test_a_library_derivative_that_blew_up_is_seen_through_the_knots(monkeypatch):

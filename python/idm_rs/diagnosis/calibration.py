@@ -46,20 +46,22 @@ class Calibration:
     #: the best 1-D scan start (u; None when no scan beat the nominal values): the nominal
     #: values with one side basin left, where the candidates also start (see `scan_starts`)
     scan_u: Optional[NDArray[np.float64]] = None
+    #: the drive cycles the search ran over (None: the whole record)
+    search_cycles: Optional[int] = SEARCH_CYCLES
 
     def summary(self) -> str:
         verdict = "converged" if self.converged else "NOT CONVERGED"
         ms = self.multistart.summary() if self.multistart is not None else ""
-        return (f"population search ({self.evaluations} models over the first {SEARCH_CYCLES} cycle(s)); "
-                f"{ms} ({verdict})")
+        over = "the whole record" if self.search_cycles is None else f"the first {self.search_cycles} cycle(s)"
+        return f"population search ({self.evaluations} models over {over}); {ms} ({verdict})"
 
 
 def search(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, seed: int = 0,
-           cycles: int = SEARCH_CYCLES, population_per_param: Optional[int] = None,
+           cycles: Optional[int] = SEARCH_CYCLES, population_per_param: Optional[int] = None,
            generations: Optional[int] = None, progress: Optional[Callable[..., Any]] = None
            ) -> tuple[list[NDArray[np.float64]], float, int]:
     """Differential evolution over the free parameters' bounds (u space) on `objective` over
-    its first `cycles` cycles, the free parameters' starting point (u = 0) one member of the
+    its first `cycles` cycles (None: the whole record), the free parameters' starting point (u = 0) one member of the
     first population; returns distinct good members (u, best first), the best chi^2 and the
     number of models simulated."""
     from scipy.optimize import differential_evolution
@@ -150,13 +152,16 @@ ALWAYS_FITTED: tuple[str, ...] = ("population search best", "nominal values", "1
 
 
 def calibrate(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, seed: int = 0,
-              always: Sequence[str] = ALWAYS_FITTED,
+              always: Sequence[str] = ALWAYS_FITTED, cycles: Optional[int] = SEARCH_CYCLES,
+              horizons: Sequence[Optional[int]] = (2, None), max_nfev: Sequence[int] = (10, 12),
               progress: Optional[Callable[..., Any]] = None) -> Calibration:
     """Search, then multistart: the search's distinct good members, the nominal point and
     Latin-hypercube points over the ranges, ranked together; local fits from the best distinct
     and from the best start of each group in `always` (a caller that has fitted from the nominal
-    point already leaves "nominal values" out)."""
-    picks, best, evaluations = search(objective, base, free, seed=seed, progress=progress)
+    point already leaves "nominal values" out). The search runs over the first `cycles` drive
+    cycles (None: the whole record), the ranking over the first of `horizons` and each local fit
+    over `horizons` in turn with `max_nfev` evaluations each."""
+    picks, best, evaluations = search(objective, base, free, seed=seed, cycles=cycles, progress=progress)
     bounds = np.array([f.u_bounds() for f in free])
     lhs = bounds[:, 0] + (bounds[:, 1] - bounds[:, 0]) * _spread_points(LHS_STARTS, len(free),
                                                                         np.random.default_rng(seed + 1))
@@ -171,7 +176,7 @@ def calibrate(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], 
     # get a local fit: the search optimised the first cycle, which two cycles may rank
     # differently; on a healthy device the nominal values are 5-15 % from the truth, in its
     # basin, however they compare; a scan finds a side basin's way out (see `scan_starts`)
-    ms = multistart(objective, base, starts, local_fits=CALIBRATION_LOCAL_FITS, horizons=(2, None), max_nfev=(10, 12),
+    ms = multistart(objective, base, starts, local_fits=CALIBRATION_LOCAL_FITS, horizons=horizons, max_nfev=max_nfev,
                     always=always, progress=progress)
     top = ms.best
     # converged: the best optimum was reached from more than one start (or the best local fit
@@ -179,4 +184,4 @@ def calibrate(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], 
     noise_floor = top.chi2 <= 1.1**2 * top.n
     converged = ms.reached >= 2 or noise_floor
     return Calibration(top, [f.fit for f in ms.fits], best, evaluations, converged, picks[0], ms,
-                       scans[0][1] if scans else None)
+                       scans[0][1] if scans else None, cycles)

@@ -66,7 +66,8 @@ class MultiStart:
 
     def summary(self) -> str:
         chis = ", ".join(f"{f.fit.chi2:.0f} (from {f.label})" for f in self.fits)
-        return (f"{self.ranked} starts ranked over the first {self.ranking_cycles or 'all'} cycle(s); "
+        over = "the whole record" if self.ranking_cycles is None else f"the first {self.ranking_cycles} cycle(s)"
+        return (f"{self.ranked} starts ranked over {over}; "
                 f"{len(self.fits)} local fits on exact Jacobians ended at chi^2 {chis}; "
                 f"{self.reached} of {len(self.fits)} reached the best"
                 + (f"; {self.skipped} more not run: a fit left noise" if self.skipped else ""))

@@ -384,6 +384,13 @@ ELIMINATION_MAX_RATIO = 1.5
 #: m2 ~ 0.26 kg, x1^2 refitted from them 2.8 x noise, from the search with x1^2 free 0.99 x);
 #: each costs ~1-3 minutes on one core, on cases that would otherwise find nothing
 DISCOVERY_WIDE_FORMS = 2
+#: the drive cycles a form's global search ranks its population over (None: the whole record,
+#: with the ranking of its starts and its local fits over the whole record too). A term that
+#: grows with the stroke hardly acts in the first cycle, which other values fit as well: a cubic
+#: spring on the DPS 4 (benches/RESULTS.md §64) was searched to 2.34 x noise over one cycle and
+#: to 0.996 x over the whole record, at 1.5 x the search's seconds. One cycle until the
+#: discovery benches are re-run with None
+FORM_SEARCH_CYCLES: Optional[int] = 1
 #: forms found beside a first effect that did not stand, refitted alone (lowest RMS first):
 #: beside the spurious effect the form nearest noise need not be the true one (RESULTS §21: the
 #: 11.8 um periodic friction's true form came second, 1.05 against 1.04 x noise); each costs

@@ -22,6 +22,7 @@ from ..thresholds import (
     DISCOVERY_WIDE_FORMS,
     ELIMINATION_LINEAR_FACTOR,
     ELIMINATION_MAX_RATIO,
+    FORM_SEARCH_CYCLES,
     NOISE_RATIO_OK,
     PRUNE_ROUNDS,
     PRUNE_Z,
@@ -83,7 +84,11 @@ def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[F
     # the search's "nominal values" (the centre of its ranges) are the calibrated values with the
     # regression's coefficients: the form's first local start, refitted already
     always = tuple(g for g in ALWAYS_FITTED if g != "nominal values")
-    g = calibrate(objective, base, list(calibrated_free) + lib, always=always, progress=progress)
+    # FORM_SEARCH_CYCLES = None: the ranking and the local fits over the whole record as well
+    whole = FORM_SEARCH_CYCLES is None
+    g = calibrate(objective, base, list(calibrated_free) + lib, always=always, cycles=FORM_SEARCH_CYCLES,
+                  horizons=(None,) if whole else (2, None), max_nfev=(DISCOVERY_REFIT_NFEV,) if whole else (10, 12),
+                  progress=progress)
     return g.fit, lib, g.summary()
 
 
