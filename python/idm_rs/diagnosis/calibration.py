@@ -147,13 +147,17 @@ def scan_starts(objective: Objective, base: ModelSpec, free: Sequence[FreeParam]
     return out
 
 
+#: a calibration's local fits: over the first two cycles, then the whole record, and their budgets
+CALIBRATION_HORIZONS: tuple[Optional[int], ...] = (2, None)
+CALIBRATION_NFEV: tuple[int, ...] = (10, 12)
+
 #: the start groups a calibration always fits from locally (besides the best-ranked distinct start)
 ALWAYS_FITTED: tuple[str, ...] = ("population search best", "nominal values", "1-D scan")
 
 
 def calibrate(objective: Objective, base: ModelSpec, free: Sequence[FreeParam], *, seed: int = 0,
               always: Sequence[str] = ALWAYS_FITTED, cycles: Optional[int] = SEARCH_CYCLES,
-              horizons: Sequence[Optional[int]] = (2, None), max_nfev: Sequence[int] = (10, 12),
+              horizons: Sequence[Optional[int]] = CALIBRATION_HORIZONS, max_nfev: Sequence[int] = CALIBRATION_NFEV,
               progress: Optional[Callable[..., Any]] = None) -> Calibration:
     """Search, then multistart: the search's distinct good members, the nominal point and
     Latin-hypercube points over the ranges, ranked together; local fits from the best distinct

@@ -55,20 +55,18 @@ NOT_BY_DRIVE: dict[tuple[str, str], str] = {
         "between the bodies differ by ~1 % of themselves, below the noise on every sawtooth of the rig's limits; "
         "a reading of the PE's own extension (a strain gauge or a second position sensor on the weight) "
         "beside the body's tells them apart"),
-    # the same pair on the weight: a force there of the PE's extension, or of the voltage
-    ("x2 - x1", "V"): (
-        "the PE's extension x2 - x1 is d33 V less its compression by the force it carries (F / k_pe: ~0.1 um "
-        "under a 3 N friction force against ~10 um of stroke), so a force c V on the weight and a force "
-        "(c / d33) (x2 - x1) on it differ by ~1 % of themselves, below the noise on every sawtooth of the rig's "
-        "limits; a reading of the PE's own extension (a strain gauge or a second position sensor on the weight) "
-        "beside the body's tells them apart"),
 }
 
 
+#: library symbols that read the same variable as another up to its sign (the weight's terms)
+_SAME_UP_TO_SIGN: dict[str, str] = {"x2 - x1": "x1 - x2", "v2 - v1": "v1 - v2"}
+
+
 def not_by_drive(names: tuple[str, str]) -> str:
-    """Why no drive separates the look-alikes `names` (either order) and what does; "" when a
-    drive can."""
-    return NOT_BY_DRIVE.get(names) or NOT_BY_DRIVE.get((names[1], names[0]), "")
+    """Why no drive separates the look-alikes `names` (either order, either body's sign of the
+    PE's extension) and what does; "" when a drive can."""
+    a, b = (_SAME_UP_TO_SIGN.get(n, n) for n in names)
+    return NOT_BY_DRIVE.get((a, b)) or NOT_BY_DRIVE.get((b, a), "")
 
 
 @dataclass(frozen=True)

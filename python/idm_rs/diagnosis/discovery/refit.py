@@ -78,7 +78,7 @@ def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[F
     """The refit's global search: the model with the form's terms calibrated as the null is
     (:func:`.calibration.calibrate` over the calibrated parameters and the coefficients). Returns
     (the best local fit, the library's free parameters, the search's summary)."""
-    from ..calibration import ALWAYS_FITTED, calibrate
+    from ..calibration import ALWAYS_FITTED, CALIBRATION_HORIZONS, CALIBRATION_NFEV, calibrate
 
     base, lib = _with_form(spec, form)
     # the search's "nominal values" (the centre of its ranges) are the calibrated values with the
@@ -87,7 +87,8 @@ def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[F
     # FORM_SEARCH_CYCLES = None: the ranking and the local fits over the whole record as well
     whole = FORM_SEARCH_CYCLES is None
     g = calibrate(objective, base, list(calibrated_free) + lib, always=always, cycles=FORM_SEARCH_CYCLES,
-                  horizons=(None,) if whole else (2, None), max_nfev=(DISCOVERY_REFIT_NFEV,) if whole else (10, 12),
+                  horizons=(None,) if whole else CALIBRATION_HORIZONS,
+                  max_nfev=(DISCOVERY_REFIT_NFEV,) if whole else CALIBRATION_NFEV,
                   progress=progress)
     return g.fit, lib, g.summary()
 
