@@ -19,7 +19,9 @@ from .case_model import ModelSpec
 from .fitting import FitResult, FreeParam, Objective, apply
 from .multistart import MultiStart, Start, multistart
 from .thresholds import (
+    CALIBRATION_HORIZONS,
     CALIBRATION_LOCAL_FITS,
+    CALIBRATION_NFEV,
     LHS_STARTS,
     SCAN_CYCLES,
     SCAN_POINTS,
@@ -146,10 +148,6 @@ def scan_starts(objective: Objective, base: ModelSpec, free: Sequence[FreeParam]
         out.append(("1-D scans combined (" + ", ".join(free[k].name for k in better) + ")", every))
     return out
 
-
-#: a calibration's local fits: over the first two cycles, then the whole record, and their budgets
-CALIBRATION_HORIZONS: tuple[Optional[int], ...] = (2, None)
-CALIBRATION_NFEV: tuple[int, ...] = (10, 12)
 
 #: the start groups a calibration always fits from locally (besides the best-ranked distinct start)
 ALWAYS_FITTED: tuple[str, ...] = ("population search best", "nominal values", "1-D scan")

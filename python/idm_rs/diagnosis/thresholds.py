@@ -216,6 +216,11 @@ CALIBRATION_SCALE = 0.05
 #: drive cycles of every experiment the population search compares (cheap, and the misfit is
 #: smooth over one cycle: FIT_HORIZONS)
 SEARCH_CYCLES = 1
+#: a calibration's local fits: over the first two drive cycles, then the whole record (a fit
+#: over two cycles first keeps a far start out of the basins the later cycles' slips make), and
+#: the evaluations of each stage (the later one starts close to its optimum)
+CALIBRATION_HORIZONS: tuple[Optional[int], ...] = (2, None)
+CALIBRATION_NFEV: tuple[int, ...] = (10, 12)
 #: the population search: members per free parameter, generations
 SEARCH_POPULATION_PER_PARAM = 6
 SEARCH_GENERATIONS = 25

@@ -18,6 +18,8 @@ from ..progress import part
 from ..rules import leaves_noise
 from ..thresholds import (
     BIC_THRESHOLD,
+    CALIBRATION_HORIZONS,
+    CALIBRATION_NFEV,
     DISCOVERY_REFIT_NFEV,
     DISCOVERY_WIDE_FORMS,
     ELIMINATION_LINEAR_FACTOR,
@@ -78,7 +80,7 @@ def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[F
     """The refit's global search: the model with the form's terms calibrated as the null is
     (:func:`.calibration.calibrate` over the calibrated parameters and the coefficients). Returns
     (the best local fit, the library's free parameters, the search's summary)."""
-    from ..calibration import ALWAYS_FITTED, CALIBRATION_HORIZONS, CALIBRATION_NFEV, calibrate
+    from ..calibration import ALWAYS_FITTED, calibrate
 
     base, lib = _with_form(spec, form)
     # the search's "nominal values" (the centre of its ranges) are the calibrated values with the
