@@ -39,8 +39,8 @@ def gate(fs: list[dict[str, Any]], g: float) -> tuple[float, list[str], float, l
     best local refit ended beyond `g` x noise."""
     saved, lost, saved_wide, lost_wide = 0.0, [], 0.0, []
     for f in fs:
-        local = [s for s in f["starts"] if not s["start"].startswith("global search")]
-        wide = [s for s in f["starts"] if s["start"].startswith("global search")]
+        local = [s for s in f["starts"] if s["start"] != "global search"]
+        wide = [s for s in f["starts"] if s["start"] == "global search"]
         name = f"{f['body']}: {', '.join(f['terms'])}"
         if wide:  # its local refits are also listed as the form tried locally: counted there
             if local and min(s["rms_over_noise"] for s in local) > g:

@@ -678,20 +678,18 @@ def test_the_next_experiment_is_sought_for_a_look_alike_the_data_do_not_choose(m
     assert proposals.look_alike_experiment(pb, d) is None
 
 
-@pytest.mark.parametrize("stands", ["first cycle", "whole record", "never"])
-def test_forms_that_gain_are_searched_globally_when_none_stands(monkeypatch, stands):
+@pytest.mark.parametrize("first_stands", [True, False])
+def test_forms_that_gain_are_searched_globally_when_none_stands(monkeypatch, first_stands):
     """When no form stood, the forms whose refits gained (BIC and the held-out prediction) are
     judged again with the global search, nearest noise first, at most DISCOVERY_WIDE_FORMS of
     them, each term set once, and the search stops at one that leaves noise (a quadratic spring
     on the LPS with m2 mis-set 12 %: x1^2 refitted from the calibration's basins left 2.8 x
-    noise, from the search 0.99 x). The first form whose search over the first cycle does not
-    stand is searched again over the whole record (a cubic spring on the DPS 4: 2.34 x noise
-    over one cycle, 0.996 x over the whole record); a form that stood is not searched again."""
+    noise, from the search 0.99 x)."""
     from types import SimpleNamespace
 
     from idm_rs.diagnosis.discovery import FoundForm
     from idm_rs.diagnosis.discovery import refit as rf
-    from idm_rs.diagnosis.thresholds import DISCOVERY_WIDE_FORMS, FORM_SEARCH_WHOLE_AGAIN
+    from idm_rs.diagnosis.thresholds import DISCOVERY_WIDE_FORMS
 
     sigma = 1.5e-9
     by = {t.param: t for t in MAIN_TERMS}
@@ -710,31 +708,24 @@ def test_forms_that_gain_are_searched_globally_when_none_stands(monkeypatch, sta
                 attempt("main", ["lib_x1cube"], 4.9, 7.0)]
     judged = []
 
-    def wide_judged(cx, body, form, force, forces, wide=False, whole=None):
+    def wide_judged(cx, body, form, force, forces, wide=False):
         assert wide
         names = sorted(t.param for t in form.terms)
-        judged.append((names, "whole record" if whole else "first cycle"))
-        ok = names == ["lib_abs", "lib_x1sq"] and stands == judged[-1][1]
-        return rf.Discovery(ok, "stands" if ok else "still short", body, form, forces,
-                            delta_bic=9e5, rms_after=(0.99 if ok else 2.0) * sigma,
-                            starts=[{"start": judged[-1][1]}])
+        judged.append(names)
+        stands = first_stands and names == ["lib_abs", "lib_x1sq"]
+        return rf.Discovery(stands, "stands" if stands else "still short", body, form, forces,
+                            delta_bic=9e5, rms_after=(0.99 if stands else 2.0) * sigma)
 
     monkeypatch.setattr(rf, "_judged", wide_judged)
     cx = SimpleNamespace(sigma=sigma, heldout_rms_null=12.6 * sigma)
     reasons, tried = [], []
     standing = rf._searched_forms(cx, attempts, {}, reasons, tried)
-    near = ["lib_abs", "lib_x1sq"]
-    assert DISCOVERY_WIDE_FORMS == 2 and FORM_SEARCH_WHOLE_AGAIN == 1
-    if stands == "first cycle":
-        assert judged == [(near, "first cycle")] and len(standing) == 1 and not reasons
-    elif stands == "whole record":
-        assert judged == [(near, "first cycle"), (near, "whole record")] and len(standing) == 1
-        assert len(tried) == 1 and reasons[0].startswith("searched globally")
-        # the refits it follows are kept in order: the one-cycle search's, then its own
-        assert [s["start"] for s in standing[0].starts] == ["first cycle", "whole record"]
+    if first_stands:
+        assert judged == [["lib_abs", "lib_x1sq"]] and len(standing) == 1 and not reasons
     else:
-        assert judged == [(near, "first cycle"), (near, "whole record"), (["lib_ff_cos", "lib_t"], "first cycle")]
-        assert not standing and len(tried) == 3 and all(r.startswith("searched globally") for r in reasons)
+        assert DISCOVERY_WIDE_FORMS == 2
+        assert judged == [["lib_abs", "lib_x1sq"], ["lib_ff_cos", "lib_t"]] and not standing
+        assert len(tried) == 2 and all(r.startswith("searched globally") for r in reasons)
 
 
 def test_a_forms_global_search_does_not_refit_from_its_first_local_start_again(monkeypatch):

@@ -393,16 +393,9 @@ DISCOVERY_WIDE_FORMS = 2
 #: with the ranking of its starts and its local fits over the whole record too). A term that
 #: grows with the stroke hardly acts in the first cycle, which other values fit as well: a cubic
 #: spring on the DPS 4 (benches/RESULTS.md §64) was searched to 2.34 x noise over one cycle and
-#: to 0.996 x over the whole record, at 1.5 x the search's seconds: the first search takes one
-#: cycle, and FORM_SEARCH_WHOLE_AGAIN forms whose search did not stand are searched again over
-#: the whole record
+#: to 0.996 x over the whole record, at 1.5 x the search's seconds. One cycle until the
+#: discovery benches are re-run with None
 FORM_SEARCH_CYCLES: Optional[int] = 1
-#: per search round, the forms (nearest noise first) whose global search over FORM_SEARCH_CYCLES
-#: did not stand that are searched again over the whole record (population, ranking and local
-#: fits): the dearer search only where the cheap one failed, so a form the first search found
-#: is found as before; each costs ~4-7 minutes on 2 cores, on cases that would otherwise find
-#: nothing
-FORM_SEARCH_WHOLE_AGAIN = 1
 #: forms found beside a first effect that did not stand, refitted alone (lowest RMS first):
 #: beside the spurious effect the form nearest noise need not be the true one (RESULTS §21: the
 #: 11.8 um periodic friction's true form came second, 1.05 against 1.04 x noise); each costs

@@ -49,8 +49,7 @@ class Discovery:
     #: the global search the refit came from (:func:`_searched`'s summary), or ""
     searched: str = ""
     #: each refit of the form in the order run: where it started ("calibrated", "nominal", "the
-    #: force's fit", "global search", "global search over the whole record"), the RMS it left in
-    #: noise units, its evaluations and seconds
+    #: force's fit", "global search"), the RMS it left in noise units, its evaluations and seconds
     starts: list[dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:

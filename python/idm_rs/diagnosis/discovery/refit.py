@@ -25,7 +25,6 @@ from ..thresholds import (
     ELIMINATION_LINEAR_FACTOR,
     ELIMINATION_MAX_RATIO,
     FORM_SEARCH_CYCLES,
-    FORM_SEARCH_WHOLE_AGAIN,
     NOISE_RATIO_OK,
     PRUNE_ROUNDS,
     PRUNE_Z,
@@ -77,13 +76,10 @@ def _refit(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[Free
 
 
 def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[FreeParam], form: FoundForm,
-              progress: Optional[Callable[..., Any]], whole: Optional[bool] = None
-              ) -> tuple[FitResult, list[FreeParam], str]:
+              progress: Optional[Callable[..., Any]]) -> tuple[FitResult, list[FreeParam], str]:
     """The refit's global search: the model with the form's terms calibrated as the null is
-    (:func:`.calibration.calibrate` over the calibrated parameters and the coefficients), its
-    population ranked over FORM_SEARCH_CYCLES cycles or, with `whole`, the search, the ranking
-    of its starts and its local fits over the whole record. Returns (the best local fit, the
-    library's free parameters, the search's summary)."""
+    (:func:`.calibration.calibrate` over the calibrated parameters and the coefficients). Returns
+    (the best local fit, the library's free parameters, the search's summary)."""
     from ..calibration import ALWAYS_FITTED, calibrate
 
     base, lib = _with_form(spec, form)
@@ -91,10 +87,8 @@ def _searched(objective: Objective, spec: ModelSpec, calibrated_free: Sequence[F
     # regression's coefficients: the form's first local start, refitted already
     always = tuple(g for g in ALWAYS_FITTED if g != "nominal values")
     # FORM_SEARCH_CYCLES = None: the ranking and the local fits over the whole record as well
-    if whole is None:
-        whole = FORM_SEARCH_CYCLES is None
-    g = calibrate(objective, base, list(calibrated_free) + lib, always=always,
-                  cycles=None if whole else FORM_SEARCH_CYCLES,
+    whole = FORM_SEARCH_CYCLES is None
+    g = calibrate(objective, base, list(calibrated_free) + lib, always=always, cycles=FORM_SEARCH_CYCLES,
                   horizons=(None,) if whole else CALIBRATION_HORIZONS,
                   max_nfev=(DISCOVERY_REFIT_NFEV,) if whole else CALIBRATION_NFEV,
                   progress=progress)
@@ -351,15 +345,12 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
 def _searched_forms(cx: _Context, attempts: list[tuple[Discovery, str, FoundForm, InferredForce]],
                     forces: dict[str, InferredForce], reasons: list[str], tried: list[Discovery]) -> list[Discovery]:
     """When no form stood: the DISCOVERY_WIDE_FORMS forms nearest noise that gained (BIC, held out),
-    as found (unpruned), judged with the global search, and the first FORM_SEARCH_WHOLE_AGAIN of
-    them that do not stand judged again with the search over the whole record; those that stand
-    (others: `reasons`, `tried`)."""
+    as found (unpruned), judged with the global search; those that stand (others: `reasons`, `tried`)."""
     def gained(t: Discovery) -> bool:
         return t.delta_bic >= BIC_THRESHOLD and _predicts_better(t.heldout_rms_after, cx.heldout_rms_null)
 
     standing: list[Discovery] = []
     seen: set[tuple[str, frozenset[str]]] = set()
-    again = 0 if FORM_SEARCH_CYCLES is not None else FORM_SEARCH_WHOLE_AGAIN  # None: the first is whole
     for trial0, body, form, force in sorted(attempts, key=lambda a: a[0].rms_after):
         key = (body, frozenset(t.param for t in form.terms))
         if len(seen) >= DISCOVERY_WIDE_FORMS or not gained(trial0) or key in seen:
@@ -367,16 +358,6 @@ def _searched_forms(cx: _Context, attempts: list[tuple[Discovery, str, FoundForm
         seen.add(key)
         trial = _judged(cx, body, form, force, forces, wide=True)
         trial.starts = trial0.starts + trial.starts  # the local refits it follows, then its own
-        if not trial.discovered and again < FORM_SEARCH_WHOLE_AGAIN:
-            # a term that grows with the stroke hardly acts in the first cycle, where other values
-            # fit as well (a cubic spring on the DPS 4: 2.34 x noise searched over one cycle,
-            # 0.996 x over the whole record, benches/RESULTS.md §64)
-            again += 1
-            reasons.append("searched globally, " + _not_standing(body, trial))
-            tried.append(trial)
-            first = trial
-            trial = _judged(cx, body, form, force, forces, wide=True, whole=True)
-            trial.starts = first.starts + trial.starts
         if trial.discovered:
             standing.append(trial)
             if trial.rms_after <= NOISE_RATIO_OK * cx.sigma:
@@ -488,12 +469,11 @@ def _forms(cx: _Context, body: str, force: InferredForce, phase: str, reasons: l
 
 
 def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forces: dict[str, InferredForce],
-            wide: bool = False, whole: Optional[bool] = None) -> Discovery:
+            wide: bool = False) -> Discovery:
     """The form refitted (with its quadrature partners) and pruned, its figures, and the rule:
     discovered when it improves BIC by BIC_THRESHOLD over the calibrated model, predicts the
     held-out experiment better, and explains the residual (the refit and the held-out prediction
-    at noise); otherwise its `reason` says why not. With `wide`, the refit is :func:`_searched`'s
-    (over the whole record with `whole`)."""
+    at noise); otherwise its `reason` says why not. With `wide`, the refit is :func:`_searched`'s."""
     objective, sigma = cx.objective, cx.sigma
     heldout_rms_null, rms_null = cx.heldout_rms_null, cx.rms_null
     # the refit starts at the calibration's optimum, then (while a start leaves more than noise)
@@ -518,11 +498,9 @@ def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forc
     record: list[dict[str, Any]] = []
     if wide:
         t0 = time.perf_counter()
-        whole = FORM_SEARCH_CYCLES is None if whole is None else whole
-        label = "global search over the whole record" if whole else "global search"
-        with part("form " + label):
-            r, lib, searched = _searched(objective, cx.spec, cx.calibrated_free, form, cx.progress, whole)
-        record.append(start_record(label, r, sigma, time.perf_counter() - t0))
+        with part("form global search"):
+            r, lib, searched = _searched(objective, cx.spec, cx.calibrated_free, form, cx.progress)
+        record.append(start_record("global search", r, sigma, time.perf_counter() - t0))
         start = [f.at(r.values[f.name]) for f in cx.calibrated_free]
     else:
         with part("form refit"):
