@@ -1,0 +1,60 @@
+"""A case's inferred force on the main body at its calibrated model, with the inference given
+`--iterations` accepted Levenberg-Marquardt steps each, and the regression's form on each force
+(plain, and with the calibrated parameters' directions projected out): what discovery would find
+if it started from the calibrated model.
+
+    python benches/bench_discovery_structures.py --seed 1 --jsonl /tmp/none.jsonl --write-only /tmp/cases --only 18
+    python benches/probe_inference_regression.py /tmp/cases/case018 [--iterations 8 24]
+
+Results: benches/RESULTS.md §65 (a linear drag on the DPS 4: v1|v1| at cross-validated error
+0.009 from the calibrated model, a path discovery does not take after ``not_converged``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import time
+from typing import Any
+
+from idm_rs.diagnosis.discovery import infer
+from idm_rs.diagnosis.discovery.regress import find_terms
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("case", help="a case directory (idm-recording/1)")
+    ap.add_argument("--iterations", type=int, nargs="+", default=[8, 24])
+    a = ap.parse_args()
+    diagnose = importlib.import_module("idm_rs.diagnosis.diagnose")
+
+    class Done(Exception):
+        pass
+
+    def stage(s: Any) -> None:
+        cal, pb, rec = s.cal, s.pb, s.rec
+        sigma = pb.sigma
+        print(f"calibration {cal.fit.rms / sigma:.2f} x noise, chi^2 {cal.fit.chi2:.0f}", flush=True)
+        for it in a.iterations:
+            t0 = time.perf_counter()
+            f = infer.infer_force(rec, cal.fit.spec, sigma, "main", simulator=pb.obj.sim, nuisance=list(cal.at),
+                                  iterations=it)
+            print(f"{it} accepted steps at most: chi^2 {f.chi2_before:.0f} -> {f.chi2_after:.0f}, "
+                  f"{f.dof:.1f} effective parameters, {time.perf_counter() - t0:.0f} s", flush=True)
+            for project in (False, True):
+                form = find_terms(f, project=project)
+                terms = ", ".join(f"{t.symbol} {form.coefficients[t.param]:.4g}" for t in form.terms)
+                print(f"  {'projected' if project else 'plain'}: {terms or '(none)'}; cross-validated error "
+                      f"{form.cv_error:.3f}, by size {[round(x, 3) for x in form.cv_by_size]}", flush=True)
+        raise Done
+
+    # the diagnosis's own stages up to the screening, then this probe in place of the rest
+    diagnose.PIPELINE = diagnose.PIPELINE[:3] + (("the inference and regression probe", stage),)
+    try:
+        diagnose.diagnose(a.case, progress=False)
+    except Done:
+        pass
+
+
+if __name__ == "__main__":
+    main()
