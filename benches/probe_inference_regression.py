@@ -4,7 +4,11 @@
 if it started from the calibrated model.
 
     python benches/bench_discovery_structures.py --seed 1 --jsonl /tmp/none.jsonl --write-only /tmp/cases --only 18
-    python benches/probe_inference_regression.py /tmp/cases/case018 [--iterations 8 24]
+    python benches/probe_inference_regression.py /tmp/cases/case018 [--iterations 8 24] [--discover]
+
+With ``--discover``, then discovery itself from the calibrated model (the path
+``thresholds.DISCOVERY_CALIBRATED_AFTER_NOT_CONVERGED`` adds after ``not_converged``): its
+verdict, form, RMS and reason.
 
 Results: benches/RESULTS.md §65 (a linear drag on the DPS 4: v1|v1| at cross-validated error
 0.009 from the calibrated model, a path discovery does not take after ``not_converged``).
@@ -25,6 +29,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("case", help="a case directory (idm-recording/1)")
     ap.add_argument("--iterations", type=int, nargs="+", default=[8, 24])
+    ap.add_argument("--discover", action="store_true", help="then discovery from the calibrated model")
     a = ap.parse_args()
     diagnose = importlib.import_module("idm_rs.diagnosis.diagnose")
 
@@ -46,6 +51,17 @@ def main() -> None:
                 terms = ", ".join(f"{t.symbol} {form.coefficients[t.param]:.4g}" for t in form.terms)
                 print(f"  {'projected' if project else 'plain'}: {terms or '(none)'}; cross-validated error "
                       f"{form.cv_error:.3f}, by size {[round(x, 3) for x in form.cv_by_size]}", flush=True)
+        if a.discover:
+            from idm_rs.diagnosis.discovery import discover
+
+            t0 = time.perf_counter()
+            ho_cal = s.heldout.rms(cal.fit.spec, cal.at)
+            found = discover(rec, cal.fit.spec, list(cal.at), pb.obj, s.heldout, ho_cal, nominal=s.nominal.spec,
+                             progress=None)
+            terms = ", ".join(t.symbol for t in found.form.terms) if found.form is not None else "(none)"
+            print(f"discovery from the calibrated model: discovered {found.discovered}, {terms}, "
+                  f"{found.rms_after / sigma:.3f} x noise, {time.perf_counter() - t0:.0f} s; {found.reason}",
+                  flush=True)
         raise Done
 
     # the diagnosis's own stages up to the screening, then this probe in place of the rest
