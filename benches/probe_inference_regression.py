@@ -6,12 +6,11 @@ if it started from the calibrated model.
     python benches/bench_discovery_structures.py --seed 1 --jsonl /tmp/none.jsonl --write-only /tmp/cases --only 18
     python benches/probe_inference_regression.py /tmp/cases/case018 [--iterations 8 24] [--discover]
 
-With ``--discover``, then discovery itself from the calibrated model (the path
-``thresholds.DISCOVERY_CALIBRATED_AFTER_NOT_CONVERGED`` adds after ``not_converged``): its
-verdict, form, RMS and reason.
+With ``--discover``, then discovery itself from the calibrated model (a path discovery does not
+take after ``not_converged``): its verdict, form, RMS and reason.
 
 Results: benches/RESULTS.md §65 (a linear drag on the DPS 4: v1|v1| at cross-validated error
-0.009 from the calibrated model, a path discovery does not take after ``not_converged``).
+0.009 from the calibrated model, refitted 4.32 x noise: discovery from there finds nothing).
 """
 
 from __future__ import annotations

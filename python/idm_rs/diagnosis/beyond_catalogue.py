@@ -20,7 +20,6 @@ from .rules import leaves_noise
 from .thresholds import (
     ALONE_FORMS,
     BIC_THRESHOLD,
-    DISCOVERY_CALIBRATED_AFTER_NOT_CONVERGED,
     NOISE_RATIO_OK,
 )
 from .whiteness import whiteness_z
@@ -209,15 +208,13 @@ def discovery_paths(verdict: str, lead: Optional[Refit], cal: CalibratedNull, no
     calibrated null without it after "unexplained"; the model with it after "not_converged"
     (its fit has moved the calibrated parameters into a basin of its own, nearer the truth
     when it mimics part of the missing force: a dry friction on the weight, led by the weight's
-    drag at 2.8 x noise against the calibration's 8.3 x). With
-    DISCOVERY_CALIBRATED_AFTER_NOT_CONVERGED, the calibrated model follows those two after
-    "not_converged" as well."""
+    drag at 2.8 x noise against the calibration's 8.3 x)."""
     beside = [DiscoveryPath(apply(lead.base, lead.free, np.zeros(len(lead.free))), list(lead.free),
                             lead.candidate.heldout_rms, lead, False)] if lead is not None else []
     calibrated = DiscoveryPath(cal.fit.spec, list(cal.at), ho_cal, None, False)
     from_nominal = DiscoveryPath(nominal.spec, list(cal.free), ho_cal, None, True)
     if verdict == "not_converged":
-        return [from_nominal] + beside + ([calibrated] if DISCOVERY_CALIBRATED_AFTER_NOT_CONVERGED else [])
+        return [from_nominal] + beside
     # last, the nominal values as given: a calibration can converge into a basin that absorbed
     # the missing force its own way (a linear drag on the LPS, sigma2's own form at ~300 x
     # sigma2: from the calibrated model the inferred force left 3 x noise and no form; from the

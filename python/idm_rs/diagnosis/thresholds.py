@@ -389,14 +389,6 @@ ELIMINATION_MAX_RATIO = 1.5
 #: m2 ~ 0.26 kg, x1^2 refitted from them 2.8 x noise, from the search with x1^2 free 0.99 x);
 #: each costs ~1-3 minutes on one core, on cases that would otherwise find nothing
 DISCOVERY_WIDE_FORMS = 2
-#: after "not_converged", the calibrated model as a last discovery path (after the nominal values
-#: as given and the model with the first effect; only where they named nothing). Two DPS 4
-#: devices were missed without it: a linear drag whose inferred force regresses onto v1|v1| at
-#: the calibrated model (cross-validated error 0.009) and onto nothing from the other paths, and
-#: a cubic spring whose search finds the truth only centred there (benches/RESULTS.md §65). Off
-#: until the discovery benches are re-run with it (those rows and the off-library rows whose
-#: calibration did not converge, which must still claim nothing)
-DISCOVERY_CALIBRATED_AFTER_NOT_CONVERGED = False
 #: the drive cycles a form's global search ranks its population over (None: the whole record,
 #: with the ranking of its starts and its local fits over the whole record too). A term that
 #: grows with the stroke hardly acts in the first cycle, which other values fit as well: a cubic
