@@ -16,13 +16,17 @@ most of chi^2. Results: benches/RESULTS.md §48.
 from __future__ import annotations
 
 import argparse
-import importlib
+import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from idm_rs.diagnosis.discovery import infer
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from at_screening import at_screening
 
 
 def _report(s: Any, t0: float) -> None:
@@ -75,23 +79,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("case", help="a case directory (idm-recording/1)")
     a = ap.parse_args()
-    diagnose = importlib.import_module("idm_rs.diagnosis.diagnose")
     t0 = time.perf_counter()
-
-    class Done(Exception):
-        pass
-
-    def stage(s: Any) -> None:
-        _report(s, t0)
-        raise Done
-
-    # the diagnosis's own stages up to the screening (the noise model learned, the held-out
-    # experiment set aside), then this report in place of the rest
-    diagnose.PIPELINE = diagnose.PIPELINE[:3] + (("the force inference's report", stage),)
-    try:
-        diagnose.diagnose(a.case, progress=False)
-    except Done:
-        pass
+    at_screening(a.case, "the force inference's report", lambda s: _report(s, t0))
 
 
 if __name__ == "__main__":

@@ -16,12 +16,16 @@ Results: benches/RESULTS.md §65 (a linear drag on the DPS 4: v1|v1| at cross-va
 from __future__ import annotations
 
 import argparse
-import importlib
+import sys
 import time
+from pathlib import Path
 from typing import Any
 
 from idm_rs.diagnosis.discovery import infer
 from idm_rs.diagnosis.discovery.regress import find_terms
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from at_screening import at_screening
 
 
 def main() -> None:
@@ -30,12 +34,7 @@ def main() -> None:
     ap.add_argument("--iterations", type=int, nargs="+", default=[8, 24])
     ap.add_argument("--discover", action="store_true", help="then discovery from the calibrated model")
     a = ap.parse_args()
-    diagnose = importlib.import_module("idm_rs.diagnosis.diagnose")
-
-    class Done(Exception):
-        pass
-
-    def stage(s: Any) -> None:
+    def report(s: Any) -> None:
         cal, pb, rec = s.cal, s.pb, s.rec
         sigma = pb.sigma
         print(f"calibration {cal.fit.rms / sigma:.2f} x noise, chi^2 {cal.fit.chi2:.0f}", flush=True)
@@ -61,14 +60,8 @@ def main() -> None:
             print(f"discovery from the calibrated model: discovered {found.discovered}, {terms}, "
                   f"{found.rms_after / sigma:.3f} x noise, {time.perf_counter() - t0:.0f} s; {found.reason}",
                   flush=True)
-        raise Done
 
-    # the diagnosis's own stages up to the screening, then this probe in place of the rest
-    diagnose.PIPELINE = diagnose.PIPELINE[:3] + (("the inference and regression probe", stage),)
-    try:
-        diagnose.diagnose(a.case, progress=False)
-    except Done:
-        pass
+    at_screening(a.case, "the inference and regression probe", report)
 
 
 if __name__ == "__main__":
