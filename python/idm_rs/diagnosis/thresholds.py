@@ -392,9 +392,10 @@ DISCOVERY_WIDE_FORMS = 2
 #: the drive cycles a form's global search ranks its population over (None: the whole record,
 #: with the ranking of its starts and its local fits over the whole record too). A term that
 #: grows with the stroke hardly acts in the first cycle, which other values fit as well: a cubic
-#: spring on the DPS 4 (benches/RESULTS.md §64) was searched to 2.34 x noise over one cycle and
-#: to 0.996 x over the whole record, at 1.5 x the search's seconds. One cycle until the
-#: discovery benches are re-run with None
+#: spring on the DPS 4 was searched to 2.34 x noise over one cycle and to 0.996 x over the whole
+#: record, at 1.5 x the search's seconds, centred on the calibrated model (benches/RESULTS.md
+#: §64); centred on the model with the first effect, where discovery searched that device, the
+#: whole record ended at 2.47 x as one cycle did (§65). One cycle: None is not validated
 FORM_SEARCH_CYCLES: Optional[int] = 1
 #: forms found beside a first effect that did not stand, refitted alone (lowest RMS first):
 #: beside the spurious effect the form nearest noise need not be the true one (RESULTS §21: the
