@@ -186,3 +186,51 @@ def test_a_ctrl_c_as_a_piece_of_a_long_run_ends_keeps_the_pieces_as_incomplete(m
     kept = idm_rs.partial_result(stop.value)
     assert len(calls) == 2 and not kept.complete
     assert 0 < kept.t[-1] < 1e-3
+
+
+
+FINALIZER = """
+import contextlib, signal, sys, time
+from idm_rs.apps.cli_interrupts import interrupts_not_swallowed
+
+class InterruptedAsItIsCollected:
+    def __del__(self):
+        signal.raise_signal(signal.SIGINT)
+
+with interrupts_not_swallowed() if sys.argv[1] == "command" else contextlib.nullcontext():
+    obj = InterruptedAsItIsCollected()
+    del obj
+    start = time.perf_counter()
+    while time.perf_counter() - start < 2.0:
+        time.sleep(0.005)
+print("ran to the end", flush=True)
+"""
+
+
+@pytest.mark.parametrize("handler", ["python", "command"])
+def test_a_commands_ctrl_c_inside_a_finalizer_is_raised_after_it(tmp_path, handler):
+    """A Ctrl-C that Python's own handler raises inside a finalizer or weakref callback is printed
+    as "Exception ignored" and lost (CI saw `reproduce` run to its end and exit 0 so); a command's
+    handler moves it out of there, into the command's own code."""
+    proc = _start(["-c", FINALIZER, handler], tmp_path)
+    out, err = proc.communicate(timeout=20)
+    if handler == "python":
+        assert proc.returncode == 0 and "ran to the end" in out and "Exception ignored" in err
+    else:
+        assert proc.returncode in (-signal.SIGINT, 130), (proc.returncode, err[-2000:])
+        assert "ran to the end" not in out and "Exception ignored" not in err
+        assert "KeyboardInterrupt" in err.splitlines()[-1]
+
+
+def test_a_handler_the_caller_set_is_left_as_it_is():
+    from idm_rs.apps.cli_interrupts import interrupts_not_swallowed
+
+    seen: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda *a: seen.append(1))
+    try:
+        with interrupts_not_swallowed():
+            signal.raise_signal(signal.SIGINT)
+            assert signal.getsignal(signal.SIGINT) is not signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert seen == [1]

@@ -38,6 +38,7 @@ from .cli_files import (
     waveform_from_args,
     write_sweep_netcdf,
 )
+from .cli_interrupts import interrupts_not_swallowed
 from .cli_outputs import check_outputs
 from .cli_parser import build_parser
 
@@ -397,7 +398,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if a.command is None:
         parser.print_help()
         return EXIT_ERROR
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), interrupts_not_swallowed():
         warnings.showwarning = _plain_warning
         return _run(a)
 
