@@ -318,6 +318,11 @@ def test_a_term_with_a_look_alike_in_the_library_is_reported_with_it():
     coef = {"V": 5e-4, "x1 - x2": -5e-4 / d33}
     term = other.terms[0]
     assert abs(other.coefficients[term.param] / coef[b] - 1) < 0.02
+    # the form with its look-alike in place is what discovery refits when the form found does
+    # not stand
+    from idm_rs.diagnosis.discovery.refit import look_alike_forms
+
+    assert [{t.symbol for t in g.terms} for g in look_alike_forms(form)] == [{b}]
     from idm_rs.diagnosis.discovery.form_words import look_alike_note
 
     assert "cannot be told apart from" in look_alike_note(form)

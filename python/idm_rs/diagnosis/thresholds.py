@@ -347,6 +347,9 @@ RANK_TOLERANCE = 1e-12
 
 #: most library terms a discovered force may have
 MAX_TERMS = 4
+#: of a form that does not stand, the forms with one term swapped for its look-alike
+#: (DEGENERATE_COS) refitted after the forms found, at most this many per form
+MAX_LOOK_ALIKE_FORMS = 2
 #: wavelengths [m] of the periodic library terms tried (their fit refines the one chosen)
 WAVELENGTHS = np.geomspace(2e-6, 200e-6, 25)
 #: a periodic term must lower the cross-validated error by this factor below the best

@@ -25,6 +25,7 @@ from ..thresholds import (
     ELIMINATION_LINEAR_FACTOR,
     ELIMINATION_MAX_RATIO,
     FORM_SEARCH_CYCLES,
+    MAX_LOOK_ALIKE_FORMS,
     NOISE_RATIO_OK,
     PRUNE_ROUNDS,
     PRUNE_Z,
@@ -283,7 +284,7 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
         done = False
         refitted: set[frozenset[str]] = set()  # the forms refitted for this body (a phase may find one again)
         for phase in ("inferred", "direct"):
-            forms = _forms(cx, body, force, phase, reasons, failures)
+            forms, alternates = _forms(cx, body, force, phase, reasons, failures)
             if not forms:
                 continue
             found_any = [f_ for f_ in forms if f_.terms]
@@ -303,7 +304,8 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
             # drive's phase: on the drag device four periodic terms at 4.2 um reached 1.09 x noise,
             # v1|v1| alone 1.00)
             found_any.sort(key=lambda f_: len(f_.terms) + (f_.wavelength > 0))
-            for form in found_any:
+            alternates.sort(key=lambda f_: len(f_.terms))
+            for form in found_any + alternates:
                 key = frozenset(t.param for t in form.terms)
                 if key in refitted:
                     continue
@@ -430,14 +432,15 @@ def _best_standing(standing: list[Discovery]) -> Discovery:
 
 
 def _forms(cx: _Context, body: str, force: InferredForce, phase: str, reasons: list[str], failures: list[str]
-           ) -> list[FoundForm]:
+           ) -> tuple[list[FoundForm], list[FoundForm]]:
     """The distinct forms found for the force on `body` in `phase`: "inferred", from the inferred
     force's effect (plain, in the complement of the calibrated parameters, and with the
     parameters' own moves added back); "direct", from
     the calibrated residual itself by the library's exact sensitivities (no knots between the
     force and the library; it costs a second library scan, so it is taken only when no form from
-    the inferred force stood). Why nothing was found goes to `reasons`, numerical failures to
-    `failures`."""
+    the inferred force stood). Returns those forms, and the forms with a term swapped for its
+    look-alike (:func:`look_alike_forms`), refitted after them. Why nothing was found goes to
+    `reasons`, numerical failures to `failures`."""
     views: list[tuple[InferredForce, bool]] = []
     if phase == "inferred":
         if force.gain > BIC_THRESHOLD:
@@ -456,6 +459,7 @@ def _forms(cx: _Context, body: str, force: InferredForce, phase: str, reasons: l
         except NumericalFailure as e:
             failures.append(f"the direct view of the {body}: {e}")
     forms: list[FoundForm] = []
+    alternates: list[FoundForm] = []
     for view, project in views:
         try:
             f_ = find_terms(view, project=project)
@@ -465,7 +469,19 @@ def _forms(cx: _Context, body: str, force: InferredForce, phase: str, reasons: l
             continue
         if all({t.param for t in f_.terms} != {t.param for t in g.terms} for g in forms):
             forms.append(f_)
-    return forms
+        alternates += [v for v in look_alike_forms(f_) if all({t.param for t in v.terms} != {t.param for t in g.terms}
+                                                              for g in forms + alternates)]
+    return forms, alternates
+
+
+def look_alike_forms(form: FoundForm) -> list[FoundForm]:
+    """`form` with a term swapped for its look-alike (`FoundForm.look_alikes`, most parallel
+    first, at most MAX_LOOK_ALIKE_FORMS): refitted when the forms found do not stand. To first
+    order the regression cannot choose between them, the refit can: a linear drag on a DPS 4
+    read as sgn v1, v1|v1| (|cos| of v1|v1| and v1 0.996) refitted to 2.3 x noise, while the
+    drag itself, v1, reaches noise."""
+    pairs = [(a, b) for a, b, _ in form.look_alikes if (a, b) in form.swaps]
+    return [form.swapped(a, b) for a, b in pairs[:MAX_LOOK_ALIKE_FORMS]]
 
 
 def _judged(cx: _Context, body: str, form: FoundForm, force: InferredForce, forces: dict[str, InferredForce],
