@@ -284,7 +284,7 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
         done = False
         refitted: set[frozenset[str]] = set()  # the forms refitted for this body (a phase may find one again)
         for phase in ("inferred", "direct"):
-            forms, alternates = _forms(cx, body, force, phase, reasons, failures)
+            forms = _forms(cx, body, force, phase, reasons, failures)
             if not forms:
                 continue
             found_any = [f_ for f_ in forms if f_.terms]
@@ -304,8 +304,9 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
             # drive's phase: on the drag device four periodic terms at 4.2 um reached 1.09 x noise,
             # v1|v1| alone 1.00)
             found_any.sort(key=lambda f_: len(f_.terms) + (f_.wavelength > 0))
-            alternates.sort(key=lambda f_: len(f_.terms))
-            for form in found_any + alternates:
+            queue = list(found_any)
+            while queue:
+                form = queue.pop(0)
                 key = frozenset(t.param for t in form.terms)
                 if key in refitted:
                     continue
@@ -323,6 +324,10 @@ def discover(rec: Recording, spec: ModelSpec, calibrated_free: Sequence[FreePara
                 tried.append(trial)
                 if out.refit is None:
                     out = trial
+                if _gained(cx, trial):
+                    # the right kind of force, perhaps not the right term: its look-alikes (to
+                    # first order the regression cannot choose, the refit can) after the forms found
+                    queue += look_alike_forms(form)
             if done:
                 break
         if done:
@@ -348,14 +353,11 @@ def _searched_forms(cx: _Context, attempts: list[tuple[Discovery, str, FoundForm
                     forces: dict[str, InferredForce], reasons: list[str], tried: list[Discovery]) -> list[Discovery]:
     """When no form stood: the DISCOVERY_WIDE_FORMS forms nearest noise that gained (BIC, held out),
     as found (unpruned), judged with the global search; those that stand (others: `reasons`, `tried`)."""
-    def gained(t: Discovery) -> bool:
-        return t.delta_bic >= BIC_THRESHOLD and _predicts_better(t.heldout_rms_after, cx.heldout_rms_null)
-
     standing: list[Discovery] = []
     seen: set[tuple[str, frozenset[str]]] = set()
     for trial0, body, form, force in sorted(attempts, key=lambda a: a[0].rms_after):
         key = (body, frozenset(t.param for t in form.terms))
-        if len(seen) >= DISCOVERY_WIDE_FORMS or not gained(trial0) or key in seen:
+        if len(seen) >= DISCOVERY_WIDE_FORMS or not _gained(cx, trial0) or key in seen:
             continue
         seen.add(key)
         trial = _judged(cx, body, form, force, forces, wide=True)
@@ -368,6 +370,12 @@ def _searched_forms(cx: _Context, attempts: list[tuple[Discovery, str, FoundForm
         reasons.append("searched globally, " + _not_standing(body, trial))
         tried.append(trial)
     return standing
+
+
+def _gained(cx: _Context, trial: Discovery) -> bool:
+    """The refit improves BIC by BIC_THRESHOLD and predicts the held-out experiment better
+    (whether or not it leaves noise)."""
+    return trial.delta_bic >= BIC_THRESHOLD and _predicts_better(trial.heldout_rms_after, cx.heldout_rms_null)
 
 
 def _not_standing(body: str, trial: Discovery) -> str:
@@ -432,15 +440,14 @@ def _best_standing(standing: list[Discovery]) -> Discovery:
 
 
 def _forms(cx: _Context, body: str, force: InferredForce, phase: str, reasons: list[str], failures: list[str]
-           ) -> tuple[list[FoundForm], list[FoundForm]]:
+           ) -> list[FoundForm]:
     """The distinct forms found for the force on `body` in `phase`: "inferred", from the inferred
     force's effect (plain, in the complement of the calibrated parameters, and with the
     parameters' own moves added back); "direct", from
     the calibrated residual itself by the library's exact sensitivities (no knots between the
     force and the library; it costs a second library scan, so it is taken only when no form from
-    the inferred force stood). Returns those forms, and the forms with a term swapped for its
-    look-alike (:func:`look_alike_forms`), refitted after them. Why nothing was found goes to
-    `reasons`, numerical failures to `failures`."""
+    the inferred force stood). Why nothing was found goes to `reasons`, numerical failures to
+    `failures`."""
     views: list[tuple[InferredForce, bool]] = []
     if phase == "inferred":
         if force.gain > BIC_THRESHOLD:
@@ -459,7 +466,6 @@ def _forms(cx: _Context, body: str, force: InferredForce, phase: str, reasons: l
         except NumericalFailure as e:
             failures.append(f"the direct view of the {body}: {e}")
     forms: list[FoundForm] = []
-    alternates: list[FoundForm] = []
     for view, project in views:
         try:
             f_ = find_terms(view, project=project)
@@ -469,17 +475,15 @@ def _forms(cx: _Context, body: str, force: InferredForce, phase: str, reasons: l
             continue
         if all({t.param for t in f_.terms} != {t.param for t in g.terms} for g in forms):
             forms.append(f_)
-        alternates += [v for v in look_alike_forms(f_) if all({t.param for t in v.terms} != {t.param for t in g.terms}
-                                                              for g in forms + alternates)]
-    return forms, alternates
+    return forms
 
 
 def look_alike_forms(form: FoundForm) -> list[FoundForm]:
     """`form` with a term swapped for its look-alike (`FoundForm.look_alikes`, most parallel
-    first, at most MAX_LOOK_ALIKE_FORMS): refitted when the forms found do not stand. To first
-    order the regression cannot choose between them, the refit can: a linear drag on a DPS 4
-    read as sgn v1, v1|v1| (|cos| of v1|v1| and v1 0.996) refitted to 2.3 x noise, while the
-    drag itself, v1, reaches noise."""
+    first, at most MAX_LOOK_ALIKE_FORMS): refitted after the forms found when `form`'s refit
+    gained but did not stand. To first order the regression cannot choose between them, the
+    refit can: a linear drag on a DPS 4 read as sgn v1, v1|v1| (|cos| of v1|v1| and v1 0.996)
+    refitted to 2.3 x noise."""
     pairs = [(a, b) for a, b, _ in form.look_alikes if (a, b) in form.swaps]
     return [form.swapped(a, b) for a, b in pairs[:MAX_LOOK_ALIKE_FORMS]]
 
