@@ -188,7 +188,6 @@ def test_a_ctrl_c_as_a_piece_of_a_long_run_ends_keeps_the_pieces_as_incomplete(m
     assert 0 < kept.t[-1] < 1e-3
 
 
-
 FINALIZER = """
 import contextlib, signal, sys, time
 from idm_rs.apps.cli_interrupts import interrupts_not_swallowed
