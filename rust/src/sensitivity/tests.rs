@@ -32,8 +32,10 @@ fn paper(s: Structure, e: Effects) -> Case {
         hyst: true,
         wave: PiecewiseLinear::triangle(80.0, 0.5e-3, 9.5e-3, 0.0).unwrap(),
         t_end: 1e-3,
-        method: Method::Rk4 { dt: 1e-8 },
-        every: 2000,
+        // a fifth of the paper case's RK4 stability limit (1e-7 s): the comparison is within
+        // one discretisation, and these are the longest unit tests
+        method: Method::Rk4 { dt: 2e-8 },
+        every: 1000,
         derived_fn: false,
     }
 }
@@ -438,10 +440,7 @@ fn every_effect_parameter_has_its_sensitivity() {
         libw_volt: 1e-4,
         libw_dvolt: 1e-8,
     };
-    // dt 2e-8: a fifth of the paper case's RK4 stability limit (1e-7 s), and half the CI
-    // time of this, the longest unit test (the comparison is within one discretisation)
-    let mut c = paper(Structure::Lps, e);
-    c.method = Method::Rk4 { dt: 2e-8 };
+    let c = paper(Structure::Lps, e);
     let names = EFFECT_NAMES;
     let h: Vec<f64> = names.iter().map(|n| rel_step(&c, n)).collect();
     c.check(&names, &h, 1e-6);
@@ -461,9 +460,11 @@ fn a_rig_has_its_sensitivities() {
         }),
         hyst: false,
         wave: PiecewiseLinear::new(vec![0.0, 1.0], vec![0.0, 2e-2]).unwrap(),
-        t_end: 0.01,
-        method: Method::Rk4 { dt: 2e-8 },
-        every: 5_000,
+        // breakaway at 7.6 ms, then 1.4 ms of sliding; dt half the friction state's stability
+        // limit while it slides (1e-7-2e-7 s)
+        t_end: 9e-3,
+        method: Method::Rk4 { dt: 5e-8 },
+        every: 2_000,
         derived_fn: false,
     };
     let names = ["m1", "mu_k", "mu_s", "sigma2", "normal_force"];
@@ -476,8 +477,8 @@ fn adaptive_runs_are_differentiated_with_their_steps_held() {
     // the derivative of each adaptive run against RK4's (checked against differences
     // above): two discretisations of one derivative, agreeing to their tolerance
     let mut rk4 = paper(Structure::Lps, Effects::default());
-    rk4.method = Method::Rk4 { dt: 1e-9 };
-    rk4.every = 10_000;
+    rk4.method = Method::Rk4 { dt: 2e-9 };
+    rk4.every = 5_000;
     rk4.t_end = 0.6e-3;
     let names = ["mu_k", "m2", "fric_alpha", "hyst_alpha"];
     let reference = rk4.engine(&names);
