@@ -216,7 +216,7 @@ mod tests {
 
     /// The rig's physics under Rodas4 at tight tolerances (every step kept): these runs stick or
     /// slide steadily for most of their span, where an implicit step grows far past RK4's
-    /// stability limit (2e-8-1e-7 s), 30-4,000 times fewer steps. The values asserted agree
+    /// stability limit (2e-8-1e-7 s): 60-5,000 times fewer steps. The values asserted agree
     /// with RK4's well inside their tolerances: breakaway at 1.0149 Fs (RK4 1.0146), sliding
     /// 7.0e-8 off the drive speed (RK4 6.9e-8), the held and the moving body to four digits.
     fn run(drive: RigDrive, wave: &PiecewiseLinear, t_end: f64) -> (Model, crate::simulate::Trajectory) {
