@@ -121,8 +121,9 @@ def _cv_path(X: list[NDArray[np.float64]], y: list[NDArray[np.float64]], max_ter
     if total <= 0.0:
         return errs, supports
     m = len(X)
+    path = _omp_path(Xa / norms, ya, max_terms)
     for k in range(1, max_terms + 1):
-        support = np.flatnonzero(_omp(Xa / norms, ya, k))
+        support = path[min(k, len(path)) - 1] if path else np.zeros(0, dtype=np.int64)
         if support.size < k and k > 1:
             break  # the library has no more independent directions
         sse = 0.0
@@ -137,17 +138,26 @@ def _cv_path(X: list[NDArray[np.float64]], y: list[NDArray[np.float64]], max_ter
     return errs, supports
 
 
-def _omp(X: NDArray[np.float64], y: NDArray[np.float64], k: int) -> NDArray[np.float64]:
-    """Orthogonal matching pursuit with at most `k` terms (scikit-learn); a library whose
-    columns are linearly dependent (V and x1 - x2 follow each other) simply stops early."""
+def _omp_path(X: NDArray[np.float64], y: NDArray[np.float64], max_terms: int) -> list[NDArray[np.int64]]:
+    """The supports of orthogonal matching pursuit (scikit-learn) after 1, 2, ... terms, up to
+    `max_terms`: one greedy pursuit whose k-th step is the pursuit stopped at k terms, on the
+    Gram matrix formed once (the library has many samples and few columns). A library whose
+    columns are linearly dependent (V and x1 - x2 follow each other) stops early: fewer steps."""
     import warnings
 
-    from sklearn.linear_model import OrthogonalMatchingPursuit
+    from sklearn.linear_model import orthogonal_mp_gram
 
+    n = X.shape[1]
+    # formed as scikit-learn's estimator forms them, so the pursuit is the estimator's
+    gram = np.empty((n, n), dtype=X.dtype, order="C")
+    np.dot(X.T, X, out=gram)
+    xy = np.empty(n, dtype=X.dtype, order="C")
+    np.dot(X.T, y, out=xy)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        omp = OrthogonalMatchingPursuit(n_nonzero_coefs=min(k, X.shape[1]), fit_intercept=False).fit(X, y)
-    return np.asarray(omp.coef_)
+        coef = orthogonal_mp_gram(gram, xy, n_nonzero_coefs=min(max_terms, n), return_path=True)
+    coef = np.reshape(coef, (n, -1))
+    return [np.flatnonzero(coef[:, k]) for k in range(coef.shape[1])]
 
 
 def _choose(errs: list[float]) -> int:
