@@ -65,9 +65,21 @@ def _choose_hypothesis_seed(config) -> None:
     if given is not None:
         _HYPOTHESIS_SEED = int(given)
         return
+    # a pytest-xdist worker draws from the seed its controller chose and prints
+    worker = getattr(config, "workerinput", None)
+    if worker is not None and worker.get("idm_rs_hypothesis_seed") is not None:
+        _HYPOTHESIS_SEED = int(worker["idm_rs_hypothesis_seed"])
+        core.global_force_seed = _HYPOTHESIS_SEED
+        return
     env = os.environ.get("IDM_RS_HYPOTHESIS_SEED")
     _HYPOTHESIS_SEED = int(env) if env else int.from_bytes(os.urandom(4), "little")
     core.global_force_seed = _HYPOTHESIS_SEED
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node):
+    """pytest-xdist's controller, per worker: the seed it will print goes to the worker."""
+    node.workerinput["idm_rs_hypothesis_seed"] = _HYPOTHESIS_SEED
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
