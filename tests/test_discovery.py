@@ -418,6 +418,30 @@ def test_the_direct_regression_reads_the_residual_net_of_its_noise():
     assert abs(net[1]) < 0.01 and list(supports[1]) == [0]
 
 
+
+def test_one_pursuit_path_gives_the_support_of_each_size():
+    """The path's k-th support is scikit-learn's estimator stopped at k terms, on a library with
+    near-collinear columns (picked among by the pursuit's order) and a column that is the sum of
+    two others (the path stops early: fewer steps than asked)."""
+    import warnings
+
+    from sklearn.linear_model import OrthogonalMatchingPursuit
+
+    from idm_rs.diagnosis.discovery.regress import _omp_path
+
+    rng = np.random.default_rng(11)
+    a = rng.normal(size=(2000, 4))
+    X = np.column_stack([a, a[:, 0] + 1e-3 * rng.normal(size=2000), a[:, 1] + a[:, 2]])
+    for y in (0.8 * X[:, 4] - 0.3 * X[:, 1] + 0.05 * rng.normal(size=2000), X[:, 1] + X[:, 2] + X[:, 3]):
+        path = _omp_path(X, y, 6)
+        assert 1 <= len(path) <= 6 and [len(s) for s in path] == list(range(1, len(path) + 1))
+        for k in range(1, len(path) + 1):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                est = OrthogonalMatchingPursuit(n_nonzero_coefs=k, fit_intercept=False).fit(X, y)
+            assert list(path[k - 1]) == list(np.flatnonzero(est.coef_)), k
+    assert len(_omp_path(X, X[:, 1] + X[:, 2] + X[:, 3], 6)) < 6  # the dependent column ends it
+
 def test_a_periodic_term_is_refitted_with_its_phase_free():
     """A periodic term found alone gets its quadrature partner before the refit (a force
     periodic in position has a phase), started at zero and free over the found term's size."""
