@@ -66,13 +66,12 @@ def _choose_hypothesis_seed(config) -> None:
         _HYPOTHESIS_SEED = int(given)
         return
     # a pytest-xdist worker draws from the seed its controller chose and prints
-    worker = getattr(config, "workerinput", None)
-    if worker is not None and worker.get("idm_rs_hypothesis_seed") is not None:
-        _HYPOTHESIS_SEED = int(worker["idm_rs_hypothesis_seed"])
-        core.global_force_seed = _HYPOTHESIS_SEED
-        return
+    handed = (getattr(config, "workerinput", None) or {}).get("idm_rs_hypothesis_seed")
     env = os.environ.get("IDM_RS_HYPOTHESIS_SEED")
-    _HYPOTHESIS_SEED = int(env) if env else int.from_bytes(os.urandom(4), "little")
+    if handed is not None:
+        _HYPOTHESIS_SEED = int(handed)
+    else:
+        _HYPOTHESIS_SEED = int(env) if env else int.from_bytes(os.urandom(4), "little")
     core.global_force_seed = _HYPOTHESIS_SEED
 
 
