@@ -10,8 +10,11 @@ evaluations took off chi^2 (a fit that moves chi^2 by less than the noise in its
 iterations bought nothing with them). With --jsonl, every fit as one line, written as it finishes
 (with the engine's seconds in it, the derivative requests' share, and the points that finished
 only at a finer step than the fit step, `retried`, or not at all, `diverged`), and the diagnosis
-as the last line. A probe, not a test:
-the wrapped diagnosis is the package's, unchanged.
+as the last line. At the end it prints the engine's share of the whole: the batches' wall and
+process-CPU seconds by kind (plain runs, derivative passes), so the cores' use shows as CPU over
+wall, and how often the engine's derivatives could be used (`fitting.usable_derivative`: usable,
+not finite, finite but blown up). A probe, not a test: the wrapped diagnosis is the package's,
+unchanged.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import argparse
 import collections
 import importlib
 import json
+import math
 import pkgutil
 import time
 import traceback
@@ -55,10 +59,17 @@ def main() -> None:
     # seconds, and points that finished only at a finer step than the fit step (retried)
     engine: list[dict[str, float]] = []
     plain_run = case_model.run_batch
+    # every batch by kind: [calls, wall s, process-CPU s (all threads), points]
+    kinds: dict[str, list[float]] = collections.defaultdict(lambda: [0, 0.0, 0.0, 0])
 
     def run_batch(tables: Any, structure: Any, **kw: Any) -> Any:
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         res = plain_run(tables, structure, **kw)
+        k = kinds["derivative passes" if kw.get("sensitivities") else "plain runs"]
+        k[0] += 1
+        k[1] += time.perf_counter() - t
+        k[2] += time.process_time() - c
+        k[3] += len(res.get("reasons", []))
         if engine:
             e = engine[-1]
             dt = time.perf_counter() - t
@@ -106,11 +117,24 @@ def main() -> None:
             sink.flush()
         return out
 
+    plain_usable = fitting.usable_derivative
+    usable: collections.Counter[str] = collections.Counter()
+
+    def usable_derivative(dpred: Any, pred: Any) -> bool:
+        ok = plain_usable(dpred, pred)
+        usable["usable" if ok else "not finite" if not np.all(np.isfinite(dpred)) else "blown up"] += 1
+        return ok
+
+    for m in modules + [fitting]:
+        if getattr(m, "usable_derivative", None) is plain_usable:
+            m.usable_derivative = usable_derivative  # type: ignore[attr-defined]
     for m in modules + [fitting]:
         if getattr(m, "fit", None) is plain_fit:
             m.fit = fit  # type: ignore[attr-defined]
+    c0 = time.process_time()
     d = idm_rs.diagnose(a.case, progress=False)
     total = time.perf_counter() - t0
+    cpu = time.process_time() - c0
     print(f"verdict {d.verdict} in {total:.1f} s; {len(rows)} fits, {sum(r['seconds'] for r in rows):.1f} s in fits")
     by: dict[str, list[dict[str, Any]]] = collections.defaultdict(list)
     for r in rows:
@@ -123,6 +147,11 @@ def main() -> None:
         print(f"| {site} | {len(rs)} | {sum(r['seconds'] for r in rs):.1f} | {sum(r['nfev'] for r in rs)} / "
               f"{sum(r['budget'] for r in rs)} | {len(capped)} | {np.median(gains) if gains else float('nan'):.3g} |")
     print(json.dumps({k: round(v, 1) for k, v in d.timings.items()}))
+    print(f"whole diagnosis: {total:.1f} s wall, {cpu:.1f} s CPU ({cpu / total:.2f} cores)")
+    for kind, (n, wall, kcpu, pts) in kinds.items():
+        print(f"engine {kind}: {int(n)} batches, {int(pts)} points, {wall:.1f} s wall ({wall / total:.0%}), "
+              f"{kcpu / wall if wall else math.nan:.2f} cores")
+    print("engine derivatives:", dict(usable))
     if sink is not None:
         # the diagnosis itself, to compare with a bench row of the same device
         sink.write(json.dumps({"diagnosis": d.to_dict()}, default=str) + "\n")
