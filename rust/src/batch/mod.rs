@@ -316,6 +316,32 @@ mod tests {
     }
 
     #[test]
+    fn points_retried_together_come_out_as_each_retried_alone() {
+        // several points of one lane group diverge at the step and are retried together on
+        // lanes: each output (trace, final state, derivatives, metrics, reason) is bitwise the
+        // one the point gives in a batch of its own
+        let mut c = cfg(RK4, Structure::Lps);
+        c.method = Method::Rk4 { dt: 4e-7 };
+        c.record_every = 5;
+        c.final_states = true;
+        c.sensitivities = vec!["mu_k".into()];
+        let sp = specs(8);
+        let run = |points: &[PointSpec]| run_batch(&c, points, &AtomicBool::new(false), &AtomicUsize::new(0)).unwrap();
+        let together = run(&sp);
+        let retried = together.iter().filter(|o| o.metrics.status == Status::Retried).count();
+        assert!(retried >= 2, "{retried} points retried: the test needs several");
+        for (i, o) in together.iter().enumerate() {
+            let alone = run(&sp[i..i + 1]).pop().unwrap();
+            let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&o.trace), bits(&alone.trace), "point {i}");
+            assert_eq!(bits(&o.final_state), bits(&alone.final_state), "point {i}");
+            assert_eq!(bits(&o.sensitivities), bits(&alone.sensitivities), "point {i}");
+            assert_eq!(format!("{:?}", o.metrics), format!("{:?}", alone.metrics), "point {i}");
+            assert_eq!(o.reason, alone.reason, "point {i}");
+        }
+    }
+
+    #[test]
     fn cancelled_batch_returns_not_run_points() {
         let c = cfg(RK4, Structure::Lps);
         let cancel = AtomicBool::new(true);

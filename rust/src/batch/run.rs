@@ -131,68 +131,99 @@ fn run_group(
     )
 }
 
-/// What a diverged point reports after its retries (if any) at RK4 steps dt/2, dt/4, ...
-/// (recording at the same times). `None` if cancelled.
-fn retry(cfg: &BatchConfig, ready: &Ready, first: Failure, cancel: &AtomicBool) -> Option<PointOutput> {
+/// What each diverged point of a lane group reports after its retries (if any) at RK4 steps
+/// dt/2, dt/4, ... (recording at the same times), in the order of `failed`. The points that
+/// diverge again are retried together, on lanes as they first ran: a lane's arithmetic is that
+/// of the point run alone, so the outputs are those of one retry per point, at a fraction of
+/// the time where many points of a batch need a smaller step. `None` where cancelled.
+fn retry_group(cfg: &BatchConfig, failed: Vec<(&Ready, Failure)>, cancel: &AtomicBool) -> Vec<Option<PointOutput>> {
     let (mut method, mut record_every) = (cfg.method, cfg.record_every);
-    let first_failure = first.t;
-    let mut failed_at = first_failure;
     let first_step = method.first_step();
-    let mut dt_tried = first_step;
-    if let Some(dt) = cfg.method.fixed_step() {
-        let mut dt = dt;
+    let mut dt_tried = vec![first_step; failed.len()];
+    let mut failed_at: Vec<f64> = failed.iter().map(|(_, f)| f.t).collect();
+    let mut out: Vec<Option<PointOutput>> = vec![None; failed.len()];
+    // the points still to be retried (indices into `failed`)
+    let mut pending: Vec<usize> = (0..failed.len()).collect();
+    if let Some(mut dt) = cfg.method.fixed_step() {
         for _ in 0..cfg.retries {
+            if pending.is_empty() {
+                break;
+            }
             dt /= 2.0;
-            dt_tried = dt;
             record_every *= 2;
             // the method asked, at the smaller step
             method = cfg.method.with_step(dt).expect("a fixed-step method");
-            let steps = match crate::integrate::plan::plan_steps(
-                &ready.model,
-                &ready.spec.wave,
-                ready.spec.t_start,
-                ready.spec.t_end(cfg),
-                dt,
-            ) {
-                Ok(s) => s,
-                Err(_) => break,
-            };
-            let r = Ready {
-                steps,
-                y0: ready.y0.clone(),
-                model: ready.model.clone(),
-                ..*ready
-            };
-            match run_group(cfg, &method, record_every, &[&r], cancel)?.pop() {
-                Some(Ok(o)) => {
-                    return Some(PointOutput {
-                        metrics: PointMetrics {
-                            status: Status::Retried,
-                            ..o.metrics
-                        },
-                        reason: format!(
-                        "diverged at t = {first_failure:.6e} s with dt = {first_step:e} s; finished at dt = {dt:e} s"
-                    ),
-                        ..o
-                    })
+            let mut runs: Vec<(usize, Ready)> = Vec::with_capacity(pending.len());
+            for &i in &pending {
+                let ready = failed[i].0;
+                dt_tried[i] = dt;
+                // a point whose run cannot be planned at this step stops retrying here
+                if let Ok(steps) = crate::integrate::plan::plan_steps(
+                    &ready.model,
+                    &ready.spec.wave,
+                    ready.spec.t_start,
+                    ready.spec.t_end(cfg),
+                    dt,
+                ) {
+                    let r = Ready {
+                        steps,
+                        y0: ready.y0.clone(),
+                        model: ready.model.clone(),
+                        ..*ready
+                    };
+                    runs.push((i, r));
                 }
-                Some(Err(f)) => failed_at = f.t,
-                None => break,
+            }
+            if runs.is_empty() {
+                pending.clear();
+                break;
+            }
+            let group: Vec<&Ready> = runs.iter().map(|(_, r)| r).collect();
+            let Some(results) = run_group(cfg, &method, record_every, &group, cancel) else {
+                return out; // cancelled: the points not finished stay None
+            };
+            pending.clear();
+            for ((i, _), res) in runs.iter().zip(results) {
+                match res {
+                    Ok(o) => {
+                        let first_failure = failed[*i].1.t;
+                        out[*i] = Some(PointOutput {
+                            metrics: PointMetrics {
+                                status: Status::Retried,
+                                ..o.metrics
+                            },
+                            reason: format!(
+                                "diverged at t = {first_failure:.6e} s with dt = {first_step:e} s; finished at dt = {dt:e} s"
+                            ),
+                            ..o
+                        });
+                    }
+                    Err(f) => {
+                        failed_at[*i] = f.t;
+                        pending.push(*i);
+                    }
+                }
             }
         }
     }
-    let how = match first.why {
-        _ if cfg.method.is_fixed() => format!("at every step tried (down to dt = {dt_tried:e} s)"),
-        Some(why) => format!("({why})"),
-        None => "(the adaptive step collapsed or the state left its bounds)".to_string(),
-    };
-    Some(PointOutput {
-        metrics: PointMetrics::diverged(failed_at, dt_tried),
-        trace: Vec::new(),
-        final_state: Vec::new(),
-        sensitivities: Vec::new(),
-        reason: format!("diverged at t = {failed_at:.6e} s {how}"),
-    })
+    for (i, (_, first)) in failed.iter().enumerate() {
+        if out[i].is_some() {
+            continue;
+        }
+        let how = match &first.why {
+            _ if cfg.method.is_fixed() => format!("at every step tried (down to dt = {:e} s)", dt_tried[i]),
+            Some(why) => format!("({why})"),
+            None => "(the adaptive step collapsed or the state left its bounds)".to_string(),
+        };
+        out[i] = Some(PointOutput {
+            metrics: PointMetrics::diverged(failed_at[i], dt_tried[i]),
+            trace: Vec::new(),
+            final_state: Vec::new(),
+            sensitivities: Vec::new(),
+            reason: format!("diverged at t = {:.6e} s {how}", failed_at[i]),
+        });
+    }
+    out
 }
 
 /// Add the derivatives of a finished point's recorded readings (at the RK4 step it finished
@@ -332,11 +363,17 @@ fn run_chunk(
         let Some(results) = run_group(cfg, &cfg.method, cfg.record_every, &group, cancel) else {
             break; // cancelled
         };
+        let mut finished: Vec<(&Ready, Option<PointOutput>)> = Vec::with_capacity(group.len());
+        let mut failed: Vec<(&Ready, Failure)> = Vec::new();
         for (r, res) in group.iter().zip(results) {
-            let res = match res {
-                Ok(x) => Some(x),
-                Err(f) => retry(cfg, r, f, cancel),
-            };
+            match res {
+                Ok(x) => finished.push((r, Some(x))),
+                Err(f) => failed.push((r, f)),
+            }
+        }
+        let retried: Vec<&Ready> = failed.iter().map(|(r, _)| *r).collect();
+        finished.extend(retried.into_iter().zip(retry_group(cfg, failed, cancel)));
+        for (r, res) in finished {
             let res = res.and_then(|o| add_sensitivities(cfg, r, o, cancel));
             if res.is_some() {
                 done.fetch_add(1, Ordering::Relaxed);
