@@ -128,7 +128,6 @@ def main() -> None:
     for m in modules + [fitting]:
         if getattr(m, "usable_derivative", None) is plain_usable:
             m.usable_derivative = usable_derivative  # type: ignore[attr-defined]
-    for m in modules + [fitting]:
         if getattr(m, "fit", None) is plain_fit:
             m.fit = fit  # type: ignore[attr-defined]
     c0 = time.process_time()

@@ -175,7 +175,6 @@ fn retry_group(cfg: &BatchConfig, failed: Vec<(&Ready, Failure)>, cancel: &Atomi
                 }
             }
             if runs.is_empty() {
-                pending.clear();
                 break;
             }
             let group: Vec<&Ready> = runs.iter().map(|(_, r)| r).collect();
