@@ -34,8 +34,19 @@ use tangent_pass::TangentRun;
 
 /// Widest dual number one pass carries; more names take several passes.
 pub const MAX_PER_PASS: usize = 8;
-/// Up to this many names (in a group of 8) run as one scalar dual pass each.
+/// For the adaptive methods (num-dual's numbers through the generic driver), up to this many
+/// names (in a group of 8) run as one scalar dual pass each.
 pub const SCALAR_PASSES_UP_TO: usize = 3;
+
+/// The width of the RK4 tangent pass that carries `k` names (1 to [`MAX_PER_PASS`]): the
+/// narrowest of 1, 2, 4 and 8 that holds them. A pass costs what its width costs, not what its
+/// names do (in plain runs, the paper's LPS / DPS 4: 1.4 / 1.8 at width 1, 1.4 / 1.9 at 2,
+/// 2.1 / 3.6 at 4, 3.1 / 4.7 at 8; num-dual's scalar dual through the generic driver 1.7 / 2.2;
+/// benches/RESULTS.md §70), and a narrower pass beside a wider one costs more than the wider
+/// one alone (5 names: 4 + 1 wide 3.5 / 5.4).
+fn tangent_width(k: usize) -> usize {
+    k.next_power_of_two().min(MAX_PER_PASS)
+}
 
 /// A value a derivative is taken with respect to.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -179,56 +190,67 @@ pub fn derivatives(
         readings: Vec::new(),
         final_state: vec![0.0; dim * n],
     };
-    // Passes: groups of up to 8 names on 8-wide dual vectors, but a group of at most
+    // Passes: groups of up to 8 names, each on a tangent as wide as it needs for RK4; for an
+    // adaptive method on num-dual's 8-wide dual vectors, but a group of at most
     // SCALAR_PASSES_UP_TO names as one scalar dual pass per name, which is cheaper there
-    // (measured: benches/RESULTS.md, section 7; the vector type pays for its generality).
+    // (measured: benches/RESULTS.md, section 7; the vector type pays for its generality). Every
+    // width gives the same bits (IEEE operations, num-dual's formulas term for term).
+    let chunks = seeds.chunks(MAX_PER_PASS);
+    let groups: Vec<&[Seed]> = match *method {
+        Method::Rk4 { .. } => chunks.collect(),
+        Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => chunks
+            .flat_map(|c| {
+                if c.len() <= SCALAR_PASSES_UP_TO {
+                    c.chunks(1).collect()
+                } else {
+                    vec![c]
+                }
+            })
+            .collect(),
+    };
     let mut first = 0;
-    for chunk in seeds.chunks(MAX_PER_PASS) {
-        let groups: Vec<&[Seed]> = if chunk.len() <= SCALAR_PASSES_UP_TO {
-            chunk.chunks(1).collect()
-        } else {
-            vec![chunk]
+    for group in groups {
+        let run = Pass {
+            model,
+            wave,
+            t_start,
+            t_end,
+            y0,
+            method,
+            held,
+            schedule,
+            seeds: group,
+            normal_force_derived,
         };
-        for group in groups {
-            let run = Pass {
-                model,
-                wave,
-                t_start,
-                t_end,
-                y0,
-                method,
-                held,
-                schedule,
-                seeds: group,
-                normal_force_derived,
-            };
-            let pass = match group.len() {
+        let pass = match *method {
+            // each fixed-step method names its tangent pass (a new one must add its own)
+            Method::Rk4 { dt } => match tangent_width(group.len()) {
+                1 => run.go_tangent::<1>(dt, cancel),
+                2 => run.go_tangent::<2>(dt, cancel),
+                4 => run.go_tangent::<4>(dt, cancel),
+                _ => run.go_tangent::<MAX_PER_PASS>(dt, cancel),
+            },
+            Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => match group.len() {
                 1 => run.go::<Dual64>(cancel),
-                // each fixed-step method names its tangent pass (a new one must add its own)
-                _ => match *method {
-                    Method::Rk4 { dt } => run.go_tangent::<MAX_PER_PASS>(dt, cancel),
-                    Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => {
-                        run.go::<DualSVec64<MAX_PER_PASS>>(cancel)
-                    }
-                },
-            }?;
-            let (readings, fin) = match pass {
-                Ok(x) => x,
-                Err(e) => return Some(Err(e)),
-            };
-            let k = group.len();
-            let times = readings.len() / k;
-            if out.readings.is_empty() {
-                out.readings = vec![0.0; times * n];
-            }
-            for t in 0..times {
-                out.readings[t * n + first..t * n + first + k].copy_from_slice(&readings[t * k..(t + 1) * k]);
-            }
-            for c in 0..dim {
-                out.final_state[c * n + first..c * n + first + k].copy_from_slice(&fin[c * k..(c + 1) * k]);
-            }
-            first += k;
+                _ => run.go::<DualSVec64<MAX_PER_PASS>>(cancel),
+            },
+        }?;
+        let (readings, fin) = match pass {
+            Ok(x) => x,
+            Err(e) => return Some(Err(e)),
+        };
+        let k = group.len();
+        let times = readings.len() / k;
+        if out.readings.is_empty() {
+            out.readings = vec![0.0; times * n];
         }
+        for t in 0..times {
+            out.readings[t * n + first..t * n + first + k].copy_from_slice(&readings[t * k..(t + 1) * k]);
+        }
+        for c in 0..dim {
+            out.final_state[c * n + first..c * n + first + k].copy_from_slice(&fin[c * k..(c + 1) * k]);
+        }
+        first += k;
     }
     Some(Ok(out))
 }

@@ -176,13 +176,12 @@ impl Case {
     }
 }
 
-/// One pass over `names` on num-dual's 8-wide numbers and on `Tangent<8>`.
-fn both_passes(c: &Case, names: &[&str], y0: &[f64]) -> (Result<PassOutput, SimError>, Result<PassOutput, SimError>) {
+/// `go` on the pass over `names` from `y0` (the case's input, span, method and schedule).
+fn with_pass<T>(c: &Case, names: &[&str], y0: &[f64], go: impl FnOnce(&Pass) -> T) -> T {
     let m = c.model();
     let names_s: Vec<String> = names.iter().map(|s| s.to_string()).collect();
     let seeds = parse_seeds(&m, &names_s, c.derived_fn).unwrap();
     let held = Held::default();
-    let dt = c.method.fixed_step().unwrap();
     let pass = Pass {
         model: &m,
         wave: &c.wave,
@@ -198,10 +197,18 @@ fn both_passes(c: &Case, names: &[&str], y0: &[f64]) -> (Result<PassOutput, SimE
         seeds: &seeds,
         normal_force_derived: c.derived_fn,
     };
-    (
-        pass.go::<DualSVec64<MAX_PER_PASS>>(&NEVER).unwrap(),
-        pass.go_tangent::<MAX_PER_PASS>(dt, &NEVER).unwrap(),
-    )
+    go(&pass)
+}
+
+/// One pass over `names` on num-dual's 8-wide numbers and on `Tangent<8>`.
+fn both_passes(c: &Case, names: &[&str], y0: &[f64]) -> (Result<PassOutput, SimError>, Result<PassOutput, SimError>) {
+    let dt = c.method.fixed_step().unwrap();
+    with_pass(c, names, y0, |pass| {
+        (
+            pass.go::<DualSVec64<MAX_PER_PASS>>(&NEVER).unwrap(),
+            pass.go_tangent::<MAX_PER_PASS>(dt, &NEVER).unwrap(),
+        )
+    })
 }
 
 /// Equal, a -0.0 for a +0.0 allowed (num-dual's "no derivative" is 0 in a tangent).
@@ -215,8 +222,10 @@ fn assert_same(a: &[f64], b: &[f64], what: &str) {
     }
 }
 
-#[test]
-fn tangent_passes_are_num_duals_bit_for_bit_on_every_kind_of_model() {
+/// Every kind of model (both structures, piezo hysteresis, the lags and effects, a derived
+/// normal force), each with names of its own, at RK4 steps coarser than the difference tests'
+/// (equality needs no accuracy).
+fn every_kind_of_model() -> Vec<(Case, Vec<&'static str>)> {
     let lags = Effects {
         kappa: 0.05,
         tau_creep: 2e-4,
@@ -267,10 +276,17 @@ fn tangent_passes_are_num_duals_bit_for_bit_on_every_kind_of_model() {
     derived.derived_fn = true;
     derived.hyst = false;
     cases.push((derived, vec!["m1", "m2", "mu_k"]));
-    for (c, names) in cases.iter_mut() {
-        // coarser steps than the central-difference tests: equality needs no accuracy
+    for (c, _) in cases.iter_mut() {
         c.method = Method::Rk4 { dt: 5e-8 };
         c.every = 400;
+    }
+    cases
+}
+
+#[test]
+fn tangent_passes_are_num_duals_bit_for_bit_on_every_kind_of_model() {
+    let cases = every_kind_of_model();
+    for (c, names) in cases.iter() {
         let rest = c.model().rest_state();
         let (a, b) = both_passes(c, names, &rest);
         let ((ra, fa), (rb, fb)) = (a.unwrap(), b.unwrap());
@@ -289,6 +305,26 @@ fn tangent_passes_are_num_duals_bit_for_bit_on_every_kind_of_model() {
     let (a, b) = both_passes(&c, &["q0", "v0", "mu_k"], &y0);
     let ((ra, _), (rb, _)) = (a.unwrap(), b.unwrap());
     assert_same(&ra, &rb, "initial-state seeds");
+}
+
+#[test]
+fn every_pass_width_gives_each_name_its_scalar_dual_bits() {
+    // the passes `derivatives` forms for the first k names (widths 1, 2, 4 and 8) against each
+    // name alone on num-dual's scalar dual through the generic driver
+    for (c, names) in every_kind_of_model() {
+        let rest = c.model().rest_state();
+        let alone: Vec<PassOutput> = names
+            .iter()
+            .map(|name| with_pass(&c, &[name], &rest, |pass| pass.go::<Dual64>(&NEVER).unwrap().unwrap()))
+            .collect();
+        for k in 1..=names.len() {
+            let got = c.engine(&names[..k]);
+            for (j, (reference, _)) in alone.iter().enumerate().take(k) {
+                let column: Vec<f64> = got.iter().skip(j).step_by(k).copied().collect();
+                assert_same(&column, reference, &format!("{} of {:?}", names[j], &names[..k]));
+            }
+        }
+    }
 }
 
 #[test]
