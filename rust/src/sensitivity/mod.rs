@@ -14,6 +14,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use num_dual::{Dual64, DualSVec64};
+use rayon::prelude::*;
 
 use crate::drive::run_tasks_one_by_one;
 use crate::error::InputError;
@@ -208,33 +209,41 @@ pub fn derivatives(
             })
             .collect(),
     };
+    // the groups side by side (each pass its own; a point's groups are as many tasks for the
+    // batch's threads as its points, which matters for a fit's few experiments), taken in order
+    let passes: Vec<Option<Result<PassOutput, SimError>>> = groups
+        .par_iter()
+        .map(|group| {
+            let run = Pass {
+                model,
+                wave,
+                t_start,
+                t_end,
+                y0,
+                method,
+                held,
+                schedule,
+                seeds: group,
+                normal_force_derived,
+            };
+            match *method {
+                // each fixed-step method names its tangent pass (a new one must add its own)
+                Method::Rk4 { dt } => match tangent_width(group.len()) {
+                    1 => run.go_tangent::<1>(dt, cancel),
+                    2 => run.go_tangent::<2>(dt, cancel),
+                    4 => run.go_tangent::<4>(dt, cancel),
+                    _ => run.go_tangent::<MAX_PER_PASS>(dt, cancel),
+                },
+                Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => match group.len() {
+                    1 => run.go::<Dual64>(cancel),
+                    _ => run.go::<DualSVec64<MAX_PER_PASS>>(cancel),
+                },
+            }
+        })
+        .collect();
     let mut first = 0;
-    for group in groups {
-        let run = Pass {
-            model,
-            wave,
-            t_start,
-            t_end,
-            y0,
-            method,
-            held,
-            schedule,
-            seeds: group,
-            normal_force_derived,
-        };
-        let pass = match *method {
-            // each fixed-step method names its tangent pass (a new one must add its own)
-            Method::Rk4 { dt } => match tangent_width(group.len()) {
-                1 => run.go_tangent::<1>(dt, cancel),
-                2 => run.go_tangent::<2>(dt, cancel),
-                4 => run.go_tangent::<4>(dt, cancel),
-                _ => run.go_tangent::<MAX_PER_PASS>(dt, cancel),
-            },
-            Method::Dopri5 { .. } | Method::Rodas4 { .. } | Method::Auto { .. } => match group.len() {
-                1 => run.go::<Dual64>(cancel),
-                _ => run.go::<DualSVec64<MAX_PER_PASS>>(cancel),
-            },
-        }?;
+    for (group, pass) in groups.iter().zip(passes) {
+        let pass = pass?;
         let (readings, fin) = match pass {
             Ok(x) => x,
             Err(e) => return Some(Err(e)),
