@@ -307,6 +307,21 @@ fn tangent_passes_are_num_duals_bit_for_bit_on_every_kind_of_model() {
     assert_same(&ra, &rb, "initial-state seeds");
 }
 
+/// More names than one pass carries (the Table 1 parameters the diagnosis fits and a state).
+const MORE_THAN_ONE_PASS: [&str; 11] = [
+    "mu_k",
+    "mu_s",
+    "m1",
+    "m2",
+    "fric_alpha",
+    "sigma1",
+    "sigma2",
+    "d33",
+    "hyst_alpha",
+    "stribeck_velocity",
+    "q0",
+];
+
 #[test]
 fn every_pass_width_gives_each_name_its_scalar_dual_bits() {
     // the passes `derivatives` forms for the first k names (widths 1, 2, 4 and 8; beyond 8
@@ -315,22 +330,7 @@ fn every_pass_width_gives_each_name_its_scalar_dual_bits() {
     let mut cases = every_kind_of_model();
     let (mut many, _) = cases[0].clone();
     many.hyst = true;
-    cases.push((
-        many,
-        vec![
-            "mu_k",
-            "mu_s",
-            "m1",
-            "m2",
-            "fric_alpha",
-            "sigma1",
-            "sigma2",
-            "d33",
-            "hyst_alpha",
-            "stribeck_velocity",
-            "q0",
-        ],
-    ));
+    cases.push((many, MORE_THAN_ONE_PASS.to_vec()));
     for (c, names) in cases {
         let rest = c.model().rest_state();
         let alone: Vec<PassOutput> = names
@@ -578,18 +578,7 @@ fn adaptive_runs_are_differentiated_with_their_steps_held() {
 #[test]
 fn more_names_than_one_pass_carries_agree_with_fewer() {
     let c = paper(Structure::Lps, Effects::default());
-    let many = [
-        "mu_k",
-        "mu_s",
-        "m1",
-        "m2",
-        "fric_alpha",
-        "sigma1",
-        "sigma2",
-        "d33",
-        "hyst_alpha",
-        "q0",
-    ];
+    let many = MORE_THAN_ONE_PASS;
     let d_many = c.engine(&many);
     let d_one = c.engine(&["hyst_alpha"]);
     let n = many.len();
