@@ -195,7 +195,8 @@ pub fn derivatives(
     // adaptive method on num-dual's 8-wide dual vectors, but a group of at most
     // SCALAR_PASSES_UP_TO names as one scalar dual pass per name, which is cheaper there
     // (measured: benches/RESULTS.md, section 7; the vector type pays for its generality). Every
-    // width gives the same bits (IEEE operations, num-dual's formulas term for term).
+    // tangent width gives the same bits as the 8-wide one; against num-dual's scalar dual, the
+    // same bits on the tested models, not on every device (RESULTS §70).
     let chunks = seeds.chunks(MAX_PER_PASS);
     let groups: Vec<&[Seed]> = match *method {
         Method::Rk4 { .. } => chunks.collect(),
