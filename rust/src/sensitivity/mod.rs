@@ -195,8 +195,8 @@ pub fn derivatives(
     // adaptive method on num-dual's 8-wide dual vectors, but a group of at most
     // SCALAR_PASSES_UP_TO names as one scalar dual pass per name, which is cheaper there
     // (measured: benches/RESULTS.md, section 7; the vector type pays for its generality). Every
-    // tangent width gives the same bits as the 8-wide one; against num-dual's scalar dual, the
-    // same bits on the tested models, not on every device (RESULTS §70).
+    // tangent width gives the bits of num-dual's scalar dual on every tested model (a
+    // discovery device's diagnosis differs in later digits, cause not found: RESULTS §70).
     let chunks = seeds.chunks(MAX_PER_PASS);
     let groups: Vec<&[Seed]> = match *method {
         Method::Rk4 { .. } => chunks.collect(),
@@ -244,8 +244,7 @@ pub fn derivatives(
         .collect();
     let mut first = 0;
     for (group, pass) in groups.iter().zip(passes) {
-        let pass = pass?;
-        let (readings, fin) = match pass {
+        let (readings, fin) = match pass? {
             Ok(x) => x,
             Err(e) => return Some(Err(e)),
         };
