@@ -19,6 +19,7 @@ import json
 import math
 import os
 import platform
+import statistics
 import sys
 import time
 import warnings
@@ -81,7 +82,7 @@ def table(rows: list[dict[str, Any]]) -> str:
     healthy = [r for r in rows if r["key"] == "none"]
     false_alarms = sum(r["verdict"] not in ("none",) for r in healthy)
     times = sorted(r["seconds"] for r in rows)
-    med = times[len(times) // 2] if times else math.nan
+    med = statistics.median(times) if times else math.nan
     lines.append("")
     named = sum(r['verdict'] not in ('none', 'unexplained', 'not_converged') for r in healthy)
     lines.append(f"{right} of {len(rows)} right; healthy devices: {len(healthy)}, false alarms (an effect named on a "

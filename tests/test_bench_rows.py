@@ -1,11 +1,14 @@
-"""The benches' row helpers: the table of where a bench's seconds went."""
+"""The benches' row helpers: the table of where a bench's seconds went, and the field-by-field
+comparison of two diagnoses."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benches"))
+from bench_diagnose_ab import differences
 from bench_rows import stage_shares
 
 
@@ -15,7 +18,7 @@ def _table(text: str) -> dict[str, tuple[float, float]]:
 
 
 def test_stage_shares_of_all_seconds_and_their_median_per_row() -> None:
-    rows = [
+    rows: list[dict[str, Any]] = [
         {"timings": {"calibration": 10.0, "wider search": 30.0, "second effect": 40.0, "discovery": 20.0}},
         {"timings": {"calibration": 50.0, "third effect": 150.0, "discovery": 100.0}},
         {"timings": {"calibration": 25.0, "discovery": 75.0, "a stage nobody grouped": 100.0}},
@@ -32,4 +35,17 @@ def test_stage_shares_of_all_seconds_and_their_median_per_row() -> None:
 
 
 def test_no_timed_rows_no_table() -> None:
-    assert stage_shares([{"verdict": "none"}, {"timings": {}}]) == ""
+    empty: list[dict[str, Any]] = [{"verdict": "none"}, {"timings": {}}]
+    assert stage_shares(empty) == ""
+
+
+def test_two_diagnoses_compared_field_by_field_a_nan_equal_to_a_nan() -> None:
+    a = {"verdict": "discovered", "third": {"heldout_rms": float("nan"), "rms": 1.0},
+         "ranking": [{"correlation": [float("nan"), 0.5]}]}
+    same = {"verdict": "discovered", "third": {"heldout_rms": float("nan"), "rms": 1.0},
+            "ranking": [{"correlation": [float("nan"), 0.5]}]}
+    assert differences(a, same) == []
+    # a NaN against a number, a changed last digit, a missing key: each named by its path
+    other = {"verdict": "discovered", "third": {"heldout_rms": 2.0, "rms": 1.0 + 2.0**-52},
+             "ranking": [{"correlation": [float("nan"), 0.5]}], "extra": 1}
+    assert differences(a, other) == [".extra", ".third.heldout_rms", ".third.rms"]

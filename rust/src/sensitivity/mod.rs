@@ -195,8 +195,8 @@ pub fn derivatives(
     // adaptive method on num-dual's 8-wide dual vectors, but a group of at most
     // SCALAR_PASSES_UP_TO names as one scalar dual pass per name, which is cheaper there
     // (measured: benches/RESULTS.md, section 7; the vector type pays for its generality). Every
-    // tangent width gives the bits of num-dual's scalar dual on every tested model (a
-    // discovery device's diagnosis differs in later digits, cause not found: RESULTS §70).
+    // width gives the same bits (IEEE operations, num-dual's formulas term for term; a
+    // discovery device's whole diagnosis is identical on both rules: RESULTS §71).
     let chunks = seeds.chunks(MAX_PER_PASS);
     let groups: Vec<&[Seed]> = match *method {
         Method::Rk4 { .. } => chunks.collect(),
